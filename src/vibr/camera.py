@@ -1,0 +1,233 @@
+"""Pinhole cameras.
+
+Conventions (used everywhere in vibr, written down once here)
+------------------------------------------------------------
+* **World → camera**: ``X_cam = R @ X_world + t`` with ``R`` a rotation (orthonormal,
+  det +1). The camera looks along its +z axis, x to the right, y down (OpenCV / the
+  paper §5.2: x̃ = K (R X + t)). Camera centre ``C = -Rᵀ t``.
+* **Depth** is *orthogonal* depth: the third coordinate of ``R X + t``, in scene units.
+  Radial distances and disparities are converted to it once, at load time.
+* **Pixel coordinates** ``(x, y)``: x along image columns, y along rows, the **centre of
+  the top-left pixel at (0, 0)**; pixel ``(row i, col j)`` of an H×W array has centre
+  ``(x, y) = (j, i)``. ``K`` maps to these coordinates. Loaders of formats that put the
+  centre of the top-left pixel at (0.5, 0.5) (COLMAP, nerfstudio) shift the principal
+  point by 0.5 on the way in and out.
+* Images are H×W×3 float32 arrays in [0, 1].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import VibrInputError
+
+_ORTHO_TOL = 1e-5
+
+
+def _as_matrix(a, shape, name, source):
+    try:
+        m = np.asarray(a, dtype=np.float64).reshape(shape)
+    except (TypeError, ValueError) as exc:
+        raise VibrInputError(f"{name} must have shape {shape}: {exc}", source) from None
+    if not np.all(np.isfinite(m)):
+        raise VibrInputError(f"{name} has non-finite entries", source)
+    return m
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A pinhole camera with its image size.
+
+    Parameters
+    ----------
+    K : (3, 3) array
+        Intrinsics, upper triangular, positive focal lengths, in vibr's pixel convention
+        (centre of the top-left pixel at (0, 0)).
+    R : (3, 3) array
+        World-to-camera rotation.
+    t : (3,) array
+        World-to-camera translation; the centre is ``C = -R.T @ t``.
+    width, height : int
+        Image size in pixels.
+    source : str, optional
+        Where the camera came from (a file name), used in error messages.
+
+    The projection is ``x̃ = K (R X + t)``, ``(x, y) = (x̃₁/x̃₃, x̃₂/x̃₃)`` (Nieto et al.
+    2016, §5.2).
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    source: str | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        src = self.source
+        K = _as_matrix(self.K, (3, 3), "K", src)
+        R = _as_matrix(self.R, (3, 3), "R", src)
+        t = _as_matrix(self.t, (3,), "t", src)
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1) > 1e-9 or np.any(K[[1, 2, 2], [0, 0, 1]] != 0):
+            raise VibrInputError(
+                "K must be upper triangular with positive focal lengths and K[2,2] = 1", src
+            )
+        err = np.abs(R @ R.T - np.eye(3)).max()
+        if err > _ORTHO_TOL or np.linalg.det(R) < 0:
+            raise VibrInputError(
+                f"R is not a rotation (|R Rᵀ - I| = {err:.2g}, det = {np.linalg.det(R):.3g})", src
+            )
+        w, h = int(self.width), int(self.height)
+        if w <= 0 or h <= 0:
+            raise VibrInputError(f"image size must be positive, got {w}x{h}", src)
+        for name, val in (("K", K), ("R", R), ("t", t)):
+            val.setflags(write=False)
+            object.__setattr__(self, name, val)
+        object.__setattr__(self, "width", w)
+        object.__setattr__(self, "height", h)
+
+    # ---------------------------------------------------------------- constructors
+    @classmethod
+    def from_centre(cls, K, R, C, width, height, source=None) -> "Camera":
+        """Camera from intrinsics, world-to-camera rotation and centre ``C`` (world)."""
+        R = np.asarray(R, dtype=np.float64)
+        return cls(K, R, -R @ np.asarray(C, dtype=np.float64), width, height, source)
+
+    @classmethod
+    def look_at(cls, eye, target, up, K, width, height) -> "Camera":
+        """Camera at ``eye`` looking at ``target``; ``up`` is the world up direction
+        (the image's y axis points opposite to it)."""
+        eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+        z = target - eye
+        z /= np.linalg.norm(z)
+        x = np.cross(z, -up)
+        if np.linalg.norm(x) < 1e-12:
+            raise ValueError("look_at: up is parallel to the viewing direction")
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        R = np.stack([x, y, z])
+        return cls.from_centre(K, R, eye, width, height)
+
+    @staticmethod
+    def intrinsics(f, width, height, fy=None, cx=None, cy=None) -> np.ndarray:
+        """K with focal ``f`` (pixels) and, by default, the principal point at the image
+        centre ``((W-1)/2, (H-1)/2)``."""
+        fy = f if fy is None else fy
+        cx = (width - 1) / 2 if cx is None else cx
+        cy = (height - 1) / 2 if cy is None else cy
+        return np.array([[f, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64)
+
+    # ---------------------------------------------------------------- properties
+    @property
+    def centre(self) -> np.ndarray:
+        """Camera centre in world coordinates, ``C = -Rᵀ t``."""
+        return -self.R.T @ self.t
+
+    @property
+    def K_inv(self) -> np.ndarray:
+        return np.linalg.inv(self.K)
+
+    @property
+    def P(self) -> np.ndarray:
+        """3×4 projection matrix ``K [R | t]``."""
+        return self.K @ np.hstack([self.R, self.t[:, None]])
+
+    @property
+    def optical_axis(self) -> np.ndarray:
+        """Unit viewing direction (camera +z) in world coordinates."""
+        return self.R[2].copy()
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(height, width)``, the shape of this camera's images."""
+        return (self.height, self.width)
+
+    @property
+    def c2w(self) -> np.ndarray:
+        """4×4 camera-to-world matrix (OpenCV axes: x right, y down, z forward)."""
+        M = np.eye(4)
+        M[:3, :3] = self.R.T
+        M[:3, 3] = self.centre
+        return M
+
+    # ---------------------------------------------------------------- maps
+    def world_to_camera(self, X) -> np.ndarray:
+        """(..., 3) world points → (..., 3) camera coordinates."""
+        return np.asarray(X, dtype=np.float64) @ self.R.T + self.t
+
+    def camera_to_world(self, Xc) -> np.ndarray:
+        """(..., 3) camera coordinates → (..., 3) world points."""
+        return (np.asarray(Xc, dtype=np.float64) - self.t) @ self.R
+
+    def project(self, X) -> tuple[np.ndarray, np.ndarray]:
+        """Project (..., 3) world points: returns pixel coordinates (..., 2) and
+        orthogonal depth (...). Points behind the camera get depth ≤ 0 (their pixel
+        coordinates are meaningless)."""
+        Xc = self.world_to_camera(X)
+        xh = Xc @ self.K.T
+        z = Xc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = xh[..., :2] / xh[..., 2:3]
+        return xy, z
+
+    def pixel_rays(self, xy) -> np.ndarray:
+        """(..., 2) pixels → (..., 3) camera-frame rays ``K⁻¹ x̄`` with unit third
+        coordinate (so ``depth * ray`` is the camera-frame point)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        xh = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+        return xh @ self.K_inv.T
+
+    def backproject(self, xy, depth) -> np.ndarray:
+        """(..., 2) pixels with orthogonal ``depth`` (...) → (..., 3) world points."""
+        rays = self.pixel_rays(xy)
+        return self.camera_to_world(rays * np.asarray(depth, dtype=np.float64)[..., None])
+
+    def pixel_grid(self) -> np.ndarray:
+        """H×W×2 array of pixel-centre coordinates ``(x, y) = (col, row)``."""
+        y, x = np.mgrid[0 : self.height, 0 : self.width].astype(np.float64)
+        return np.stack([x, y], axis=-1)
+
+    def scaled(self, s: float) -> "Camera":
+        """The same camera for images resized by factor ``s`` (new size rounded).
+
+        With pixel centres at integer coordinates, a resize maps ``x' = s (x + ½) − ½``.
+        """
+        w, h = max(1, int(round(self.width * s))), max(1, int(round(self.height * s)))
+        sx, sy = w / self.width, h / self.height
+        S = np.array([[sx, 0, 0.5 * sx - 0.5], [0, sy, 0.5 * sy - 0.5], [0, 0, 1.0]])
+        return Camera(S @ self.K, self.R, self.t, w, h, self.source)
+
+    def with_size(self, width: int, height: int) -> "Camera":
+        return Camera(self.K, self.R, self.t, width, height, self.source)
+
+    def allclose(self, other: "Camera", atol: float = 1e-9) -> bool:
+        return (
+            self.width == other.width
+            and self.height == other.height
+            and np.allclose(self.K, other.K, atol=atol, rtol=0)
+            and np.allclose(self.R, other.R, atol=atol, rtol=0)
+            and np.allclose(self.t, other.t, atol=atol, rtol=0)
+        )
+
+    def to_dict(self) -> dict:
+        return {
+            "K": self.K.tolist(),
+            "R": self.R.tolist(),
+            "t": self.t.tolist(),
+            "width": self.width,
+            "height": self.height,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, source=None) -> "Camera":
+        try:
+            return cls(d["K"], d["R"], d["t"], d["width"], d["height"], source)
+        except KeyError as exc:
+            raise VibrInputError(f"camera is missing key {exc}", source) from None
+
+    def __repr__(self) -> str:
+        f = self.K[0, 0]
+        C = np.array2string(self.centre, precision=3, suppress_small=True)
+        return f"Camera({self.width}x{self.height}, f={f:.1f}px, C={C})"

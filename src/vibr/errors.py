@@ -1,0 +1,29 @@
+"""Errors raised on bad input.
+
+Every problem with user data (a missing file, an unreadable image, bad depth, a
+malformed camera) raises :class:`VibrInputError`, whose message is one line naming
+the file and the problem. The CLI prints that line and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+class VibrInputError(ValueError):
+    """Bad input data: the message names the file (when there is one) and the problem."""
+
+    def __init__(self, problem: str, path: str | os.PathLike | None = None):
+        self.path = None if path is None else os.fspath(path)
+        self.problem = " ".join(str(problem).split())  # always one line
+        super().__init__(self.problem if self.path is None else f"{self.path}: {self.problem}")
+
+
+def require_file(path: str | os.PathLike) -> str:
+    """Return ``path`` as a string, or raise :class:`VibrInputError` if it is not a file."""
+    p = os.fspath(path)
+    if not os.path.exists(p):
+        raise VibrInputError("file not found", p)
+    if not os.path.isfile(p):
+        raise VibrInputError("not a regular file", p)
+    return p

@@ -1,0 +1,84 @@
+"""The geometry stage's output: warped source samples, what the renderer consumes.
+
+Every visible source pixel (k, m) becomes one sample: where it lands in the target
+(``tau_k(x_m)``, METHOD §2 eq. projection), its colour and colour gradient in the source,
+the local Jacobian of the warp, the deformation factor ``1/|det ∂tau_k/∂x_m|``, the depth
+derivative ``∂tau_k/∂z`` and the depth uncertainty. Samples of all source views are
+concatenated; ``view`` tells which view each came from. The renderer knows nothing of
+cameras: it sees only these arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(eq=False)
+class Samples:
+    """Visible source samples landing in a target of shape ``target_shape``.
+
+    Attributes (N samples)
+    ----------------------
+    xy : (N, 2) float64
+        Target pixel coordinates ``tau_k(x_m)`` (vibr's convention: centre of the
+        top-left pixel at (0, 0)); every sample satisfies ``0 <= x <= W-1``,
+        ``0 <= y <= H-1``.
+    colour : (N, 3) float32
+        Source colour ``v_k(m)`` in [0, 1].
+    grad : (N, 3, 2) float32
+        Source colour gradient ``∇v_k(m)`` (per channel, d/dx then d/dy), in source
+        pixels, central differences.
+    jac : (N, 2, 2) float64
+        ``∂tau_k/∂x_m`` (METHOD eq. deformation); rows are target x, y; columns source
+        x, y.
+    inv_det : (N,) float64
+        Deformation weight ``1 / |det ∂tau_k/∂x_m|``.
+    dtau_dz : (N, 2) float64
+        ``∂tau_k/∂z`` (METHOD eq. geometrie), target pixels per scene unit of depth.
+    sigma_z : (N,) float64
+        Depth standard deviation of the sample, scene units.
+    view : (N,) int32
+        Index of the source view (into the list of sources).
+    src_xy : (N, 2) int32
+        The sample's source pixel (x = column, y = row).
+    target_shape : (H, W)
+    meta : dict
+        Diagnostics (counts per view, times).
+    """
+
+    xy: np.ndarray
+    colour: np.ndarray
+    grad: np.ndarray
+    jac: np.ndarray
+    inv_det: np.ndarray
+    dtau_dz: np.ndarray
+    sigma_z: np.ndarray
+    view: np.ndarray
+    src_xy: np.ndarray
+    target_shape: tuple[int, int]
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.xy.shape[0])
+
+    def select(self, mask) -> "Samples":
+        """The samples where boolean ``mask`` (N,) is true."""
+        return Samples(
+            self.xy[mask], self.colour[mask], self.grad[mask], self.jac[mask],
+            self.inv_det[mask], self.dtau_dz[mask], self.sigma_z[mask], self.view[mask],
+            self.src_xy[mask], self.target_shape, dict(self.meta),
+        )
+
+    @staticmethod
+    def concatenate(parts: list["Samples"], target_shape) -> "Samples":
+        if not parts:
+            z2 = np.zeros((0, 2))
+            return Samples(z2, np.zeros((0, 3), np.float32), np.zeros((0, 3, 2), np.float32),
+                           np.zeros((0, 2, 2)), np.zeros(0), z2.copy(), np.zeros(0),
+                           np.zeros(0, np.int32), np.zeros((0, 2), np.int32), tuple(target_shape))
+        cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+        return Samples(cat("xy"), cat("colour"), cat("grad"), cat("jac"), cat("inv_det"),
+                       cat("dtau_dz"), cat("sigma_z"), cat("view"), cat("src_xy"),
+                       tuple(target_shape), {})
