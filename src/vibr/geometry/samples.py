@@ -43,6 +43,8 @@ class Samples:
         Index of the source view (into the list of sources).
     src_xy : (N, 2) int32
         The sample's source pixel (x = column, y = row).
+    X : (N, 3) float64
+        The sample's 3D point in world coordinates (for view-dependent blending, ULR).
     target_shape : (H, W)
     meta : dict
         Diagnostics (counts per view, times).
@@ -57,6 +59,7 @@ class Samples:
     sigma_z: np.ndarray
     view: np.ndarray
     src_xy: np.ndarray
+    X: np.ndarray
     target_shape: tuple[int, int]
     meta: dict = field(default_factory=dict)
 
@@ -68,7 +71,7 @@ class Samples:
         return Samples(
             self.xy[mask], self.colour[mask], self.grad[mask], self.jac[mask],
             self.inv_det[mask], self.dtau_dz[mask], self.sigma_z[mask], self.view[mask],
-            self.src_xy[mask], self.target_shape, dict(self.meta),
+            self.src_xy[mask], self.X[mask], self.target_shape, dict(self.meta),
         )
 
     @staticmethod
@@ -77,8 +80,9 @@ class Samples:
             z2 = np.zeros((0, 2))
             return Samples(z2, np.zeros((0, 3), np.float32), np.zeros((0, 3, 2), np.float32),
                            np.zeros((0, 2, 2)), np.zeros(0), z2.copy(), np.zeros(0),
-                           np.zeros(0, np.int32), np.zeros((0, 2), np.int32), tuple(target_shape))
+                           np.zeros(0, np.int32), np.zeros((0, 2), np.int32), np.zeros((0, 3)),
+                           tuple(target_shape))
         cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
         return Samples(cat("xy"), cat("colour"), cat("grad"), cat("jac"), cat("inv_det"),
                        cat("dtau_dz"), cat("sigma_z"), cat("view"), cat("src_xy"),
-                       tuple(target_shape), {})
+                       cat("X"), tuple(target_shape), {})

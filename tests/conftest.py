@@ -1,0 +1,42 @@
+"""Shared fixtures. Real scenes are found at ``$VIBR_DATA`` or ``../shared/data`` beside
+the repository; tests that need them skip only when that folder is absent."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+_REPO = Path(__file__).resolve().parents[1]
+
+
+def find_data_dir() -> Path | None:
+    env = os.environ.get("VIBR_DATA")
+    for cand in ([Path(env)] if env else []) + [_REPO.parent / "shared" / "data"]:
+        if cand.is_dir():
+            return cand
+    return None
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    d = find_data_dir()
+    if d is None:
+        pytest.skip("real data folder not found (set VIBR_DATA or place ../shared/data)")
+    return d
+
+
+@pytest.fixture(scope="session")
+def cotton_dir(data_dir) -> Path:
+    return data_dir / "hci2016_cotton"
+
+
+@pytest.fixture(scope="session")
+def fountain_dir(data_dir) -> Path:
+    return data_dir / "strecha_fountain-P11"
+
+
+@pytest.fixture(scope="session")
+def temple_dir(data_dir) -> Path:
+    return data_dir / "middlebury_templeSparseRing"

@@ -1,0 +1,52 @@
+import numpy as np
+import pytest
+
+from vibr import Camera, VibrInputError
+
+
+def _cam(seed=0):
+    rng = np.random.default_rng(seed)
+    K = Camera.intrinsics(120.0, 64, 48)
+    return Camera.look_at(rng.normal(size=3) * 3 + [0, 0, -8], [0, 0, 0], [0, -1, 0], K, 64, 48)
+
+
+def test_project_backproject_roundtrip():
+    cam = _cam()
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0, 60, size=(100, 2))
+    z = rng.uniform(1, 10, size=100)
+    X = cam.backproject(xy, z)
+    xy2, z2 = cam.project(X)
+    np.testing.assert_allclose(xy2, xy, atol=1e-9)
+    np.testing.assert_allclose(z2, z, atol=1e-9)
+
+
+def test_centre_projects_to_principal_point_direction():
+    cam = _cam()
+    # A point on the optical axis projects to the principal point, at depth = distance.
+    X = cam.centre + 5.0 * cam.optical_axis
+    xy, z = cam.project(X)
+    np.testing.assert_allclose(xy, cam.K[:2, 2], atol=1e-9)
+    assert z == pytest.approx(5.0)
+
+
+def test_scaled_keeps_pixel_centre_convention():
+    cam = Camera(Camera.intrinsics(100.0, 64, 48), np.eye(3), np.zeros(3), 64, 48)
+    half = cam.scaled(0.5)
+    assert half.shape == (24, 32)
+    # Pixel centre (0.5, 0.5) of the half-size image covers original pixels 0..1 → x = 0.5 there.
+    X = cam.backproject(np.array([0.5, 0.5]), 3.0)
+    xy, _ = half.project(X)
+    np.testing.assert_allclose(xy, [0.0, 0.0], atol=1e-12)
+
+
+def test_bad_rotation_is_rejected():
+    R = np.eye(3)
+    R[0, 1] = 0.1
+    with pytest.raises(VibrInputError, match="not a rotation"):
+        Camera(Camera.intrinsics(100, 10, 10), R, np.zeros(3), 10, 10, source="cam.txt")
+
+
+def test_reflection_is_rejected():
+    with pytest.raises(VibrInputError, match="not a rotation"):
+        Camera(Camera.intrinsics(100, 10, 10), np.diag([1.0, 1.0, -1.0]), np.zeros(3), 10, 10)
