@@ -1,0 +1,504 @@
+"""Camera calibration from raw photos with COLMAP (pycolmap), CPU only.
+
+Pipeline (``vibr calibrate PHOTOS_DIR OUT_SCENE``)
+--------------------------------------------------
+1. **Downscale** every photo by ``scale`` (Lanczos) into a work folder, as PNG (lossless).
+2. **Features**: SIFT extraction (``pycolmap.extract_features``), one shared camera by
+   default (photos from one camera), camera model ``SIMPLE_RADIAL`` by default.
+3. **Matching**: exhaustive (all pairs; best for ≲ 100 photos) or sequential (neighbours in
+   file-name order; for video-like captures), with two-view geometric verification.
+4. **Incremental mapping** (``pycolmap.incremental_mapping``): poses, intrinsics and sparse
+   points by bundle adjustment; the largest model is kept.
+5. **Undistortion** to PINHOLE cameras (``pycolmap.undistort_images``).
+6. A :class:`~vibr.scene.Scene` in vibr's conventions: ``x̃ = K (R X + t)`` with
+   ``R, t = cam_from_world`` (COLMAP's pose is already world → camera) and the principal
+   point shifted by −½ px (COLMAP puts the centre of the top-left pixel at (½, ½), vibr at
+   (0, 0); see :mod:`vibr.camera`). The sparse points go to ``scene.points`` (they bound the
+   depth range of the plane sweep, ``Scene.depth_range``), and the scene is written with
+   :func:`vibr.io.save_scene` into a temporary sibling of ``out_dir`` that is renamed at the
+   end, so a failed run leaves no partial output.
+
+The reconstruction's scale and world frame are arbitrary (COLMAP's gauge): depth maps and
+renders made from it are consistent with it. :func:`similarity_align` and
+:func:`pose_errors` compare it to reference cameras up to that similarity.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+from .errors import VibrInputError
+from .progress import is_quiet, log, progress
+from .scene import Scene, View
+
+#: Photo file extensions read by calibrate (case-insensitive).
+IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
+
+#: Default minimum number of registered images (two sources and a target to render).
+MIN_REGISTERED = 3
+
+CAMERA_MODELS = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "SIMPLE_PINHOLE", "PINHOLE")
+MATCHERS = ("exhaustive", "sequential")
+
+
+@dataclass
+class CalibrationReport:
+    """What a calibration did: registered / unregistered image names, counts, stage times (s)."""
+
+    registered: list[str]
+    unregistered: list[str]
+    num_points: int
+    mean_reprojection_error_px: float
+    image_size: tuple[int, int]
+    times_s: dict[str, float]
+
+    def summary(self) -> str:
+        t = ", ".join(f"{k} {v:.1f}s" for k, v in self.times_s.items())
+        lines = [
+            f"registered {len(self.registered)}/{len(self.registered) + len(self.unregistered)} images, "
+            f"{self.num_points} sparse points, mean reprojection error "
+            f"{self.mean_reprojection_error_px:.3f} px",
+            f"time: {t}",
+        ]
+        if self.unregistered:
+            lines.append("not registered: " + ", ".join(self.unregistered))
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- inputs
+def list_photos(photos_dir) -> list[Path]:
+    """The photos in ``photos_dir`` (not recursive), sorted by name.
+
+    Raises :class:`VibrInputError` if the folder does not exist, holds no image files, or
+    two files share a stem (vibr names views by stem).
+    """
+    d = Path(photos_dir)
+    if not d.exists():
+        raise VibrInputError("photo folder not found", d)
+    if not d.is_dir():
+        raise VibrInputError("not a folder (calibrate takes a folder of photos)", d)
+    files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS)
+    if not files:
+        raise VibrInputError(
+            f"no photos found (looked for {', '.join(IMAGE_EXTENSIONS)})", d
+        )
+    stems = [p.stem for p in files]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise VibrInputError(f"several photos share a name stem: {', '.join(dup)}", d)
+    return files
+
+
+def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> tuple[int, int]:
+    """Write each photo, resized by ``scale`` (Lanczos), as ``out_dir/<stem>.png`` (8-bit RGB).
+
+    Returns the (width, height) of the first one. The new size is ``round(W·s) × round(H·s)``,
+    consistent with :meth:`vibr.camera.Camera.scaled`.
+    """
+    from PIL import Image
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    size = None
+    for f in progress(files, desc="calibrate: downscale"):
+        try:
+            with Image.open(f) as im:
+                im.load()
+                if im.mode not in ("RGB", "L"):
+                    # 16-bit / alpha / palette → 8-bit RGB (SIFT works on 8-bit grey).
+                    im = im.convert("RGB") if im.mode not in ("I;16", "I", "F") else _to8bit(im)
+                w, h = im.size
+                if scale != 1.0:
+                    nw, nh = max(1, int(round(w * scale))), max(1, int(round(h * scale)))
+                    im = im.resize((nw, nh), Image.LANCZOS)
+                im.save(out_dir / f"{f.stem}.png")
+                if size is None:
+                    size = im.size
+        except (OSError, ValueError) as exc:
+            raise VibrInputError(f"cannot read image: {exc}", f) from None
+    return size
+
+
+def _to8bit(im):
+    from PIL import Image
+
+    a = np.asarray(im, dtype=np.float64)
+    hi = a.max() if a.max() > 0 else 1.0
+    return Image.fromarray(np.clip(a / hi * 255 + 0.5, 0, 255).astype(np.uint8)).convert("RGB")
+
+
+@contextlib.contextmanager
+def _colmap_log_level(verbose: bool):
+    """Silence COLMAP's glog INFO lines unless ``verbose``."""
+    import pycolmap
+
+    old = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 0 if verbose else 2
+    try:
+        yield
+    finally:
+        pycolmap.logging.minloglevel = old
+
+
+# ---------------------------------------------------------------------------- COLMAP → vibr
+def camera_from_colmap(cam, image, source=None) -> Camera:
+    """vibr :class:`Camera` from a pycolmap PINHOLE / SIMPLE_PINHOLE camera and its image.
+
+    ``K = [[fx, 0, cx − ½], [0, fy, cy − ½], [0, 0, 1]]`` (COLMAP's pixel centres are at
+    half-integers, vibr's at integers); ``R, t`` = COLMAP's ``cam_from_world`` (world →
+    camera, as in vibr).
+    """
+    model = cam.model_name if hasattr(cam, "model_name") else str(cam.model)
+    p = np.asarray(cam.params, dtype=np.float64)
+    if model.endswith("SIMPLE_PINHOLE"):
+        fx = fy = p[0]
+        cx, cy = p[1], p[2]
+    elif model.endswith("PINHOLE"):
+        fx, fy, cx, cy = p[:4]
+    else:
+        raise VibrInputError(f"camera model {model} is not a pinhole model (undistort first)", source)
+    K = np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+    pose = image.cam_from_world() if callable(image.cam_from_world) else image.cam_from_world
+    R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+    t = np.asarray(pose.translation, dtype=np.float64)
+    # COLMAP's quaternion → matrix is orthonormal to ~1e-15; re-orthonormalise anyway (SVD).
+    U, _, Vt = np.linalg.svd(R)
+    R = U @ Vt
+    return Camera(K, R, t, int(cam.width), int(cam.height), source)
+
+
+def scene_from_reconstruction(rec, image_dir, *, name="scene", root=None, meta=None) -> Scene:
+    """Scene from an undistorted pycolmap Reconstruction and its image folder.
+
+    Views are sorted by image name; images are read as H×W×3 float32 in [0, 1]; the
+    reconstruction's 3D points become ``scene.points`` ((N, 3) float64, world units).
+    """
+    import imageio.v3 as iio
+
+    image_dir = Path(image_dir)
+    images = sorted((im for im in rec.images.values() if _has_pose(im)), key=lambda im: im.name)
+    views = []
+    for im in images:
+        path = image_dir / im.name
+        try:
+            a = iio.imread(path)
+        except (OSError, ValueError) as exc:
+            raise VibrInputError(f"cannot read undistorted image: {exc}", path) from None
+        if a.ndim == 2:
+            a = np.repeat(a[..., None], 3, axis=2)
+        a = a[..., :3]
+        img = a.astype(np.float32) / float(np.iinfo(a.dtype).max if a.dtype.kind in "ui" else 1.0)
+        cam = camera_from_colmap(rec.cameras[im.camera_id], im, source=str(path))
+        views.append(View(Path(im.name).stem, img, cam, path=str(path)))
+    if rec.num_points3D():
+        pts = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
+    else:
+        pts = np.zeros((0, 3))
+    return Scene(views, name=name, root=Path(root) if root else None, points=pts, meta=dict(meta or {}))
+
+
+def _has_pose(im) -> bool:
+    hp = im.has_pose
+    return bool(hp() if callable(hp) else hp)
+
+
+# ---------------------------------------------------------------------------- main entry points
+def calibrate_scene(
+    photos_dir,
+    *,
+    scale: float = 1.0,
+    matcher: str = "exhaustive",
+    camera_model: str = "SIMPLE_RADIAL",
+    single_camera: bool = True,
+    min_registered: int = MIN_REGISTERED,
+    max_features: int = 8192,
+    num_threads: int = 2,
+    seed: int = 0,
+    work_dir=None,
+    verbose: bool = False,
+) -> tuple[Scene, CalibrationReport]:
+    """Calibrate a folder of photos with COLMAP; return the undistorted scene (in memory).
+
+    Parameters
+    ----------
+    photos_dir : path
+        Folder of photos of one static scene (jpg/png/tif...), not recursive.
+    scale : float
+        Resize factor applied to the photos before everything else (0 < scale ≤ 1 typical;
+        0.5 of 3072×2048 gives 1536×1024). The scene's cameras are those of the resized images.
+    matcher : {"exhaustive", "sequential"}
+        Pair selection for feature matching.
+    camera_model : str
+        COLMAP model estimated by bundle adjustment (SIMPLE_RADIAL, RADIAL, OPENCV,
+        SIMPLE_PINHOLE, PINHOLE). Distorted models are undistorted to PINHOLE in step 5.
+    single_camera : bool
+        One shared intrinsic camera for all photos (same camera and zoom) or one per photo.
+    min_registered : int
+        Fewer registered images raise :class:`VibrInputError` naming the unregistered ones.
+    max_features : int
+        SIFT features per image.
+    num_threads : int
+        Threads for COLMAP's stages (the machine is shared; default 2).
+    seed : int
+        Random seed for the mapper's RANSAC (reproducible runs).
+    work_dir : path, optional
+        Where to keep COLMAP's database, model and undistorted images; a temporary folder
+        (removed afterwards) by default.
+    verbose : bool
+        Let COLMAP print its log.
+
+    Returns
+    -------
+    scene : Scene
+        Undistorted PINHOLE views named by photo stem (sorted), ``scene.points`` the sparse
+        points, ``scene.meta`` the calibration summary.
+    report : CalibrationReport
+    """
+    import pycolmap
+
+    photos_dir = Path(photos_dir)
+    files = list_photos(photos_dir)
+    if not (0 < scale <= 4):
+        raise VibrInputError(f"scale must be in (0, 4], got {scale}", photos_dir)
+    if matcher not in MATCHERS:
+        raise VibrInputError(f"matcher must be one of {', '.join(MATCHERS)}, got {matcher!r}", photos_dir)
+    if camera_model not in CAMERA_MODELS:
+        raise VibrInputError(
+            f"camera model must be one of {', '.join(CAMERA_MODELS)}, got {camera_model!r}", photos_dir
+        )
+    min_registered = max(2, int(min_registered))
+    if len(files) < min_registered:
+        raise VibrInputError(
+            f"{len(files)} photos found, calibrate needs at least {min_registered}", photos_dir
+        )
+
+    own_work = work_dir is None
+    work = Path(tempfile.mkdtemp(prefix="vibr-calibrate-")) if own_work else Path(work_dir)
+    work.mkdir(parents=True, exist_ok=True)
+    times: dict[str, float] = {}
+    try:
+        img_dir, db, sparse, undist = work / "images", work / "database.db", work / "sparse", work / "undistorted"
+        for p in (db, sparse, undist):  # a reused work folder starts clean
+            if p.is_dir():
+                shutil.rmtree(p)
+            elif p.exists():
+                p.unlink()
+        if img_dir.is_dir():
+            shutil.rmtree(img_dir)
+
+        t0 = time.perf_counter()
+        log(f"calibrate [1/5] resizing {len(files)} photos by {scale:g}")
+        size = _downscale_photos(files, img_dir, scale)
+        times["resize"] = time.perf_counter() - t0
+        names = [f"{f.stem}.png" for f in files]
+
+        with _colmap_log_level(verbose):
+            t0 = time.perf_counter()
+            log(f"calibrate [2/5] SIFT features ({size[0]}x{size[1]}, {camera_model}, "
+                f"{'one shared camera' if single_camera else 'one camera per photo'})")
+            reader = pycolmap.ImageReaderOptions()
+            reader.camera_model = camera_model
+            ext = pycolmap.FeatureExtractionOptions()
+            ext.num_threads = num_threads
+            ext.use_gpu = False
+            ext.max_image_size = max(size) if size else -1
+            ext.sift.max_num_features = int(max_features)
+            pycolmap.extract_features(
+                db, img_dir, image_names=names,
+                camera_mode=pycolmap.CameraMode.SINGLE if single_camera else pycolmap.CameraMode.PER_IMAGE,
+                reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu,
+            )
+            times["features"] = time.perf_counter() - t0
+
+            t0 = time.perf_counter()
+            log(f"calibrate [3/5] {matcher} matching")
+            mopt = pycolmap.FeatureMatchingOptions()
+            mopt.num_threads = num_threads
+            mopt.use_gpu = False
+            vopt = pycolmap.TwoViewGeometryOptions()
+            vopt.ransac.random_seed = seed
+            if matcher == "exhaustive":
+                pycolmap.match_exhaustive(db, matching_options=mopt, verification_options=vopt,
+                                          device=pycolmap.Device.cpu)
+            else:
+                popt = pycolmap.SequentialPairingOptions()
+                popt.num_threads = num_threads
+                pycolmap.match_sequential(db, matching_options=mopt, pairing_options=popt,
+                                          verification_options=vopt, device=pycolmap.Device.cpu)
+            times["matching"] = time.perf_counter() - t0
+
+            t0 = time.perf_counter()
+            log("calibrate [4/5] incremental mapping (poses, intrinsics, sparse points)")
+            iopt = pycolmap.IncrementalPipelineOptions()
+            iopt.num_threads = num_threads
+            iopt.random_seed = seed
+            iopt.mapper.random_seed = seed
+            iopt.triangulation.random_seed = seed
+            iopt.mapper.num_threads = num_threads
+            sparse.mkdir()
+            bar = progress(total=len(files), desc="calibrate: registered")
+            try:
+                recs = pycolmap.incremental_mapping(
+                    db, img_dir, sparse, options=iopt,
+                    initial_image_pair_callback=lambda: bar.update(2),
+                    next_image_callback=lambda: bar.update(1),
+                )
+            finally:
+                bar.close()
+            times["mapping"] = time.perf_counter() - t0
+
+            best_key, rec = None, None
+            for k, r in (recs or {}).items():
+                if rec is None or r.num_reg_images() > rec.num_reg_images():
+                    best_key, rec = k, r
+            registered = sorted(im.name for im in rec.images.values() if _has_pose(im)) if rec else []
+            unregistered = [n for n in names if n not in set(registered)]
+            stem = {f"{f.stem}.png": f.name for f in files}
+            if len(registered) < min_registered:
+                raise VibrInputError(
+                    f"only {len(registered)} of {len(files)} photos registered (at least "
+                    f"{min_registered} needed); not registered: "
+                    + ", ".join(stem[n] for n in unregistered),
+                    photos_dir,
+                )
+            if unregistered:
+                log("calibrate: not registered (left out): " + ", ".join(stem[n] for n in unregistered))
+            model_dir = sparse / str(best_key)
+            rec.write(model_dir)  # the kept model (incremental_mapping also wrote it)
+
+            t0 = time.perf_counter()
+            log(f"calibrate [5/5] undistorting {len(registered)} images to PINHOLE")
+            pycolmap.undistort_images(
+                undist, model_dir, img_dir, output_type="COLMAP", num_threads=num_threads
+            )
+            times["undistort"] = time.perf_counter() - t0
+            urec = pycolmap.Reconstruction(undist / "sparse")
+
+        report = CalibrationReport(
+            registered=[stem[n] for n in registered],
+            unregistered=[stem[n] for n in unregistered],
+            num_points=int(rec.num_points3D()),
+            mean_reprojection_error_px=float(rec.compute_mean_reprojection_error()),
+            image_size=tuple(size),
+            times_s=times,
+        )
+        meta = {
+            "format": "calibrate",
+            "calibration": {
+                "tool": f"pycolmap {pycolmap.__version__}",
+                "photos": str(photos_dir),
+                "scale": scale,
+                "matcher": matcher,
+                "camera_model": camera_model,
+                "single_camera": single_camera,
+                "registered": report.registered,
+                "unregistered": report.unregistered,
+                "num_points": report.num_points,
+                "mean_reprojection_error_px": report.mean_reprojection_error_px,
+                "times_s": {k: round(v, 3) for k, v in times.items()},
+            },
+        }
+        scene = scene_from_reconstruction(
+            urec, undist / "images", name=photos_dir.resolve().name, root=None, meta=meta
+        )
+        return scene, report
+    finally:
+        if own_work:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scene:
+    """Calibrate a folder of photos and write a vibr scene (``transforms.json``, images,
+    ``sparse_pc.ply``) to ``out_dir``.
+
+    Takes the keyword arguments of :func:`calibrate_scene`. The scene is written with
+    :func:`vibr.io.save_scene` into a temporary sibling of ``out_dir`` renamed at the end:
+    on any error nothing is left at ``out_dir``. An existing ``out_dir`` is an error unless
+    ``overwrite``. Returns the scene (its ``meta["calibration"]`` holds the summary).
+    """
+    try:
+        from .io import save_scene
+    except ImportError:
+        raise VibrInputError("vibr.io.save_scene is not available in this installation", out_dir) from None
+
+    out = Path(out_dir)
+    if out.exists() and not overwrite:
+        raise VibrInputError("output folder already exists (use --overwrite)", out)
+    parent = out.resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    scene, report = calibrate_scene(photos_dir, **kwargs)
+    log("calibrate: " + report.summary().replace("\n", "\ncalibrate: "))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=parent))
+    try:
+        save_scene(scene, tmp / "scene", overwrite=False)
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+            os.replace(out, old / "x")
+            os.replace(tmp / "scene", out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp / "scene", out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    scene.root = out
+    return scene
+
+
+# ---------------------------------------------------------------------------- evaluation helpers
+def similarity_align(src_pts, dst_pts) -> tuple[float, np.ndarray, np.ndarray]:
+    """Least-squares similarity ``dst ≈ s · R · src + t`` (Umeyama 1991).
+
+    Parameters
+    ----------
+    src_pts, dst_pts : (N, 3) arrays, N ≥ 3 non-collinear.
+
+    Returns
+    -------
+    s : float, R : (3, 3) rotation, t : (3,).
+    """
+    X = np.asarray(src_pts, dtype=np.float64)
+    Y = np.asarray(dst_pts, dtype=np.float64)
+    mx, my = X.mean(0), Y.mean(0)
+    Xc, Yc = X - mx, Y - my
+    S = Yc.T @ Xc / len(X)
+    U, d, Vt = np.linalg.svd(S)
+    D = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        D[2, 2] = -1
+    R = U @ D @ Vt
+    var_x = (Xc**2).sum() / len(X)
+    s = float(np.trace(np.diag(d) @ D) / var_x)
+    t = my - s * R @ mx
+    return s, R, t
+
+
+def pose_errors(est: list[Camera], ref: list[Camera]) -> dict:
+    """Per-view pose errors of ``est`` cameras after a similarity alignment to ``ref``.
+
+    The similarity ``X_ref = s R X_est + t`` is fitted to the camera centres
+    (:func:`similarity_align`). Rotation error of view i: the angle of
+    ``R_ref,i (R_est,i Rᵀ)ᵀ`` in degrees; centre error: ``‖s R C_est,i + t − C_ref,i‖``
+    in reference units, and divided by the baseline span (largest distance between two
+    reference centres).
+
+    Returns a dict with ``rot_deg`` (N,), ``centre`` (N,), ``centre_rel`` (N,), ``span``,
+    ``scale``.
+    """
+    Ce = np.array([c.centre for c in est])
+    Cr = np.array([c.centre for c in ref])
+    s, Rs, ts = similarity_align(Ce, Cr)
+    rot = []
+    for ce, cr in zip(est, ref):
+        M = cr.R @ (ce.R @ Rs.T).T
+        rot.append(np.degrees(np.arccos(np.clip((np.trace(M) - 1) / 2, -1.0, 1.0))))
+    cerr = np.linalg.norm((s * Ce @ Rs.T + ts) - Cr, axis=1)
+    span = float(np.max(np.linalg.norm(Cr[:, None] - Cr[None], axis=2)))
+    return {"rot_deg": np.array(rot), "centre": cerr, "centre_rel": cerr / span, "span": span, "scale": s}

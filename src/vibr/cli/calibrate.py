@@ -1,0 +1,74 @@
+"""``vibr calibrate PHOTOS_DIR OUT_SCENE``: cameras from raw photos with COLMAP (CPU)."""
+
+from __future__ import annotations
+
+import argparse
+
+from . import add_quiet
+
+_EPILOG = """\
+stages: resize -> SIFT features -> matching -> incremental mapping -> undistortion to pinhole;
+the scene is written as transforms.json + images + sparse_pc.ply (the sparse points bound the
+depth range of 'vibr depth'). The reconstruction's scale and orientation are arbitrary.
+
+examples:
+  vibr calibrate photos/ scene/ --scale 0.5
+  vibr depth scene/ && vibr render scene/ --target 5 -o view5.png
+"""
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="calibrate cameras from a folder of photos (COLMAP SfM, CPU)",
+        description="Calibrate a folder of photos of one static scene with COLMAP (pycolmap, CPU): "
+        "features, matching, incremental mapping, undistortion; write a vibr scene.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("photos", metavar="PHOTOS_DIR", help="folder of photos (jpg/png/tif), not recursive")
+    p.add_argument("out", metavar="OUT_SCENE", help="output scene folder (must not exist unless --overwrite)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="resize the photos by this factor first (e.g. 0.5: 3072x2048 -> 1536x1024; default 1)")
+    p.add_argument("--matcher", choices=["exhaustive", "sequential"], default="exhaustive",
+                   help="exhaustive: all pairs (default, best up to ~100 photos); "
+                   "sequential: neighbours in file-name order (video-like captures)")
+    p.add_argument("--camera-model", default="SIMPLE_RADIAL",
+                   choices=["SIMPLE_RADIAL", "RADIAL", "OPENCV", "SIMPLE_PINHOLE", "PINHOLE"],
+                   help="COLMAP camera model to estimate (default SIMPLE_RADIAL)")
+    p.add_argument("--per-image-cameras", action="store_true",
+                   help="one intrinsic camera per photo (default: one shared camera)")
+    p.add_argument("--min-registered", type=int, default=3,
+                   help="fail if fewer photos register (default 3)")
+    p.add_argument("--max-features", type=int, default=8192, help="SIFT features per photo (default 8192)")
+    p.add_argument("--threads", type=int, default=2, help="COLMAP threads (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--work", metavar="DIR", default=None,
+                   help="keep COLMAP's database, model and undistorted images here")
+    p.add_argument("--overwrite", action="store_true", help="replace OUT_SCENE if it exists")
+    p.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
+    add_quiet(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..calibrate import calibrate
+    from ..progress import log
+
+    scene = calibrate(
+        args.photos,
+        args.out,
+        overwrite=args.overwrite,
+        scale=args.scale,
+        matcher=args.matcher,
+        camera_model=args.camera_model,
+        single_camera=not args.per_image_cameras,
+        min_registered=args.min_registered,
+        max_features=args.max_features,
+        num_threads=args.threads,
+        seed=args.seed,
+        work_dir=args.work,
+        verbose=args.verbose,
+    )
+    log(f"calibrate: wrote {len(scene)} views to {args.out}")
+    return 0

@@ -1,0 +1,72 @@
+"""Comparison figures: reference, each method, error maps, and zoomed crops where methods
+differ most. Plain PNGs assembled with numpy (no plotting dependency)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+# A perceptually ordered dark-to-bright map (approximating 'inferno') for error images.
+_ANCHORS = np.array([[0, 0, 4], [40, 11, 84], [101, 21, 110], [159, 42, 99], [212, 72, 66],
+                     [245, 125, 21], [250, 193, 39], [252, 255, 164]], float) / 255.0
+
+
+def colormap(x: np.ndarray) -> np.ndarray:
+    """Map values in [0, 1] (clipped) to H×W×3 float32 colours."""
+    x = np.clip(np.asarray(x, float), 0, 1) * (len(_ANCHORS) - 1)
+    i = np.minimum(x.astype(int), len(_ANCHORS) - 2)
+    f = (x - i)[..., None]
+    return ((1 - f) * _ANCHORS[i] + f * _ANCHORS[i + 1]).astype(np.float32)
+
+
+def error_map(img: np.ndarray, ref: np.ndarray, max_err: float = 0.1) -> np.ndarray:
+    """Colour-coded per-pixel RGB error ‖img − ref‖/√3, saturating at ``max_err``."""
+    e = np.sqrt(np.mean((np.asarray(img, float) - ref) ** 2, axis=-1))
+    return colormap(e / max_err)
+
+
+def most_different_window(images: list[np.ndarray], size: int) -> tuple[int, int]:
+    """Top-left (row, col) of the size×size window where the images disagree most
+    (sum over the window of the per-pixel variance across images)."""
+    from scipy.ndimage import uniform_filter
+
+    stack = np.stack([np.asarray(i, float).mean(-1) for i in images])
+    var = stack.var(axis=0)
+    score = uniform_filter(var, size, mode="constant")
+    h, w = var.shape
+    half = size // 2
+    score = score[half : h - size + half + 1, half : w - size + half + 1]
+    r, c = np.unravel_index(np.argmax(score), score.shape)
+    return int(r), int(c)
+
+
+def write_figures(folder, ref: np.ndarray, images: dict[str, np.ndarray], mask=None,
+                  prefix: str = "view", max_err: float = 0.1) -> dict:
+    """Write ``PREFIX_compare.png`` (top row: reference and each method; bottom row: the mask
+    and each method's error map) and ``PREFIX_crops.png`` (the same images cropped to the
+    window where methods differ most, magnified ×4). Returns the file names and the column
+    order."""
+    from .io import write_image
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    names = list(images)
+    top = [ref] + [np.clip(images[n], 0, 1) for n in names]
+    m = np.ones(ref.shape[:2], bool) if mask is None else np.asarray(mask, bool)
+    bottom = [np.repeat(m[..., None].astype(np.float32), 3, -1)] + [error_map(images[n], ref, max_err) for n in names]
+    sep = np.ones((ref.shape[0], 4, 3), np.float32)
+    row = lambda ims: np.concatenate(sum(([i, sep] for i in ims), [])[:-1], axis=1)  # noqa: E731
+    grid = np.concatenate([row(top), np.ones((4, row(top).shape[1], 3), np.float32), row(bottom)], axis=0)
+    compare = folder / f"{prefix}_compare.png"
+    write_image(compare, grid)
+
+    size = max(16, min(ref.shape[:2]) // 6)
+    r, c = most_different_window(top[1:] if len(top) > 2 else top, size)
+    crop = lambda a: np.kron(a[r : r + size, c : c + size], np.ones((4, 4, 1), np.float32))  # noqa: E731
+    sepc = np.ones((size * 4, 4, 3), np.float32)
+    crops = np.concatenate(sum(([crop(i), sepc] for i in top), [])[:-1], axis=1)
+    crops_path = folder / f"{prefix}_crops.png"
+    write_image(crops_path, crops)
+    return {"compare": str(compare), "crops": str(crops_path), "columns": ["reference"] + names,
+            "crop_window": {"row": r, "col": c, "size": size}, "error_saturation": max_err}

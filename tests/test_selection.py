@@ -1,0 +1,57 @@
+import numpy as np
+
+from vibr import Camera, Scene, View
+from vibr.selection import rank_views, select_views
+
+
+def _grid_scene(n=5, z=10.0, size=32):
+    """Parallel cameras on an n×n grid (baseline 1), fronto-parallel plane at depth z."""
+    K = Camera.intrinsics(40.0, size, size)
+    views = []
+    for r in range(n):
+        for c in range(n):
+            C = np.array([c - n // 2, r - n // 2, 0.0])
+            cam = Camera.from_centre(K, np.eye(3), C, size, size)
+            views.append(View(f"v{r}{c}", np.zeros((size, size, 3), np.float32), cam,
+                              depth=np.full((size, size), z, np.float32)))
+    return Scene(views, grid=(n, n))
+
+
+def test_nearest_grid_neighbours_rank_first():
+    scene = _grid_scene()
+    sources, target = scene.split("v22")
+    order, pen, overlap = rank_views(sources, target.camera)
+    first4 = {sources.views[i].name for i in order[:4]}
+    assert first4 == {"v12", "v21", "v23", "v32"}
+    # Diagonal neighbours come next, the far corners last.
+    next4 = {sources.views[i].name for i in order[4:8]}
+    assert next4 == {"v11", "v13", "v31", "v33"}
+    assert {sources.views[i].name for i in order[-4:]} == {"v00", "v04", "v40", "v44"}
+
+
+def test_view_facing_away_is_last():
+    scene = _grid_scene(n=3)
+    # Turn one source around: it sees none of the target's points.
+    v = scene.views[0]
+    Rflip = np.diag([-1.0, 1.0, -1.0])
+    scene.views[0] = v.replace(camera=Camera.from_centre(v.camera.K, Rflip, v.camera.centre, 32, 32))
+    sources, target = scene.split("v11")
+    order, pen, overlap = rank_views(sources, target.camera)
+    assert overlap[0] == 0 and order[-1] == 0
+    assert 0 not in select_views(sources, target.camera, 7)
+
+
+def test_select_all_when_k_large():
+    scene = _grid_scene(n=3)
+    sources, target = scene.split(4)
+    assert select_views(sources, target.camera, 100) == list(range(8))
+    assert len(select_views(sources, target.camera, 3)) == 3
+
+
+def test_no_geometry_falls_back_to_plane():
+    scene = _grid_scene(n=3)
+    scene = Scene([v.replace(depth=None) for v in scene.views], grid=(3, 3))
+    sources, target = scene.split("v11")
+    order, pen, overlap = rank_views(sources, target.camera)
+    assert np.all(overlap > 0)
+    assert {sources.views[i].name for i in order[:4]} == {"v01", "v10", "v12", "v21"}
