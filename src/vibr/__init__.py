@@ -9,7 +9,8 @@ photographs (colour term), their edges (gradient term) and natural-image smoothn
 from .camera import Camera
 from .errors import VibrInputError
 from .scene import Scene, View
+from .render import RenderResult, render
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "Scene", "View", "VibrInputError", "__version__"]
+__all__ = ["Camera", "RenderResult", "Scene", "View", "VibrInputError", "render", "__version__"]

@@ -8,7 +8,9 @@ Pipeline (``vibr calibrate PHOTOS_DIR OUT_SCENE``)
 3. **Matching**: exhaustive (all pairs; best for ≲ 100 photos) or sequential (neighbours in
    file-name order; for video-like captures), with two-view geometric verification.
 4. **Incremental mapping** (``pycolmap.incremental_mapping``): poses, intrinsics and sparse
-   points by bundle adjustment; the largest model is kept.
+   points by bundle adjustment; the largest model is kept. Then, by default, the principal
+   point is refined by one more bundle adjustment and kept only if its covariance shows
+   the photos determine it (:func:`_refine_principal_point`).
 5. **Undistortion** to PINHOLE cameras (``pycolmap.undistort_images``).
 6. A :class:`~vibr.scene.Scene` in vibr's conventions: ``x̃ = K (R X + t)`` with
    ``R, t = cam_from_world`` (COLMAP's pose is already world → camera) and the principal
@@ -19,13 +21,14 @@ Pipeline (``vibr calibrate PHOTOS_DIR OUT_SCENE``)
    end, so a failed run leaves no partial output.
 
 The reconstruction's scale and world frame are arbitrary (COLMAP's gauge): depth maps and
-renders made from it are consistent with it. :func:`similarity_align` and
-:func:`pose_errors` compare it to reference cameras up to that similarity.
+renders made from it are consistent with it. :func:`similarity_align`,
+:func:`align_cameras` and :func:`pose_errors` compare it to reference cameras up to that similarity.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import tempfile
@@ -98,16 +101,16 @@ def list_photos(photos_dir) -> list[Path]:
     return files
 
 
-def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> tuple[int, int]:
+def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> list[tuple[int, int]]:
     """Write each photo, resized by ``scale`` (Lanczos), as ``out_dir/<stem>.png`` (8-bit RGB).
 
-    Returns the (width, height) of the first one. The new size is ``round(W·s) × round(H·s)``,
-    consistent with :meth:`vibr.camera.Camera.scaled`.
+    Returns the list of (width, height) of the written images. The new size is
+    ``round(W·s) × round(H·s)``, consistent with :meth:`vibr.camera.Camera.scaled`.
     """
     from PIL import Image
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    size = None
+    sizes = []
     for f in progress(files, desc="calibrate: downscale"):
         try:
             with Image.open(f) as im:
@@ -120,11 +123,10 @@ def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> tuple[i
                     nw, nh = max(1, int(round(w * scale))), max(1, int(round(h * scale)))
                     im = im.resize((nw, nh), Image.LANCZOS)
                 im.save(out_dir / f"{f.stem}.png")
-                if size is None:
-                    size = im.size
+                sizes.append(im.size)
         except (OSError, ValueError) as exc:
             raise VibrInputError(f"cannot read image: {exc}", f) from None
-    return size
+    return sizes
 
 
 def _to8bit(im):
@@ -218,6 +220,7 @@ def calibrate_scene(
     matcher: str = "exhaustive",
     camera_model: str = "SIMPLE_RADIAL",
     single_camera: bool = True,
+    refine_principal_point: bool | None = None,
     min_registered: int = MIN_REGISTERED,
     max_features: int = 8192,
     num_threads: int = 2,
@@ -241,6 +244,13 @@ def calibrate_scene(
         SIMPLE_PINHOLE, PINHOLE). Distorted models are undistorted to PINHOLE in step 5.
     single_camera : bool
         One shared intrinsic camera for all photos (same camera and zoom) or one per photo.
+    refine_principal_point : bool, optional
+        True: bundle adjustment refines the principal point throughout the mapping.
+        False: it stays at the image centre (COLMAP's default). None (default, "auto"): map
+        with it fixed, then refine it in one global bundle adjustment and keep the result
+        only if its covariance shows the photos determine it (:func:`_refine_principal_point`).
+        On fountain-P11 the principal point is ~11 px (at 1536×1024) off centre; held at the
+        centre, the poses absorb it as a ~0.5° rotation of every camera.
     min_registered : int
         Fewer registered images raise :class:`VibrInputError` naming the unregistered ones.
     max_features : int
@@ -286,7 +296,8 @@ def calibrate_scene(
     times: dict[str, float] = {}
     try:
         img_dir, db, sparse, undist = work / "images", work / "database.db", work / "sparse", work / "undistorted"
-        for p in (db, sparse, undist):  # a reused work folder starts clean
+        stale = (db, Path(f"{db}-wal"), Path(f"{db}-shm"), sparse, undist)
+        for p in stale:  # a reused work folder starts clean
             if p.is_dir():
                 shutil.rmtree(p)
             elif p.exists():
@@ -296,7 +307,12 @@ def calibrate_scene(
 
         t0 = time.perf_counter()
         log(f"calibrate [1/5] resizing {len(files)} photos by {scale:g}")
-        size = _downscale_photos(files, img_dir, scale)
+        sizes = _downscale_photos(files, img_dir, scale)
+        size = max(sizes, key=lambda wh: wh[0] * wh[1])
+        if single_camera and len(set(sizes)) > 1:
+            # One shared camera needs one image size: photos of several sizes get one each.
+            log(f"calibrate: photos have {len(set(sizes))} different sizes: one camera per photo")
+            single_camera = False
         times["resize"] = time.perf_counter() - t0
         names = [f"{f.stem}.png" for f in files]
 
@@ -309,7 +325,7 @@ def calibrate_scene(
             ext = pycolmap.FeatureExtractionOptions()
             ext.num_threads = num_threads
             ext.use_gpu = False
-            ext.max_image_size = max(size) if size else -1
+            ext.max_image_size = max(max(wh) for wh in sizes)
             ext.sift.max_num_features = int(max_features)
             pycolmap.extract_features(
                 db, img_dir, image_names=names,
@@ -343,6 +359,7 @@ def calibrate_scene(
             iopt.mapper.random_seed = seed
             iopt.triangulation.random_seed = seed
             iopt.mapper.num_threads = num_threads
+            iopt.ba_refine_principal_point = bool(refine_principal_point)
             sparse.mkdir()
             bar = progress(total=len(files), desc="calibrate: registered")
             try:
@@ -371,7 +388,15 @@ def calibrate_scene(
                 )
             if unregistered:
                 log("calibrate: not registered (left out): " + ", ".join(stem[n] for n in unregistered))
+            pp_note = "refined in mapping" if refine_principal_point else "fixed at the image centre"
+            if refine_principal_point is None:
+                t0 = time.perf_counter()
+                rec, pp_note = _refine_principal_point(rec, num_threads)
+                times["principal_point"] = time.perf_counter() - t0
+            log(f"calibrate: principal point {pp_note}")
+            pycolmap.logging.minloglevel = 0 if verbose else 2
             model_dir = sparse / str(best_key)
+            model_dir.mkdir(parents=True, exist_ok=True)
             rec.write(model_dir)  # the kept model (incremental_mapping also wrote it)
 
             t0 = time.perf_counter()
@@ -399,6 +424,7 @@ def calibrate_scene(
                 "matcher": matcher,
                 "camera_model": camera_model,
                 "single_camera": single_camera,
+                "principal_point": pp_note,
                 "registered": report.registered,
                 "unregistered": report.unregistered,
                 "num_points": report.num_points,
@@ -415,9 +441,65 @@ def calibrate_scene(
             shutil.rmtree(work, ignore_errors=True)
 
 
+#: The "auto" principal-point refinement is kept only if the standard deviation of each
+#: principal-point coordinate (from the bundle-adjustment covariance) is at most
+#: ``PP_MAX_STD`` · max(W, H) and the shift at most ``PP_MAX_SHIFT`` · max(W, H).
+PP_MAX_STD = 0.002
+PP_MAX_SHIFT = 0.03
+
+
+def _refine_principal_point(rec, num_threads: int):
+    """Global bundle adjustment of a copy of ``rec`` with the principal point free, kept only
+    if the data determine it.
+
+    The covariance of the camera parameters at the optimum (``pycolmap.estimate_ba_covariance``,
+    gauge fixed by three points) gives the standard deviation σ of each principal-point
+    coordinate; the refinement is kept when every σ ≤ ``PP_MAX_STD`` · max(W, H) and the shift
+    ≤ ``PP_MAX_SHIFT`` · max(W, H). (On fountain-P11 at 1536×1024, σ ≈ 0.7 / 1.9 px; on a
+    level arc of views σ_y is tens of pixels: the principal point trades off against a
+    common pitch of the cameras.)
+
+    Returns ``(reconstruction, note)``: the refined copy or ``rec`` itself, and a note.
+    """
+    import pycolmap
+
+    trial = pycolmap.Reconstruction(rec)
+    opt = pycolmap.BundleAdjustmentOptions()
+    opt.refine_principal_point = True
+    opt.print_summary = False
+    opt.ceres.solver_options.num_threads = num_threads
+    cfg = pycolmap.BundleAdjustmentConfig()
+    for iid in trial.reg_image_ids():
+        cfg.add_image(iid)
+    cfg.fix_gauge(pycolmap.BundleAdjustmentGauge.THREE_POINTS)
+    try:
+        ba = pycolmap.create_default_ceres_bundle_adjuster(opt, cfg, trial)
+        ba.solve()
+        cov = pycolmap.estimate_ba_covariance(pycolmap.BACovarianceOptions(), trial, ba)
+    except Exception as exc:  # noqa: BLE001 - any solver failure means "keep the centre"
+        return rec, f"kept at the image centre (refinement failed: {exc})"
+    worst_std, shift = 0.0, 0.0
+    for cid, cam in trial.cameras.items():
+        size = max(cam.width, cam.height)
+        C = cov.get_other_params_cov(cam.params) if cov is not None else None
+        idx = list(cam.principal_point_idxs())
+        if C is None or C.shape[0] != len(cam.params):
+            return rec, "kept at the image centre (no covariance for the refinement)"
+        std = np.sqrt(np.clip(np.diag(C)[idx], 0, None))
+        worst_std = max(worst_std, float(std.max()) / size)
+        c0 = rec.cameras[cid]
+        d = np.hypot(cam.principal_point_x - c0.principal_point_x, cam.principal_point_y - c0.principal_point_y)
+        shift = max(shift, d / size)
+    if not (np.isfinite(worst_std) and worst_std <= PP_MAX_STD and shift <= PP_MAX_SHIFT):
+        return rec, (f"kept at the image centre (refined: std {100 * worst_std:.2f}%, shift "
+                     f"{100 * shift:.2f}% of the image size)")
+    return trial, f"refined (std {100 * worst_std:.3f}%, shift {100 * shift:.2f}% of the image size)"
+
+
 def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scene:
     """Calibrate a folder of photos and write a vibr scene (``transforms.json``, images,
-    ``sparse_pc.ply``) to ``out_dir``.
+    ``sparse_pc.ply``, and ``calibration.json``: registered / unregistered photos, point
+    count, reprojection error, stage times) to ``out_dir``.
 
     Takes the keyword arguments of :func:`calibrate_scene`. The scene is written with
     :func:`vibr.io.save_scene` into a temporary sibling of ``out_dir`` renamed at the end:
@@ -439,6 +521,9 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=parent))
     try:
         save_scene(scene, tmp / "scene", overwrite=False)
+        # The calibration summary beside transforms.json (registered images, errors, times).
+        with open(tmp / "scene" / "calibration.json", "w") as fh:
+            json.dump(scene.meta["calibration"], fh, indent=2)
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
             os.replace(out, old / "x")
@@ -480,25 +565,51 @@ def similarity_align(src_pts, dst_pts) -> tuple[float, np.ndarray, np.ndarray]:
     return s, R, t
 
 
-def pose_errors(est: list[Camera], ref: list[Camera]) -> dict:
+def align_cameras(est: list[Camera], ref: list[Camera], align: str = "poses") -> tuple[float, np.ndarray, np.ndarray]:
+    """Similarity ``X_ref = s Rₛ X_est + t`` between two calibrations of the same views
+    (see :func:`pose_errors` for the two ``align`` modes). Returns ``(s, Rₛ (3, 3), t (3,))``."""
+    Ce = np.array([c.centre for c in est])
+    Cr = np.array([c.centre for c in ref])
+    if align == "centres":
+        return similarity_align(Ce, Cr)
+    if align != "poses":
+        raise ValueError(f"align must be 'poses' or 'centres', got {align!r}")
+    M = sum(cr.R.T @ ce.R for ce, cr in zip(est, ref))
+    U, _, Vt = np.linalg.svd(M)
+    Rs = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    Ec, Rc = Ce - Ce.mean(0), Cr - Cr.mean(0)
+    s = float(np.sum((Ec @ Rs.T) * Rc) / np.sum(Ec**2))
+    return s, Rs, Cr.mean(0) - s * Rs @ Ce.mean(0)
+
+
+def pose_errors(est: list[Camera], ref: list[Camera], align: str = "poses") -> dict:
     """Per-view pose errors of ``est`` cameras after a similarity alignment to ``ref``.
 
-    The similarity ``X_ref = s R X_est + t`` is fitted to the camera centres
-    (:func:`similarity_align`). Rotation error of view i: the angle of
-    ``R_ref,i (R_est,i Rᵀ)ᵀ`` in degrees; centre error: ``‖s R C_est,i + t − C_ref,i‖``
-    in reference units, and divided by the baseline span (largest distance between two
-    reference centres).
+    The similarity maps estimated world points to reference ones, ``X_ref = s Rₛ X_est + t``.
+
+    * ``align="centres"``: Umeyama fit of the camera centres (:func:`similarity_align`).
+      Ill-conditioned in rotation when the centres are nearly collinear (a short arc).
+    * ``align="poses"`` (default): ``Rₛ`` is the chordal mean of ``R_ref,iᵀ R_est,i`` over
+      the views (SVD projection of their sum onto SO(3)), then ``s, t`` are the least-squares
+      fit of the centres with ``Rₛ`` fixed:
+      ``s = Σ (Rₛ C̄_est,i)·C̄_ref,i / Σ ‖C̄_est,i‖²`` (C̄: centred), ``t = mean C_ref − s Rₛ mean C_est``.
+
+    Rotation error of view i: the angle θ of ``M = R_ref,i (R_est,i Rₛᵀ)ᵀ`` in degrees
+    (``‖M − I‖_F = 2√2 sin(θ/2)``); centre
+    error: ``‖s Rₛ C_est,i + t − C_ref,i‖`` in reference units, and divided by the baseline
+    span (largest distance between two reference centres).
 
     Returns a dict with ``rot_deg`` (N,), ``centre`` (N,), ``centre_rel`` (N,), ``span``,
     ``scale``.
     """
     Ce = np.array([c.centre for c in est])
     Cr = np.array([c.centre for c in ref])
-    s, Rs, ts = similarity_align(Ce, Cr)
+    s, Rs, ts = align_cameras(est, ref, align)
     rot = []
     for ce, cr in zip(est, ref):
         M = cr.R @ (ce.R @ Rs.T).T
-        rot.append(np.degrees(np.arccos(np.clip((np.trace(M) - 1) / 2, -1.0, 1.0))))
+        # ‖M − I‖_F = 2√2 sin(θ/2): accurate for small angles, unlike arccos((tr M − 1)/2).
+        rot.append(np.degrees(2 * np.arcsin(min(1.0, np.linalg.norm(M - np.eye(3)) / (2 * np.sqrt(2))))))
     cerr = np.linalg.norm((s * Ce @ Rs.T + ts) - Cr, axis=1)
     span = float(np.max(np.linalg.norm(Cr[:, None] - Cr[None], axis=2)))
     return {"rot_deg": np.array(rot), "centre": cerr, "centre_rel": cerr / span, "span": span, "scale": s}

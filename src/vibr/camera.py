@@ -102,7 +102,7 @@ class Camera:
         eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
         z = target - eye
         z /= np.linalg.norm(z)
-        x = np.cross(z, -up)
+        x = np.cross(-up, z)
         if np.linalg.norm(x) < 1e-12:
             raise ValueError("look_at: up is parallel to the viewing direction")
         x /= np.linalg.norm(x)

@@ -38,6 +38,10 @@ def register(sub) -> None:
                    help="COLMAP camera model to estimate (default SIMPLE_RADIAL)")
     p.add_argument("--per-image-cameras", action="store_true",
                    help="one intrinsic camera per photo (default: one shared camera)")
+    p.add_argument("--principal-point", choices=["auto", "fixed", "refine"], default="auto",
+                   help="fixed: at the image centre; refine: by bundle adjustment throughout; "
+                   "auto (default): refined by a final bundle adjustment, kept only if its "
+                   "covariance shows the photos determine it")
     p.add_argument("--min-registered", type=int, default=3,
                    help="fail if fewer photos register (default 3)")
     p.add_argument("--max-features", type=int, default=8192, help="SIFT features per photo (default 8192)")
@@ -63,6 +67,7 @@ def run(args) -> int:
         matcher=args.matcher,
         camera_model=args.camera_model,
         single_camera=not args.per_image_cameras,
+        refine_principal_point={"auto": None, "fixed": False, "refine": True}[args.principal_point],
         min_registered=args.min_registered,
         max_features=args.max_features,
         num_threads=args.threads,

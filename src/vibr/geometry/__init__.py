@@ -1,5 +1,29 @@
-"""Geometry stage (paper §5): depth preparation, warps, Jacobians, visibility, weights."""
+"""Geometry stage (paper §5, METHOD.md §2): depth preparation, warps, Jacobians,
+visibility → :class:`Samples` (what the renderer consumes).
 
+Main entry points
+-----------------
+compute_samples(sources, target, *, vis_threshold=0.02, ...) -> Samples
+ensure_source_depth(scene) -> Scene        (depth transfer to views without depth)
+planar_proxy(sources, target_camera, depth=None, sigma_z=None) -> Scene
+
+Modules: ``depth`` (radial/disparity → orthogonal depth, slopes, bilateral hole filling),
+``warp`` (tau_k and its Jacobians), ``visibility`` (z-buffer splatting, occlusion test),
+``transfer``, ``proxy``, ``pipeline``; ``weights`` belongs to the renderer.
+"""
+
+from .depth import (depth_derivatives, disparity_to_depth, fill_depth_holes, radial_to_orthogonal,
+                    radial_to_orthogonal_derivatives)
+from .pipeline import compute_samples, prepare_depth
+from .proxy import planar_proxy, plane_depth
 from .samples import Samples
+from .transfer import ensure_source_depth, transfer_depth
+from .visibility import new_zbuffers, reduce_zbuffers, splat_mesh, splat_zbuffer, visibility_mask
+from .warp import warp_constants, warp_points, warp_view
 
-__all__ = ["Samples"]
+__all__ = [
+    "Samples", "compute_samples", "prepare_depth", "ensure_source_depth", "transfer_depth",
+    "planar_proxy", "plane_depth", "depth_derivatives", "disparity_to_depth", "fill_depth_holes",
+    "radial_to_orthogonal", "radial_to_orthogonal_derivatives", "warp_constants", "warp_points",
+    "warp_view", "new_zbuffers", "splat_zbuffer", "splat_mesh", "reduce_zbuffers", "visibility_mask",
+]

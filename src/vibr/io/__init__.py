@@ -1,0 +1,158 @@
+"""Dataset loaders and writers (IO at the edges of vibr).
+
+:func:`load_scene` detects the format of a path and returns a :class:`~vibr.scene.Scene`:
+
+=============================  ==========================================================
+HCI 4D light field             folder with ``input_CamNNN.png`` [+ ``parameters.cfg``]
+Strecha                        images + ``*.camera`` (beside, or ``gt_dense_cameras/``)
+Middlebury                     ``*_par.txt`` (the file or its folder)
+nerfstudio / instant-NGP       ``transforms.json`` (the file or its folder)
+COLMAP                         sparse model (``root/sparse/0``, ``root/sparse`` or the model)
+=============================  ==========================================================
+
+:func:`save_scene` writes any scene as nerfstudio ``transforms.json`` (+ PNG images, float32
+``.npy`` depth, sigma_z maps, sparse points), losslessly: loading the result gives the same
+cameras (to 1e-9), images and depth (bit for bit; resized images are stored on the 16-bit
+grid, see :func:`vibr.io.images.quantise16`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..errors import VibrInputError
+from .camera_json import read_camera_json, write_camera_json
+from .depthfiles import read_depth, read_pfm, write_depth, write_pfm
+from .images import read_image, write_image
+from .transforms import save_scene
+
+__all__ = ["load_scene", "save_scene", "detect_format", "read_image", "write_image", "read_depth",
+           "write_depth", "read_pfm", "write_pfm", "read_camera_json", "write_camera_json", "FORMATS"]
+
+FORMATS = ("hci", "strecha", "middlebury", "transforms", "colmap")
+
+
+def detect_format(path) -> str:
+    """Name of the scene format at ``path`` (one of :data:`FORMATS`).
+
+    Raises :class:`VibrInputError` when the path is missing or nothing is recognised.
+    """
+    from .colmap import find_colmap_model
+    from .hci import is_hci_folder
+    from .middlebury import find_par_file
+    from .strecha import is_strecha_folder
+    from .transforms import find_transforms
+
+    p = Path(path)
+    if not p.exists():
+        raise VibrInputError("file or folder not found", p)
+    if p.is_file():
+        if p.name.endswith("_par.txt"):
+            return "middlebury"
+        if p.suffix.lower() == ".json":
+            return "transforms"
+        if p.name == "parameters.cfg":
+            return "hci"
+        raise VibrInputError("not a scene: give a folder, a transforms.json or a *_par.txt file", p)
+    if find_transforms(p) is not None:
+        return "transforms"
+    if is_hci_folder(p):
+        return "hci"
+    if find_colmap_model(p) is not None:
+        return "colmap"
+    if find_par_file(p) is not None:
+        return "middlebury"
+    if is_strecha_folder(p):
+        return "strecha"
+    raise VibrInputError(
+        "no supported scene found (looked for transforms.json, input_CamNNN.png light-field views, "
+        "a COLMAP sparse model, a *_par.txt file, or images with .camera files)", p)
+
+
+def load_scene(path, *, scale: float = 1.0, views=None, **options):
+    """Load a scene in any supported format (detected by :func:`detect_format`).
+
+    Parameters
+    ----------
+    path : str or Path
+        A scene folder, ``transforms.json`` or ``*_par.txt`` file.
+    scale : float
+        Resize factor applied after reading: images with anti-aliasing
+        (skimage.transform.resize), cameras with :meth:`Camera.scaled`, depth by nearest
+        neighbour (never mixes depths across edges).
+    views : list of int or str, optional
+        Load only these views, in this order (positions in the format's view order, or
+        names = image stems); only their images are read.
+    **options
+        Format-specific options, e.g. ``grid=(rows, cols)`` for an HCI folder without
+        ``parameters.cfg``.
+
+    Returns
+    -------
+    Scene
+        ``scene.meta["format"]`` names the format; light fields set ``scene.grid`` and
+        ``scene.meta["grid_pos"]``.
+    """
+    try:
+        scale = float(scale)
+    except (TypeError, ValueError):
+        raise VibrInputError(f"scale must be a number, got {scale!r}") from None
+    if not (scale > 0 and scale <= 16):
+        raise VibrInputError(f"scale must be in (0, 16], got {scale}")
+    fmt = detect_format(path)
+    p = Path(path)
+    if fmt == "hci":
+        from .hci import load_hci
+
+        return load_hci(p.parent if p.is_file() else p, scale=scale, views=views, **options)
+    if options:
+        raise VibrInputError(f"options {sorted(options)} do not apply to {fmt} scenes", p)
+    if fmt == "transforms":
+        from .transforms import load_transforms
+
+        return load_transforms(p, scale=scale, views=views)
+    if fmt == "colmap":
+        from .colmap import load_colmap
+
+        return load_colmap(p, scale=scale, views=views)
+    if fmt == "middlebury":
+        from .middlebury import load_middlebury
+
+        return load_middlebury(p, scale=scale, views=views)
+    from .strecha import load_strecha
+
+    return load_strecha(p, scale=scale, views=views)
+
+
+def select_entries(entries: list[dict], views, root=None) -> list[dict]:
+    """Pick the loader entries named by ``views`` (positions or names/stems), in that order."""
+    if views is None:
+        return entries
+    if isinstance(views, (str, int)):
+        views = [views]
+    names = [e["name"] for e in entries]
+    out, seen = [], set()
+    for k in views:
+        if isinstance(k, int) or (isinstance(k, str) and k.strip().lstrip("-").isdigit() and k.strip() not in names):
+            i = int(k)
+            if not -len(entries) <= i < len(entries):
+                raise VibrInputError(f"no view {i}: the scene has {len(entries)} views", root)
+            i %= len(entries)
+        else:
+            k = str(k).strip()
+            stem = os.path.splitext(k)[0]
+            if k in names:
+                i = names.index(k)
+            elif stem in names:
+                i = names.index(stem)
+            else:
+                raise VibrInputError(
+                    f"no view named {k!r} (views: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''})", root)
+        if i in seen:
+            raise VibrInputError(f"view {names[i]} is listed twice", root)
+        seen.add(i)
+        out.append(entries[i])
+    if not out:
+        raise VibrInputError("no views selected", root)
+    return out

@@ -1,0 +1,16 @@
+"""Depth estimation: per-view depth maps and sigma_z from calibrated photographs.
+
+* :func:`estimate_depth` — the entry point (light-field or plane-sweep MVS).
+* :func:`plane_sweep` — plane-sweep stereo for one reference view.
+* :func:`check_consistency` — forward-backward geometric consistency across views.
+* :func:`epi_disparity`, :func:`lightfield_depth` — light-field estimators.
+"""
+
+from .api import default_depth_range, estimate_depth, select_neighbours, upsample_depth
+from .consistency import ConsistencyResult, check_consistency
+from .lightfield import disparity_model, epi_disparity, lightfield_depth
+from .planesweep import SweepResult, plane_homographies, plane_sweep
+
+__all__ = ["estimate_depth", "default_depth_range", "select_neighbours", "upsample_depth",
+           "plane_sweep", "plane_homographies", "SweepResult", "check_consistency",
+           "ConsistencyResult", "epi_disparity", "disparity_model", "lightfield_depth"]

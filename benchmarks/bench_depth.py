@@ -1,0 +1,209 @@
+"""Depth-estimation benchmark (issue 5): HCI cotton metrics and Strecha fountain MVS.
+
+Usage::
+
+    python benchmarks/bench_depth.py cotton      # BadPix(0.07), MSE×100 of the centre view
+    python benchmarks/bench_depth.py fountain    # 11 views at 768×512: kept, reprojection, time,
+                                                 # and the PSNR of view 5 rendered from the others
+    python benchmarks/bench_depth.py synthetic   # exact-depth scenes: % within 1 % relative error
+    python benchmarks/bench_depth.py             # all three
+
+Prints tables. Timings are single runs on a shared machine (noisy); repeat with --repeat N to
+get medians. Data: $VIBR_DATA or ../shared/data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+_REPO = Path(__file__).resolve().parents[1]
+
+
+def data_dir() -> Path:
+    env = os.environ.get("VIBR_DATA")
+    d = Path(env) if env else _REPO.parent / "shared" / "data"
+    if not d.is_dir():
+        sys.exit(f"data folder not found: {d}")
+    return d
+
+
+def hci_metrics(disp: np.ndarray, gt: np.ndarray, border: int = 15) -> tuple[float, float]:
+    """HCI 4D LF benchmark metrics (Honauer et al. 2016): BadPix(0.07) in percent and
+    MSE×100, on all pixels but a ``border``-pixel frame (the benchmark's 15 px)."""
+    sl = (slice(border, -border), slice(border, -border)) if border else (slice(None),) * 2
+    e = (disp - gt)[sl]
+    return 100.0 * float(np.mean(np.abs(e) > 0.07)), 100.0 * float(np.mean(e ** 2))
+
+
+def bench_cotton(args) -> None:
+    from vibr.io import load_scene, read_pfm
+    from vibr.stereo.lightfield import lightfield_depth
+
+    root = data_dir() / "hci2016_cotton"
+    scene = load_scene(root)
+    gt = np.asarray(read_pfm(root / "gt_disp_lowres.pfm"), np.float64)
+    ref = scene.index("input_Cam040")
+    pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
+    r0, c0 = pos[ref]
+    block = [ref] + [i for i, (r, c) in pos.items() if max(abs(r - r0), abs(c - c0)) == 1]
+    full = list(range(len(scene)))
+    cams = [v.camera for v in scene.views]
+
+    def img(i):
+        return scene.views[i].image
+
+    rows = []
+    for label, inputs in (("3x3 block (8 nb)", block), ("9x9 grid (80 nb)", full)):
+        for refine in args.refine.split(","):
+            times = []
+            for _ in range(args.repeat):
+                t = time.perf_counter()
+                z, s, st, d = lightfield_depth(scene, ref, cams, img, inputs, refine=refine,
+                                               return_disparity=True)
+                times.append(time.perf_counter() - t)
+            bp, mse = hci_metrics(d, gt, 15)
+            bp0, mse0 = hci_metrics(d, gt, 0)
+            rows.append((label, refine, bp, mse, bp0, mse0, statistics.median(times),
+                         st.get("n_views", "-"), st.get("n_planes", "-")))
+    print("\nhci2016_cotton, centre view input_Cam040 vs gt_disp_lowres.pfm (512x512)")
+    print(f"{'inputs':<18} {'refine':<9} {'BadPix0.07 %':>12} {'MSE*100':>8} {'BadPix(all) %':>13} "
+          f"{'MSE*100(all)':>12} {'time s':>7} {'sweep views':>11} {'planes':>6}")
+    for r in rows:
+        print(f"{r[0]:<18} {r[1]:<9} {r[2]:>12.2f} {r[3]:>8.3f} {r[4]:>13.2f} {r[5]:>12.3f} "
+              f"{r[6]:>7.1f} {str(r[7]):>11} {str(r[8]):>6}")
+    print("(first two metric columns: 15 px border excluded, as the benchmark; 'all': every pixel)")
+
+
+def bench_fountain(args) -> None:
+    from vibr.io import load_scene
+    from vibr.stereo import estimate_depth
+
+    root = data_dir() / "strecha_fountain-P11"
+    t = time.perf_counter()
+    scene = load_scene(root, scale=args.fountain_scale)
+    t_load = time.perf_counter() - t
+    h, w = scene[0].shape
+    times = []
+    for _ in range(args.repeat):
+        t = time.perf_counter()
+        est = estimate_depth(scene, method="mvs", n_neighbours=args.neighbours,
+                             step_px=args.step_px, max_planes=args.max_planes)
+        times.append(time.perf_counter() - t)
+    info = est.meta["depth_estimation"]["views"]
+    print(f"\nstrecha_fountain-P11, all 11 views at {w}x{h} (load {t_load:.1f} s, not counted); "
+          f"{args.neighbours} neighbours, step {args.step_px} px, <= {args.max_planes} planes; "
+          f"load average {os.getloadavg()[0]:.1f}")
+    print(f"{'view':<6} {'range (near..far)':>18} {'planes':>6} {'confident %':>11} {'kept %':>7} "
+          f"{'reproj px':>9} {'time s':>7}")
+    for name, st in info.items():
+        dr = st["depth_range"]
+        print(f"{name:<6} {dr[0]:>8.2f}..{dr[1]:<8.2f} {st['n_planes']:>6} {100 * st['confident']:>11.1f} "
+              f"{100 * st['kept']:>7.1f} {st.get('reproj_px', float('nan')):>9.3f} {st['time_s']:>7.1f}")
+    kept = np.mean([st["kept"] for st in info.values()])
+    rep = np.nanmedian([st.get("reproj_px", np.nan) for st in info.values()])
+    print(f"total depth time {statistics.median(times):.1f} s (median of {len(times)}), "
+          f"mean kept {100 * kept:.1f} %, median of per-view mean reprojection error {rep:.3f} px")
+    zs = np.concatenate([v.depth[np.isfinite(v.depth)] for v in est.views])
+    print(f"estimated depth percentiles 1/50/99: {np.percentile(zs, [1, 50, 99]).round(2).tolist()}")
+    if args.no_render:
+        return
+    try:
+        from vibr.metrics import psnr
+        from vibr.render import render
+    except ImportError as exc:  # pragma: no cover
+        print(f"render not available: {exc}")
+        return
+    tgt = scene.index("0005")
+    t = time.perf_counter()
+    held = estimate_depth(scene, views=[i for i in range(len(scene)) if i != tgt], exclude=[tgt],
+                          method="mvs", n_neighbours=args.neighbours, step_px=args.step_px,
+                          max_planes=args.max_planes)
+    t_held = time.perf_counter() - t
+    sources, target = held.split(tgt)
+    for method in args.methods.split(","):
+        t = time.perf_counter()
+        res = render(sources, target, method=method)
+        t_r = time.perf_counter() - t
+        p_all = psnr(res.image, target.image)
+        cov = getattr(res, "coverage", None)
+        p_cov = psnr(res.image, target.image, mask=cov) if cov is not None else float("nan")
+        print(f"view 5 from the other 10 ({w}x{h}, depth without view 5: {t_held:.1f} s): "
+              f"{method:<8} PSNR {p_all:.2f} dB (covered pixels {p_cov:.2f} dB), render {t_r:.1f} s; "
+              f"paper (Nieto et al. 2016, fountain, gradient method): 26.36 dB")
+
+
+def _textured(img, r=3, thr=0.02):
+    """Pixels whose (2r+1)² window has a grey-level std above ``thr`` (images in [0, 1])."""
+    from scipy.ndimage import uniform_filter
+
+    from vibr.stereo.planesweep import to_grey
+
+    g = to_grey(img).astype(np.float64)
+    m = uniform_filter(g, 2 * r + 1)
+    return np.sqrt(np.maximum(uniform_filter(g * g, 2 * r + 1) - m * m, 0)) > thr
+
+
+def bench_synthetic(args) -> None:
+    """Exact-depth synthetic scenes: fraction of textured pixels within 1 % relative error."""
+    from vibr.scene import Scene, View
+    from vibr.stereo import estimate_depth
+    from vibr.synthetic import default_world, free_cameras, make_scene, render_view
+
+    W, H = args.synthetic_size, args.synthetic_size * 4 // 5
+    world = default_world(0)
+    cams = free_cameras(5, 0, width=W, height=H, pos_jitter=0.6)
+    views = []
+    for i, c in enumerate(cams):
+        im, d = render_view(world, c)
+        views.append(View(f"view_{i:03d}", im, c, depth=d))
+    cases = [("free, 5 views, jitter 0.6", Scene(views), 0, "mvs"),
+             ("grid 3x3, baseline 0.3", make_scene("grid", n_views=9, width=W, height=H, seed=0,
+                                                   baseline=0.3), 4, "lightfield")]
+    print(f"\nsynthetic scenes ({W}x{H}), reference view vs exact depth")
+    print(f"{'scene':<28} {'method':<10} {'textured %':>10} {'kept %':>7} {'<1% of textured':>15} "
+          f"{'<1% of kept':>11} {'time s':>7}")
+    for name, scene, ref, method in cases:
+        t = time.perf_counter()
+        est = estimate_depth(scene, views=[ref], method=method)
+        t = time.perf_counter() - t
+        gt, d = scene[ref].depth, est[ref].depth
+        tex = _textured(scene[ref].image) & np.isfinite(gt)
+        kept = np.isfinite(d) & np.isfinite(gt)
+        rel = np.abs(d - gt) / gt
+        print(f"{name:<28} {method:<10} {100 * tex.mean():>10.1f} {100 * kept.mean():>7.1f} "
+              f"{100 * np.mean(rel[tex] < 0.01):>15.1f} {100 * np.mean(rel[kept] < 0.01):>11.1f} {t:>7.1f}")
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("what", nargs="*", default=["synthetic", "cotton", "fountain"], choices=["cotton", "fountain", "synthetic"])
+    p.add_argument("--repeat", type=int, default=1)
+    p.add_argument("--refine", default="st,sweep,sweep+tv")
+    p.add_argument("--fountain-scale", type=float, default=0.25)
+    p.add_argument("--neighbours", type=int, default=4)
+    p.add_argument("--methods", default="gradient,ulr")
+    p.add_argument("--step-px", type=float, default=0.5, help="parallax step between planes")
+    p.add_argument("--max-planes", type=int, default=256)
+    p.add_argument("--synthetic-size", type=int, default=256, help="synthetic image width")
+    p.add_argument("--no-render", action="store_true")
+    args = p.parse_args(argv)
+    from vibr.progress import set_quiet
+
+    set_quiet(True)
+    if "synthetic" in args.what:
+        bench_synthetic(args)
+    if "cotton" in args.what:
+        bench_cotton(args)
+    if "fountain" in args.what:
+        bench_fountain(args)
+
+
+if __name__ == "__main__":
+    main()

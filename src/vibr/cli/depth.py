@@ -1,0 +1,90 @@
+"""``vibr depth``: estimate per-view depth maps and sigma_z (light field or plane-sweep MVS)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from . import add_quiet
+
+_DESC = """\
+Estimate orthogonal depth maps and their uncertainty sigma_z for the views of a scene, on
+the CPU: light fields (scene with a grid) by the EPI structure tensor refined by a fine
+plane sweep over the grid and TV-L1; other scenes by plane-sweep multi-view stereo (ZNCC
+over the nearest views, sub-plane refinement, cross-view consistency check). Pixels whose
+depth is unreliable or inconsistent are written as unknown (0 in the .npy files).
+
+The result is the scene saved as a nerfstudio transforms.json folder (OUT/transforms.json,
+OUT/depth/*.npy, OUT/sigma_z/*.npy). Without -o, a SCENE that is itself a transforms.json
+folder is updated in place (the new folder replaces it only once complete).
+"""
+
+_EPILOG = """\
+examples:
+  vibr depth ../shared/data/strecha_fountain-P11 -o fountain_depth/ --resize 0.25
+  vibr depth ../shared/data/strecha_fountain-P11 -o f/ --resize 0.25 --step-px 1 --max-planes 128   (fast)
+  vibr depth ../shared/data/hci2016_cotton -o cotton_depth/ --views input_Cam040
+  vibr depth fountain_depth/ --views 5 --exclude 4          update in place, never using view 4
+  vibr depth SCENE -o out/ --scale 0.5 --depth-range 4 20   estimate at half resolution
+"""
+
+
+def register(sub) -> None:
+    p = sub.add_parser("depth", help="estimate depth maps and sigma_z (light field / MVS)",
+                       description=_DESC, epilog=_EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
+    p.add_argument("-o", "--out", default=None,
+                   help="output folder (default: update SCENE in place if it is a transforms.json scene)")
+    p.add_argument("--views", default=None, help="comma-separated views to estimate (default: all)")
+    p.add_argument("--exclude", default=None, help="comma-separated views never used as inputs")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="estimation scale; maps are upsampled back to the scene's size (default 1)")
+    p.add_argument("--resize", type=float, default=1.0,
+                   help="load the scene resized by this factor; the output has that size (default 1)")
+    p.add_argument("--method", choices=["auto", "mvs", "lightfield"], default="auto",
+                   help="auto: lightfield when the scene is a grid, else mvs")
+    p.add_argument("--neighbours", type=int, default=4, help="stereo partners per view (MVS, default 4)")
+    p.add_argument("--depth-range", type=float, nargs=2, metavar=("NEAR", "FAR"), default=None,
+                   help="depth range in scene units (default: from sparse points or a coarse sweep)")
+    p.add_argument("--step-px", type=float, default=0.5,
+                   help="parallax between consecutive planes on the farthest partner, px (MVS, default 0.5)")
+    p.add_argument("--max-planes", type=int, default=256, help="most planes per view (MVS, default 256)")
+    p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
+    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    add_quiet(p)
+    p.set_defaults(func=run)
+
+
+def _split(s):
+    return None if s is None else [t.strip() for t in s.split(",") if t.strip()]
+
+
+def run(args) -> int:
+    from ..errors import VibrInputError
+    from ..io import load_scene, save_scene
+    from ..stereo import estimate_depth
+
+    src = Path(args.scene)
+    in_place = args.out is None
+    if in_place:
+        tj = src if src.name == "transforms.json" else src / "transforms.json"
+        if not tj.is_file():
+            raise VibrInputError("give -o OUT: only a transforms.json scene is updated in place", src)
+        if args.resize != 1.0:
+            raise VibrInputError("--resize needs -o OUT (an in-place update keeps the scene's size)", src)
+        out = tj.parent
+    else:
+        out = Path(args.out)
+    scene = load_scene(args.scene, scale=args.resize)
+    est = estimate_depth(scene, views=_split(args.views), scale=args.scale,
+                         depth_range=args.depth_range, method=args.method,
+                         exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
+                         consistency=not args.no_consistency, step_px=args.step_px,
+                         max_planes=args.max_planes)
+    info = est.meta["depth_estimation"]
+    save_scene(est, out, overwrite=in_place or args.force)
+    kept = [v["kept"] for v in info["views"].values() if v.get("role") == "target"]
+    print(f"wrote {out}/transforms.json: depth for {len(kept)} view(s) by {info['method']} "
+          f"in {info['time_s']:.1f} s, {100 * sum(kept) / max(1, len(kept)):.1f} % of pixels kept")
+    return 0

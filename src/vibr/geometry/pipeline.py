@@ -1,0 +1,232 @@
+"""The geometry stage end to end: source views with depth + target camera → :class:`Samples`.
+
+Steps (paper §5, METHOD.md §2), per source view k:
+
+1. depth preparation: NaN = unknown; optionally fill holes (joint bilateral, Kopf 2007);
+   slopes ``(z_x, z_y)`` (edge-aware, :func:`vibr.geometry.depth.depth_derivatives`);
+2. splat every pixel's quad into the target z-buffer (all views into one buffer);
+3. per pixel: warp ``tau_k``, in-target test, visibility against the z-buffer;
+4. per visible sample: ``tau``, ``∂tau/∂x_m``, ``1/|det|`` (capped), ``∂tau/∂z``, world
+   point, colour, central-difference colour gradient, ``sigma_z``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numba import njit, prange
+
+from ..camera import Camera
+from ..errors import VibrInputError
+from ..scene import Scene, View
+from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
+from .samples import Samples
+from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
+                         reduce_zbuffers, splat_zbuffer, visibility_mask)
+from .warp import DEFAULT_MAX_INV_DET, _warp_one, warp_constants
+
+__all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL"]
+
+#: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
+#: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
+#: estimates; the renderer's geometric weight, METHOD §3, scales with it).
+DEFAULT_SIGMA_Z_REL = 0.01
+
+
+def prepare_depth(view: View, *, fill_holes: bool = False, edge_rel: float = DEFAULT_EDGE_REL):
+    """Depth of a view as float64 plus slopes: returns ``(z, z_x, z_y)``, (H, W) float64,
+    NaN where unknown (holes filled first when ``fill_holes``)."""
+    if view.depth is None:
+        raise VibrInputError(f"source view {view.name} has no depth map", view.path or view.name)
+    z = view.depth
+    if fill_holes and np.isnan(z).any():
+        z, _ = fill_depth_holes(z, view.image)
+    z = np.ascontiguousarray(z, dtype=np.float64)
+    zx, zy = depth_derivatives(z, edge_rel)
+    return z, zx, zy
+
+
+@njit(parallel=True, cache=True)
+def _fields_kernel(state, row_off, z, zx, zy, M, c, A, Ck, img, max_inv_det, sig_map, sig_scalar,
+                   k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
+    """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples start at
+    ``row_off[i]`` (row-major order, as ``np.flatnonzero`` would give)."""
+    H, W = z.shape
+    use_map = sig_map.shape[0] > 0
+    for i in prange(H):
+        buf = np.empty(10)
+        s = row_off[i]
+        y = float(i)
+        iu = i - 1 if i > 0 else 0
+        idn = i + 1 if i < H - 1 else H - 1
+        sy = 1.0 / (idn - iu) if idn > iu else 0.0
+        for j in range(W):
+            if state[i, j] != VISIBLE:
+                continue
+            x = float(j)
+            zc = z[i, j]
+            _warp_one(x, y, zc, zx[i, j], zy[i, j], M, c, buf)
+            xy[s, 0] = buf[0]
+            xy[s, 1] = buf[1]
+            jac[s, 0, 0] = buf[3]
+            jac[s, 0, 1] = buf[4]
+            jac[s, 1, 0] = buf[5]
+            jac[s, 1, 1] = buf[6]
+            dtau[s, 0] = buf[7]
+            dtau[s, 1] = buf[8]
+            ad = abs(buf[9])
+            # 1/|det| capped at max_inv_det (also covers det = 0)
+            inv_det[s] = 1.0 / ad if ad * max_inv_det > 1.0 else max_inv_det
+            # world point X = z (R_kᵀ K_k⁻¹) x̄ + C_k
+            for r in range(3):
+                X[s, r] = zc * (A[r, 0] * x + A[r, 1] * y + A[r, 2]) + Ck[r]
+            src[s, 0] = j
+            src[s, 1] = i
+            view[s] = k_view
+            sig[s] = sig_map[i, j] if use_map else sig_scalar
+            jl = j - 1 if j > 0 else 0
+            jr = j + 1 if j < W - 1 else W - 1
+            sx = 1.0 / (jr - jl) if jr > jl else 0.0
+            for ch in range(3):
+                colour[s, ch] = img[i, j, ch]
+                grad[s, ch, 0] = (img[i, jr, ch] - img[i, jl, ch]) * sx
+                grad[s, ch, 1] = (img[idn, j, ch] - img[iu, j, ch]) * sy
+            s += 1
+
+
+def _view_sigma(view: View, z: np.ndarray, sigma_z_default):
+    """Per-pixel or scalar sigma_z of a view (documented default when it has none)."""
+    if view.sigma_z is not None:
+        return view.sigma_z
+    if sigma_z_default is not None:
+        return float(sigma_z_default)
+    med = np.nanmedian(z) if np.isfinite(z).any() else 1.0
+    return DEFAULT_SIGMA_Z_REL * float(med)
+
+
+def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VIS_THRESHOLD,
+                    fill_holes: bool = False, max_inv_det: float = DEFAULT_MAX_INV_DET,
+                    edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
+                    sigma_z_default: float | None = None, splat_mode: str = "affine",
+                    return_zbuffer: bool = False) -> Samples:
+    """Visible warped source samples for a target camera (paper §5).
+
+    Parameters
+    ----------
+    sources : Scene
+        Source views; every one must have a depth map (NaN pixels are skipped, or filled
+        first when ``fill_holes``) — use :func:`vibr.geometry.ensure_source_depth` for
+        views without depth.
+    target : Camera or View
+        What to render (a View's camera is used).
+    vis_threshold : float
+        Relative depth tolerance of the visibility test (``w ≤ (1 + thr) z_u``), see
+        :mod:`vibr.geometry.visibility` (measurements there); default 0.02.
+    fill_holes : bool
+        Fill unknown depth with the joint bilateral filter before warping.
+    max_inv_det : float
+        Cap of the deformation weight ``1/|det ∂tau/∂x_m|`` (default 4, see
+        :data:`vibr.geometry.warp.DEFAULT_MAX_INV_DET`; the authors use 1, METHOD §10).
+    edge_rel : float
+        Edge detection of the depth slopes (:func:`depth_derivatives`).
+    max_quad_px : int
+        Larger projected quads are not splatted into the z-buffer.
+    splat_mode : "affine" or "projective"
+        How quads are rasterised into the z-buffer (:func:`splat_zbuffer`).
+    sigma_z_default : float, optional
+        sigma_z (scene units) for views without one; default ``0.01 · median depth``.
+    return_zbuffer : bool
+        Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``.
+
+    Returns
+    -------
+    Samples
+        ``meta`` holds per-view counts (``counts``: name → dict of visible / occluded /
+        outside / behind / unknown) and per-stage times in seconds (``times``: wall clock,
+        ``cpu_times``: process CPU time of all threads).
+
+    Raises
+    ------
+    VibrInputError
+        A source without depth, or no source sample landing in the target.
+    """
+    cam = target.camera if isinstance(target, View) else target
+    if not isinstance(cam, Camera):
+        raise VibrInputError("target must be a Camera or a View", None)
+    tname = cam.source or (target.name if isinstance(target, View) else "target camera")
+    Hu, Wu = cam.shape
+    times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
+    cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    prepped = []
+    for v in sources.views:
+        z, zx, zy = prepare_depth(v, fill_holes=fill_holes, edge_rel=edge_rel)
+        if v.image is None:
+            raise VibrInputError(f"source view {v.name} has no image", v.path or v.name)
+        M, c = warp_constants(v.camera, cam)
+        prepped.append((v, z, zx, zy, M, c))
+    times["depth"], cpu["depth"] = time.perf_counter() - t0, time.process_time() - c0
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    bufs = new_zbuffers((Hu, Wu))
+    for v, z, zx, zy, M, c in prepped:
+        splat_zbuffer(bufs, M, c, z, zx, zy, max_quad_px, splat_mode)
+    zbuf = reduce_zbuffers(bufs)
+    del bufs
+    times["zbuffer"], cpu["zbuffer"] = time.perf_counter() - t0, time.process_time() - c0
+
+    states = []
+    counts = {}
+    for k, (v, z, zx, zy, M, c) in enumerate(prepped):
+        t0, c0 = time.perf_counter(), time.process_time()
+        state, row_counts = visibility_mask(M, c, z, zx, zy, zbuf, vis_threshold, return_counts=True)
+        vis_rows = row_counts[:, VISIBLE]
+        hist = row_counts.sum(axis=0)
+        counts[v.name] = {"unknown": int(hist[0]), "behind": int(hist[1]), "outside": int(hist[2]),
+                          "occluded": int(hist[3]), "visible": int(hist[4])}
+        states.append((state, vis_rows))
+        times["visibility"] += time.perf_counter() - t0
+        cpu["visibility"] += time.process_time() - c0
+
+    # one allocation for all samples; each view's kernel writes its rows in place
+    t0, c0 = time.perf_counter(), time.process_time()
+    N = int(sum(int(r.sum()) for _, r in states))
+    xy = np.empty((N, 2))
+    jac = np.empty((N, 2, 2))
+    inv_det = np.empty(N)
+    dtau = np.empty((N, 2))
+    X = np.empty((N, 3))
+    colour = np.empty((N, 3), np.float32)
+    grad = np.empty((N, 3, 2), np.float32)
+    src = np.empty((N, 2), np.int32)
+    sig = np.empty(N)
+    view = np.empty(N, np.int32)
+    o = 0
+    for k, ((v, z, zx, zy, M, c), (state, vis_rows)) in enumerate(zip(prepped, states)):
+        n = int(vis_rows.sum())
+        if n == 0:
+            continue
+        row_off = o + np.concatenate([[0], np.cumsum(vis_rows)[:-1]]).astype(np.int64)
+        A = np.ascontiguousarray(v.camera.R.T @ np.linalg.inv(v.camera.K))
+        sz = _view_sigma(v, z, sigma_z_default)
+        if np.ndim(sz) == 0:
+            sig_map, sig_scalar = np.zeros((0, 0)), float(sz)
+        else:
+            sig_map, sig_scalar = np.ascontiguousarray(sz, dtype=np.float64), 0.0
+        _fields_kernel(state, row_off, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
+                       v.image, float(max_inv_det), sig_map, sig_scalar, np.int32(k),
+                       xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
+        o += n
+    out = Samples(xy, colour, grad, jac, inv_det, dtau, sig, view, src, X, (Hu, Wu))
+    times["assembly"], cpu["assembly"] = time.perf_counter() - t0, time.process_time() - c0
+    if len(out) == 0:
+        raise VibrInputError("no source view sees the target", tname)
+    out.meta["counts"] = counts
+    out.meta["times"] = times
+    out.meta["cpu_times"] = cpu
+    out.meta["vis_threshold"] = float(vis_threshold)
+    if return_zbuffer:
+        out.meta["zbuffer"] = zbuf
+    return out

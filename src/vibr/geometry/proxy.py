@@ -1,0 +1,102 @@
+"""Planar geometric proxy (paper §6, second structured experiment).
+
+The coarsest proxy: a fronto-parallel plane of the *target* camera at depth ``D``
+(target-frame orthogonal depth), with a large depth uncertainty sigma_z so that the
+geometric weights (METHOD §3) let the variational model, not the proxy, decide.
+
+For a source pixel with ray ``r = R_kᵀ K_k⁻¹ x̄`` (world, scaled so that orthogonal source
+depth s gives the point ``C_k + s r``), the plane ``n·X + d_u = D`` with ``n = R_u[2]``,
+``d_u = t_u[2]`` is met at ``s = (D − n·C_k − d_u) / (n·r)``; pixels whose ray does not
+meet the plane in front of both cameras get NaN.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import VibrInputError
+from ..scene import Scene, View
+
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL"]
+
+#: Default proxy uncertainty: ``sigma_z = PROXY_SIGMA_Z_REL · D`` (ten times the default
+#: of estimated depth, :data:`vibr.geometry.pipeline.DEFAULT_SIGMA_Z_REL`), or half the
+#: 5–95 % spread of the available depth seen from the target if that is larger.
+PROXY_SIGMA_Z_REL = 0.1
+
+
+def plane_depth(camera: Camera, target: Camera, D: float) -> np.ndarray:
+    """(H, W) float32 source orthogonal depth of the target's fronto-parallel plane at
+    target depth ``D``; NaN where the ray misses it or meets it behind a camera."""
+    H, W = camera.shape
+    y, x = np.mgrid[0:H, 0:W].astype(np.float64)
+    xb = np.stack([x, y, np.ones_like(x)], axis=-1)
+    r = xb @ (camera.R.T @ np.linalg.inv(camera.K)).T
+    n = target.R[2]
+    den = r @ n
+    num = D - n @ camera.centre - target.t[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = num / den
+    s[~(np.isfinite(s) & (s > 0))] = np.nan
+    return s.astype(np.float32)
+
+
+def _target_depths(sources: Scene, target: Camera, stride: int = 4) -> np.ndarray:
+    out = []
+    for v in sources.views:
+        if v.depth is None:
+            continue
+        d = v.depth[::stride, ::stride]
+        yy, xx = np.mgrid[0:v.camera.height:stride, 0:v.camera.width:stride]
+        ok = np.isfinite(d)
+        if not ok.any():
+            continue
+        X = v.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(np.float64), d[ok])
+        w = target.project(X)[1]
+        out.append(w[w > 0])
+    if not out and sources.points is not None and len(sources.points):
+        w = target.project(sources.points)[1]
+        out.append(w[w > 0])
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
+                 sigma_z: float | None = None) -> Scene:
+    """Replace every source depth map by a fronto-parallel plane of the target camera.
+
+    Parameters
+    ----------
+    sources : Scene
+    target_camera : Camera or View
+    depth : float, optional
+        Plane depth in the target frame (scene units). Default: the median of the
+        available depth (source depth maps, else sparse points) seen from the target.
+    sigma_z : float, optional
+        Depth uncertainty given to every view; default ``max(0.1·D, ½ (p95 − p5))`` of the
+        available depth seen from the target.
+
+    Returns
+    -------
+    Scene with the same views, their ``depth`` the plane and ``sigma_z`` the scalar above;
+    ``meta["proxy"] = {"depth": D, "sigma_z": sigma_z}``.
+    """
+    cam = target_camera.camera if isinstance(target_camera, View) else target_camera
+    wd = None
+    if depth is None or sigma_z is None:
+        wd = _target_depths(sources, cam)
+    if depth is None:
+        if wd.size == 0:
+            raise VibrInputError("planar proxy: no depth or sparse points to choose the plane depth; "
+                                 "pass depth=", sources.root)
+        depth = float(np.median(wd))
+    depth = float(depth)
+    if not depth > 0:
+        raise VibrInputError(f"planar proxy: plane depth must be positive, got {depth}", sources.root)
+    if sigma_z is None:
+        spread = 0.5 * float(np.percentile(wd, 95) - np.percentile(wd, 5)) if wd is not None and wd.size else 0.0
+        sigma_z = max(PROXY_SIGMA_Z_REL * depth, spread)
+    views = [v.replace(depth=plane_depth(v.camera, cam, depth), sigma_z=float(sigma_z))
+             for v in sources.views]
+    meta = dict(sources.meta, proxy={"depth": depth, "sigma_z": float(sigma_z)})
+    return Scene(views, sources.name, sources.root, sources.grid, sources.points, meta)

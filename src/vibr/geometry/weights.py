@@ -1,0 +1,94 @@
+"""Per-sample weights of the data term (paper §5.6, METHOD §3; after Pujades et al. 2014).
+
+``W_km = omega_km · |det ∂tau_k/∂x_m|⁻¹`` with the geometric weight
+
+    omega_km = 1 / (sigma_s² + sigma_z,k² · (∂tau_k/∂z · ∇u(tau_k(x_m)))²)
+
+``sigma_s`` is the sensor noise and ``∇u`` the gradient of the current estimate's luminance
+sampled at the sample's landing point. **Intensity scale**: ``sigma_s`` and the gradient
+are expressed on the scale ``scale`` (default 255: sigma_s = 1 means one grey level of an
+8-bit image, the authors' setting), while images are [0, 1] float32 in memory; the
+conversion happens here, once. The returned weights are therefore in ``scale``⁻² units.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .samples import Samples
+
+__all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights"]
+
+_LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
+
+
+def luminance(u) -> np.ndarray:
+    """(H, W, 3) → (H, W) Rec. 601 luminance (float32)."""
+    u = np.asarray(u, np.float32)
+    return u if u.ndim == 2 else u @ _LUMA
+
+
+def luminance_gradient(u) -> np.ndarray:
+    """Central-difference gradient of the luminance: (H, W, 2) float32, (d/dx, d/dy) per
+    target pixel (replicated border)."""
+    from ..render.operators import grad_central
+
+    lum = np.ascontiguousarray(luminance(u))[None]  # planar (1, H, W)
+    return np.ascontiguousarray(grad_central(lum)[0].transpose(1, 2, 0))
+
+
+def deformation_weight(samples: Samples, cap: float | None = None) -> np.ndarray:
+    """``1/|det ∂tau/∂x|`` (N,) float64, optionally capped (the authors cap it at 1 for
+    unstructured scenes, so a source closer than the target does not dominate)."""
+    w = np.asarray(samples.inv_det, np.float64)
+    w = np.where(np.isfinite(w), w, 0.0)
+    return np.minimum(w, cap) if cap is not None else w
+
+
+def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *,
+                      scale: float = 255.0, grad_max: float | None = 64.0,
+                      inv_det_cap: float | None = None, splat=None) -> np.ndarray:
+    """Data-term weights ``W_km`` (METHOD §3), (N,) float64.
+
+    Parameters
+    ----------
+    samples : Samples
+    u : (H, W, 3) float32 in [0, 1] or None
+        Current estimate; None (or ``sigma_z`` = 0) gives ``omega = 1/sigma_s²`` (the SAVSR
+        weight: deformation only).
+    sigma_s : float
+        Sensor noise standard deviation, in intensity units of ``scale`` (default 1 grey
+        level of 255).
+    sigma_z : float, (N,) array or None
+        Depth standard deviation in scene units; None uses ``samples.sigma_z`` (NaN → 0).
+    scale : float
+        The intensity scale ``sigma_s`` and ``grad_max`` refer to (images are [0, 1]).
+    grad_max : float or None
+        Clamp of the luminance gradient magnitude, ``scale`` units per pixel (the authors
+        clamp it too): at strong edges every view is unreliable, and the clamp keeps the
+        weights from collapsing so the data term still dominates the TV prior there.
+    inv_det_cap : float or None
+        Cap of the deformation weight (see :func:`deformation_weight`).
+    splat : vibr.render.operators.Splat, optional
+        Precomputed bilinear interpolation of ``samples.xy`` (saves its set-up).
+    """
+    w_def = deformation_weight(samples, inv_det_cap)
+    if sigma_z is None:
+        sz = np.asarray(samples.sigma_z, np.float64)
+    else:
+        sz = np.broadcast_to(np.asarray(sigma_z, np.float64), (len(samples),))
+    sz = np.where(np.isfinite(sz), sz, 0.0)
+    base = 1.0 / (sigma_s ** 2)
+    if u is None or not np.any(sz > 0):
+        return w_def * base
+    from ..render.operators import Splat
+
+    g = luminance_gradient(u) * np.float32(scale)
+    if grad_max is not None:
+        mag = np.sqrt((g ** 2).sum(-1, keepdims=True))
+        g = g * np.minimum(1.0, grad_max / np.maximum(mag, 1e-12)).astype(np.float32)
+    sp = splat if splat is not None else Splat(samples.xy, samples.target_shape)
+    gs = sp.apply(np.ascontiguousarray(g))  # (N, 2): ∇u(tau(x_m)), scale units / target px
+    proj = (np.asarray(samples.dtau_dz, np.float64) * gs).sum(1)  # ∂tau/∂z · ∇u
+    omega = 1.0 / (sigma_s ** 2 + (sz * proj) ** 2)
+    return w_def * omega

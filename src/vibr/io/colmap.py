@@ -1,0 +1,118 @@
+"""COLMAP sparse models (read through ``pycolmap.Reconstruction``).
+
+Layouts recognised (``root`` is what the user passes, or the model folder itself)::
+
+    root/sparse/0/{cameras,images,points3D}.{bin,txt}   root/images/   (mapper output)
+    root/sparse/{cameras,images,points3D}.{bin,txt}     root/images/   (image_undistorter output)
+    root/stereo/depth_maps/NAME.geometric.bin           dense depth, used when present
+
+Cameras: PINHOLE and SIMPLE_PINHOLE; other perspective models (SIMPLE_RADIAL, RADIAL,
+OPENCV, FULL_OPENCV) only when all their distortion parameters are zero; otherwise run
+``colmap image_undistorter`` first. COLMAP puts the centre of the top-left pixel at
+(0.5, 0.5), so vibr's principal point is ``(cx − 0.5, cy − 0.5)``. Poses are COLMAP's
+``cam_from_world`` (world → camera, OpenCV axes, vibr's own convention). Only registered
+images are loaded. Points3D go to ``scene.points``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import VibrInputError
+from ..scene import Scene
+from .camera_json import as_rotation
+from .depthfiles import read_depth
+from .images import build_views
+
+_MODEL_FILES = ("cameras", "images")
+_ZERO_DIST_OK = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV")
+
+
+def _is_model_dir(p: Path) -> bool:
+    return p.is_dir() and all((p / f"{n}.bin").is_file() or (p / f"{n}.txt").is_file() for n in _MODEL_FILES)
+
+
+def find_colmap_model(path) -> tuple[Path, Path] | None:
+    """(model folder, scene root) for a COLMAP layout at ``path``, or None."""
+    p = Path(path)
+    if _is_model_dir(p):
+        if p.parent.name == "sparse":
+            return p, p.parent.parent
+        if p.name == "sparse":
+            return p, p.parent
+        return p, p
+    for cand in (p / "sparse" / "0", p / "sparse", p / "dense" / "sparse", p / "dense" / "0" / "sparse"):
+        if _is_model_dir(cand):
+            return cand, cand.parent.parent if cand.name == "0" else cand.parent
+    return None
+
+
+def colmap_camera_K(cam, source) -> np.ndarray:
+    """vibr K (top-left pixel centre at (0, 0)) of a pycolmap camera; distortion → error."""
+    model = cam.model.name
+    if model not in ("PINHOLE", "SIMPLE_PINHOLE") + _ZERO_DIST_OK:
+        raise VibrInputError(f"camera {cam.camera_id} has model {model}, which is not a pinhole: run "
+                             "'colmap image_undistorter' and load its output", source)
+    params = np.asarray(cam.params, dtype=np.float64)
+    extra = [int(i) for i in cam.extra_params_idxs()]
+    if extra and np.any(params[extra] != 0):
+        raise VibrInputError(f"camera {cam.camera_id} ({model}) has non-zero distortion "
+                             f"{params[extra].tolist()}: run 'colmap image_undistorter' and load its output",
+                             source)
+    fx, fy = float(cam.focal_length_x), float(cam.focal_length_y)
+    cx, cy = float(cam.principal_point_x) - 0.5, float(cam.principal_point_y) - 0.5
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+
+def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
+    """Load a COLMAP sparse model (+ images, + dense geometric depth maps when present)."""
+    import pycolmap
+
+    from . import select_entries
+
+    found = find_colmap_model(path)
+    if found is None:
+        raise VibrInputError("no COLMAP model (cameras + images .bin/.txt) found", path)
+    model, root = found
+    try:
+        rec = pycolmap.Reconstruction(str(model))
+    except Exception as exc:
+        raise VibrInputError(f"cannot read COLMAP model ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})",
+                             model) from None
+    img_dirs = [d for d in (root / "images", model / "images", model.parent / "images") if d.is_dir()]
+    if not img_dirs:
+        raise VibrInputError("no images folder found beside the COLMAP model (expected root/images)", root)
+    img_dir = img_dirs[0]
+    depth_dir = root / "stereo" / "depth_maps"
+    entries = []
+    for iid in sorted(rec.images):
+        im = rec.images[iid]
+        if not im.has_pose:
+            continue
+        src = f"{model} image {im.name}"
+        cam = rec.cameras[im.camera_id]
+        K = colmap_camera_K(cam, src)
+        T = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world
+        R = as_rotation(T.rotation.matrix(), src)
+        t = np.asarray(T.translation, dtype=np.float64)
+        camera = Camera(K, R, t, int(cam.width), int(cam.height), source=src)
+        e = {"name": Path(im.name).with_suffix("").as_posix(), "path": img_dir / im.name, "camera": camera,
+             "depth_path": depth_dir / f"{im.name}.geometric.bin"}
+        entries.append(e)
+    if not entries:
+        raise VibrInputError("the COLMAP model has no registered images", model)
+    entries = select_entries(entries, views, root)
+    n_depth = 0
+    for e in entries:
+        dp = e.pop("depth_path")
+        if dp.is_file():
+            e["depth"] = read_depth(dp, shape=e["camera"].shape)
+            n_depth += 1
+    vs = build_views(entries, scale, desc="reading images")
+    pts = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
+    return Scene(vs, name=root.name, root=root, points=pts if len(pts) else None,
+                 meta={"format": "COLMAP", "scale": scale, "model": str(model),
+                       "depth_source": "stereo/depth_maps/*.geometric.bin" if n_depth else None})

@@ -1,0 +1,212 @@
+"""HCI 4D light-field folders (Honauer et al. 2016 benchmark layout).
+
+A folder holds ``input_CamNNN.png`` (view index ``NNN = cols·r + c``, row r top→bottom,
+column c left→right), optionally ``parameters.cfg``, ``gt_disp_lowres.pfm`` (centre-view
+disparity, pixels per view step) and ``gt_depth_lowres.pfm``.
+
+Camera model
+------------
+The views are parallel shift-lens pinholes. With the world frame = the centre camera's frame
+(R = I for every view), focal ``f`` (px), baseline ``b`` (scene units per view step) and
+focus distance ``Z0`` (the plane with zero disparity), view (r, c) of a grid with centre
+(rc, cc) has
+
+* centre ``C = ((c − cc)·b, (r − rc)·b, 0)`` (camera x right, y down),
+* ``K = [[f, 0, cx + (c − cc)·f·b/Z0], [0, f, cy + (r − rc)·f·b/Z0], [0, 0, 1]]`` with
+  ``(cx, cy) = ((W − 1)/2, (H − 1)/2)``.
+
+A centre-view point at pixel x with depth Z then appears in view (r, c) at
+``x − (c − cc)·d`` with ``d = f·b·(1/Z − 1/Z0)``: the benchmark's grid relation
+``I_cc(x, y) = I_rc(x − (c − cc)d, y − (r − rc)d)``. Depth is computed from the ground-truth
+*disparity* as ``Z = 1 / (d/(f·b) + 1/Z0)`` so that the loaded cameras reproduce it exactly.
+
+With ``parameters.cfg``: ``f = focal_length_mm · max(res) / sensor_size_mm``,
+``b = baseline_mm / 1000`` (metres), ``Z0 = focus_distance_m``; grid from num_cams_x/y.
+
+**Without** ``parameters.cfg`` (rule, documented here once): the grid is square,
+``n = ceil(sqrt(max index + 1))`` per side unless ``grid`` is given; ``f = W`` (image width,
+px), ``b = 1`` scene unit, and ``1/Z0 = (max|d| + 1)/(f·b)`` so every depth is positive
+(``1/Z ≥ 1/(f·b)``); with only a depth file, that depth is used as is and ``Z0`` = its median.
+
+Depth goes on the centre view only (the view the disparity belongs to). Missing views in the
+grid are allowed (a light field with holes). ``scene.grid = (rows, cols)`` and
+``scene.meta["grid_pos"] = {name: (row, col)}``.
+"""
+
+from __future__ import annotations
+
+import configparser
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import VibrInputError
+from ..scene import Scene
+from .depthfiles import read_pfm
+from .images import build_views, image_size
+
+_CAM_RE = re.compile(r"^input_Cam(\d+)\.(png|jpg|jpeg|tif|tiff)$", re.IGNORECASE)
+
+
+def is_hci_folder(path) -> bool:
+    p = Path(path)
+    if not p.is_dir():
+        return False
+    return (p / "parameters.cfg").is_file() or any(_CAM_RE.match(n) for n in os.listdir(p))
+
+
+def _read_cfg(path: Path) -> dict:
+    cp = configparser.ConfigParser()
+    try:
+        cp.read(path, encoding="utf-8")
+        ins, ext = cp["intrinsics"], cp["extrinsics"]
+        out = {
+            "focal_mm": ins.getfloat("focal_length_mm"),
+            "res_x": ins.getint("image_resolution_x_px"),
+            "res_y": ins.getint("image_resolution_y_px"),
+            "sensor_mm": ins.getfloat("sensor_size_mm"),
+            "cols": ext.getint("num_cams_x"),
+            "rows": ext.getint("num_cams_y"),
+            "baseline_mm": ext.getfloat("baseline_mm"),
+            "focus_m": ext.getfloat("focus_distance_m"),
+        }
+        pose = {k: ext.getfloat(k) for k in ext if k.startswith("center_cam_")}
+    except (configparser.Error, KeyError, ValueError, TypeError) as exc:
+        raise VibrInputError(f"malformed parameters.cfg ({type(exc).__name__}: {exc})", path) from None
+    for k in ("focal_mm", "sensor_mm", "baseline_mm", "focus_m", "cols", "rows", "res_x", "res_y"):
+        if out[k] is None or not out[k] > 0:
+            raise VibrInputError(f"parameters.cfg: {k} must be positive", path)
+    out["pose"] = pose
+    return out
+
+
+def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | None = None) -> Scene:
+    """Load an HCI light-field folder (see the module docstring for the camera model).
+
+    Parameters
+    ----------
+    path : folder
+    scale : float
+        Resize factor for images, cameras and depth.
+    views : list of int or str, optional
+        Subset (positions in the index-sorted view list, or names such as ``input_Cam040``).
+    grid : (rows, cols), optional
+        Grid shape when there is no parameters.cfg.
+    """
+    from . import select_entries
+
+    root = Path(path)
+    files = {}
+    for n in sorted(os.listdir(root)):
+        m = _CAM_RE.match(n)
+        if m:
+            files[int(m.group(1))] = root / n
+    if not files:
+        raise VibrInputError("no input_CamNNN.png views in this HCI light-field folder", root)
+
+    cfg_path = root / "parameters.cfg"
+    cfg = _read_cfg(cfg_path) if cfg_path.is_file() else None
+    if cfg is not None:
+        rows, cols = cfg["rows"], cfg["cols"]
+        if grid is not None and tuple(grid) != (rows, cols):
+            raise VibrInputError(f"grid {tuple(grid)} contradicts num_cams_y/x = {(rows, cols)}", cfg_path)
+    elif grid is not None:
+        rows, cols = (int(g) for g in grid)
+    else:
+        rows = cols = math.isqrt(max(files) + 1 - 1) + 1  # ceil(sqrt(max index + 1))
+    if max(files) >= rows * cols:
+        bad = files[max(files)]
+        raise VibrInputError(f"view index {max(files)} is outside the {rows}x{cols} grid", bad)
+    rc, cc = rows // 2, cols // 2
+    centre_idx = rc * cols + cc
+    has_gt = (root / "gt_disp_lowres.pfm").is_file() or (root / "gt_depth_lowres.pfm").is_file()
+    if cfg is None and grid is None and has_gt and centre_idx not in files:
+        raise VibrInputError(
+            f"the ground truth belongs to the centre view, but input_Cam{centre_idx:03d} (centre of the "
+            f"{rows}x{cols} grid inferred from the largest view index) is missing: give the grid shape "
+            "(load_scene(..., grid=(rows, cols))) or add parameters.cfg", root)
+
+    # Every view of a grid must have the same size (the model is one sensor shifted).
+    sizes = {i: image_size(p) for i, p in files.items()}
+    ref_i = centre_idx if centre_idx in sizes else min(sizes)
+    W, H = sizes[ref_i]
+    for i, s in sizes.items():
+        if s != (W, H):
+            raise VibrInputError(
+                f"light-field views must all have the same size: this one is {s[0]}x{s[1]}, "
+                f"{files[ref_i].name} is {W}x{H}", files[i])
+    if cfg is not None and (cfg["res_x"], cfg["res_y"]) != (W, H):
+        raise VibrInputError(
+            f"parameters.cfg says {cfg['res_x']}x{cfg['res_y']} but the views are {W}x{H}", cfg_path)
+
+    # Ground truth of the centre view: disparity preferred (it defines the grid relation).
+    disp_path, depth_path = root / "gt_disp_lowres.pfm", root / "gt_depth_lowres.pfm"
+    disp = depth_gt = None
+    if disp_path.is_file():
+        disp = read_pfm(disp_path).astype(np.float64)
+        if disp.ndim != 2 or disp.shape != (H, W):
+            raise VibrInputError(f"disparity has shape {disp.shape}, views are {H}x{W}", disp_path)
+        if not np.all(np.isfinite(disp)):
+            raise VibrInputError(f"disparity has {int((~np.isfinite(disp)).sum())} NaN or infinite values", disp_path)
+    elif depth_path.is_file():
+        from ..scene import depth_from_file_values
+
+        depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
+
+    if cfg is not None:
+        f = cfg["focal_mm"] * max(W, H) / cfg["sensor_mm"]
+        b = cfg["baseline_mm"] / 1000.0
+        Z0 = cfg["focus_m"]
+        rule = "parameters.cfg"
+    else:
+        f, b = float(W), 1.0
+        if disp is not None:
+            Z0 = f * b / (np.abs(disp).max() + 1.0)
+        elif depth_gt is not None and np.any(np.isfinite(depth_gt)):
+            Z0 = float(np.nanmedian(depth_gt))
+        else:
+            Z0 = f * b
+        rule = "no parameters.cfg: f = width, b = 1, 1/Z0 = (max|d| + 1)/(f b)"
+
+    depth_c = None
+    if disp is not None:
+        inv = disp / (f * b) + 1.0 / Z0
+        if np.any(inv <= 0):
+            raise VibrInputError(
+                f"disparity down to {disp.min():.4g} px lies beyond infinity for f·b = {f * b:.5g}, "
+                f"Z0 = {Z0:.5g}", disp_path)
+        depth_c = (1.0 / inv).astype(np.float32)
+    elif depth_gt is not None:
+        depth_c = depth_gt
+
+    cx0, cy0 = (W - 1) / 2.0, (H - 1) / 2.0
+    entries, grid_pos = [], {}
+    for i, p in sorted(files.items()):
+        r, c = divmod(i, cols)
+        K = np.array([[f, 0.0, cx0 + (c - cc) * f * b / Z0],
+                      [0.0, f, cy0 + (r - rc) * f * b / Z0],
+                      [0.0, 0.0, 1.0]])
+        C = np.array([(c - cc) * b, (r - rc) * b, 0.0])
+        cam = Camera.from_centre(K, np.eye(3), C, W, H, source=str(p))
+        name = p.stem
+        grid_pos[name] = (r, c)
+        entries.append({"name": name, "path": p, "camera": cam,
+                        "depth": depth_c if i == centre_idx else None})
+    entries = select_entries(entries, views, root)
+    vs = build_views(entries, scale, desc="reading light field")
+    names = {v.name for v in vs}
+    meta = {
+        "format": "HCI 4D light field",
+        "grid_pos": {n: rcpos for n, rcpos in grid_pos.items() if n in names},
+        "centre_view": files[centre_idx].stem if centre_idx in files else None,
+        "focal_px": f, "baseline": b, "focus_distance": Z0, "camera_rule": rule,
+        "depth_source": disp_path.name if disp is not None else (depth_path.name if depth_gt is not None else None),
+        "scale": scale,
+    }
+    if cfg is not None and cfg["pose"]:
+        meta["centre_pose_cfg"] = cfg["pose"]
+    return Scene(vs, name=root.name, root=root, grid=(rows, cols), meta=meta)

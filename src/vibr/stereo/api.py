@@ -1,0 +1,336 @@
+"""``estimate_depth``: per-view depth maps and their uncertainty from calibrated photos.
+
+The paper's first stage (Nieto et al. 2016, §5.3) computes the geometric proxy with MVS
+(Goesele et al. 2007) for unstructured views and with the EPI structure tensor (Wanner &
+Goldluecke 2012) for light fields. vibr does both on the CPU:
+
+* ``method="mvs"``: plane sweep (:func:`vibr.stereo.planesweep.plane_sweep`) over the
+  ``n_neighbours`` best neighbouring views, then the forward-backward consistency check
+  across the estimated views (:mod:`vibr.stereo.consistency`); unreliable or inconsistent
+  pixels become NaN (the geometry stage's bilateral filter fills them).
+* ``method="lightfield"``: :func:`vibr.stereo.lightfield.lightfield_depth` (structure
+  tensor on the epipolar-plane images, refined by a fine plane sweep over the grid and a
+  confidence-weighted TV-L1).
+
+Resolution: the estimate is computed at ``scale`` (images resampled, cameras
+:meth:`~vibr.camera.Camera.scaled`) and the depth and sigma_z maps are **upsampled back to
+the scene's resolution** (bilinear in inverse depth where the four neighbours are known,
+nearest otherwise), so the returned scene has the input's resolution. To work at a
+reduced resolution end to end, load the scene at that scale (``load_scene(path,
+scale=...)``) and call with ``scale=1``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+from scipy.ndimage import map_coordinates
+from skimage.transform import resize
+
+from ..camera import Camera
+from ..errors import VibrInputError
+from ..progress import log
+from ..scene import Scene
+from .consistency import check_consistency
+from .planesweep import plane_sweep
+
+
+# --------------------------------------------------------------------------- helpers
+def resize_image(img: np.ndarray, camera: Camera) -> np.ndarray:
+    """Resample an image to ``camera``'s size (anti-aliased when shrinking)."""
+    if img.shape[:2] == camera.shape:
+        return img
+    return resize(img, camera.shape, order=1, anti_aliasing=True, preserve_range=True).astype(np.float32)
+
+
+def upsample_depth(depth: np.ndarray, camera_lo: Camera, camera_hi: Camera) -> np.ndarray:
+    """Bring a depth map (NaN unknown) from ``camera_lo``'s grid to ``camera_hi``'s.
+
+    Pixel x of the high-resolution grid sits at ``x_lo = s (x + ½) − ½`` (the mapping of
+    :meth:`Camera.scaled`). Inverse depth is interpolated bilinearly where the four
+    low-resolution neighbours are known, nearest-neighbour elsewhere (NaN stays NaN).
+    """
+    if depth.shape == camera_hi.shape:
+        return depth
+    Hh, Wh = camera_hi.shape
+    sx = camera_lo.width / camera_hi.width
+    sy = camera_lo.height / camera_hi.height
+    yy, xx = np.mgrid[0:Hh, 0:Wh].astype(np.float64)
+    xl = sx * (xx + 0.5) - 0.5
+    yl = sy * (yy + 0.5) - 0.5
+    known = np.isfinite(depth)
+    w = np.where(known, 1.0 / np.where(known, depth, 1.0), 0.0)
+    wi = map_coordinates(w, [yl, xl], order=1, mode="nearest")
+    ki = map_coordinates(known.astype(np.float64), [yl, xl], order=1, mode="nearest")
+    dn = map_coordinates(np.where(known, depth, np.nan), [yl, xl], order=0, mode="nearest")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(ki > 1 - 1e-9, 1.0 / wi, dn)
+    return out.astype(np.float32)
+
+
+def upsample_map(m: np.ndarray, camera_lo: Camera, camera_hi: Camera) -> np.ndarray:
+    """Nearest-neighbour resampling of a per-pixel map (e.g. sigma_z) to ``camera_hi``."""
+    if m.shape == camera_hi.shape:
+        return m
+    Hh, Wh = camera_hi.shape
+    yy, xx = np.mgrid[0:Hh, 0:Wh].astype(np.float64)
+    xl = camera_lo.width / camera_hi.width * (xx + 0.5) - 0.5
+    yl = camera_lo.height / camera_hi.height * (yy + 0.5) - 0.5
+    return map_coordinates(m, [yl, xl], order=0, mode="nearest").astype(np.float32)
+
+
+def select_neighbours(cameras: list[Camera], ref: int, candidates: list[int], k: int,
+                      max_angle_deg: float = 60.0) -> list[int]:
+    """The ``k`` candidate views best suited as stereo partners of view ``ref``.
+
+    Candidates whose optical axis turns by more than ``max_angle_deg`` from the
+    reference's, or whose centre coincides with it, are dropped; the rest are ranked by the
+    distance between centres (the nearest first: small baselines match best, and the
+    plane sweep's robust aggregation copes with the loss of depth precision).
+    """
+    cr = cameras[ref]
+    scored = []
+    for j in candidates:
+        if j == ref:
+            continue
+        cj = cameras[j]
+        cosang = float(np.clip(cr.optical_axis @ cj.optical_axis, -1, 1))
+        dist = float(np.linalg.norm(cj.centre - cr.centre))
+        if np.degrees(np.arccos(cosang)) > max_angle_deg or dist < 1e-12:
+            continue
+        scored.append((dist, j))
+    scored.sort()
+    return [j for _, j in scored[:k]]
+
+
+def _parallax_rate(ref: Camera, src: Camera) -> float:
+    """Pixels of parallax in ``src`` per unit of inverse depth ``w`` of the reference
+    image centre's ray: ``|p(w=1) − p(w=0)|`` (the plane homography is affine in w)."""
+    x = np.array([(ref.width - 1) / 2, (ref.height - 1) / 2])
+    ray = ref.pixel_rays(x)
+    xy_inf = src.project(ref.camera_to_world(ray * 1e9))[0]
+    xy1 = src.project(ref.camera_to_world(ray * 1.0))[0]
+    return float(np.linalg.norm(xy1 - xy_inf))
+
+
+def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: dict,
+                        neighbours: list[int], *, coarse_width: int = 192,
+                        max_parallax: float = 0.5, margin: float = 0.15,
+                        use_points: bool = True) -> tuple[float, float]:
+    """A depth range for the reference view when none is given.
+
+    1. Sparse points (``scene.points``), when present: the 2nd–98th percentile of the
+       depths of the points that project into the reference, widened by ``margin``.
+    2. Otherwise a coarse plane sweep at ``coarse_width`` pixels over a wide range, from
+       the plane whose parallax with the nearest neighbour is ``max_parallax`` × image width
+       (near) to 100× that depth (far), uniform in inverse depth; the 2nd–98th percentile
+       of the confident coarse inverse depths, widened by ``margin`` of their span.
+    """
+    cam = cameras[ref]
+    if use_points and scene.points is not None and len(scene.points) >= 20:
+        xy, z = cam.project(np.asarray(scene.points, np.float64))
+        inside = (z > 0) & (xy[:, 0] >= 0) & (xy[:, 0] <= cam.width - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= cam.height - 1)
+        if inside.sum() >= 20:
+            lo, hi = np.percentile(z[inside], [2, 98])
+            span = hi - lo
+            return float(max(lo - margin * span, lo * 0.5)), float(hi + margin * span)
+    rate = _parallax_rate(cam, cameras[neighbours[0]])
+    w_max = max_parallax * cam.width / max(rate, 1e-12)
+    w_min = w_max / 100.0
+    s = min(1.0, coarse_width / cam.width)
+    cref = cam.scaled(s)
+    csrc = [cameras[j].scaled(s) for j in neighbours]
+    n_planes = int(np.clip(np.ceil(max_parallax * cref.width / 0.75), 32, 256))
+    res = plane_sweep(resize_image(images[ref], cref), cref,
+                      [resize_image(images[j], c) for j, c in zip(neighbours, csrc)], csrc,
+                      (1.0 / w_max, 1.0 / w_min), n_planes=n_planes, radius=2,
+                      desc="coarse depth range")
+    good = res.confident & (res.cost < 0.5 * res.meta.get("max_cost", 0.6))
+    w = res.inv_depth[good]
+    if w.size < 50:
+        return 1.0 / w_max, 1.0 / w_min
+    lo, hi = np.percentile(w, [3, 97])
+    span = max(hi - lo, 1e-9 * hi)
+    lo = max(lo - margin * span, w_min)
+    hi = min(hi + margin * span, w_max)
+    return float(1.0 / hi), float(1.0 / lo)
+
+
+def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo: int, hi: int) -> int:
+    """Number of planes so that consecutive planes move the farthest neighbour's pixel by
+    about ``step_px`` (the sub-label fit refines below that), clipped to [lo, hi]."""
+    rate = max(_parallax_rate(ref, c) for c in srcs)
+    span_px = rate * (1.0 / depth_range[0] - 1.0 / depth_range[1])
+    return int(np.clip(np.ceil(span_px / step_px) + 1, lo, hi))
+
+
+# --------------------------------------------------------------------------- main API
+def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=None,
+                   method: str = "auto", exclude=(), n_neighbours: int = 4,
+                   n_planes: int | None = None, step_px: float = 0.5, max_planes: int = 256, radius: int = 3,
+                   n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
+                   min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
+                   n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9, **lf_params) -> Scene:
+    """Estimate orthogonal depth and its uncertainty for views of a scene.
+
+    Parameters
+    ----------
+    scene : Scene
+        Calibrated views with images (existing depth is ignored and replaced on the
+        requested views).
+    views : list of int or str, optional
+        Views to estimate (default: every view not in ``exclude``).
+    scale : float
+        Resolution factor of the estimation; the maps are upsampled back (module docstring).
+    depth_range : (near, far), optional
+        Orthogonal depth range in scene units for every reference view; default
+        :func:`default_depth_range` per view.
+    method : "auto" | "mvs" | "lightfield"
+        "auto" is "lightfield" when ``scene.grid`` is set, else "mvs".
+    exclude : views never used as inputs (e.g. an evaluation's held-out target).
+    n_neighbours : stereo partners per reference view (MVS).
+    n_planes : planes of the sweep (default: from ``step_px``, 64 … ``max_planes``).
+    step_px : parallax step between planes on the farthest partner, in pixels.
+    max_planes : upper bound on the number of planes per view.
+    radius : ZNCC window half-size.
+    n_best : views averaged per pixel and plane (default half of the partners).
+    max_cost : aggregated ``1 − ZNCC`` above which a pixel is unknown.
+    eps : ZNCC regulariser (intensity std, images in [0, 1]); see
+        :func:`~vibr.stereo.planesweep.plane_sweep`.
+    consistency : run the cross-view forward-backward check (MVS); views whose partners
+        are not requested get ``n_partners`` extra (non-excluded) views estimated for it.
+    min_agree, rel_tol, px_tol : consistency check parameters
+        (:func:`vibr.stereo.consistency.check_consistency`).
+    mem_bytes : memory bound of one plane sweep's working set.
+    **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
+        ``max_views``, ``refine``, ``tv_lambda``, ...). The light-field method uses
+        ``depth_range``, ``radius`` (default 3 here; 2 when called directly), ``max_cost``
+        and ``mem_bytes``; it ignores ``n_neighbours``, ``step_px`` and the consistency
+        options (its sweep already uses the grid views; its eps defaults to 0.001).
+
+    Returns
+    -------
+    Scene
+        A copy of ``scene`` at its own resolution with ``depth`` (H×W float32, NaN unknown)
+        and ``sigma_z`` (H×W float32, scene units; unknown pixels get the largest known
+        value) set on the requested views. ``meta["depth_estimation"]`` holds per-view
+        statistics (kept fraction, reprojection error, time, depth range, planes); its
+        ``role`` is "target" or "consistency partner" (estimated only for the check, not
+        stored on the returned scene).
+
+    sigma_z = sqrt(sigma_curv² + spread²): the cost-curvature width of
+    :func:`~vibr.stereo.planesweep.plane_sweep` combined with the spread of the agreeing
+    neighbours' depths from the consistency check.
+    """
+    t_all = time.perf_counter()
+    n = len(scene)
+    excl = {scene.index(k) for k in exclude}
+    if views is None:
+        targets = [i for i in range(n) if i not in excl]
+    else:
+        targets = [scene.index(k) for k in views]
+    for i in targets:
+        if i in excl:
+            raise VibrInputError(f"view {scene.views[i].name} is both requested and excluded", scene.root)
+        if scene.views[i].image is None:
+            raise VibrInputError(f"view {scene.views[i].name} has no image", scene.root)
+    inputs = [i for i in range(n) if i not in excl and scene.views[i].image is not None]
+    if len(inputs) < 2:
+        raise VibrInputError("depth estimation needs at least two input views", scene.root)
+    if not (0 < scale <= 1.0 + 1e-9):
+        raise VibrInputError(f"scale must be in (0, 1], got {scale}", scene.root)
+    if method == "auto":
+        method = "lightfield" if scene.grid is not None else "mvs"
+    if method not in ("mvs", "lightfield"):
+        raise VibrInputError(f"unknown depth method {method!r} (auto, mvs, lightfield)", scene.root)
+    if depth_range is not None:
+        depth_range = (float(depth_range[0]), float(depth_range[1]))
+        if not 0 < depth_range[0] < depth_range[1]:
+            raise VibrInputError(f"bad depth range {depth_range}", scene.root)
+
+    cams = [v.camera.scaled(scale) if scale != 1.0 else v.camera for v in scene.views]
+    images: dict[int, np.ndarray] = {}
+
+    def img(i):
+        if i not in images:
+            images[i] = resize_image(scene.views[i].image, cams[i])
+        return images[i]
+
+    if method == "lightfield":
+        from .lightfield import lightfield_depth
+
+        results = {}
+        for i in targets:
+            results[i] = lightfield_depth(scene, i, cams, img, inputs, depth_range=depth_range,
+                                          radius=radius, max_cost=max_cost, mem_bytes=mem_bytes,
+                                          **lf_params)
+        stats = {scene.views[i].name: dict(results[i][2], role="target") for i in targets}
+        depths = {i: results[i][0] for i in targets}
+        sigmas = {i: results[i][1] for i in targets}
+    else:
+        # views to estimate: the targets plus consistency partners
+        nbrs = {i: select_neighbours(cams, i, inputs, n_neighbours) for i in targets}
+        for i in targets:
+            if not nbrs[i]:
+                raise VibrInputError(f"view {scene.views[i].name} has no usable stereo partner", scene.root)
+        est = list(targets)
+        if consistency:
+            for i in targets:
+                for j in nbrs[i][:n_partners]:
+                    if j not in est:
+                        est.append(j)
+                        nbrs[j] = select_neighbours(cams, j, inputs, n_neighbours)
+        depths, sigmas, stats = {}, {}, {}
+        raw = {}
+        for i in est:
+            t0 = time.perf_counter()
+            nb = nbrs[i]
+            if not nb:
+                continue
+            dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb)
+            D = n_planes or _planes_for(cams[i], [cams[j] for j in nb], dr, step_px, min(64, max_planes), max_planes)
+            res = plane_sweep(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], dr,
+                              n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
+                              eps=eps, mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
+            d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
+            raw[i] = (d, res.sigma_z)
+            stats[scene.views[i].name] = {
+                "depth_range": dr, "n_planes": D, "neighbours": [scene.views[j].name for j in nb],
+                "confident": float(res.confident.mean()), "sweep_s": res.meta["time_s"],
+                "time_s": time.perf_counter() - t0,
+                "role": "target" if i in targets else "consistency partner"}
+        for i in targets:
+            d, s = raw[i]
+            st = stats[scene.views[i].name]
+            if consistency:
+                t0 = time.perf_counter()
+                partners = [j for j in est if j != i and j in raw and (j in nbrs[i] or i in nbrs.get(j, []))]
+                cr = check_consistency(d, cams[i], [raw[j][0] for j in partners],
+                                       [cams[j] for j in partners], rel_tol=rel_tol,
+                                       px_tol=px_tol, min_agree=min_agree)
+                d = np.where(cr.keep, d, np.nan).astype(np.float32)
+                spread = np.where(np.isfinite(cr.spread), cr.spread, 0.0)
+                s = np.sqrt(s.astype(np.float64) ** 2 + spread ** 2).astype(np.float32)
+                st["consistency_partners"] = [scene.views[j].name for j in partners]
+                st["reproj_px"] = float(np.nanmean(cr.reproj[cr.keep])) if cr.keep.any() else float("nan")
+                st["consistency_s"] = time.perf_counter() - t0
+            st["kept"] = float(np.isfinite(d).mean())
+            depths[i], sigmas[i] = d, s
+
+    new_views = list(scene.views)
+    for i in targets:
+        v = scene.views[i]
+        d = upsample_depth(depths[i], cams[i], v.camera)
+        s = upsample_map(np.asarray(sigmas[i], np.float32), cams[i], v.camera)
+        known = np.isfinite(d)
+        fill = float(np.nanmax(s[known])) if known.any() else 1.0
+        s = np.where(known & np.isfinite(s), s, fill).astype(np.float32)
+        new_views[i] = v.replace(depth=d, sigma_z=s)
+    meta = dict(scene.meta)
+    meta["depth_estimation"] = {"method": method, "scale": scale, "views": stats,
+                                "excluded": [scene.views[i].name for i in sorted(excl)],
+                                "time_s": time.perf_counter() - t_all}
+    log(f"depth: {len(targets)} view(s) by {method} in {time.perf_counter() - t_all:.1f} s")
+    return replace(scene, views=new_views, meta=meta)

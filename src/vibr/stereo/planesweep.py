@@ -1,0 +1,175 @@
+"""Plane-sweep multi-view stereo for one reference view (fronto-parallel planes).
+
+The reference camera's viewing frustum is cut by planes ``z = 1/w`` (orthogonal depth),
+with ``w`` sampled uniformly in inverse depth (uniform in disparity, so equally fine for
+near and far points). For each plane every source image is warped into the reference by
+the plane homography (:func:`vibr.stereo._kernels.sweep_slab`), compared with the
+reference by ZNCC in a small window, and the per-view costs ``1 − ZNCC`` are aggregated by
+the mean of the best ``n_best`` views (robust to occlusion). Winner-take-all with a
+parabolic sub-label fit gives the depth; the fit's curvature gives an uncertainty.
+
+Memory: the planes are processed in slabs and only the running minimum and its two
+neighbouring costs are kept (O(views · H · W) working memory, never a D × H × W volume).
+For light fields with fronto-parallel, parallel cameras this sweep is exact as well.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..camera import Camera
+from ..progress import progress
+from . import _kernels as kern
+
+_LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+
+
+def to_grey(img: np.ndarray) -> np.ndarray:
+    """H×W×3 float image → H×W float32 luma (ITU-R 601 weights)."""
+    img = np.asarray(img, dtype=np.float32)
+    if img.ndim == 2:
+        return img
+    return np.ascontiguousarray(img @ _LUMA)
+
+
+@dataclass
+class SweepResult:
+    """Output of :func:`plane_sweep` for one reference view.
+
+    depth : (H, W) float32, orthogonal depth in scene units (every pixel gets a value;
+        ``confident`` says which are reliable).
+    inv_depth : (H, W) float64, 1/depth.
+    cost : (H, W) float64, aggregated cost ``1 − ZNCC`` ∈ [0, 2] at the minimum.
+    sigma_z : (H, W) float32, depth std from the cost curvature (scene units).
+    confident : (H, W) bool, textured, convex minimum not at the range ends, cost below
+        ``max_cost``.
+    winv : (D,) float64, the plane inverse depths.
+    meta : dict, timings and parameters.
+    """
+
+    depth: np.ndarray
+    inv_depth: np.ndarray
+    cost: np.ndarray
+    sigma_z: np.ndarray
+    confident: np.ndarray
+    winv: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+
+def plane_homographies(ref: Camera, srcs: list[Camera]) -> tuple[np.ndarray, np.ndarray]:
+    """Per-source ``A_v`` (nv,3,3) and ``b_v`` (nv,3) such that the fronto-parallel plane of
+    inverse depth ``w`` in ``ref`` maps reference pixels x̄ to ``x̃_v = (A_v + w b_v e₃ᵀ) x̄``.
+
+    With R_rel = R_v R_rᵀ, t_rel = t_v − R_rel t_r (reference camera frame → source frame):
+    a point ``X_r = z K_r⁻¹ x̄`` on the plane maps to ``K_v (R_rel X_r + t_rel)``
+    ∝ ``K_v R_rel K_r⁻¹ x̄ + w K_v t_rel`` (Hartley & Zisserman eq. 13.2 with n = e₃, d = z).
+    """
+    Kr_inv = np.linalg.inv(ref.K)
+    A = np.empty((len(srcs), 3, 3))
+    b = np.empty((len(srcs), 3))
+    for v, c in enumerate(srcs):
+        R_rel = c.R @ ref.R.T
+        t_rel = c.t - R_rel @ ref.t
+        A[v] = c.K @ R_rel @ Kr_inv
+        b[v] = c.K @ t_rel
+    # the kernel adds w*b to the full homogeneous vector, i.e. (A x̄ + w b) with the
+    # third coordinate of x̄ equal to 1: b e₃ᵀ x̄ = b.
+    return A, b
+
+
+def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
+                src_cameras: list[Camera], depth_range: tuple[float, float], *,
+                n_planes: int = 128, radius: int = 3, n_best: int | None = None,
+                eps: float = 0.002, max_cost: float = 0.6, slab: int | None = None,
+                mem_bytes: float = 2e9, desc: str | None = None) -> SweepResult:
+    """Plane-sweep stereo for one reference view.
+
+    Parameters
+    ----------
+    ref_image : (H, W, 3) or (H, W) float32 in [0, 1]
+    ref_camera : Camera of the reference (size H×W).
+    src_images, src_cameras : the neighbouring views (any sizes).
+    depth_range : (near, far) orthogonal depth in the reference camera, scene units.
+    n_planes : number of planes D, uniform in inverse depth 1/far … 1/near.
+    radius : ZNCC window half-size (window (2r+1)²).
+    n_best : aggregate the mean of the ``n_best`` lowest per-view costs (default: half of
+        the views, at least 1).
+    eps : ZNCC regulariser: ``ncc = cov / sqrt((var_I + eps²)(var_J + eps²))`` (intensity
+        units in [0, 1]); flat windows get ncc → 0 instead of noise.
+    max_cost : pixels with aggregated cost above this are not ``confident``.
+    slab : planes per compiled call (for the progress bar); default chosen from mem_bytes.
+    mem_bytes : bound on the working memory (the sweep needs ~ 29 bytes · views · H · W,
+        independent of D; a ValueError is raised if that alone exceeds the bound).
+
+    Returns
+    -------
+    SweepResult
+        ``sigma_z`` is ``z² · Δw · max(1/√12, sqrt(c₀ / (2a)))``: the inverse-depth step Δw
+        times the width of the parabola ``c₀ + a (l − l*)²`` at the level ``2 c₀`` (a
+        larger minimum cost or a flatter minimum → larger uncertainty), propagated by
+        ``dz = z² dw``. It is a heuristic scale, not a calibrated probability.
+    """
+    t0 = time.perf_counter()
+    H, W = ref_camera.shape
+    I = to_grey(ref_image).astype(np.float64)
+    if I.shape != (H, W):
+        raise ValueError(f"reference image {I.shape} does not match its camera {(H, W)}")
+    nv = len(src_images)
+    if nv == 0 or nv != len(src_cameras):
+        raise ValueError("plane_sweep needs at least one source view with its camera")
+    near, far = float(depth_range[0]), float(depth_range[1])
+    if not (0 < near < far):
+        raise ValueError(f"bad depth range {depth_range}")
+    work = 29.0 * nv * H * W
+    if work > mem_bytes:
+        raise ValueError(f"plane sweep working set {work/1e9:.2f} GB exceeds mem_bytes")
+    n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
+    # planes from far to near, uniform in inverse depth
+    winv = np.linspace(1.0 / far, 1.0 / near, int(n_planes))
+    greys = [to_grey(s) for s in src_images]
+    Hm = max(g.shape[0] for g in greys)
+    Wm = max(g.shape[1] for g in greys)
+    srcs = np.zeros((nv, Hm, Wm), np.float32)
+    sizes = np.zeros((nv, 2), np.int64)
+    for v, g in enumerate(greys):
+        srcs[v, : g.shape[0], : g.shape[1]] = g
+        sizes[v] = g.shape
+    A, b = plane_homographies(ref_camera, list(src_cameras))
+    eps2 = float(eps) ** 2
+    mu, sd = kern.box_mean_std(I, radius, eps2)
+    J = np.empty((nv, H, W), np.float32)
+    HJ = np.empty((nv, H, W))
+    HJJ = np.empty((nv, H, W))
+    HIJ = np.empty((nv, H, W))
+    ok = np.empty((nv, H, W), np.uint8)
+    best_c = np.full((H, W), np.inf)
+    best_l = np.zeros((H, W), np.int64)
+    c_minus = np.full((H, W), np.inf)
+    c_plus = np.full((H, W), np.inf)
+    prev = np.full((H, W), np.inf)
+    D = len(winv)
+    slab = max(1, int(slab) if slab else max(1, D // 16))
+    starts = range(0, D, slab)
+    for l0 in progress(starts, desc=desc or "plane sweep", total=len(starts), unit="slab"):
+        kern.sweep_slab(I, mu, sd, srcs, sizes, A, b, winv[l0 : l0 + slab], l0, int(radius),
+                        n_best, eps2, 16, J, HJ, HJJ, HIJ, ok, best_c, best_l, c_minus, c_plus, prev)
+    lab, curv = kern.subpixel(best_c, best_l, c_minus, c_plus)
+    dw = winv[1] - winv[0] if D > 1 else 1.0 / near
+    w = winv[0] + lab * dw
+    z = 1.0 / w
+    # std in labels: half-width of the parabola at twice the minimum cost (see docstring)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sl = np.where(curv > 0, np.sqrt(np.maximum(best_c, 1e-3) / (2 * np.maximum(curv, 1e-12))), D / 4.0)
+    sl = np.maximum(sl, 1.0 / np.sqrt(12.0))
+    sigma_z = (z * z * sl * abs(dw)).astype(np.float32)
+    textured = sd > 2.0 * eps  # window std above the regulariser
+    confident = (curv > 0) & (best_c <= max_cost) & textured
+    return SweepResult(
+        depth=z.astype(np.float32), inv_depth=w, cost=best_c, sigma_z=sigma_z,
+        confident=confident, winv=winv,
+        meta={"time_s": time.perf_counter() - t0, "n_planes": D, "n_views": nv, "n_best": n_best,
+              "radius": radius, "depth_range": (near, far), "max_cost": max_cost},
+    )

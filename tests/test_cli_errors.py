@@ -1,0 +1,185 @@
+"""Bad input: one line on stderr naming the file and the problem, exit status 2, no
+traceback, no partial output (``vibr info`` / ``vibr convert``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from vibr.cli import main
+from vibr.io.depthfiles import write_pfm
+from vibr.io.images import write_image
+
+
+def run_cli(capsys, *args):
+    code = main(list(map(str, args)) + ["-q"])
+    err = capsys.readouterr().err.strip()
+    return code, err
+
+
+def assert_one_line_error(code, err, *words):
+    assert code == 2
+    assert "\n" not in err and "Traceback" not in err, err
+    assert err.startswith("vibr ")
+    for w in words:
+        assert str(w) in err, (w, err)
+
+
+def _img(path, w=16, h=12, seed=0):
+    rng = np.random.default_rng(seed)
+    write_image(path, (rng.integers(0, 256, (h, w, 3)) / 255).astype(np.float32))
+
+
+def make_transforms(root, depth=None, matrix=None):
+    """A one-frame nerfstudio scene; optional depth array written as .npy."""
+    root.mkdir(exist_ok=True)
+    _img(root / "a.png")
+    fr = {"file_path": "a.png", "transform_matrix": matrix if matrix is not None else np.eye(4).tolist()}
+    if depth is not None:
+        np.save(root / "a_depth.npy", depth)
+        fr["depth_file_path"] = "a_depth.npy"
+    doc = {"fl_x": 20.0, "fl_y": 20.0, "cx": 8.0, "cy": 6.0, "w": 16, "h": 12, "frames": [fr]}
+    (root / "transforms.json").write_text(json.dumps(doc))
+    return root
+
+
+def test_missing_path(capsys, tmp_path):
+    code, err = run_cli(capsys, "info", tmp_path / "nope")
+    assert_one_line_error(code, err, tmp_path / "nope", "not found")
+
+
+def test_missing_image_of_a_frame(capsys, tmp_path):
+    root = make_transforms(tmp_path / "s")
+    os.remove(root / "a.png")
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, root / "a.png", "not found")
+
+
+def test_unrecognised_folder(capsys, tmp_path):
+    (tmp_path / "notes.txt").write_text("hello")
+    code, err = run_cli(capsys, "info", tmp_path)
+    assert_one_line_error(code, err, tmp_path, "no supported scene")
+
+
+def test_garbage_png_in_light_field(capsys, tmp_path, cotton_dir):
+    os.symlink(cotton_dir / "input_Cam040.png", tmp_path / "input_Cam040.png")
+    (tmp_path / "input_Cam041.png").write_bytes(b"\x89PNG garbage bytes" * 10)
+    code, err = run_cli(capsys, "info", tmp_path)
+    assert_one_line_error(code, err, tmp_path / "input_Cam041.png", "cannot read image")
+
+
+def test_garbage_png_in_transforms_scene(capsys, tmp_path):
+    root = make_transforms(tmp_path / "s")
+    (root / "a.png").write_bytes(os.urandom(300))
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, root / "a.png", "cannot read image")
+
+
+def test_light_field_views_of_different_sizes(capsys, tmp_path, cotton_dir):
+    os.symlink(cotton_dir / "input_Cam040.png", tmp_path / "input_Cam040.png")
+    _img(tmp_path / "input_Cam041.png", 256, 256)
+    code, err = run_cli(capsys, "info", tmp_path)
+    assert_one_line_error(code, err, tmp_path / "input_Cam041.png", "same size", "256x256", "512x512")
+
+
+@pytest.mark.parametrize("bad,word", [(np.nan, "NaN"), (np.inf, "infinite"), (-2.0, "negative")])
+def test_bad_depth_values(capsys, tmp_path, bad, word):
+    d = np.full((12, 16), 3.0, np.float32)
+    d[4, 5] = bad
+    root = make_transforms(tmp_path / "s", depth=d)
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, root / "a_depth.npy", word)
+
+
+def test_nan_disparity_in_light_field(capsys, tmp_path, cotton_dir):
+    for n in ("input_Cam040.png", "input_Cam080.png"):  # Cam080: the 9x9 grid is inferred
+        os.symlink(cotton_dir / n, tmp_path / n)
+    disp = np.zeros((512, 512), np.float32)
+    disp[10, 10] = np.nan
+    write_pfm(tmp_path / "gt_disp_lowres.pfm", disp)
+    code, err = run_cli(capsys, "info", tmp_path)
+    assert_one_line_error(code, err, tmp_path / "gt_disp_lowres.pfm", "NaN")
+
+
+def test_non_orthonormal_rotation(capsys, tmp_path):
+    M = np.eye(4)
+    M[:3, :3] *= 1.1
+    root = make_transforms(tmp_path / "s", matrix=M.tolist())
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, root / "transforms.json", "not a rotation")
+
+
+def test_malformed_json(capsys, tmp_path):
+    root = make_transforms(tmp_path / "s")
+    (root / "transforms.json").write_text('{"fl_x": 20, "frames": [{"file_path": "a.png",')
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, root / "transforms.json", "malformed JSON", "line 1")
+
+
+def _strecha(tmp_path, fountain_dir, names=("0000", "0001")):
+    (tmp_path / "images").mkdir()
+    (tmp_path / "gt_dense_cameras").mkdir()
+    for n in names:
+        os.symlink(fountain_dir / "images" / f"{n}.jpg", tmp_path / "images" / f"{n}.jpg")
+        shutil.copy(fountain_dir / "gt_dense_cameras" / f"{n}.jpg.camera", tmp_path / "gt_dense_cameras")
+    return tmp_path
+
+
+def test_malformed_camera_file(capsys, tmp_path, fountain_dir):
+    root = _strecha(tmp_path, fountain_dir)
+    bad = root / "gt_dense_cameras" / "0001.jpg.camera"
+    bad.write_text("\n".join(bad.read_text().splitlines()[:6]) + "\n")  # truncated
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, bad, "malformed .camera")
+
+
+def test_camera_file_with_bad_rotation(capsys, tmp_path, fountain_dir):
+    root = _strecha(tmp_path, fountain_dir)
+    bad = root / "gt_dense_cameras" / "0000.jpg.camera"
+    lines = bad.read_text().splitlines()
+    lines[4] = "1 0 0"
+    lines[5] = "1 0 0"
+    bad.write_text("\n".join(lines) + "\n")
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, bad, "not a rotation")
+
+
+def test_image_without_camera_file(capsys, tmp_path, fountain_dir):
+    root = _strecha(tmp_path, fountain_dir)
+    os.symlink(fountain_dir / "images" / "0002.jpg", root / "images" / "0002.jpg")
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, root / "images" / "0002.jpg", "no camera file")
+
+
+def test_convert_leaves_no_partial_output(capsys, tmp_path):
+    root = make_transforms(tmp_path / "s")
+    (root / "a.png").write_bytes(b"junk")
+    out = tmp_path / "out"
+    code, err = run_cli(capsys, "convert", root, out)
+    assert_one_line_error(code, err, root / "a.png")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
+
+
+def test_convert_refuses_existing_output_without_force(capsys, tmp_path):
+    root = make_transforms(tmp_path / "s")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    code, err = run_cli(capsys, "convert", root, out)
+    assert_one_line_error(code, err, out, "--force")
+    assert (out / "keep.txt").read_text() == "mine"
+    assert run_cli(capsys, "convert", root, out, "--force")[0] == 0
+    assert (out / "transforms.json").is_file() and not (out / "keep.txt").exists()
+
+
+def test_exit_status_of_the_real_command(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "vibr", "info", str(tmp_path / "missing")],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.strip().count("\n") == 0 and "missing" in r.stderr and "Traceback" not in r.stderr

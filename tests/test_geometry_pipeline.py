@@ -1,0 +1,130 @@
+"""compute_samples end to end: closed-form case, per-sample fields, bad input, degenerate views."""
+
+import numpy as np
+import pytest
+
+from vibr.camera import Camera
+from vibr.errors import VibrInputError
+from vibr.geometry import Samples, compute_samples
+from vibr.scene import Scene, View
+
+W, H, F = 40, 30, 50.0
+
+
+def _cam(C, R=np.eye(3), f=F):
+    return Camera.from_centre(Camera.intrinsics(f, W, H), R, np.asarray(C, float), W, H)
+
+
+def _img(seed=0):
+    return np.random.default_rng(seed).random((H, W, 3)).astype(np.float32)
+
+
+def test_translation_plane_samples():
+    b, z = 0.2, 2.5
+    img = _img()
+    src = View("s", img, _cam([0, 0, 0]), np.full((H, W), z), sigma_z=0.05)
+    tgt = _cam([b, 0, 0])
+    s = compute_samples(Scene([src]), tgt)
+    assert isinstance(s, Samples) and s.target_shape == (H, W)
+    shift = F * b / z  # 4 px
+    np.testing.assert_allclose(s.xy[:, 0], s.src_xy[:, 0] - shift, atol=1e-9)
+    np.testing.assert_allclose(s.xy[:, 1], s.src_xy[:, 1], atol=1e-9)
+    assert len(s) == H * (W - int(shift))  # the 4 leftmost columns land outside
+    assert s.meta["counts"]["s"]["outside"] == H * int(shift)
+    np.testing.assert_allclose(s.jac, np.broadcast_to(np.eye(2), (len(s), 2, 2)), atol=1e-12)
+    np.testing.assert_allclose(s.inv_det, 1.0)
+    np.testing.assert_allclose(s.dtau_dz, np.broadcast_to([F * b / z**2, 0], (len(s), 2)), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(s.sigma_z, 0.05)
+    # colours and central-difference gradients of the source at src_xy
+    x, y = s.src_xy[:, 0], s.src_xy[:, 1]
+    np.testing.assert_array_equal(s.colour, img[y, x])
+    inner = (x > 0) & (x < W - 1) & (y > 0) & (y < H - 1)
+    gx = (img[y, np.minimum(x + 1, W - 1)] - img[y, np.maximum(x - 1, 0)]) / 2
+    gy = (img[np.minimum(y + 1, H - 1), x] - img[np.maximum(y - 1, 0), x]) / 2
+    np.testing.assert_allclose(s.grad[inner, :, 0], gx[inner], atol=1e-6)
+    np.testing.assert_allclose(s.grad[inner, :, 1], gy[inner], atol=1e-6)
+    # world points: depth z in the source frame, reproject onto src_xy
+    np.testing.assert_allclose(s.X[:, 2], z)
+    xy, _ = src.camera.project(s.X)
+    np.testing.assert_allclose(xy, s.src_xy, atol=1e-9)
+    assert s.view.dtype == np.int32 and s.src_xy.dtype == np.int32
+    assert s.colour.dtype == np.float32 and s.grad.dtype == np.float32
+    assert np.all((s.xy >= 0) & (s.xy <= [W - 1, H - 1]))
+
+
+def test_unknown_depth_is_skipped_or_filled():
+    img = np.full((H, W, 3), 0.5, np.float32)
+    d = np.full((H, W), 2.0)
+    d[10:13, 10:13] = np.nan
+    sc = Scene([View("s", img, _cam([0, 0, 0]), d)])
+    tgt = _cam([0, 0, 0])
+    s = compute_samples(sc, tgt)
+    assert len(s) == H * W - 9 and s.meta["counts"]["s"]["unknown"] == 9
+    assert not np.any((s.src_xy[:, 0] == 11) & (s.src_xy[:, 1] == 11))
+    s2 = compute_samples(sc, tgt, fill_holes=True)
+    assert len(s2) == H * W
+
+
+def test_default_sigma_z_and_map():
+    d = np.full((H, W), 4.0)
+    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
+    s = compute_samples(sc, _cam([0, 0, 0]))
+    np.testing.assert_allclose(s.sigma_z, 0.01 * 4.0)  # DEFAULT_SIGMA_Z_REL · median depth
+    smap = np.arange(H * W, dtype=np.float32).reshape(H, W) * 1e-3
+    sc2 = Scene([View("s", _img(), _cam([0, 0, 0]), d, sigma_z=smap)])
+    s2 = compute_samples(sc2, _cam([0, 0, 0]))
+    np.testing.assert_allclose(s2.sigma_z, smap[s2.src_xy[:, 1], s2.src_xy[:, 0]], rtol=1e-6)
+
+
+def test_inv_det_is_capped():
+    # a source with 3× the focal length sees the plane at 3× the target's resolution:
+    # det = (1/3)² → 1/det = 9, capped at DEFAULT_MAX_INV_DET = 4 (or what is asked)
+    d = np.full((H, W), 2.0)
+    zoom = View("zoom", _img(), _cam([0, 0, 0], f=3 * F), d)
+    s = compute_samples(Scene([zoom]), _cam([0, 0, 0]))
+    np.testing.assert_allclose(s.inv_det, 4.0)
+    np.testing.assert_allclose(compute_samples(Scene([zoom]), _cam([0, 0, 0]), max_inv_det=10.0).inv_det, 9.0)
+    np.testing.assert_allclose(compute_samples(Scene([zoom]), _cam([0, 0, 0]), max_inv_det=1.0).inv_det, 1.0)
+    # a grazing surface (det → 0) stays bounded too
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    steep = View("steep", _img(), _cam([0, 0, 0]), 2.0 + 5.0 * x)
+    s2 = compute_samples(Scene([steep]), _cam([0.01, 0, 0]))
+    assert np.all(s2.inv_det <= 4.0) and np.all(np.isfinite(s2.inv_det))
+
+
+def test_no_view_sees_the_target_and_degenerate_sources():
+    d = np.full((H, W), 2.0)
+    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
+    # target behind the plane and facing away from it
+    away = Camera.from_centre(Camera.intrinsics(F, W, H), np.diag([-1.0, 1.0, -1.0]), [0, 0, 0], W, H,
+                              source="target.json")
+    with pytest.raises(VibrInputError, match="target.json.*no source view sees the target"):
+        compute_samples(sc, away)
+    # a source whose whole depth is behind the target camera yields zero samples, no crash
+    behind = View("behind", _img(1), _cam([0, 0, 0.2]), np.full((H, W), 0.5))  # points at z = 0.7
+    s = compute_samples(Scene([sc.views[0], behind]), _cam([0, 0, 1.0]))
+    assert s.meta["counts"]["behind"]["visible"] == 0
+    assert s.meta["counts"]["behind"]["behind"] == H * W
+    assert np.all(s.view == 0) and len(s) > 0
+
+
+def test_source_without_depth_is_an_input_error():
+    sc = Scene([View("nodepth", _img(), _cam([0, 0, 0]), path="photos/nodepth.png")])
+    with pytest.raises(VibrInputError, match="photos/nodepth.png"):
+        compute_samples(sc, _cam([0, 0, 0]))
+
+
+def test_occluder_hides_the_background():
+    # background plane at z = 4 seen by the source, a foreground square at z = 2 in the middle
+    d = np.full((H, W), 4.0)
+    d[10:20, 15:25] = 2.0
+    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
+    s = compute_samples(sc, _cam([0.1, 0, 0]))  # foreground moves 2.5 px, background 1.25 px
+    c = s.meta["counts"]["s"]
+    assert c["occluded"] > 0
+    # the occluded background pixels are just left of the square (covered by its shift)
+    occl = np.ones((H, W), bool)
+    occl[s.src_xy[:, 1], s.src_xy[:, 0]] = False
+    occl[:, :2] = False  # outside
+    ys, xs = np.nonzero(occl)
+    assert np.all((ys >= 10) & (ys < 20)) and np.all((xs >= 13) & (xs < 15))

@@ -1,0 +1,85 @@
+"""COLMAP sparse models written with pycolmap's own API (there is no real COLMAP data here)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vibr.errors import VibrInputError
+from vibr.io import load_scene
+from vibr.io.depthfiles import write_colmap_bin
+from vibr.io.images import write_image
+
+pycolmap = pytest.importorskip("pycolmap")
+
+
+def _rot(ax, ang):
+    c, s = np.cos(ang), np.sin(ang)
+    R = np.eye(3)
+    i, j = [(1, 2), (0, 2), (0, 1)][ax]
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return R
+
+
+def write_model(root, *, model="PINHOLE", params=(100.0, 110.0, 32.0, 24.0), sparse="sparse/0", depth=True):
+    """Two images (one camera of ``model``, one SIMPLE_PINHOLE), three points, a depth map."""
+    rec = pycolmap.Reconstruction()
+    cam1 = pycolmap.Camera.create_from_model_name(1, model, 100.0, 64, 48)
+    cam1.params = list(params)
+    cam2 = pycolmap.Camera.create_from_model_name(2, "SIMPLE_PINHOLE", 90.0, 64, 48)
+    cam2.params = [90.0, 31.5, 23.0]
+    poses = {}
+    for cam in (cam1, cam2):
+        rec.add_camera_with_trivial_rig(cam)
+    for iid, (cid, R, t) in enumerate([(1, _rot(1, 0.1), [0.1, -0.2, 2.0]), (2, _rot(0, -0.05) @ _rot(2, 0.2), [0.3, 0.0, 2.5])], 1):
+        name = f"img{iid}.png"
+        im = pycolmap.Image(name=name, camera_id=cid, image_id=iid)
+        rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(R)), np.asarray(t, float)))
+        poses[f"img{iid}"] = (np.asarray(R), np.asarray(t, float))
+    pts = np.array([[0.0, 0.0, 1.0], [0.2, -0.1, 0.5], [-0.3, 0.2, 0.8]])
+    for p in pts:
+        rec.add_point3D(p, pycolmap.Track())
+    (root / sparse).mkdir(parents=True)
+    rec.write(str(root / sparse))
+    (root / "images").mkdir()
+    rng = np.random.default_rng(0)
+    for n in ("img1", "img2"):
+        write_image(root / "images" / f"{n}.png", (rng.integers(0, 256, (48, 64, 3)) / 255).astype(np.float32))
+    d = np.full((48, 64), 2.0, np.float32)
+    d[:5] = 0.0  # unknown
+    if depth:
+        (root / "stereo" / "depth_maps").mkdir(parents=True)
+        write_colmap_bin(root / "stereo" / "depth_maps" / "img1.png.geometric.bin", d)
+    return poses, pts
+
+
+def test_colmap_model_loads(tmp_path):
+    poses, pts = write_model(tmp_path)
+    s = load_scene(tmp_path)
+    assert s.meta["format"] == "COLMAP" and s.names == ["img1", "img2"]
+    c1, c2 = s["img1"].camera, s["img2"].camera
+    # COLMAP's pixel centres are at +0.5: vibr's principal point is shifted by -0.5.
+    np.testing.assert_allclose(c1.K, [[100, 0, 31.5], [0, 110, 23.5], [0, 0, 1]])
+    np.testing.assert_allclose(c2.K, [[90, 0, 31.0], [0, 90, 22.5], [0, 0, 1]])
+    for v in s.views:
+        R, t = poses[v.name]
+        np.testing.assert_allclose(v.camera.R, R, atol=1e-12)
+        np.testing.assert_allclose(v.camera.t, t, atol=1e-12)
+    np.testing.assert_allclose(np.sort(s.points, axis=0), np.sort(pts, axis=0))
+    d = s["img1"].depth
+    assert np.isnan(d[:5]).all() and np.all(d[5:] == 2.0)
+    assert s["img2"].depth is None
+    # The model folder itself and the image_undistorter layout (root/sparse) load too.
+    assert load_scene(tmp_path / "sparse" / "0").names == ["img1", "img2"]
+
+
+def test_colmap_undistorter_layout_and_zero_distortion(tmp_path):
+    write_model(tmp_path, model="OPENCV", params=(100.0, 110.0, 32.0, 24.0, 0, 0, 0, 0), sparse="sparse", depth=False)
+    s = load_scene(tmp_path)
+    np.testing.assert_allclose(s["img1"].camera.K[0], [100, 0, 31.5])
+
+
+def test_colmap_distortion_is_an_error(tmp_path):
+    write_model(tmp_path, model="OPENCV", params=(100.0, 110.0, 32.0, 24.0, 0.1, 0, 0, 0))
+    with pytest.raises(VibrInputError, match="image_undistorter"):
+        load_scene(tmp_path)

@@ -1,0 +1,41 @@
+"""``vibr depth`` end to end on a tiny synthetic scene."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from vibr.cli import main
+
+
+def test_vibr_depth_in_place_and_out(tmp_path, capsys):
+    from vibr.io import load_scene, save_scene
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=4, width=64, height=48, seed=2)
+    for v in s.views:
+        v.depth = None
+        v.sigma_z = None
+    src = save_scene(s, tmp_path / "scene")
+    out = tmp_path / "out"
+    assert main(["-q", "depth", str(src), "-o", str(out), "--views", "view_000",
+                 "--exclude", "view_003"]) == 0
+    e = load_scene(out)
+    assert e[0].depth is not None and np.isfinite(e[0].depth).mean() > 0.2
+    assert np.ndim(e[0].sigma_z) == 2
+    assert e[3].depth is None
+    # in place
+    assert main(["-q", "depth", str(src), "--views", "view_001", "--no-consistency"]) == 0
+    e2 = load_scene(src)
+    assert e2[1].depth is not None
+    assert "depth" in json.dumps(json.load(open(src / "transforms.json")))
+
+
+def test_vibr_depth_bad_input(tmp_path, capsys):
+    assert main(["-q", "depth", str(tmp_path / "missing"), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "vibr depth: error" in err and len(err.strip().splitlines()) == 1
+    # in place on a folder that is not a transforms.json scene
+    (tmp_path / "x").mkdir()
+    assert main(["-q", "depth", str(tmp_path / "x")]) == 2
