@@ -9,8 +9,10 @@ photographs (colour term), their edges (gradient term) and natural-image smoothn
 from .camera import Camera
 from .errors import VibrInputError
 from .scene import Scene, View
-from .render import RenderResult, render
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "RenderResult", "Scene", "View", "VibrInputError", "render", "__version__"]
+__all__ = ["Camera", "Scene", "View", "VibrInputError", "__version__"]
+
+# The renderer lives in ``vibr.render`` (``from vibr.render import render``); it is not
+# re-exported here so that the name keeps meaning the subpackage.

@@ -13,7 +13,10 @@ conversion happens here, once. The returned weights are therefore in ``scale``�
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit, prange
 
 from .samples import Samples
 
@@ -25,7 +28,10 @@ _LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
 def luminance(u) -> np.ndarray:
     """(H, W, 3) → (H, W) Rec. 601 luminance (float32)."""
     u = np.asarray(u, np.float32)
-    return u if u.ndim == 2 else u @ _LUMA
+    if u.ndim == 2:
+        return u
+    # per channel, so that a (H, W, 3) view of a planar (3, H, W) image reads whole planes
+    return _LUMA[0] * u[..., 0] + _LUMA[1] * u[..., 1] + _LUMA[2] * u[..., 2]
 
 
 def luminance_gradient(u) -> np.ndarray:
@@ -45,10 +51,36 @@ def deformation_weight(samples: Samples, cap: float | None = None) -> np.ndarray
     return np.minimum(w, cap) if cap is not None else w
 
 
+@njit(parallel=True, cache=True)
+def _weights_kernel(x0, y0, fx, fy, g, dtau, sz, sz_scalar, inv_det, cap, sigma_s2, out):
+    """out_m = min(1/|det|, cap) / (sigma_s² + (sigma_z,m · ∂tau/∂z · ∇u(tau(x_m)))²), with
+    ∇u bilinearly interpolated from ``g`` (H, W, 2); non-finite inputs count as 0."""
+    n = x0.shape[0]
+    use_map = sz.shape[0] == n
+    for i in prange(n):
+        a = np.float64(fx[i])
+        b = np.float64(fy[i])
+        x = x0[i]
+        y = y0[i]
+        gx = ((1 - a) * (1 - b) * g[y, x, 0] + a * (1 - b) * g[y, x + 1, 0]
+              + (1 - a) * b * g[y + 1, x, 0] + a * b * g[y + 1, x + 1, 0])
+        gy = ((1 - a) * (1 - b) * g[y, x, 1] + a * (1 - b) * g[y, x + 1, 1]
+              + (1 - a) * b * g[y + 1, x, 1] + a * b * g[y + 1, x + 1, 1])
+        s = sz[i] if use_map else sz_scalar
+        if not math.isfinite(s):
+            s = 0.0
+        d = inv_det[i]
+        if not math.isfinite(d):
+            d = 0.0
+        d = min(d, cap)
+        p = s * (dtau[i, 0] * gx + dtau[i, 1] * gy)
+        out[i] = d / (sigma_s2 + p * p)
+
+
 def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *,
                       scale: float = 255.0, grad_max: float | None = 64.0,
-                      inv_det_cap: float | None = None, splat=None) -> np.ndarray:
-    """Data-term weights ``W_km`` (METHOD §3), (N,) float64.
+                      inv_det_cap: float | None = None, splat=None, dtype=np.float64) -> np.ndarray:
+    """Data-term weights ``W_km`` (METHOD §3), (N,) ``dtype`` (float64 by default).
 
     Parameters
     ----------
@@ -72,23 +104,22 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
     splat : vibr.render.operators.Splat, optional
         Precomputed bilinear interpolation of ``samples.xy`` (saves its set-up).
     """
-    w_def = deformation_weight(samples, inv_det_cap)
-    if sigma_z is None:
-        sz = np.asarray(samples.sigma_z, np.float64)
-    else:
-        sz = np.broadcast_to(np.asarray(sigma_z, np.float64), (len(samples),))
-    sz = np.where(np.isfinite(sz), sz, 0.0)
+    sz = samples.sigma_z if sigma_z is None else sigma_z
+    sz = np.asarray(sz, np.float64)
     base = 1.0 / (sigma_s ** 2)
-    if u is None or not np.any(sz > 0):
-        return w_def * base
+    if u is None or not np.any(np.nan_to_num(sz) > 0):
+        return (deformation_weight(samples, inv_det_cap) * base).astype(dtype, copy=False)
     from ..render.operators import Splat
 
     g = luminance_gradient(u) * np.float32(scale)
     if grad_max is not None:
         mag = np.sqrt((g ** 2).sum(-1, keepdims=True))
-        g = g * np.minimum(1.0, grad_max / np.maximum(mag, 1e-12)).astype(np.float32)
+        g *= np.minimum(1.0, grad_max / np.maximum(mag, 1e-12)).astype(np.float32)
     sp = splat if splat is not None else Splat(samples.xy, samples.target_shape)
-    gs = sp.apply(np.ascontiguousarray(g))  # (N, 2): ∇u(tau(x_m)), scale units / target px
-    proj = (np.asarray(samples.dtau_dz, np.float64) * gs).sum(1)  # ∂tau/∂z · ∇u
-    omega = 1.0 / (sigma_s ** 2 + (sz * proj) ** 2)
-    return w_def * omega
+    out = np.empty(len(samples), dtype)
+    sz_map = sz if sz.ndim == 1 else np.zeros(0)
+    sz_scalar = float(sz) if sz.ndim == 0 else 0.0
+    _weights_kernel(sp.x0, sp.y0, sp.fx, sp.fy, np.ascontiguousarray(g), np.asarray(samples.dtau_dz),
+                    sz_map, sz_scalar, np.asarray(samples.inv_det),
+                    np.inf if inv_det_cap is None else float(inv_det_cap), float(sigma_s) ** 2, out)
+    return out

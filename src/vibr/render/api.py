@@ -49,6 +49,10 @@ class RenderResult:
     metrics : dict
         ``psnr`` / ``ssim`` / ``dssim`` against the held-out view (when the target is a
         View with an image), over the covered pixels with a 2-pixel border excluded.
+    init : (H, W, 3) float32 or None
+        The initial image (weighted blend + push–pull) the solver started from.
+    iterations, power_iterations : int
+        FISTA iterations and power iterations (step size) over all outer passes.
     """
 
     image: np.ndarray
@@ -62,6 +66,8 @@ class RenderResult:
     n_samples: int = 0
     metrics: dict = field(default_factory=dict)
     init: np.ndarray | None = None
+    iterations: int = 0
+    power_iterations: int = 0
 
 
 def _log(msg, verbose):
@@ -86,7 +92,17 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
 
     t0 = time.perf_counter()
     sp = Splat(samples.xy, (H, W))
-    acc = sp.adjoint(np.ones(len(samples)))  # unweighted bilinear coverage
+    gamma = p["gamma"] if method == "gradient" else 0.0
+    BtB = Btg = None
+    cg_unit = 0.0
+    if gamma > 0:
+        # Bᵀ B and Bᵀ ∇v with unit weights: the gradient term's stencil up to its constant
+        # weight (grad_weighting visibility/none), and Σ_s (BᵀB)[s] = Bᵀ 1 is the coverage
+        grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
+        BtB, Btg, cg_unit = sp.normal(np.ones(len(samples), np.float32), grad_vals, dtype=np.float32)
+        acc = BtB.sum(0, dtype=np.float64)
+    else:
+        acc = sp.adjoint(np.ones(len(samples), np.float32))  # unweighted bilinear coverage
     coverage = acc >= p["hole_threshold"]
     times["assembly"] += time.perf_counter() - t0
 
@@ -111,33 +127,34 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
     def weights(u):
         t0 = time.perf_counter()
         sz = 0.0 if method == "savsr" else p["sigma_z"]
-        w = geometric_weights(samples, u, p["sigma_s"], sz, scale=s, grad_max=p["grad_max"], splat=sp)
+        w = geometric_weights(samples, u, p["sigma_s"], sz, scale=s, grad_max=p["grad_max"], splat=sp,
+                              dtype=np.float32)
+        w *= np.float32(1.0 / rho)
         times["weights"] += time.perf_counter() - t0
-        return w / rho
+        return w
 
     # initial weights: deformation only (u unknown yet); initial image: their blend + push-pull
     Wk = weights(None)
     t0 = time.perf_counter()
-    _, bw, _ = sp.normal(Wk, np.concatenate([colour, np.ones((len(samples), 1), np.float32)], 1))
-    wsum = bw[3]
-    blend = np.where(wsum > 0, bw[:3] / np.maximum(wsum, 1e-300), 0.0).transpose(1, 2, 0)
+    A0, bw, _ = sp.normal(Wk, colour, dtype=np.float32)
+    wsum = A0.sum(0)  # Σ_s (BᵀWB)[s] = Bᵀ W 1: bilinear rows sum to one
+    del A0
+    blend = np.where(wsum > 0, bw / np.maximum(wsum, 1e-30), 0.0).transpose(1, 2, 0)
     # blend = Σ W b c / Σ W b (W-weighted bilinear splat); the push–pull weight is the plain
     # coverage, so that "≥ 1" means "one full sample landed here"
     init = push_pull(blend * acc[..., None], acc)
     u = np.ascontiguousarray(init.transpose(2, 0, 1))  # planar (3, H, W) from here on
     times["init"] = time.perf_counter() - t0
 
-    gamma = p["gamma"] if method == "gradient" else 0.0
     alpha = p["alpha"]
     lam_int = p["lam"] / s
     n_outer = max(1, int(p["n_outer"]))
     energy, terms, outer = [], [], []
     prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"])
+    power_state: dict = {}
+    n_iter = n_power = 0
     Ag = bg = None
     cg = 0.0
-    grad_vals = None
-    if gamma > 0:
-        grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
     bar = None
     if progress_bar:
         from ..progress import progress
@@ -147,17 +164,17 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
         if method != "savsr":
             Wk = weights(u.transpose(1, 2, 0))
         t0 = time.perf_counter()
-        A, b, c = sp.normal(Wk, colour)
+        A, b, c = sp.normal(Wk, colour, dtype=np.float32)
         if gamma > 0:
             if p["grad_weighting"] == "W":
-                Cw = Wk
-            else:  # visibility / none: every (visible) sample, sensor precision 1/sigma_s²
-                Cw = np.full(len(samples), 1.0 / (p["sigma_s"] ** 2 * rho))
-            if Ag is None or p["grad_weighting"] == "W":
-                Ag, bg, cg = sp.normal(Cw, grad_vals)
-                bg = bg.reshape(3, 2, H, W).astype(np.float32)
-                Ag = Ag.astype(np.float32)
-        model = QuadraticModel(A.astype(np.float32), b.astype(np.float32), float(c), Ag, bg, float(cg),
+                Ag, bg, cg = sp.normal(Wk, grad_vals, dtype=np.float32)
+            elif Ag is None:
+                # visibility / none: every (visible) sample, sensor precision 1/sigma_s²
+                cw = 1.0 / (p["sigma_s"] ** 2 * rho)
+                Ag, bg, cg = BtB * np.float32(cw), Btg * np.float32(cw), cg_unit * cw
+                BtB = Btg = None
+            bg = bg.reshape(3, 2, H, W)
+        model = QuadraticModel(A, b, float(c), Ag, bg, float(cg),
                                alpha, gamma, lam_int, s, p["coupled_tv"])
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -169,9 +186,11 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
 
         res = fista(model, u, max_iter=p["max_iter"], tol=p["tol"], min_iter=p["min_iter"],
                     tv_iter=p["tv_iter"], precond=p["precond"], d_floor=p["d_floor"], prox=prox,
-                    callback=cb)
+                    callback=cb, power_state=power_state)
         times["solve"] += time.perf_counter() - t0
         u = res.u
+        n_iter += res.n_iter
+        n_power += res.n_power
         energy += res.energy
         terms += res.terms
         _log(f"render {method}: outer {o + 1}/{n_outer}: {res.n_iter} iterations ({res.stopped}), "
@@ -184,9 +203,8 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
     times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
     p = dict(p, density=rho)
-    p = dict(p, density=rho)
     return RenderResult(img, coverage, energy, terms, outer, times,
-                        method, p, len(samples), init=init)
+                        method, p, len(samples), init=init, iterations=n_iter, power_iterations=n_power)
 
 
 def _prepare_sources(sources: Scene, target, depth: str, sigma_z_proxy=None):
@@ -255,8 +273,8 @@ def render(sources: Scene, target: View | Camera, method: str = "gradient", *,
     **params
         alpha (1.0), gamma (1.0; gradient only), lam (0.1), sigma_s (1.0, grey levels),
         sigma_z (None: the geometry's), scale (255: the intensity scale all these refer to;
-        images are [0, 1] internally), n_outer (3), max_iter (60), tol (1e-4, relative
-        energy change), tv_iter (5), coupled_tv (True), grad_weighting ("visibility" | "none"
+        images are [0, 1] internally), n_outer (2), max_iter (60), tol (1e-4, relative
+        energy change), tv_iter (2), coupled_tv (True), grad_weighting ("visibility" | "none"
         | "W"), grad_max (64 grey levels / px), precond (False), hole_threshold (0.5),
         ulr_k (4), ulr_beta_res (0.1). See :mod:`vibr.render.methods`.
 

@@ -29,7 +29,7 @@ METHODS = ("ulr", "savsr", "bvs", "gradient")
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
     alpha=1.0, gamma=1.0, lam=0.1, sigma_s=1.0, sigma_z=None, scale=255.0,
-    n_outer=3, max_iter=60, tol=1e-4, min_iter=3, tv_iter=5, coupled_tv=True,
+    n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1,
 )

@@ -90,81 +90,134 @@ def _B_apply(u, x0, y0, fx, fy):
 
 
 @njit(parallel=True, cache=True)
-def _assemble_kernel(x0, y0, fx, fy, order, starts, w, vals, H, W, with_stencil):
-    """Σ Bᵀ diag(w) B (9-point stencil), Σ Bᵀ (w·vals) and ½ Σ w |vals|².
+def _assemble_kernel(x0, y0, fx, fy, order, starts, w, vals, A, rhs, with_stencil):
+    """Σ Bᵀ diag(w) B (9-point stencil, into ``A``), Σ Bᵀ (w·vals) (into ``rhs``) and
+    returns ½ Σ w |vals|².
 
     Rows of samples are processed in two passes of even / odd top rows: a sample with
-    top row r writes rows r and r+1 only, so buckets of one parity never collide.
+    top row r writes rows r and r+1 only, so buckets of one parity never collide. Each
+    bucket accumulates into a private two-row buffer laid out (row, x, entry), so the
+    scattered += of a sample stay within a few cache lines; the buffer is added to the
+    (entry, row, x) outputs once per bucket.
     """
     K = vals.shape[1]
-    A = np.zeros((9, H, W), np.float64) if with_stencil else np.zeros((9, 1, 1), np.float64)
-    rhs = np.zeros((K, H, W), np.float64)
+    W = rhs.shape[2]
     n_rows = starts.shape[0] - 1
+    S = 9 if with_stencil else 0
     cpart = np.zeros(n_rows, np.float64)
     for parity in range(2):
         for r in prange(n_rows):
-            if r % 2 != parity:
+            if r % 2 != parity or starts[r] == starts[r + 1]:
                 continue
-            bw = np.empty(4)  # per row: private to the thread
+            la = np.zeros((2, W, S + K), np.float64)
+            jmin = W
+            jmax = -1
             acc = 0.0
             for q in range(starts[r], starts[r + 1]):
                 i = order[q]
-                wi = w[i]
+                wi = np.float64(w[i])
                 if wi == 0.0:
                     continue
-                a, b = fx[i], fy[i]
-                bw[0] = (1 - a) * (1 - b)
-                bw[1] = a * (1 - b)
-                bw[2] = (1 - a) * b
-                bw[3] = a * b
-                x, y = x0[i], y0[i]
-                for ca in range(4):
-                    ya = y + ca // 2
-                    xa = x + ca % 2
-                    wa = wi * bw[ca]
-                    for k in range(K):
-                        rhs[k, ya, xa] += wa * vals[i, k]
-                    if with_stencil:
-                        for cb in range(4):
-                            dy = cb // 2 - ca // 2
-                            dx = cb % 2 - ca % 2
-                            A[3 * (dy + 1) + dx + 1, ya, xa] += wa * bw[cb]
+                a = np.float64(fx[i])
+                b = np.float64(fy[i])
+                b0 = (1 - a) * (1 - b)
+                b1 = a * (1 - b)
+                b2 = (1 - a) * b
+                b3 = a * b
+                w0 = wi * b0
+                w1 = wi * b1
+                w2 = wi * b2
+                w3 = wi * b3
+                x = x0[i]
+                jmin = min(jmin, x)
+                jmax = max(jmax, x + 1)
+                if with_stencil:
+                    # corner (dy, dx) of the sample couples to corner (dy', dx') through entry
+                    # 3 (dy' − dy + 1) + (dx' − dx + 1); unrolled for the 4 × 4 pairs
+                    la[0, x, 4] += w0 * b0
+                    la[0, x, 5] += w0 * b1
+                    la[0, x, 7] += w0 * b2
+                    la[0, x, 8] += w0 * b3
+                    la[0, x + 1, 3] += w1 * b0
+                    la[0, x + 1, 4] += w1 * b1
+                    la[0, x + 1, 6] += w1 * b2
+                    la[0, x + 1, 7] += w1 * b3
+                    la[1, x, 1] += w2 * b0
+                    la[1, x, 2] += w2 * b1
+                    la[1, x, 4] += w2 * b2
+                    la[1, x, 5] += w2 * b3
+                    la[1, x + 1, 0] += w3 * b0
+                    la[1, x + 1, 1] += w3 * b1
+                    la[1, x + 1, 3] += w3 * b2
+                    la[1, x + 1, 4] += w3 * b3
                 s = 0.0
                 for k in range(K):
-                    s += vals[i, k] * vals[i, k]
+                    v = np.float64(vals[i, k])
+                    la[0, x, S + k] += w0 * v
+                    la[0, x + 1, S + k] += w1 * v
+                    la[1, x, S + k] += w2 * v
+                    la[1, x + 1, S + k] += w3 * v
+                    s += v * v
                 acc += 0.5 * wi * s
             cpart[r] = acc
-    return A, rhs, cpart.sum()
+            for ra in range(2):
+                ya = r + ra
+                for e in range(S):
+                    Ae = A[e, ya]
+                    for j in range(jmin, jmax + 1):
+                        Ae[j] += la[ra, j, e]
+                for k in range(K):
+                    rk = rhs[k, ya]
+                    for j in range(jmin, jmax + 1):
+                        rk[j] += la[ra, j, S + k]
+    return cpart.sum()
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, fastmath=True)
+def _stencil_point(A, u, c, i, j, H, W):
+    s = 0.0
+    for dy in range(-1, 2):
+        ii = i + dy
+        if ii < 0 or ii >= H:
+            continue
+        for dx in range(-1, 2):
+            jj = j + dx
+            if jj < 0 or jj >= W:
+                continue
+            s += A[3 * (dy + 1) + dx + 1, i, j] * u[c, ii, jj]
+    return s
+
+
+@njit(parallel=True, cache=True, fastmath=True)
 def _stencil_apply(A, u, out):
     """out[c] = Σ_s A[s] · shift_s(u[c]); planar (C, H, W) images, (9, H, W) stencil.
 
-    Entries of A that point outside the image are zero by construction (no sample
-    touches an outside pixel), so only the index range needs guarding: the interior
-    j-loop is branch-free (vectorisable)."""
+    Interior pixels take the 9 products in one expression (one pass over the output row,
+    vectorisable); border pixels check their neighbours (entries pointing outside are
+    ignored)."""
     C, H, W = u.shape
     for i in prange(H):
+        interior_row = 0 < i < H - 1
         for c in range(C):
-            for j in range(W):
-                out[c, i, j] = 0.0
-            for dy in range(-1, 2):
-                ii = i + dy
-                if ii < 0 or ii >= H:
-                    continue
-                for dx in range(-1, 2):
-                    a = A[3 * (dy + 1) + dx + 1, i]
-                    ur = u[c, ii]
-                    o = out[c, i]
-                    j0 = 1 if dx < 0 else 0
-                    j1 = W - 1 if dx > 0 else W
-                    for j in range(j0, j1):
-                        o[j] += a[j] * ur[j + dx]
+            o = out[c, i]
+            if interior_row and W > 2:
+                a0, a1, a2 = A[0, i], A[1, i], A[2, i]
+                a3, a4, a5 = A[3, i], A[4, i], A[5, i]
+                a6, a7, a8 = A[6, i], A[7, i], A[8, i]
+                um, u0, up = u[c, i - 1], u[c, i], u[c, i + 1]
+                for j in range(1, W - 1):
+                    o[j] = (a0[j] * um[j - 1] + a1[j] * um[j] + a2[j] * um[j + 1]
+                            + a3[j] * u0[j - 1] + a4[j] * u0[j] + a5[j] * u0[j + 1]
+                            + a6[j] * up[j - 1] + a7[j] * up[j] + a8[j] * up[j + 1])
+                o[0] = _stencil_point(A, u, c, i, 0, H, W)
+                o[W - 1] = _stencil_point(A, u, c, i, W - 1, H, W)
+            else:
+                for j in range(W):
+                    o[j] = _stencil_point(A, u, c, i, j, H, W)
     return out
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _dot(a, b):
     a1 = a.ravel()
     b1 = b.ravel()
@@ -228,21 +281,35 @@ class Splat:
         squeeze = vals.ndim == 1
         if squeeze:
             vals = vals[:, None]
-        w = np.ones(self.n) if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
-        _, rhs, _ = _assemble_kernel(self.x0, self.y0, self.fx, self.fy, self.order, self.starts,
-                                     w, np.ascontiguousarray(vals), self.shape[0], self.shape[1], False)
+        w = np.ones(self.n) if weight is None else np.ascontiguousarray(weight)
+        H, W = self.shape
+        rhs = np.zeros((vals.shape[1], H, W), np.float64)
+        _assemble_kernel(self.x0, self.y0, self.fx, self.fy, self.order, self.starts,
+                         w, np.ascontiguousarray(vals), np.zeros((0, 1, 1)), rhs, False)
         return rhs[0] if squeeze else np.ascontiguousarray(rhs.transpose(1, 2, 0))
 
-    def normal(self, weight, vals):
+    def normal(self, weight, vals, dtype=np.float64):
         """Assemble the stencil ``A = Bᵀ diag(w) B`` (9, H, W), ``b = Bᵀ (w·vals)`` (K, H, W)
-        and ``c = ½ Σ w |vals|²``, all float64, so that for a planar image u (K, H, W)
-        ``½ Σ_m w_m |(Bu)(m) − vals_m|² = ½⟨u, Au⟩ − ⟨b, u⟩ + c``."""
-        w = np.ascontiguousarray(weight, dtype=np.float64)
-        vals = np.ascontiguousarray(vals, dtype=np.float64)
+        and ``c = ½ Σ w |vals|²`` so that for a planar image u (K, H, W)
+        ``½ Σ_m w_m |(Bu)(m) − vals_m|² = ½⟨u, Au⟩ − ⟨b, u⟩ + c``.
+
+        ``weight`` (N,) and ``vals`` (N, K) or (N,) may be float32 or float64 (sums are
+        accumulated in float64); ``A`` and ``b`` are returned as ``dtype``."""
+        w = np.ascontiguousarray(weight)
+        if w.dtype not in (np.float32, np.float64):
+            w = w.astype(np.float64)
+        vals = np.asarray(vals)
         if vals.ndim == 1:
             vals = vals[:, None]
-        return _assemble_kernel(self.x0, self.y0, self.fx, self.fy, self.order, self.starts,
-                                w, vals, self.shape[0], self.shape[1], True)
+        vals = np.ascontiguousarray(vals)
+        if vals.dtype not in (np.float32, np.float64):
+            vals = vals.astype(np.float64)
+        H, W = self.shape
+        A = np.zeros((9, H, W), dtype)
+        rhs = np.zeros((vals.shape[1], H, W), dtype)
+        c = _assemble_kernel(self.x0, self.y0, self.fx, self.fy, self.order, self.starts,
+                             w, vals, A, rhs, True)
+        return A, rhs, c
 
 
 def assemble(splat: Splat, weight, vals):
@@ -294,7 +361,7 @@ def stencil_to_sparse(A):
 
 # ----------------------------------------------------------------------------- ∇ / div
 # Planar layout: images (C, H, W), gradients (C, 2, H, W) with [:, 0] = d/dx, [:, 1] = d/dy.
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _grad_fwd(u, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -315,7 +382,7 @@ def _grad_fwd(u, g):
     return g
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _div_bwd(p, out):
     C, _, H, W = p.shape
     for i in prange(H):
@@ -356,7 +423,7 @@ def div_bwd(p, out=None) -> np.ndarray:
     return _div_bwd(p, out)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _grad_central(u, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -378,7 +445,7 @@ def _grad_central(u, g):
     return g
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _grad_central_adj(g, out):
     # per axis: out[k] = ½(g[k-1]·[k≥1] + g[k]·[k=n-1]) − ½(g[k+1]·[k≤n-2] + g[k]·[k=0])
     C, _, H, W = g.shape

@@ -19,8 +19,8 @@ __all__ = ["push_pull"]
 def _down(c, w):
     H, W = w.shape
     Hp, Wp = H + (H % 2), W + (W % 2)
-    cw = np.zeros((Hp, Wp) + c.shape[2:], np.float64)
-    ww = np.zeros((Hp, Wp), np.float64)
+    cw = np.zeros((Hp, Wp) + c.shape[2:], np.float32)
+    ww = np.zeros((Hp, Wp), np.float32)
     cw[:H, :W] = c * w[..., None]
     ww[:H, :W] = w
     cs = cw.reshape(Hp // 2, 2, Wp // 2, 2, -1).sum((1, 3))
@@ -42,9 +42,10 @@ def _up(c, shape):
     fx = (xs - x0)[None, :, None] if w > 1 else np.zeros((1, W, 1))
     y1 = np.minimum(y0 + 1, h - 1)
     x1 = np.minimum(x0 + 1, w - 1)
-    top = c[y0][:, x0] * (1 - fx) + c[y0][:, x1] * fx
-    bot = c[y1][:, x0] * (1 - fx) + c[y1][:, x1] * fx
-    return top * (1 - fy) + bot * fy
+    fy = fy.astype(np.float32)
+    fx = fx.astype(np.float32)
+    rows = c[y0] * (1 - fy) + c[y1] * fy  # bilinear = linear along y, then along x
+    return rows[:, x0] * (1 - fx) + rows[:, x1] * fx
 
 
 def push_pull(colour_sum, weight, eps: float = 1e-8) -> np.ndarray:
@@ -62,11 +63,11 @@ def push_pull(colour_sum, weight, eps: float = 1e-8) -> np.ndarray:
     (H, W, C) float32: the normalised colour where ``weight ≥ 1``, a blend with the coarser
     levels where ``0 < weight < 1``, the pulled-up fill where ``weight = 0``.
     """
-    S = np.asarray(colour_sum, np.float64)
+    S = np.asarray(colour_sum, np.float32)
     squeeze = S.ndim == 2
     if squeeze:
         S = S[..., None]
-    w = np.maximum(np.asarray(weight, np.float64), 0.0)
+    w = np.maximum(np.asarray(weight, np.float32), np.float32(0.0))
     c = np.where(w[..., None] > eps, S / np.maximum(w, eps)[..., None], 0.0)
     w = np.minimum(w, 1.0)
     levels = [(c, w)]
@@ -75,6 +76,6 @@ def push_pull(colour_sum, weight, eps: float = 1e-8) -> np.ndarray:
     c_up = levels[-1][0]
     for cl, wl in reversed(levels[:-1]):
         up = _up(c_up, wl.shape)
-        c_up = wl[..., None] * cl + (1 - wl[..., None]) * up
+        c_up = cl + (1 - wl[..., None]) * (up - cl)  # w·c + (1 − w)·up
     out = c_up.astype(np.float32)
     return out[..., 0] if squeeze else out

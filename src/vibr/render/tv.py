@@ -26,24 +26,33 @@ from numba import njit, prange
 __all__ = ["tv_value", "TVProx"]
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _tv_value(u, coupled):
     C, H, W = u.shape
     rows = np.zeros(H)
     for i in prange(H):
-        acc = np.zeros(W)
+        acc = np.zeros(W, np.float32)
+        nxt = min(i + 1, H - 1)  # last row: gy = 0
+        s = 0.0
         for c in range(C):
             ur = u[c, i]
-            for j in range(W):
-                gx = ur[j + 1] - ur[j] if j < W - 1 else 0.0
-                gy = u[c, i + 1, j] - ur[j] if i < H - 1 else 0.0
-                if coupled:
+            un = u[c, nxt]
+            if coupled:
+                for j in range(W - 1):
+                    gx = ur[j + 1] - ur[j]
+                    gy = un[j] - ur[j]
                     acc[j] += gx * gx + gy * gy
-                else:
-                    acc[j] += math.sqrt(gx * gx + gy * gy)
-        s = 0.0
-        for j in range(W):
-            s += math.sqrt(acc[j]) if coupled else acc[j]
+                gy = un[W - 1] - ur[W - 1]
+                acc[W - 1] += gy * gy
+            else:
+                for j in range(W - 1):
+                    gx = ur[j + 1] - ur[j]
+                    gy = un[j] - ur[j]
+                    s += math.sqrt(gx * gx + gy * gy)
+                s += abs(un[W - 1] - ur[W - 1])
+        if coupled:
+            for j in range(W):
+                s += math.sqrt(acc[j])
         rows[i] = s
     return rows.sum()
 
@@ -55,7 +64,7 @@ def tv_value(u, coupled: bool = True) -> float:
     return float(_tv_value(u, coupled))
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, fastmath=True)
 def _primal(z, r, mu, dinv, use_d, x):
     """x = z + mu · d⁻¹ · div r, planar: z, x (C, H, W), r (C, 2, H, W)."""
     C, H, W = z.shape
@@ -89,26 +98,69 @@ def _primal(z, r, mu, dinv, use_d, x):
                     o[j] = zr[j] + mu * o[j]
 
 
-@njit(parallel=True, cache=True)
-def _dual(x, r, p, step, beta, coupled):
-    """q = P(r + step ∇x); r ← q + beta (q − p); p ← q (planar, per row)."""
-    C, H, W = x.shape
+@njit(cache=True, fastmath=True)
+def _primal_row(z, r, mu, dinv, use_d, k, o):
+    """Row k of x = z + mu · d⁻¹ · div r into o (C, W)."""
+    C, H, W = z.shape
+    for c in range(C):
+        px = r[c, 0, k]
+        orow = o[c]
+        if W > 1:
+            orow[0] = px[0]
+            for j in range(1, W - 1):
+                orow[j] = px[j] - px[j - 1]
+            orow[W - 1] = -px[W - 2]
+        else:
+            orow[0] = 0.0
+        if H > 1:
+            if k < H - 1:
+                py = r[c, 1, k]
+                for j in range(W):
+                    orow[j] += py[j]
+            if k > 0:
+                pm = r[c, 1, k - 1]
+                for j in range(W):
+                    orow[j] -= pm[j]
+        zr = z[c, k]
+        if use_d:
+            dr = dinv[k]
+            for j in range(W):
+                orow[j] = zr[j] + mu * dr[j] * orow[j]
+        else:
+            for j in range(W):
+                orow[j] = zr[j] + mu * orow[j]
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def _dual_fused(z, r_in, p_old, r_out, p_new, mu, dinv, use_d, step, beta, coupled):
+    """One accelerated dual step with the primal computed on the fly:
+    x = z + mu d⁻¹ div r_in (rows i, i+1), q = P(r_in + step ∇x),
+    r_out = q + beta (q − p_old), p_new = q.
+
+    r_in is read at rows i−1..i+1, so r_out must not alias it (nor p_new, unless p_old is
+    not r_in); p_old is read at row i only, so p_new may alias p_old."""
+    C, H, W = z.shape
     for i in prange(H):
+        xi = np.empty((C, W), np.float32)
+        xn = np.empty((C, W), np.float32)
+        _primal_row(z, r_in, mu, dinv, use_d, i, xi)
+        if i < H - 1:
+            _primal_row(z, r_in, mu, dinv, use_d, i + 1, xn)
         q = np.empty((C, 2, W), np.float32)
         nrm = np.zeros(W, np.float32)
         for c in range(C):
-            xr = x[c, i]
+            xr = xi[c]
             qx = q[c, 0]
             qy = q[c, 1]
-            rx = r[c, 0, i]
-            ry = r[c, 1, i]
+            rx = r_in[c, 0, i]
+            ry = r_in[c, 1, i]
             for j in range(W - 1):
                 qx[j] = rx[j] + step * (xr[j + 1] - xr[j])
             qx[W - 1] = rx[W - 1]
             if i < H - 1:
-                xn = x[c, i + 1]
+                xnr = xn[c]
                 for j in range(W):
-                    qy[j] = ry[j] + step * (xn[j] - xr[j])
+                    qy[j] = ry[j] + step * (xnr[j] - xr[j])
             else:
                 for j in range(W):
                     qy[j] = ry[j]
@@ -124,12 +176,13 @@ def _dual(x, r, p, step, beta, coupled):
                     nrm[j] = 1.0 / max(1.0, math.sqrt(q[c, 0, j] ** 2 + q[c, 1, j] ** 2))
             for d in range(2):
                 qd = q[c, d]
-                rd = r[c, d, i]
-                pd = p[c, d, i]
+                ro = r_out[c, d, i]
+                po = p_old[c, d, i]
+                pn = p_new[c, d, i]
                 for j in range(W):
                     v = qd[j] * nrm[j]
-                    rd[j] = v + beta * (v - pd[j])
-                    pd[j] = v
+                    ro[j] = v + beta * (v - po[j])
+                    pn[j] = v
 
 
 class TVProx:
@@ -152,6 +205,7 @@ class TVProx:
         C, H, W = self.shape
         self.p = np.zeros((C, 2, H, W), dtype)
         self._r = np.zeros_like(self.p)
+        self._s = np.zeros_like(self.p)
         self._one = np.ones((1, 1), dtype)
 
     def reset(self):
@@ -168,14 +222,25 @@ class TVProx:
         use_d = d is not None
         dinv = np.ascontiguousarray(1.0 / np.asarray(d, dtype=np.float32)) if use_d else self._one
         dmax = float(dinv.max()) if use_d else 1.0
-        step = 1.0 / (8.0 * mu * dmax)
-        r = self._r
-        r[:] = self.p
+        step = np.float32(1.0 / (8.0 * mu * dmax))
+        mu32 = np.float32(mu)
+        n = self.n_iter if n_iter is None else n_iter
+        # three dual buffers rotate: p (the iterate kept between calls), r (the
+        # extrapolated point) and a free one, so no copy is needed (see _dual_fused)
+        p, a, b = self.p, self._r, self._s
+        r = p
         t = 1.0
-        for _ in range(self.n_iter if n_iter is None else n_iter):
-            _primal(z, r, np.float32(mu), dinv, use_d, out)
+        for k in range(n):
             t_new = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
-            _dual(out, r, self.p, np.float32(step), np.float32((t - 1.0) / t_new), self.coupled)
+            beta = np.float32((t - 1.0) / t_new)
+            if k == 0:
+                # r_in is p: write q to fresh buffers (r → a, p → b), p's buffer is free
+                _dual_fused(z, p, p, a, b, mu32, dinv, use_d, step, beta, self.coupled)
+                r, p, a = a, b, p
+            else:
+                _dual_fused(z, r, p, a, p, mu32, dinv, use_d, step, beta, self.coupled)
+                r, a = a, r
             t = t_new
-        _primal(z, self.p, np.float32(mu), dinv, use_d, out)
+        self.p, self._r, self._s = p, r, a
+        _primal(z, self.p, mu32, dinv, use_d, out)
         return out
