@@ -106,3 +106,43 @@ def test_cotton_stride1_gradient(cotton_dir):
     names = [inv[(4 + dr, 4 + dc)] for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
     r = render(sc.subset(names), sc["input_Cam040"], "gradient", gamma=3.0)
     assert r.metrics["psnr"] >= 47.9, r.metrics
+
+
+def test_underestimated_step_size_backtracks():
+    """A power iteration started on a bad vector underestimates L; the rejected plain
+    step must double L (backtracking), keep the energy monotone and reach the same
+    energy as a well-started run."""
+    rng = np.random.default_rng(3)
+    model, _ = _model(rng, 2.0)
+    u0 = rng.uniform(0, 1, model.b.shape).astype(np.float32)
+    good = fista(model, u0, max_iter=200, tol=0)
+    bad_state = {"v": np.full(model.b.shape, 1e-3, np.float32)}  # smooth: a small eigenvalue
+    L_bad = model.lipschitz(n_iter=3, v0=bad_state["v"])
+    assert L_bad < 0.5 * good.L  # the premise: the estimate really is too small
+    bad = fista(model, u0, max_iter=200, tol=0, power_state=bad_state)
+    E = np.array(bad.energy)
+    assert np.all(np.diff(E) <= 1e-6 * abs(E[0]))
+    assert bad.L >= 0.5 * good.L  # doubled until the steps were accepted
+    assert abs(E[-1] - good.energy[-1]) <= 1e-4 * abs(good.energy[-1])
+
+
+@pytest.mark.parametrize("gamma", [0.0, 2.0])
+def test_energy_gradient_matches_finite_differences(gamma):
+    """∇f of the smooth part (colour + gradient terms) against central differences (exact for
+    a quadratic up to rounding), and the fused forward step y − s·∇f(y)."""
+    rng = np.random.default_rng(4)
+    model, _ = _model(rng, gamma)
+    x = rng.uniform(0, 1, model.b.shape).astype(np.float32)
+    d = rng.standard_normal(model.b.shape).astype(np.float32)
+
+    def f(u):
+        ec, eg, _ = model.terms(u, model.products(u))
+        return model.alpha * ec + model.gamma * eg
+
+    eps = 1e-2
+    fd = (f(x + eps * d) - f(x - eps * d)) / (2 * eps)
+    g = model.grad(model.products(x))
+    an = float(np.sum(g.astype(np.float64) * d))
+    assert abs(fd - an) <= 1e-3 * abs(an)
+    step = 0.37
+    np.testing.assert_allclose(model.forward(x, model.products(x), step), x - step * g, atol=1e-5)

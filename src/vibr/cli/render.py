@@ -21,6 +21,7 @@ examples:
       --sources input_Cam030,input_Cam031,input_Cam032,input_Cam039,input_Cam041,input_Cam048,input_Cam049,input_Cam050
   vibr render scene/ --target novel_camera.json -o novel.png --method bvs
   vibr render scene/ --target 3 -o v3.png --depth planar --gamma 3
+  vibr render photos_scene/ --target 5 -o v5.png --depth estimated --views 8
 """
 
 
@@ -43,12 +44,17 @@ def register(sub) -> None:
     p.add_argument("--sigma-s", type=float, help="sensor noise, grey levels of 255 (default 1.0)")
     p.add_argument("--sigma-z", type=float, help="depth std. dev., scene units (default: the scene's / 1%% of depth)")
     p.add_argument("--intensity-scale", type=float, help="intensity scale the parameters refer to (default 255)")
-    p.add_argument("--outer", type=int, help="weight re-estimation passes (default 3)")
+    p.add_argument("--outer", type=int, help="weight re-estimation passes (default 2)")
     p.add_argument("--iterations", type=int, help="FISTA iterations per pass at most (default 60)")
     p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
     p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
-    p.add_argument("--depth", default="given", choices=["given", "planar"],
-                   help="source geometry: the scene's depth or a fronto-parallel plane (default: given)")
+    p.add_argument("--depth", default="gt", choices=["gt", "given", "estimated", "planar", "files"],
+                   help="source geometry: the scene's depth maps (gt, alias given), depth estimated "
+                        "from the sources (estimated; the target never takes part), a fronto-parallel "
+                        "plane (planar), or NAME.npy/.pfm/.png files in --depth-files (default: gt)")
+    p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files")
+    p.add_argument("--views", type=int, metavar="K",
+                   help="render from the K best source views for the target (ULR ranking; default: all)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale, e.g. 0.5 (default 1)")
     add_quiet(p)
     p.set_defaults(func=run)
@@ -57,6 +63,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, read_camera_json, write_image
+    from ..pipeline import prepare
     from ..progress import is_quiet, log
     from ..render import render
 
@@ -66,22 +73,21 @@ def run(args) -> int:
         target = read_camera_json(tgt)
         if args.scale != 1.0:
             target = target.scaled(args.scale)
-        sources = scene.subset(args.sources) if args.sources else scene
     else:
-        target = scene[tgt]
-        if args.sources:
-            if target.name in [scene[s].name for s in args.sources]:
-                raise VibrInputError(f"target view {target.name} is also listed as a source", args.scene)
-            # keep the target in the pool: its depth (light fields) may be transferred to the sources
-            sources = scene.subset(list(args.sources) + [target.name])
-        else:
-            sources = scene
+        target = scene[tgt].name
+        if args.sources and target in [scene[s].name for s in args.sources]:
+            raise VibrInputError(f"target view {target} is also listed as a source", args.scene)
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
+    depth = "gt" if args.depth == "given" else args.depth
+    sources, target = prepare(scene, target, sources=args.sources, depth=depth,
+                              depth_files=args.depth_files, n_views=args.views)
     params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
                   scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
                   precond=True if args.precond else None)
     if args.sigma_z is not None:
         params["sigma_z"] = args.sigma_z
-    res = render(sources, target, args.method, depth=args.depth, progress_bar=not is_quiet(),
+    res = render(sources, target, args.method, depth="given", progress_bar=not is_quiet(),
                  verbose=not is_quiet(), **params)
     write_image(args.output, res.image)
     t = res.times

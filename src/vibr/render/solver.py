@@ -83,16 +83,6 @@ def _axpby(a, x, b, y):
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def _grad_step_kernel(Ax, Gx, r, alpha, gamma, out):
-    for i in prange(Ax.shape[0]):
-        out[i] = alpha * Ax[i] + gamma * Gx[i] - r[i]
-
-
-def _grad_step(Ax, Gx, r, alpha, gamma, out):
-    _grad_step_kernel(Ax.ravel(), Gx.ravel(), r.ravel(), alpha, gamma, out.ravel())
-
-
-@njit(parallel=True, cache=True, fastmath=True)
 def _forward_kernel(y, Ay, Gy, r, alpha, gamma, dinv, step, out):
     """out = y − step · d⁻¹ · (alpha·Ay + gamma·Gy − r), planar (C, n); dinv (n,) or empty."""
     C, n = y.shape
@@ -182,12 +172,11 @@ class QuadraticModel:
         return self.alpha * ec + self.gamma * eg + self.lam_int * tv
 
     def grad(self, P):
-        """∇f from the products of the point: alpha (Ax − b) + gamma (DᵀA_g D x − Dᵀb_g)."""
+        """∇f from the products of the point: alpha (Ax − b) + gamma (DᵀA_g D x − Dᵀb_g)
+        (the solver fuses it into :meth:`forward`)."""
         Ax, Gx = P
-        out = np.empty_like(Ax)
-        _grad_step(Ax, Gx if self.use_grad else Ax, self.r, np.float32(self.alpha),
-                   np.float32(self.gamma if self.use_grad else 0.0), out)
-        return out
+        h = _axpby(self.alpha, Ax, self.gamma, Gx) if self.use_grad else self.alpha * Ax
+        return h - self.r
 
     def forward(self, y, P, step, dinv=None):
         """The forward (gradient) step ``y − step · d⁻¹ · ∇f(y)`` from the products ``P`` of
