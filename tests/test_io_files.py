@@ -165,3 +165,18 @@ def test_resize_image_maps_pixel_centres_like_camera_scaled(s):
     inner = (slice(3, -3), slice(3, -3))
     np.testing.assert_allclose(out[..., 0][inner], ex[inner], atol=2e-4)
     np.testing.assert_allclose(out[..., 1][inner], ey[inner], atol=2e-4)
+
+
+def test_atomic_output_has_the_usual_file_mode(tmp_path):
+    import os
+
+    from vibr.io.atomic import atomic_path
+
+    umask = os.umask(0o022)
+    try:
+        with atomic_path(tmp_path / "out.txt") as tmp:
+            with open(tmp, "w") as f:
+                f.write("x")
+    finally:
+        os.umask(umask)
+    assert (os.stat(tmp_path / "out.txt").st_mode & 0o777) == 0o644

@@ -55,3 +55,31 @@ def test_no_geometry_falls_back_to_plane():
     order, pen, overlap = rank_views(sources, target.camera)
     assert np.all(overlap > 0)
     assert {sources.views[i].name for i in order[:4]} == {"v01", "v10", "v12", "v21"}
+
+
+def _ring(n=12, radius=3.0, centre=(0.1, 0.2, -0.1), size=32):
+    K = Camera.intrinsics(40.0, size, size)
+    views = []
+    for k, t in enumerate(np.linspace(0, 2 * np.pi, n, endpoint=False)):
+        eye = np.array(centre) + radius * np.array([np.cos(t), 0.0, np.sin(t)])
+        cam = Camera.look_at(eye, centre, [0, -1, 0], K, size, size)
+        views.append(View(f"r{k:02d}", np.zeros((size, size, 3), np.float32), cam))
+    return Scene(views)
+
+
+def test_axes_meeting_point_closed_form():
+    from vibr.camera import axes_meeting_point
+
+    ring = _ring()
+    np.testing.assert_allclose(axes_meeting_point([v.camera for v in ring.views]), [0.1, 0.2, -0.1], atol=1e-9)
+    # parallel axes (a light-field grid) do not meet
+    assert axes_meeting_point([v.camera for v in _grid_scene(n=3).views]) is None
+
+
+def test_ring_without_geometry_picks_ring_neighbours():
+    """No depth, no points: the fallback plane goes through the object the ring looks at,
+    so the best views are the target's neighbours on the ring, not the far side."""
+    ring = _ring()
+    sources, target = ring.split("r00")
+    chosen = {sources.views[i].name for i in select_views(sources, target.camera, 4)}
+    assert chosen == {"r01", "r02", "r11", "r10"}

@@ -129,3 +129,22 @@ def test_estimate_depth_excluded_views_never_used():
     assert np.all(np.isfinite(e[0].sigma_z))
     with pytest.raises(VibrInputError, match="excluded"):
         estimate_depth(s, views=[1], exclude=[1])
+
+
+def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):
+    """The temple ring's neighbours are ~22° apart: the half-image parallax limit alone put
+    the sweep's near end at 1.17 while the temple lies around 0.5–0.6 from the cameras. The
+    range must contain the depth where the ring's axes meet."""
+    from vibr.camera import axes_meeting_point
+    from vibr.io import load_scene
+    from vibr.stereo.api import default_depth_range, select_neighbours
+
+    sc = load_scene(temple_dir, scale=0.5)
+    cams = [v.camera for v in sc.views]
+    ref = 0
+    nb = select_neighbours(cams, ref, list(range(1, len(cams))), 4)
+    near, far = default_depth_range(sc, ref, cams, {i: v.image for i, v in enumerate(sc.views)}, nb)
+    X = axes_meeting_point([cams[ref]] + [cams[j] for j in nb])
+    z_c = float((X - cams[ref].centre) @ cams[ref].optical_axis)
+    assert 0.45 < z_c < 0.7
+    assert near < 0.9 * z_c and far > 1.1 * z_c

@@ -231,3 +231,38 @@ class Camera:
         f = self.K[0, 0]
         C = np.array2string(self.centre, precision=3, suppress_small=True)
         return f"Camera({self.width}x{self.height}, f={f:.1f}px, C={C})"
+
+
+def axes_meeting_point(cameras, max_cond: float = 1e6) -> np.ndarray | None:
+    """The point nearest to every camera's optical axis (least squares), or None.
+
+    Minimises ``Σ_k ‖(I − a_k a_kᵀ)(X − C_k)‖²`` over X (``a_k`` the unit axis, ``C_k`` the
+    centre): ``(Σ P_k) X = Σ P_k C_k`` with ``P_k = I − a_k a_kᵀ``. Cameras that look at a
+    common object (a ring, an arc, hand-held photos of a thing) meet there; cameras with
+    (nearly) parallel axes (a light-field grid) do not, and None is returned, as it is when
+    the point lies behind most of the cameras.
+    """
+    cams = list(cameras)
+    if len(cams) < 2:
+        return None
+    M = np.zeros((3, 3))
+    rhs = np.zeros(3)
+    for c in cams:
+        a = c.optical_axis
+        P = np.eye(3) - np.outer(a, a)
+        M += P
+        rhs += P @ c.centre
+    if np.linalg.cond(M) > max_cond:
+        return None
+    X = np.linalg.solve(M, rhs)
+    in_front = [float((X - c.centre) @ c.optical_axis) > 0 for c in cams]
+    if np.mean(in_front) < 0.5:
+        return None
+    # parallel-ish axes give a well-posed but meaningless point very far away: require the
+    # point to be nearer the axes than the cameras are to each other's spread
+    spread = np.max([np.linalg.norm(c.centre - cams[0].centre) for c in cams])
+    miss = np.sqrt(np.mean([np.sum(((np.eye(3) - np.outer(c.optical_axis, c.optical_axis)) @ (X - c.centre)) ** 2)
+                            for c in cams]))
+    if spread <= 0 or miss > spread:
+        return None
+    return X

@@ -68,31 +68,79 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
              sources: Sequence[int | str] | None = None, depth: str = "gt",
              depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
              border: int = 0, figures: str | Path | None = None, estimate_kw: dict | None = None,
-             render_kw: dict | None = None) -> dict:
+             render_kw: dict | None = None, intensity_scale: float | None = None,
+             geometry_kw: dict | None = None, figure_labels: Sequence[str] | None = None,
+             figure_prefix: str | None = None, figure_downscale: int = 1,
+             use_lpips: bool = True, view_split: int | None = None) -> dict:
     """Render the held-out ``target`` with each setting and measure it.
 
-    Returns a JSON-serialisable report: ``scene``, ``target``, ``sources``, ``scale``,
-    ``depth``, ``mask``, machine info, the geometry time, and ``results``: one entry per
-    setting with ``method``, ``params``, ``depth``, ``psnr``, ``dssim``, ``ssim``,
-    ``seconds``, ``coverage`` (and ``lpips`` when the ``lpips`` package works here).
+    The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
+    ``depth="estimated"`` estimates it here, from the sources only), then the warped samples
+    (:func:`vibr.geometry.compute_samples`) are computed once and every setting renders from
+    them (``render(..., samples=...)``). Per-setting ``seconds`` are therefore render times
+    only; ``depth_seconds`` and ``samples_seconds`` are reported once.
+
+    Parameters
+    ----------
+    intensity_scale : float, optional
+        The intensity scale the render parameters refer to (render's ``scale``; default the
+        renderer's, 255). A setting's own ``scale`` parameter overrides it.
+    render_kw : dict, optional
+        Extra render parameters for every setting (a setting's params win).
+    geometry_kw : dict, optional
+        Arguments of :func:`vibr.geometry.compute_samples`.
+    figure_labels : sequence of str, optional
+        Settings (by label) shown in the figures; default all.
+    figure_prefix : str, optional
+        File-name prefix of the figures; default ``TARGET_DEPTH``.
+    figure_downscale : int
+        Integer factor the side-by-side figure is reduced by (box average); crops stay at
+        full resolution.
+    view_split : int, optional
+        Also measure each setting separately on the evaluated pixels seen by at most
+        ``view_split`` source views and on those seen by more (:func:`view_counts`): entry
+        ``regions`` = {"few": {...}, "many": {...}} with psnr, dssim and the pixel fraction.
+
+    Returns a JSON-serialisable report: ``scene``, ``target``, ``sources``, ``scale`` (the
+    image scale the scene was loaded at), ``intensity_scale``, ``size``, ``depth``, ``mask``,
+    machine info, the geometry times, and ``results``: one entry per setting with
+    ``method``, ``label``, ``params`` (every parameter the renderer used), ``depth``,
+    ``psnr``, ``dssim``, ``ssim``, ``seconds``, ``coverage``, ``iterations`` (and ``lpips``
+    when the ``lpips`` package works here).
     """
+    from .geometry import compute_samples
     from .pipeline import prepare
     from .render import render
 
     if mask not in ("reconstructed", "all"):
         raise VibrInputError(f"--mask must be 'reconstructed' or 'all', not {mask!r}")
+    settings = list(settings)
+    if not settings:
+        raise VibrInputError("no setting to evaluate")
+    if intensity_scale is None:
+        from .render.methods import DEFAULTS
+
+        intensity_scale = DEFAULTS["scale"]
+    intensity_scale = float(intensity_scale)
+    if not intensity_scale > 0:
+        raise VibrInputError(f"the intensity scale must be > 0, got {intensity_scale}")
     t0 = time.perf_counter()
     src, tview = prepare(scene, target, sources=sources, depth=depth, depth_files=depth_files,
                          n_views=n_views, estimate_kw=estimate_kw)
-    t_geom = time.perf_counter() - t0
+    t_depth = time.perf_counter() - t0
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)
-    log(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_geom:.1f} s)")
+    t0 = time.perf_counter()
+    samples = compute_samples(src, tview.camera, **(geometry_kw or {}))
+    t_samples = time.perf_counter() - t0
+    log(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
+        f"{len(samples)} samples ({t_samples:.1f} s)")
 
     images, rows = {}, []
-    for s in progress(settings, desc=f"render {tview.name}"):
+    for s in progress(settings, desc=f"render {tview.name} ({depth})"):
+        params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
         t = time.perf_counter()
-        res = render(src, tview.camera, method=s.method, **{**(render_kw or {}), **s.params})
+        res = render(src, tview.camera, method=s.method, samples=samples, **params)
         dt = time.perf_counter() - t
         images[s.label] = res
         rows.append((s, res, dt))
@@ -102,24 +150,40 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         for _, res, _ in rows:
             cover &= np.asarray(res.coverage, bool)
     ref = tview.image
-    lp = _lpips_fn()
+    lp = _lpips_fn() if use_lpips else None
+    counts = view_counts(samples) if view_split is not None else None
     results = []
     for s, res, dt in rows:
         m = cover if mask == "reconstructed" else None
+        used = {k: v for k, v in getattr(res, "params", {}).items()
+                if isinstance(v, (int, float, str, bool)) or v is None}
         entry = {
             "method": s.method,
             "label": s.label,
-            "params": {**s.params, **{k: v for k, v in getattr(res, "params", {}).items()
-                                      if isinstance(v, (int, float, str, bool)) or v is None}},
+            "params": {**used, **s.params},
+            "intensity_scale": float(used.get("scale", intensity_scale)),
             "depth": depth,
             "psnr": float(psnr(res.image, ref, mask=m, border=border)),
             "ssim": float(ssim(res.image, ref, mask=m, border=border)),
             "dssim": float(dssim(res.image, ref, mask=m, border=border)),
             "seconds": round(dt, 3),
             "coverage": float(np.asarray(res.coverage, bool).mean()),
+            "iterations": len(getattr(res, "energy", []) or []),
+            "energy": float(res.energy[-1]) if getattr(res, "energy", None) else None,
         }
         if lp is not None:
             entry["lpips"] = lp(res.image, ref)
+        if view_split is not None:
+            entry["regions"] = {}
+            base = cover if mask == "reconstructed" else np.ones(tview.shape, bool)
+            for name, sel in (("few", counts <= view_split), ("many", counts > view_split)):
+                mm = base & sel
+                inner = mm[border:mm.shape[0] - border, border:mm.shape[1] - border]
+                if inner.any():
+                    entry["regions"][name] = {
+                        "psnr": float(psnr(res.image, ref, mask=mm, border=border)),
+                        "dssim": float(dssim(res.image, ref, mask=mm, border=border)),
+                        "fraction": float(inner.mean())}
         results.append(entry)
 
     report = {
@@ -127,23 +191,100 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         "scene_path": str(scene.root) if scene.root else None,
         "target": tview.name,
         "sources": [v.name for v in src.views],
-        "scale": scene.meta.get("scale", 1.0),
+        "scale": float(scene.meta.get("scale", 1.0)),
+        "intensity_scale": intensity_scale,
         "size": [int(tview.shape[1]), int(tview.shape[0])],
         "depth": depth,
         "mask": mask,
         "border": border,
         "evaluated_fraction": float(cover.mean()) if mask == "reconstructed" else 1.0,
-        "geometry_seconds": round(t_geom, 3),
-        "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                    "python": platform.python_version()},
+        "n_samples": int(len(samples)),
+        "depth_seconds": round(t_depth, 3),
+        "samples_seconds": round(t_samples, 3),
+        "geometry_seconds": round(t_depth + t_samples, 3),
+        "machine": machine_info(),
         "results": results,
     }
+    if view_split is not None:
+        report["view_split"] = int(view_split)
+    if depth == "planar" and "proxy" in src.meta:
+        report["proxy"] = _jsonable(src.meta["proxy"])
+    if estimate_kw:
+        report["estimate_kw"] = _jsonable(estimate_kw)
+    if depth == "estimated" and "depth_estimation" in src.meta:
+        report["depth_estimation"] = _jsonable(_depth_summary(src.meta["depth_estimation"]))
     if figures:
         from .figures import write_figures
 
-        report["figures"] = write_figures(figures, ref, {k: r.image for k, r in images.items()},
-                                          cover, prefix=f"{tview.name}_{depth}")
+        shown = list(images) if figure_labels is None else [k for k in figure_labels if k in images]
+        report["figures"] = write_figures(figures, ref, {k: images[k].image for k in shown},
+                                          cover, prefix=figure_prefix or f"{tview.name}_{depth}",
+                                          downscale=figure_downscale)
     return report
+
+
+def view_counts(samples) -> np.ndarray:
+    """(H, W) int: how many distinct source views have a visible sample whose landing
+    point rounds to each target pixel."""
+    H, W = samples.target_shape
+    if len(samples) == 0:
+        return np.zeros((H, W), np.int64)
+    x = np.clip(np.rint(samples.xy[:, 0]).astype(np.int64), 0, W - 1)
+    y = np.clip(np.rint(samples.xy[:, 1]).astype(np.int64), 0, H - 1)
+    key = np.unique(np.asarray(samples.view, np.int64) * (H * W) + y * W + x)
+    return np.bincount(key % (H * W), minlength=H * W).reshape(H, W)
+
+
+def _depth_summary(meta: dict) -> dict:
+    """The depth estimator's statistics, reduced to what a report needs: method, time, and
+    per estimated view the kept fraction, planes, depth range and reprojection error."""
+    keep = ("kept", "confident", "n_planes", "depth_range", "reproj_px", "time_s", "role")
+    views = meta.get("views", {}) if isinstance(meta, dict) else {}
+    out = {k: meta[k] for k in ("method", "scale", "excluded", "time_s") if k in meta}
+    out["views"] = {name: {k: st[k] for k in keep if k in st} for name, st in views.items()
+                    if isinstance(st, dict)}
+    kept = [st["kept"] for st in out["views"].values() if "kept" in st and st.get("role", "target") == "target"]
+    if kept:
+        out["mean_kept"] = float(np.mean(kept))
+    return out
+
+
+def _jsonable(x):
+    """Numbers, strings, lists and dicts only (numpy scalars and tuples converted)."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, (int, float, str, bool)) or x is None:
+        return x
+    return str(x)
+
+
+def machine_info() -> dict:
+    """Platform, CPU model, logical CPUs and numba threads of this machine."""
+    import os
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    info = {"platform": platform.platform(), "processor": cpu, "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "numba_num_threads_env": os.environ.get("NUMBA_NUM_THREADS")}
+    try:
+        import numba
+
+        info["numba_threads"] = int(numba.config.NUMBA_NUM_THREADS)
+    except Exception:  # pragma: no cover
+        pass
+    return info
 
 
 def _lpips_fn():
@@ -175,11 +316,18 @@ def write_report(report: dict, path) -> None:
 
 
 def format_table(report: dict) -> str:
-    """A plain-text table of a report's results (what ``vibr eval`` prints)."""
+    """A plain-text table of a report's results (what ``vibr eval`` prints); an LPIPS column
+    appears when the report has LPIPS values."""
+    has_lp = any("lpips" in r for r in report["results"])
     lines = [f"{report['scene']} / {report['target']}  depth={report['depth']}  "
-             f"{report['size'][0]}x{report['size'][1]}  mask={report['mask']} "
-             f"({100 * report['evaluated_fraction']:.1f}% of pixels)",
-             f"{'setting':<34} {'PSNR dB':>8} {'DSSIM':>7} {'time s':>7}"]
+             f"{report['size'][0]}x{report['size'][1]} (image scale {report.get('scale', 1.0):g}, "
+             f"intensity scale {report.get('intensity_scale', 255):g})  mask={report['mask']} "
+             f"({100 * report['evaluated_fraction']:.1f}% of pixels), border {report.get('border', 0)}",
+             f"{'setting':<40} {'PSNR dB':>8} {'DSSIM':>7}" + (f" {'LPIPS':>6}" if has_lp else "")
+             + f" {'time s':>7}"]
     for r in report["results"]:
-        lines.append(f"{r['label']:<34} {r['psnr']:>8.2f} {r['dssim']:>7.1f} {r['seconds']:>7.2f}")
+        lp = (f" {r['lpips']:>6.3f}" if "lpips" in r else f" {'':>6}") if has_lp else ""
+        lines.append(f"{r['label']:<40} {r['psnr']:>8.2f} {r['dssim']:>7.1f}{lp} {r['seconds']:>7.2f}")
+    lines.append(f"geometry: depth {report.get('depth_seconds', 0):.1f} s, samples "
+                 f"{report.get('samples_seconds', 0):.1f} s (computed once for all settings)")
     return "\n".join(lines)

@@ -26,13 +26,16 @@ def error_map(img: np.ndarray, ref: np.ndarray, max_err: float = 0.1) -> np.ndar
     return colormap(e / max_err)
 
 
-def most_different_window(images: list[np.ndarray], size: int) -> tuple[int, int]:
+def most_different_window(images: list[np.ndarray], size: int, mask=None) -> tuple[int, int]:
     """Top-left (row, col) of the size×size window where the images disagree most
-    (sum over the window of the per-pixel variance across images)."""
+    (sum over the window of the per-pixel variance across images; only pixels of ``mask``
+    count when it is given, so that the crop shows evaluated pixels)."""
     from scipy.ndimage import uniform_filter
 
     stack = np.stack([np.asarray(i, float).mean(-1) for i in images])
     var = stack.var(axis=0)
+    if mask is not None:
+        var = np.where(np.asarray(mask, bool), var, 0.0)
     score = uniform_filter(var, size, mode="constant")
     h, w = var.shape
     half = size // 2
@@ -41,14 +44,34 @@ def most_different_window(images: list[np.ndarray], size: int) -> tuple[int, int
     return int(r), int(c)
 
 
+def downscale_image(a: np.ndarray, f: int) -> np.ndarray:
+    """Box-average an H×W×C image by the integer factor ``f`` (edges cropped to a multiple)."""
+    f = int(f)
+    if f <= 1:
+        return a
+    H, W = a.shape[0] // f * f, a.shape[1] // f * f
+    a = np.asarray(a[:H, :W], np.float32)
+    return a.reshape(H // f, f, W // f, f, -1).mean(axis=(1, 3))
+
+
+def _write_png(path: Path, img: np.ndarray) -> None:
+    """An 8-bit PNG at full zlib compression (figures are kept in docs), written atomically."""
+    from PIL import Image
+
+    from .io.atomic import atomic_path
+
+    q = (np.clip(np.asarray(img, np.float32), 0, 1) * 255 + 0.5).astype(np.uint8)
+    with atomic_path(path) as tmp:
+        Image.fromarray(q).save(tmp, format="PNG", compress_level=9)
+
+
 def write_figures(folder, ref: np.ndarray, images: dict[str, np.ndarray], mask=None,
-                  prefix: str = "view", max_err: float = 0.1) -> dict:
+                  prefix: str = "view", max_err: float = 0.1, downscale: int = 1) -> dict:
     """Write ``PREFIX_compare.png`` (top row: reference and each method; bottom row: the mask
     and each method's error map) and ``PREFIX_crops.png`` (the same images cropped to the
-    window where methods differ most, magnified ×4). Returns the file names and the column
-    order."""
-    from .io import write_image
-
+    window where methods differ most, magnified ×4). ``downscale`` reduces the side-by-side
+    figure by an integer factor (the crops stay at full resolution). Returns the file names
+    and the column order."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     names = list(images)
@@ -59,14 +82,15 @@ def write_figures(folder, ref: np.ndarray, images: dict[str, np.ndarray], mask=N
     row = lambda ims: np.concatenate(sum(([i, sep] for i in ims), [])[:-1], axis=1)  # noqa: E731
     grid = np.concatenate([row(top), np.ones((4, row(top).shape[1], 3), np.float32), row(bottom)], axis=0)
     compare = folder / f"{prefix}_compare.png"
-    write_image(compare, grid)
+    _write_png(compare, downscale_image(grid, downscale))
 
     size = max(16, min(ref.shape[:2]) // 6)
-    r, c = most_different_window(top[1:] if len(top) > 2 else top, size)
+    r, c = most_different_window(top[1:] if len(top) > 2 else top, size, m)
     crop = lambda a: np.kron(a[r : r + size, c : c + size], np.ones((4, 4, 1), np.float32))  # noqa: E731
     sepc = np.ones((size * 4, 4, 3), np.float32)
     crops = np.concatenate(sum(([crop(i), sepc] for i in top), [])[:-1], axis=1)
     crops_path = folder / f"{prefix}_crops.png"
-    write_image(crops_path, crops)
+    _write_png(crops_path, crops)
     return {"compare": str(compare), "crops": str(crops_path), "columns": ["reference"] + names,
-            "crop_window": {"row": r, "col": c, "size": size}, "error_saturation": max_err}
+            "crop_window": {"row": r, "col": c, "size": size}, "error_saturation": max_err,
+            "downscale": int(max(1, downscale))}

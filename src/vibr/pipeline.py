@@ -16,7 +16,11 @@ chosen geometry:
     takes part.
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
-    paper's coarsest proxy, with a large depth uncertainty.
+    paper's coarsest proxy, with a large depth uncertainty. Its depth and uncertainty come
+    from the sources' depth or sparse points; when the sources have neither (a light field
+    whose only depth is the held-out centre's), from the scene's views that have depth —
+    two scalars (median and spread of that depth seen from the target), as
+    ``render(depth="planar")`` does; ``meta["proxy"]["from_views"]`` then names them.
 ``files``
     depth files in a folder, one per source view, named after the view (``NAME.npy``,
     ``NAME.pfm`` or ``NAME.png``; 0 = unknown).
@@ -106,7 +110,19 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
 
         src = estimate_depth(src, **(estimate_kw or {}))
     elif depth == "planar":
-        src = planar_proxy(src, tcam)
+        plane = {}
+        if (all(v.depth is None for v in src.views)
+                and (src.points is None or not len(src.points))):
+            # Nothing among the sources to place the plane (a light field whose only depth is
+            # the held-out centre's ground truth): take its depth and uncertainty — two
+            # scalars, as render(depth="planar") does — from the scene's views with depth.
+            known = [v for v in scene.views if v.depth is not None]
+            if known:
+                ref = planar_proxy(Scene(known, scene.name, scene.root, None, None, {}), tcam).meta["proxy"]
+                plane = {"depth": ref["depth"], "sigma_z": ref["sigma_z"]}
+        src = planar_proxy(src, tcam, **plane)
+        if plane:
+            src.meta["proxy"] = dict(src.meta["proxy"], from_views=[v.name for v in known])
     elif depth == "files":
         if depth_files is None:
             raise VibrInputError("--depth files needs --depth-files DIR")

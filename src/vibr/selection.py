@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, axes_meeting_point
 from .scene import Scene
 
 
@@ -27,9 +27,10 @@ def target_points(sources: Scene, target: Camera, max_points: int = 4096) -> np.
     """(N, 3) world points the target camera sees, from the sources' geometry.
 
     Uses a strided subsample of every source depth map, keeps those in front of the target
-    and inside its image. Falls back to the scene's sparse points, then to a plane
-    perpendicular to the target's axis at the mean distance from the target to the sources
-    (a scene with no geometry at all).
+    and inside its image. Falls back to the scene's sparse points, then (a scene with no
+    geometry at all) to a plane perpendicular to the target's axis through the point where
+    the cameras' axes meet (:func:`vibr.camera.axes_meeting_point`), or at 4× the mean
+    target–source distance when they do not meet (parallel rigs).
     """
     pts = []
     per_view = max(64, max_points // max(1, len(sources)))
@@ -55,11 +56,16 @@ def target_points(sources: Scene, target: Camera, max_points: int = 4096) -> np.
             if len(P) > max_points:
                 P = P[np.random.default_rng(0).choice(len(P), max_points, replace=False)]
             return P
-    # No geometry: a fronto-parallel plane at the mean source distance.
-    dist = np.mean([np.linalg.norm(v.camera.centre - target.centre) for v in sources.views])
-    dist = dist if dist > 0 else 1.0
+    # No geometry: a fronto-parallel plane in the target, through the point the cameras'
+    # axes meet when they converge on an object (a ring), else at 4× the mean distance
+    # between the target and the sources (parallel rigs: far enough for the angle term).
+    X = axes_meeting_point([target] + [v.camera for v in sources.views])
+    z = float((X - target.centre) @ target.optical_axis) if X is not None else 0.0
+    if z <= 0:
+        dist = np.mean([np.linalg.norm(v.camera.centre - target.centre) for v in sources.views])
+        z = 4.0 * dist if dist > 0 else 1.0
     g = target.pixel_grid()[:: max(1, target.height // 16), :: max(1, target.width // 16)].reshape(-1, 2)
-    return target.backproject(g, np.full(len(g), 4.0 * dist))
+    return target.backproject(g, np.full(len(g), z))
 
 
 def rank_views(sources: Scene, target: Camera, *, beta: float = 1.0, min_overlap: float = 0.05,

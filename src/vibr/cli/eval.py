@@ -20,7 +20,12 @@ examples:
       --sources input_Cam030,input_Cam031,input_Cam032,input_Cam039,input_Cam041,input_Cam048,input_Cam049,input_Cam050 \\
       --depth gt --json cotton.json --figures figs/
   vibr eval ../shared/data/strecha_fountain-P11 --target 0005 --scale 0.25 --depth estimated \\
-      --method bvs,gradient --alpha 0.1 --gamma 1 --lam 0.002 --json fountain5.json
+      --method bvs,gradient --alpha 0.1 --gamma 1 --lam 0.002 --intensity-scale 255 --json fountain5.json
+
+--scale is the IMAGE scale (0.25: 3072x2048 -> 768x512); --intensity-scale is the scale of the
+intensities the parameters refer to (255: lam, sigma_s in grey levels). Both are recorded in
+the report (top-level "scale" and "intensity_scale"). The geometry (depth, then the warped
+samples) is computed once and shared by every method and setting.
 
 Views are named by file stem (input_Cam040, 0005) or index. --gamma applies to the
 'gradient' method (one row per value); --alpha and --lam (comma lists allowed) apply to every
@@ -54,7 +59,19 @@ def register(sub) -> None:
     p.add_argument("--gamma", type=_floats, default=[0, 1, 2, 3], help="gradient-term weights (default: 0,1,2,3)")
     p.add_argument("--alpha", type=_floats, help="colour-term weights (default: the renderer's)")
     p.add_argument("--lam", type=_floats, help="TV weights (default: the renderer's)")
-    p.add_argument("--scale", type=float, default=1.0, help="image scale, e.g. 0.25 (default: 1)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="IMAGE scale the scene is loaded at, e.g. 0.25 (default: 1)")
+    p.add_argument("--intensity-scale", type=float, default=None, metavar="S",
+                   help="INTENSITY scale the render parameters (lam, sigma_s, ...) refer to: 255 "
+                        "means grey levels of 8-bit images, 1 means [0, 1] intensities "
+                        "(default: the renderer's, 255)")
+    p.add_argument("--step-px", type=float, default=None,
+                   help="--depth estimated: parallax step between sweep planes, px (default: the estimator's)")
+    p.add_argument("--max-planes", type=int, default=None,
+                   help="--depth estimated: most sweep planes per view (default: the estimator's)")
+    p.add_argument("--depth-range", type=float, nargs=2, metavar=("NEAR", "FAR"), default=None,
+                   help="--depth estimated: orthogonal depth range of the sweep, scene units "
+                        "(default: the estimator's coarse sweep)")
     p.add_argument("--mask", choices=["reconstructed", "all"], default="reconstructed",
                    help="pixels the metrics are taken over (default: reconstructed)")
     p.add_argument("--border", type=int, default=0, help="pixels excluded at the image border (default: 0)")
@@ -68,12 +85,19 @@ def run(args) -> int:
     from ..evaluate import evaluate, format_table, settings_grid, write_report
     from ..io import load_scene
 
+    from ..errors import VibrInputError
+
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
+    if args.intensity_scale is not None and not args.intensity_scale > 0:
+        raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
     scene = load_scene(args.scene, scale=args.scale)
     scene.meta.setdefault("scale", args.scale)
+    estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                     ("depth_range", args.depth_range)) if v is not None}
     report = evaluate(scene, args.target, settings, sources=args.sources, depth=args.depth,
                       depth_files=args.depth_files, n_views=args.views, mask=args.mask,
-                      border=args.border, figures=args.figures)
+                      border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
+                      intensity_scale=args.intensity_scale)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")

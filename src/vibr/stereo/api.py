@@ -29,7 +29,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 from skimage.transform import resize
 
-from ..camera import Camera
+from ..camera import Camera, axes_meeting_point
 from ..errors import VibrInputError
 from ..progress import log
 from ..scene import Scene
@@ -125,8 +125,11 @@ def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: d
        depths of the points that project into the reference, widened by ``margin``.
     2. Otherwise a coarse plane sweep at ``coarse_width`` pixels over a wide range, from
        the plane whose parallax with the nearest neighbour is ``max_parallax`` × image width
-       (near) to 100× that depth (far), uniform in inverse depth; the 2nd–98th percentile
-       of the confident coarse inverse depths, widened by ``margin`` of their span.
+       (near) to 100× that depth (far), extended to cover ``[z_c / 4, 4 z_c]`` when the
+       cameras' optical axes meet at a depth ``z_c`` (:func:`vibr.camera.axes_meeting_point`)
+       and ``[z_c / 2, 2 z_c]`` is not already inside,
+       uniform in inverse depth; the 2nd–98th percentile of the confident coarse inverse
+       depths, widened by ``margin`` of their span.
     """
     cam = cameras[ref]
     if use_points and scene.points is not None and len(scene.points) >= 20:
@@ -139,6 +142,16 @@ def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: d
     rate = _parallax_rate(cam, cameras[neighbours[0]])
     w_max = max_parallax * cam.width / max(rate, 1e-12)
     w_min = w_max / 100.0
+    # Cameras that converge on an object (a ring, an arc) put it near the point their axes
+    # meet. A wide baseline can put that point nearer than the half-image parallax limit
+    # above: when a factor 2 around its depth is not inside the sweep, widen the sweep to a
+    # factor 4 around it.
+    X = axes_meeting_point([cameras[ref]] + [cameras[j] for j in neighbours])
+    if X is not None:
+        z_c = float((X - cam.centre) @ cam.optical_axis)
+        if z_c > 0 and not (w_min <= 0.5 / z_c and 2.0 / z_c <= w_max):
+            w_max = max(w_max, 4.0 / z_c)
+            w_min = min(w_min, 0.25 / z_c)
     s = min(1.0, coarse_width / cam.width)
     cref = cam.scaled(s)
     csrc = [cameras[j].scaled(s) for j in neighbours]
