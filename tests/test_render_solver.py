@@ -80,6 +80,18 @@ def test_synthetic_exact_depth_40db(synthetic_grid, method):
         assert len(r.outer) == r.params["n_outer"]
 
 
+def test_vibr_render_is_callable_and_a_package(synthetic_grid):
+    """The issue's API ``vibr.render(scene, target, method=...)``, while the subpackage's
+    modules stay importable."""
+    import vibr
+    import vibr.render.solver as solver
+
+    tgt = synthetic_grid.views[4]
+    r = vibr.render(synthetic_grid, tgt, method="bvs", n_outer=1)
+    assert r.image.shape == (128, 128, 3) and r.metrics["psnr"] >= 40.0
+    assert solver.fista is vibr.render.solver.fista
+
+
 def test_ulr_and_bare_camera_target(synthetic_grid):
     from vibr.render import render
 

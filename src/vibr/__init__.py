@@ -12,7 +12,15 @@ from .scene import Scene, View
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "Scene", "View", "VibrInputError", "__version__"]
 
-# The renderer lives in ``vibr.render`` (``from vibr.render import render``); it is not
-# re-exported here so that the name keeps meaning the subpackage.
+def __getattr__(name):
+    # vibr.render is a callable subpackage (vibr.render(scene, target, ...)); imported on
+    # first use so that ``import vibr`` stays light
+    if name == "render":
+        import importlib
+
+        return importlib.import_module(".render", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["Camera", "Scene", "View", "VibrInputError", "render", "__version__"]

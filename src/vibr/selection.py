@@ -23,7 +23,7 @@ from .camera import Camera, axes_meeting_point
 from .scene import Scene
 
 
-def target_points(sources: Scene, target: Camera, max_points: int = 4096) -> np.ndarray:
+def target_points(sources: Scene, target: Camera, max_points: int = 1024) -> np.ndarray:
     """(N, 3) world points the target camera sees, from the sources' geometry.
 
     Uses a strided subsample of every source depth map, keeps those in front of the target
