@@ -50,7 +50,8 @@ def run(args) -> int:
     sources, tview = scene.split(target)
     t1 = time.perf_counter()
     log(f"scene: {len(scene)} views ({args.layout}), {args.size}x{args.size}, made in {t1 - t0:.2f} s; "
-        f"rendering {tview.name} from the other {len(sources)}")
+        f"rendering {tview.name} from the other {len(sources)} (the first run on a machine also "
+        f"compiles the kernels, about a minute)")
     res = render(sources, tview.camera, method=args.method)
     t2 = time.perf_counter()
     mask = res.coverage
