@@ -64,40 +64,6 @@ def tv_value(u, coupled: bool = True) -> float:
     return float(_tv_value(u, coupled))
 
 
-@njit(parallel=True, cache=True, fastmath=True)
-def _primal(z, r, mu, dinv, use_d, x):
-    """x = z + mu · d⁻¹ · div r, planar: z, x (C, H, W), r (C, 2, H, W)."""
-    C, H, W = z.shape
-    for i in prange(H):
-        for c in range(C):
-            px = r[c, 0, i]
-            o = x[c, i]
-            zr = z[c, i]
-            if W > 1:
-                o[0] = px[0]
-                for j in range(1, W - 1):
-                    o[j] = px[j] - px[j - 1]
-                o[W - 1] = -px[W - 2]
-            else:
-                o[0] = 0.0
-            if H > 1:
-                if i < H - 1:
-                    py = r[c, 1, i]
-                    for j in range(W):
-                        o[j] += py[j]
-                if i > 0:
-                    pm = r[c, 1, i - 1]
-                    for j in range(W):
-                        o[j] -= pm[j]
-            if use_d:
-                dr = dinv[i]
-                for j in range(W):
-                    o[j] = zr[j] + mu * dr[j] * o[j]
-            else:
-                for j in range(W):
-                    o[j] = zr[j] + mu * o[j]
-
-
 @njit(cache=True, fastmath=True)
 def _primal_row(z, r, mu, dinv, use_d, k, o):
     """Row k of x = z + mu · d⁻¹ · div r into o (C, W)."""
@@ -129,6 +95,13 @@ def _primal_row(z, r, mu, dinv, use_d, k, o):
         else:
             for j in range(W):
                 orow[j] = zr[j] + mu * orow[j]
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def _primal(z, r, mu, dinv, use_d, x):
+    """x = z + mu · d⁻¹ · div r, planar: z, x (C, H, W), r (C, 2, H, W)."""
+    for i in prange(z.shape[1]):
+        _primal_row(z, r, mu, dinv, use_d, i, x[:, i])
 
 
 @njit(parallel=True, cache=True, fastmath=True)
