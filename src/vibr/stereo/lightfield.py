@@ -145,8 +145,12 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     # using the camera of the nearest same-row view (scaled by its column offset).
     row_nb = [j for j in others if pos[j][0] == r0]
     col_nb = [j for j in others if pos[j][1] == c0]
-    if row_nb:
-        j = min(row_nb, key=lambda k: abs(pos[k][1] - c0))
+    # any view in another column gives the x model (parallel grid: the x shift depends on
+    # the column offset only), the same row preferred; a grid with missing views may leave
+    # a view with diagonal neighbours only
+    x_nb = [j for j in others if pos[j][1] != c0]
+    if x_nb:
+        j = min(x_nb, key=lambda k: (abs(pos[k][0] - r0), abs(pos[k][1] - c0)))
         a, b = disparity_model(cam, cams[j])
         ds = pos[j][1] - c0
     else:
@@ -191,9 +195,9 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         # ---- fine plane sweep over the grid neighbours
         dsel = best_d[st_conf] if st_conf.sum() > 100 else best_d.ravel()
         dlo, dhi = np.percentile(dsel, [1, 99])
-        if depth_range is None and max(abs(dlo), abs(dhi)) > st_max_disp:
-            # large disparities: the 3-tap derivative along s aliases; use the generic
-            # coarse-sweep range instead of the local estimate's
+        if depth_range is None and (st_conf.sum() <= 100 or max(abs(dlo), abs(dhi)) > st_max_disp):
+            # large disparities (the 3-tap derivative along s aliases), or no local estimate
+            # (no same-row or same-column neighbour): the generic coarse-sweep range
             from .api import default_depth_range
 
             nb0 = sorted(others, key=lambda k: abs(pos[k][0] - r0) + abs(pos[k][1] - c0))[:4]
