@@ -45,3 +45,23 @@ def test_render_camera_file_and_errors(scene_dir, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "nope" in err and len(err.strip().splitlines()) == 1
     assert not bad.exists()
+
+
+def test_scene_without_any_geometry_renders_by_default(tmp_path, capsys):
+    """No depth maps, no sparse points: the default --depth auto estimates depth from the
+    sources (the target held out) and renders; --depth gt says what is missing."""
+    from vibr.cli import main
+    from vibr.io import save_scene
+    from vibr.scene import Scene
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", n_views=9, width=96, height=96, seed=2)
+    bare = Scene([v.replace(depth=None, sigma_z=None) for v in sc.views], name="bare")
+    save_scene(bare, tmp_path / "bare")
+    out = tmp_path / "v4.png"
+    assert main(["render", str(tmp_path / "bare"), "--target", "view_004", "-o", str(out), "-q"]) == 0
+    psnr = float(capsys.readouterr().out.split("PSNR")[1].split("dB")[0])
+    assert psnr > 30.0 and out.is_file()
+    assert main(["render", str(tmp_path / "bare"), "--target", "view_004", "-o", str(tmp_path / "x.png"),
+                 "--depth", "gt", "-q"]) == 2
+    assert "no depth" in capsys.readouterr().err and not (tmp_path / "x.png").exists()

@@ -21,6 +21,9 @@ chosen geometry:
     whose only depth is the held-out centre's), from the scene's views that have depth —
     two scalars (median and spread of that depth seen from the target), as
     ``render(depth="planar")`` does; ``meta["proxy"]["from_views"]`` then names them.
+``auto``
+    ``gt`` when the scene carries depth (any view, or the held-out target of a light
+    field), else ``estimated``: a scene with no geometry at all still renders.
 ``files``
     depth files in a folder, one per source view, named after the view (``NAME.npy``,
     ``NAME.pfm`` or ``NAME.png``; 0 = unknown).
@@ -36,7 +39,7 @@ from .camera import Camera
 from .errors import VibrInputError
 from .scene import Scene, View
 
-DEPTH_MODES = ("gt", "estimated", "planar", "files")
+DEPTH_MODES = ("auto", "gt", "estimated", "planar", "files")
 
 
 def _depth_file_for(folder: Path, name: str) -> Path:
@@ -60,7 +63,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         estimation) or a bare camera.
     sources : sequence of int or str, optional
         Source views; default all views but the target (or the ``n_views`` best).
-    depth : {"gt", "estimated", "planar", "files"}
+    depth : {"gt", "auto", "estimated", "planar", "files"}
         Where the sources' depth comes from (module docstring).
     depth_files : path, optional
         Folder of depth files, for ``depth="files"``.
@@ -80,6 +83,12 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
 
     if depth not in DEPTH_MODES:
         raise VibrInputError(f"unknown depth mode {depth!r} (choose from {', '.join(DEPTH_MODES)})")
+    if depth == "auto":
+        depth = "gt" if any(v.depth is not None for v in scene.views) else "estimated"
+        if depth == "estimated":
+            from .progress import log
+
+            log("the scene has no depth maps: estimating them from the source views (--depth estimated)")
     if isinstance(target, Camera):
         tview: View | Camera = target
         tcam = target

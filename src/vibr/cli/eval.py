@@ -51,8 +51,9 @@ def register(sub) -> None:
     p.add_argument("--target", required=True, help="view to hold out and render (name or index)")
     p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
     p.add_argument("--views", type=int, metavar="K", help="use only the K best source views for the target")
-    p.add_argument("--depth", default="gt", choices=["gt", "estimated", "planar", "files"],
-                   help="geometry of the sources (default: gt, the depth given with the scene)")
+    p.add_argument("--depth", default="gt", choices=["gt", "auto", "estimated", "planar", "files"],
+                   help="geometry of the sources (default: gt, the depth given with the scene; auto: "
+                        "gt when the scene has depth, else estimated)")
     p.add_argument("--depth-files", metavar="DIR", help="folder of NAME.npy/.pfm/.png depth maps for --depth files")
     p.add_argument("--method", type=_names, default=["ulr", "savsr", "bvs", "gradient"],
                    help="comma-separated methods among ulr, savsr, bvs, gradient (default: all)")

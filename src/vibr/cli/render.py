@@ -48,10 +48,11 @@ def register(sub) -> None:
     p.add_argument("--iterations", type=int, help="FISTA iterations per pass at most (default 60)")
     p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
     p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
-    p.add_argument("--depth", default="gt", choices=["gt", "given", "estimated", "planar", "files"],
+    p.add_argument("--depth", default="auto", choices=["auto", "gt", "given", "estimated", "planar", "files"],
                    help="source geometry: the scene's depth maps (gt, alias given), depth estimated "
                         "from the sources (estimated; the target never takes part), a fronto-parallel "
-                        "plane (planar), or NAME.npy/.pfm/.png files in --depth-files (default: gt)")
+                        "plane (planar), NAME.npy/.pfm/.png files in --depth-files (files), or gt when "
+                        "the scene has depth and estimated when it has none (auto, the default)")
     p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files")
     p.add_argument("--views", type=int, metavar="K",
                    help="render from the K best source views for the target (ULR ranking; default: all)")
