@@ -34,7 +34,8 @@ def register(sub) -> None:
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene folder (any supported format)")
     p.add_argument("--target", required=True, metavar="VIEW|CAMERA.json",
-                   help="view name / index to hold out and render, or a camera JSON file")
+                   help="view name / index to hold out and render, or a camera JSON file (K, R, t, "
+                        "width, height at the scene's original resolution: --scale applies to it too)")
     p.add_argument("-o", "--output", required=True, help="output image (PNG)")
     p.add_argument("--method", default="gradient", choices=["gradient", "bvs", "savsr", "ulr"],
                    help="rendering method (default: gradient)")
@@ -56,7 +57,7 @@ def register(sub) -> None:
     p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files")
     p.add_argument("--views", type=int, metavar="K",
                    help="render from the K best source views for the target (ULR ranking; default: all)")
-    p.add_argument("--scale", type=float, default=1.0, help="image scale, e.g. 0.5 (default 1)")
+    p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene and of a camera-file target, e.g. 0.5 (default 1)")
     add_quiet(p)
     p.set_defaults(func=run)
 
