@@ -10,8 +10,10 @@ The smooth part is quadratic: ``f(u) = ½⟨u, Hu⟩ − ⟨r, u⟩ + c`` with
 (:mod:`vibr.render.operators`) assembled once per weight update. The solver is the
 monotone FISTA (MFISTA, Beck & Teboulle 2009, IEEE TIP 18(11)) with the TV proximal step of
 :class:`~vibr.render.tv.TVProx` (warm-started dual). Because ``f`` is quadratic, the
-products ``(A x, A_g D x)`` are linear in ``x``: the extrapolated point's products are the
-same combination of stored products, so each iteration costs one stencil pair.
+products ``(A x, DᵀA_g D x)`` are linear in ``x``: the extrapolated point's products are the
+same combination of stored products, so each iteration costs one stencil pair, and the
+forward step at the extrapolated point is computed in one pass from the stored iterates
+(:meth:`QuadraticModel.forward`) without storing that point.
 
 **Intensity scale.** Images are [0, 1]; the parameters refer to intensities on the scale
 ``s`` (default 255). The energy is ``s²·E`` of the [0, 1] image, so the TV weight inside is
@@ -283,8 +285,9 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
         than 6/3 on cotton and the synthetic scene; 3/1 does, through backtracking).
 
     Each iteration: ``z = prox_{lam/L TV}(y − ∇f(y)/L)``, accept ``z`` only if it lowers E
-    (MFISTA), momentum ``y = x + t/t'(z − x) + (t−1)/t'(x − x_prev)``; a rejected step also
-    restarts the momentum. The energy sequence is therefore non-increasing.
+    (MFISTA); after an accepted step the momentum is ``y = x + (t−1)/t'(x − x_prev)``; a
+    rejected step restarts it (``y = x``), and a rejected plain step (no momentum) doubles
+    ``L``. The energy sequence is therefore non-increasing.
     """
     t0 = time.perf_counter()
     s2 = model.scale ** 2
