@@ -31,73 +31,23 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
-from numba import njit, prange
+from .fused import forward_step, hessian_power, hessian_terms, power_start
+from .operators import dot, grad_central_adj
+from .tv import TVProx
 
-from .operators import grad_central, grad_central_adj, stencil_apply, dot
-from .tv import TVProx, tv_value
-
-__all__ = ["QuadraticModel", "SolveResult", "fista"]
-
-
-# ---------------------------------------------------------------- fused element-wise kernels
-# One pass over memory each; these run once or more per FISTA iteration.
-@njit(parallel=True, cache=True, fastmath=True)
-def _dots4_kernel(x, a, b, c, d):
-    n = x.shape[0]
-    nb = 64
-    chunk = (n + nb - 1) // nb
-    parts = np.zeros((nb, 4))
-    for k in prange(nb):
-        s0 = s1 = s2 = s3 = 0.0
-        for i in range(k * chunk, min(n, (k + 1) * chunk)):
-            xi = np.float64(x[i])
-            s0 += xi * a[i]
-            s1 += xi * b[i]
-            s2 += xi * c[i]
-            s3 += xi * d[i]
-        parts[k, 0] = s0
-        parts[k, 1] = s1
-        parts[k, 2] = s2
-        parts[k, 3] = s3
-    return parts.sum(0)
+__all__ = ["QuadraticModel", "Products", "SolveResult", "fista"]
 
 
-def _dots4(x, a, b, c, d):
-    """(⟨x,a⟩, ⟨x,b⟩, ⟨x,c⟩, ⟨x,d⟩) in float64, one pass."""
-    r = _dots4_kernel(x.ravel(), a.ravel(), b.ravel(), c.ravel(), d.ravel())
-    return float(r[0]), float(r[1]), float(r[2]), float(r[3])
+class Products(NamedTuple):
+    """What one pass over ``x`` gives: ``h = H x`` and ``dots = (⟨x,Ax⟩, ⟨b,x⟩,
+    ⟨x,DᵀA_gDx⟩, ⟨Dᵀb_g,x⟩, TV(x))`` (float64)."""
 
-
-@njit(parallel=True, cache=True, fastmath=True)
-def _axpby_kernel(a, x, b, y, out):
-    for i in prange(x.shape[0]):
-        out[i] = a * x[i] + b * y[i]
-
-
-def _axpby(a, x, b, y):
-    """a·x + b·y (same shape, float32)."""
-    out = np.empty_like(x)
-    _axpby_kernel(np.float32(a), x.ravel(), np.float32(b), y.ravel(), out.ravel())
-    return out
-
-
-@njit(parallel=True, cache=True, fastmath=True)
-def _forward_kernel(x, xp, Ax, Axp, Gx, Gxp, r, beta, alpha, gamma, dinv, step, out):
-    """Forward step at the extrapolated point y = x + beta (x − x_prev), whose products are
-    the same combination of the stored ones (f is quadratic):
-    out = y − step · d⁻¹ · (alpha·Ay + gamma·Gy − r); planar (C, n); dinv (n,) or empty."""
-    C, n = x.shape
-    use_d = dinv.shape[0] == n
-    for i in prange(n):
-        s = step * dinv[i] if use_d else step
-        for c in range(C):
-            y = x[c, i] + beta * (x[c, i] - xp[c, i])
-            ay = Ax[c, i] + beta * (Ax[c, i] - Axp[c, i])
-            gy = Gx[c, i] + beta * (Gx[c, i] - Gxp[c, i])
-            out[c, i] = y - s * (alpha * ay + gamma * gy - r[c, i])
+    h: np.ndarray
+    dots: tuple
 
 
 @dataclass
@@ -134,67 +84,45 @@ class QuadraticModel:
         # Dᵀ b_g, so that the gradient term's products stay 3-channel:
         # E_grad = ½⟨x, DᵀA_gD x⟩ − ⟨Dᵀb_g, x⟩ + c_g
         self.bgt = grad_central_adj(self.bg) if self.use_grad else None
-        # the constant part of ∇f = alpha A x + gamma DᵀA_gD x − r
-        self.r = self.alpha * self.b if not self.use_grad else _axpby(self.alpha, self.b, self.gamma, self.bgt)
+        # the constant part of ∇f = H x − r, H = alpha A + gamma DᵀA_gD
+        self.r = (self.alpha * self.b if not self.use_grad
+                  else self.alpha * self.b + self.gamma * self.bgt).astype(np.float32)
 
-    def products(self, x):
-        """(A x, DᵀA_g D x): everything the energy and its gradient need, linear in x."""
-        Ax = stencil_apply(self.A, x)
-        if not self.use_grad:
-            return (Ax, None)
-        Dx = grad_central(x)
-        C, _, H, W = Dx.shape
-        AgDx = stencil_apply(self.Ag, Dx.reshape(2 * C, H, W)).reshape(Dx.shape)
-        return (Ax, grad_central_adj(AgDx))
+    def products(self, x, out=None) -> Products:
+        """``H x`` and the inner products of the energy, in one pass over memory
+        (:func:`vibr.render.fused.hessian_terms`); everything the energy and its gradient
+        at ``x`` need. ``out`` receives ``H x``."""
+        h, dots = hessian_terms(self.A, self.Ag if self.use_grad else None, x, self.b,
+                                self.bgt if self.use_grad else None, self.alpha, self.gamma,
+                                self.coupled, out=out)
+        return Products(h, dots)
 
-    def terms(self, x, P):
-        """(E_color, E_grad, TV) of x on the [0, 1] scale (unweighted by alpha, gamma, lam)."""
-        Ax, Gx = P
-        if self.use_grad:
-            xAx, bx, xGx, gx = _dots4(x, Ax, self.b, Gx, self.bgt)
-            eg = 0.5 * xGx - gx + self.cg
-        else:
-            xAx, bx, _, _ = _dots4(x, Ax, self.b, Ax, self.b)
-            eg = 0.0
+    def terms(self, x, P: Products):
+        """(E_color, E_grad, TV) of x on the [0, 1] scale (unweighted by alpha, gamma, lam),
+        from the products ``P`` of x."""
+        xAx, bx, xGx, gx, tv = P.dots
         ec = 0.5 * xAx - bx + self.c
-        return ec, eg, tv_value(x, self.coupled)
+        eg = 0.5 * xGx - gx + self.cg if self.use_grad else 0.0
+        return ec, eg, tv
 
     def energy(self, terms) -> float:
         ec, eg, tv = terms
         return self.alpha * ec + self.gamma * eg + self.lam_int * tv
 
-    def grad(self, P):
-        """∇f from the products of the point: alpha (Ax − b) + gamma (DᵀA_g D x − Dᵀb_g)
-        (the solver fuses it into :meth:`forward`)."""
-        Ax, Gx = P
-        h = _axpby(self.alpha, Ax, self.gamma, Gx) if self.use_grad else self.alpha * Ax
-        return h - self.r
+    def grad(self, P: Products):
+        """∇f = H x − r (the solver fuses it into :meth:`forward`)."""
+        return P.h - self.r
 
-    def forward(self, x, P, step, dinv=None, x_prev=None, P_prev=None, beta=0.0):
+    def forward(self, x, P, step, dinv=None, x_prev=None, P_prev=None, beta=0.0, out=None):
         """The forward (gradient) step ``y − step · d⁻¹ · ∇f(y)`` at ``y = x + beta (x −
         x_prev)`` from the products ``P`` of ``x`` (and ``P_prev`` of ``x_prev``), in one
         pass: the extrapolated point and its products are never stored."""
-        if x_prev is None or beta == 0.0:
-            x_prev, P_prev, beta = x, P, 0.0
-        Ax, Gx = P
-        Axp, Gxp = P_prev
-        if not self.use_grad:
-            Gx = Gxp = Ax
-        C = x.shape[0]
-        flat = lambda a: a.reshape(C, -1)  # noqa: E731
-        out = np.empty_like(x)
-        d = np.zeros(0, np.float32) if dinv is None else np.ascontiguousarray(dinv, np.float32).ravel()
-        g = self.gamma if self.use_grad else 0.0
-        _forward_kernel(flat(x), flat(x_prev), flat(Ax), flat(Axp), flat(Gx), flat(Gxp), flat(self.r),
-                        np.float32(beta), np.float32(self.alpha), np.float32(g), d, np.float32(step),
-                        flat(out))
-        return out
+        h_prev = None if P_prev is None else P_prev.h
+        return forward_step(x, P.h, self.r, step, dinv, x_prev, h_prev, beta, out=out)
 
-    def hess_apply(self, x):
-        Ax, Gx = self.products(x)
-        if self.use_grad:
-            return _axpby(self.alpha, Ax, self.gamma, Gx)
-        return self.alpha * Ax
+    def hess_apply(self, x, out=None):
+        """``H x``."""
+        return self.products(x, out=out).h
 
     def gershgorin(self) -> np.ndarray:
         """Per-pixel upper bound ``d ≥ row-sum |H|`` (H, W) so that ``diag(d) ⪰ H``.
@@ -216,20 +144,27 @@ class QuadraticModel:
         ``v0`` starts the iteration (e.g. the eigenvector of a previous, similar ``H``: the
         outer re-weighting changes ``H`` little, so a few iterations then suffice); the last
         iterate is stored in ``state["v"]`` when ``state`` is a dict."""
-        if v0 is None:
-            rng = np.random.default_rng(seed)
-            x = rng.standard_normal(self.b.shape).astype(np.float32)
-        else:
-            x = np.array(v0, np.float32)
-        s = None if d is None else (1.0 / np.sqrt(d))[None].astype(np.float32)
+        x = power_start(self.b.shape) if v0 is None else np.array(v0, np.float32)
         lam = 0.0
-        for _ in range(n_iter):
-            x /= math.sqrt(max(dot(x, x), 1e-300))
-            y = self.hess_apply(x * s if s is not None else x)
-            if s is not None:
+        if d is None:
+            # one pass per iteration: h = H x/‖x‖ (the scale folded into alpha, gamma), the
+            # Rayleigh quotient ⟨x, Hx⟩/‖x‖² and ‖h‖² come out of the same pass
+            Ag = self.Ag if self.use_grad else None
+            nx = dot(x, x)
+            buf = np.empty_like(x)
+            for _ in range(n_iter):
+                sc = 1.0 / math.sqrt(max(nx, 1e-300))
+                h, (xAx, xGx, hh) = hessian_power(self.A, Ag, x, self.alpha * sc, self.gamma * sc, out=buf)
+                lam = (self.alpha * xAx + self.gamma * xGx) / max(nx, 1e-300)
+                x, buf, nx = h, x, hh
+        else:
+            s = (1.0 / np.sqrt(d))[None].astype(np.float32)
+            for _ in range(n_iter):
+                x /= math.sqrt(max(dot(x, x), 1e-300))
+                y = self.hess_apply(x * s)
                 y *= s
-            lam = dot(x, y)
-            x = y
+                lam = dot(x, y)
+                x = y
         if state is not None:
             state["v"] = x
         return 1.05 * max(lam, 1e-12)
@@ -305,7 +240,13 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
         L, n_power = _step_size(model, power_state, d)
     else:
         L, n_power = _step_size(model, power_state, None)
-    Px = model.products(x)
+    # three image buffers and three product buffers rotate (x, x_prev, candidate z): after
+    # an accepted step the old x_prev is free for the next candidate; nothing is
+    # allocated in the loop (fresh pages cost as much as the kernels at this size)
+    zin = np.empty_like(x)
+    zbuf, xpbuf = np.empty_like(x), np.empty_like(x)
+    hz, hxp = np.empty_like(x), np.empty_like(x)
+    Px = model.products(x, out=np.empty_like(x))
     Tx = model.terms(x, Px)
     Fx = model.energy(Tx)
     res = SolveResult(u=x, L=L, n_power=n_power)
@@ -313,20 +254,22 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
     res.terms.append((Tx[0] * s2, Tx[1] * s2, Tx[2] * model.scale))
     if callback:
         callback(0, res.energy[-1], res.terms[-1])
-    x_prev, P_prev = x, Px
+    x_prev, P_prev = xpbuf, Products(hxp, ())
     beta = 0.0  # momentum of the next step: y = x + beta (x − x_prev)
     t = 1.0
     rejected = 0
     res.stopped = "max_iter"
     for k in range(1, max_iter + 1):
-        zin = model.forward(x, Px, 1.0 / L, None if dinv is None else dinv[0], x_prev, P_prev, beta)
-        z = prox(zin, model.lam_int / L, d=d) if precond else prox(zin, model.lam_int / L)
-        Pz = model.products(z)
+        model.forward(x, Px, 1.0 / L, None if dinv is None else dinv[0], x_prev, P_prev, beta, out=zin)
+        z = prox(zin, model.lam_int / L, d=d, out=zbuf)
+        Pz = model.products(z, out=hz)
         Tz = model.terms(z, Pz)
         Fz = model.energy(Tz)
         t_new = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
         if Fz <= Fx:
             dec = Fx - Fz
+            # rotate: x_prev ← x, x ← z, the old x_prev buffers take the next candidate
+            zbuf, hz = x_prev, P_prev.h
             x_prev, P_prev = x, Px
             x, Px, Tx, Fx = z, Pz, Tz, Fz
             rejected = 0

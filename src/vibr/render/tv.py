@@ -64,12 +64,31 @@ def tv_value(u, coupled: bool = True) -> float:
     return float(_tv_value(u, coupled))
 
 
+#: rows per band of :func:`_dual_step` (each thread walks its band once)
+BAND = 24
+
+
 @njit(cache=True, fastmath=True)
-def _primal_row(z, r, mu, dinv, use_d, k, o):
-    """Row k of x = z + mu · d⁻¹ · div r into o (C, W)."""
+def _r_row(p, p_old, beta, k, out):
+    """Row k of the extrapolated dual r = p + beta (p − p_old) into out (C, 2, W)."""
+    C = p.shape[0]
+    W = p.shape[3]
+    for c in range(C):
+        for d in range(2):
+            pr = p[c, d, k]
+            po = p_old[c, d, k]
+            o = out[c, d]
+            for j in range(W):
+                o[j] = pr[j] + beta * (pr[j] - po[j])
+
+
+@njit(cache=True, fastmath=True)
+def _x_row(z, rk, rkm, mu, dinv, use_d, k, o):
+    """Row k of x = z + mu · d⁻¹ · div r from the dual rows k (rk) and k − 1 (rkm),
+    (C, 2, W) each (``div_bwd``: Neumann, r_x[W−1] and r_y[H−1] are 0)."""
     C, H, W = z.shape
     for c in range(C):
-        px = r[c, 0, k]
+        px = rk[c, 0]
         orow = o[c]
         if W > 1:
             orow[0] = px[0]
@@ -80,11 +99,11 @@ def _primal_row(z, r, mu, dinv, use_d, k, o):
             orow[0] = 0.0
         if H > 1:
             if k < H - 1:
-                py = r[c, 1, k]
+                py = rk[c, 1]
                 for j in range(W):
                     orow[j] += py[j]
             if k > 0:
-                pm = r[c, 1, k - 1]
+                pm = rkm[c, 1]
                 for j in range(W):
                     orow[j] -= pm[j]
         zr = z[c, k]
@@ -98,64 +117,89 @@ def _primal_row(z, r, mu, dinv, use_d, k, o):
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def _primal(z, r, mu, dinv, use_d, x):
-    """x = z + mu · d⁻¹ · div r, planar: z, x (C, H, W), r (C, 2, H, W)."""
-    for i in prange(z.shape[1]):
-        _primal_row(z, r, mu, dinv, use_d, i, x[:, i])
+def _primal(z, p, mu, dinv, use_d, band, x):
+    """x = z + mu · d⁻¹ · div p, planar: z, x (C, H, W), p (C, 2, H, W).
 
-
-@njit(parallel=True, cache=True, fastmath=True)
-def _dual_fused(z, r_in, p_old, r_out, p_new, mu, dinv, use_d, step, beta, coupled):
-    """One accelerated dual step with the primal computed on the fly:
-    x = z + mu d⁻¹ div r_in (rows i, i+1), q = P(r_in + step ∇x),
-    r_out = q + beta (q − p_old), p_new = q.
-
-    r_in is read at rows i−1..i+1, so r_out must not alias it (nor p_new, unless p_old is
-    not r_in); p_old is read at row i only, so p_new may alias p_old."""
+    Rows go through contiguous buffers: the strided (C, 2, W) view of one row of p
+    (or (C, W) of x) would keep the row loops from vectorising (6× slower)."""
     C, H, W = z.shape
-    for i in prange(H):
-        xi = np.empty((C, W), np.float32)
-        xn = np.empty((C, W), np.float32)
-        _primal_row(z, r_in, mu, dinv, use_d, i, xi)
-        if i < H - 1:
-            _primal_row(z, r_in, mu, dinv, use_d, i + 1, xn)
+    n_bands = (H + band - 1) // band
+    for t in prange(n_bands):
+        r0 = t * band
+        r1 = min(H, r0 + band)
+        ring = np.zeros((2, C, 2, W), np.float32)
+        xrow = np.empty((C, W), np.float32)
+        for i in range(max(r0 - 1, 0), r1):
+            _r_row(p, p, np.float32(0.0), i, ring[i % 2])
+            if i >= r0:
+                _x_row(z, ring[i % 2], ring[(i + 1) % 2], mu, dinv, use_d, i, xrow)
+                for c in range(C):
+                    x[c, i, :] = xrow[c]
+
+
+@njit(parallel=True, cache=True, fastmath=True, error_model="numpy")
+def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, band, p_new):
+    """One accelerated dual step (Beck & Teboulle 2009, FGP): at r = p + beta (p − p_old),
+    x = z + mu d⁻¹ div r, p_new = P_{|·|≤1}(r + step ∇x).
+
+    Each thread walks a band of rows keeping two-row rings of r and x, so every row of
+    r and x is formed once, in cache, and never stored: the pass reads z, p (and p_old
+    when beta ≠ 0) and writes p_new, which must not alias p or p_old."""
+    C, H, W = z.shape
+    n_bands = (H + band - 1) // band
+    for t in prange(n_bands):
+        r0 = t * band
+        r1 = min(H, r0 + band)
+        rr = np.zeros((2, C, 2, W), np.float32)
+        xr = np.empty((2, C, W), np.float32)
         q = np.empty((C, 2, W), np.float32)
-        nrm = np.zeros(W, np.float32)
-        for c in range(C):
-            xr = xi[c]
-            qx = q[c, 0]
-            qy = q[c, 1]
-            rx = r_in[c, 0, i]
-            ry = r_in[c, 1, i]
-            for j in range(W - 1):
-                qx[j] = rx[j] + step * (xr[j + 1] - xr[j])
-            qx[W - 1] = rx[W - 1]
-            if i < H - 1:
-                xnr = xn[c]
-                for j in range(W):
-                    qy[j] = ry[j] + step * (xnr[j] - xr[j])
-            else:
-                for j in range(W):
-                    qy[j] = ry[j]
+        nrm = np.empty(W, np.float32)
+        one = np.float32(1.0)
+        if r0 > 0:
+            _r_row(p, p_old, beta, r0 - 1, rr[(r0 - 1) % 2])
+        _r_row(p, p_old, beta, r0, rr[r0 % 2])
+        _x_row(z, rr[r0 % 2], rr[(r0 + 1) % 2], mu, dinv, use_d, r0, xr[r0 % 2])
+        for i in range(r0, r1):
+            if i + 1 < H:
+                # r row i−1 is no longer needed: its slot takes row i+1
+                _r_row(p, p_old, beta, i + 1, rr[(i + 1) % 2])
+                _x_row(z, rr[(i + 1) % 2], rr[i % 2], mu, dinv, use_d, i + 1, xr[(i + 1) % 2])
+            ri = rr[i % 2]
+            xi = xr[i % 2]
+            xn = xr[(i + 1) % 2]
+            if coupled:
+                nrm[:] = 0.0
+            for c in range(C):
+                xrow = xi[c]
+                qx = q[c, 0]
+                qy = q[c, 1]
+                rx = ri[c, 0]
+                ry = ri[c, 1]
+                for j in range(W - 1):
+                    qx[j] = rx[j] + step * (xrow[j + 1] - xrow[j])
+                qx[W - 1] = rx[W - 1]
+                if i < H - 1:
+                    xnr = xn[c]
+                    for j in range(W):
+                        qy[j] = ry[j] + step * (xnr[j] - xrow[j])
+                else:
+                    for j in range(W):
+                        qy[j] = ry[j]
+                if coupled:
+                    for j in range(W):
+                        nrm[j] += qx[j] * qx[j] + qy[j] * qy[j]
             if coupled:
                 for j in range(W):
-                    nrm[j] += qx[j] * qx[j] + qy[j] * qy[j]
-        if coupled:
-            for j in range(W):
-                nrm[j] = 1.0 / max(1.0, math.sqrt(nrm[j]))
-        for c in range(C):
-            if not coupled:
-                for j in range(W):
-                    nrm[j] = 1.0 / max(1.0, math.sqrt(q[c, 0, j] ** 2 + q[c, 1, j] ** 2))
-            for d in range(2):
-                qd = q[c, d]
-                ro = r_out[c, d, i]
-                po = p_old[c, d, i]
-                pn = p_new[c, d, i]
-                for j in range(W):
-                    v = qd[j] * nrm[j]
-                    ro[j] = v + beta * (v - po[j])
-                    pn[j] = v
+                    nrm[j] = one / max(one, math.sqrt(nrm[j]))
+            for c in range(C):
+                if not coupled:
+                    for j in range(W):
+                        nrm[j] = one / max(one, math.sqrt(q[c, 0, j] * q[c, 0, j] + q[c, 1, j] * q[c, 1, j]))
+                for d in range(2):
+                    qd = q[c, d]
+                    pn = p_new[c, d, i]
+                    for j in range(W):
+                        pn[j] = qd[j] * nrm[j]
 
 
 class TVProx:
@@ -198,22 +242,18 @@ class TVProx:
         step = np.float32(1.0 / (8.0 * mu * dmax))
         mu32 = np.float32(mu)
         n = self.n_iter if n_iter is None else n_iter
-        # three dual buffers rotate: p (the iterate kept between calls), r (the
-        # extrapolated point) and a free one, so no copy is needed (see _dual_fused)
-        p, a, b = self.p, self._r, self._s
-        r = p
+        # three dual buffers rotate (p, the previous p, a free one): no copies; the
+        # extrapolated point is formed on the fly in _dual_step
+        p, p_old, free = self.p, self._r, self._s
         t = 1.0
-        for k in range(n):
+        beta = 0.0
+        for _ in range(n):
+            _dual_step(z, p, p_old if beta != 0.0 else p, np.float32(beta), mu32, dinv, use_d, step,
+                       self.coupled, BAND, free)
+            p_old, p, free = p, free, p_old
             t_new = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
-            beta = np.float32((t - 1.0) / t_new)
-            if k == 0:
-                # r_in is p: write q to fresh buffers (r → a, p → b), p's buffer is free
-                _dual_fused(z, p, p, a, b, mu32, dinv, use_d, step, beta, self.coupled)
-                r, p, a = a, b, p
-            else:
-                _dual_fused(z, r, p, a, p, mu32, dinv, use_d, step, beta, self.coupled)
-                r, a = a, r
+            beta = (t - 1.0) / t_new
             t = t_new
-        self.p, self._r, self._s = p, r, a
-        _primal(z, self.p, mu32, dinv, use_d, out)
+        self.p, self._r, self._s = p, p_old, free
+        _primal(z, self.p, mu32, dinv, use_d, BAND, out)
         return out

@@ -1,0 +1,313 @@
+"""One-pass kernels of the FISTA iteration (speed; the maths is in :mod:`.operators`).
+
+:func:`hessian_terms` computes, for a planar image ``x`` (C, H, W),
+
+    h = alpha · A x + gamma · Dᵀ A_g D x              (the Hessian product H x)
+
+together with the inner products the energy needs, ``⟨x, Ax⟩``, ``⟨b, x⟩``,
+``⟨x, DᵀA_gDx⟩``, ``⟨Dᵀb_g, x⟩`` and ``TV(x)``, in **one pass over memory**: it reads the two
+9-point stencils, ``x``, ``b`` and ``Dᵀb_g`` once and writes ``h`` once. The intermediate
+``D x`` and ``A_g D x`` (six planes each) never leave the cache: each thread walks a band of
+rows and keeps three-row ring buffers of them (``A_g D x`` at row k needs ``D x`` at rows
+k−1..k+1, ``Dᵀ(A_g D x)`` at row i needs ``A_g D x`` at rows i−1..i+1). The result equals the
+composition ``stencil_apply``, ``grad_central``, ``grad_central_adj`` of
+:mod:`.operators` to float rounding (tested).
+
+:func:`forward_step` is the FISTA forward step at the extrapolated point from the stored
+Hessian products (f is quadratic, so ``H y`` is the same combination of ``H x`` and
+``H x_prev`` as ``y`` of ``x`` and ``x_prev``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .operators import _stencil_point
+
+__all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start"]
+
+#: rows per band of :func:`hessian_terms` (halo work ≈ 3 / BAND of a pass)
+BAND = 24
+
+
+@njit(cache=True, fastmath=True)
+def _dx_row(x, k, dst):
+    """Row k of the central-difference gradient (replicated border, as
+    ``operators.grad_central``) into ``dst`` (C, 2, W + 2), columns shifted by one so that
+    the zero pads at 0 and W + 1 make the stencil's border terms vanish."""
+    C, H, W = x.shape
+    km = max(k - 1, 0)
+    kp = min(k + 1, H - 1)
+    for c in range(C):
+        xr = x[c, k]
+        gx = dst[c, 0]
+        gy = dst[c, 1]
+        if W > 1:
+            gx[1] = 0.5 * (xr[1] - xr[0])
+            for j in range(1, W - 1):
+                gx[j + 1] = 0.5 * (xr[j + 1] - xr[j - 1])
+            gx[W] = 0.5 * (xr[W - 1] - xr[W - 2])
+        else:
+            gx[1] = 0.0
+        a = x[c, kp]
+        b = x[c, km]
+        for j in range(W):
+            gy[j + 1] = 0.5 * (a[j] - b[j])
+
+
+@njit(cache=True, fastmath=True)
+def _stencil_row_padded(A, k, um, u0, up, out):
+    """out[j] = Σ_s A[s, k, j] · u_dy[j + dx + 1] for padded rows (W + 2) above, at and
+    below row k (all-zero rows where they fall outside the image)."""
+    W = out.shape[0]
+    a0, a1, a2 = A[0, k], A[1, k], A[2, k]
+    a3, a4, a5 = A[3, k], A[4, k], A[5, k]
+    a6, a7, a8 = A[6, k], A[7, k], A[8, k]
+    for j in range(W):
+        out[j] = (a0[j] * um[j] + a1[j] * um[j + 1] + a2[j] * um[j + 2]
+                  + a3[j] * u0[j] + a4[j] * u0[j + 1] + a5[j] * u0[j + 2]
+                  + a6[j] * up[j] + a7[j] * up[j + 1] + a8[j] * up[j + 2])
+
+
+@njit(cache=True, fastmath=True)
+def _stencil_row(A, u, c, i, out):
+    """Row i of the 9-point stencil ``A`` applied to channel c of ``u`` (C, H, W)."""
+    C, H, W = u.shape
+    if 0 < i < H - 1 and W > 2:
+        a0, a1, a2 = A[0, i], A[1, i], A[2, i]
+        a3, a4, a5 = A[3, i], A[4, i], A[5, i]
+        a6, a7, a8 = A[6, i], A[7, i], A[8, i]
+        um, u0, up = u[c, i - 1], u[c, i], u[c, i + 1]
+        for j in range(1, W - 1):
+            out[j] = (a0[j] * um[j - 1] + a1[j] * um[j] + a2[j] * um[j + 1]
+                      + a3[j] * u0[j - 1] + a4[j] * u0[j] + a5[j] * u0[j + 1]
+                      + a6[j] * up[j - 1] + a7[j] * up[j] + a8[j] * up[j + 1])
+        out[0] = _stencil_point(A, u, c, i, 0, H, W)
+        out[W - 1] = _stencil_point(A, u, c, i, W - 1, H, W)
+    else:
+        for j in range(W):
+            out[j] = _stencil_point(A, u, c, i, j, H, W)
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms, band, h, parts):
+    C, H, W = x.shape
+    n_bands = parts.shape[0]
+    for t in prange(n_bands):
+        r0 = t * band
+        r1 = min(H, r0 + band)
+        xAx = 0.0
+        bx = 0.0
+        xGx = 0.0
+        gx = 0.0
+        tv = 0.0
+        hh = 0.0
+        ax = np.empty(W, np.float32)
+        tvacc = np.empty(W, np.float32)
+        # ring buffers (row mod 3): D x padded, A_g D x; tags = the row a slot holds
+        dring = np.zeros((3, C, 2, W + 2), np.float32)
+        gring = np.zeros((3, C, 2, W), np.float32)
+        zero = np.zeros(W + 2, np.float32)
+        dtag = np.full(3, -10, np.int64)
+        gx_row = np.empty(W, np.float32)
+        for k in range(r0 - 1, r1 + 1):
+            if use_grad and 0 <= k < H:
+                # A_g D x at row k, from D x at rows k-1..k+1
+                for kk in range(max(k - 1, 0), min(k + 2, H)):
+                    s = kk % 3
+                    if dtag[s] != kk:
+                        _dx_row(x, kk, dring[s])
+                        dtag[s] = kk
+                g = gring[k % 3]
+                for c in range(C):
+                    for d in range(2):
+                        um = dring[(k - 1) % 3, c, d] if k >= 1 else zero
+                        up = dring[(k + 1) % 3, c, d] if k + 1 < H else zero
+                        _stencil_row_padded(Ag, k, um, dring[k % 3, c, d], up, g[c, d])
+            i = k - 1
+            if i < r0 or i >= r1:
+                continue
+            # output row i
+            if coupled:
+                tvacc[:] = 0.0
+            nxt = min(i + 1, H - 1)
+            for c in range(C):
+                _stencil_row(A, x, c, i, ax)
+                xr = x[c, i]
+                br = b[c, i]
+                hr = h[c, i]
+                if use_grad:
+                    # Dᵀ(A_g D x) at row i (operators.grad_central_adj, per axis)
+                    gxx = gring[i % 3, c, 0]
+                    if W > 1:
+                        gx_row[0] = -0.5 * (gxx[1] + gxx[0])
+                        for j in range(1, W - 1):
+                            gx_row[j] = 0.5 * (gxx[j - 1] - gxx[j + 1])
+                        gx_row[W - 1] = 0.5 * (gxx[W - 2] + gxx[W - 1])
+                    else:
+                        gx_row[0] = 0.0
+                    if H > 1:
+                        if i >= 1:
+                            a_ = gring[(i - 1) % 3, c, 1]
+                            for j in range(W):
+                                gx_row[j] += 0.5 * a_[j]
+                        if i == H - 1:
+                            a_ = gring[i % 3, c, 1]
+                            for j in range(W):
+                                gx_row[j] += 0.5 * a_[j]
+                        if i <= H - 2:
+                            a_ = gring[(i + 1) % 3, c, 1]
+                            for j in range(W):
+                                gx_row[j] -= 0.5 * a_[j]
+                        if i == 0:
+                            a_ = gring[i % 3, c, 1]
+                            for j in range(W):
+                                gx_row[j] -= 0.5 * a_[j]
+                    if with_terms:
+                        gr = bgt[c, i]
+                        for j in range(W):
+                            xv = np.float64(xr[j])
+                            xAx += xv * ax[j]
+                            bx += xv * br[j]
+                            xGx += xv * gx_row[j]
+                            gx += xv * gr[j]
+                            hr[j] = alpha * ax[j] + gamma * gx_row[j]
+                    else:
+                        for j in range(W):
+                            xv = np.float64(xr[j])
+                            xAx += xv * ax[j]
+                            xGx += xv * gx_row[j]
+                            hv = alpha * ax[j] + gamma * gx_row[j]
+                            hr[j] = hv
+                            hh += np.float64(hv) * hv
+                elif with_terms:
+                    for j in range(W):
+                        xv = np.float64(xr[j])
+                        xAx += xv * ax[j]
+                        bx += xv * br[j]
+                        hr[j] = alpha * ax[j]
+                else:
+                    for j in range(W):
+                        xAx += np.float64(xr[j]) * ax[j]
+                        hv = alpha * ax[j]
+                        hr[j] = hv
+                        hh += np.float64(hv) * hv
+                if not with_terms:
+                    continue
+                # TV (forward differences, Neumann: tv.tv_value)
+                un = x[c, nxt]
+                if coupled:
+                    for j in range(W - 1):
+                        dx_ = xr[j + 1] - xr[j]
+                        dy_ = un[j] - xr[j]
+                        tvacc[j] += dx_ * dx_ + dy_ * dy_
+                    dy_ = un[W - 1] - xr[W - 1]
+                    tvacc[W - 1] += dy_ * dy_
+                else:
+                    for j in range(W - 1):
+                        dx_ = xr[j + 1] - xr[j]
+                        dy_ = un[j] - xr[j]
+                        tv += math.sqrt(dx_ * dx_ + dy_ * dy_)
+                    tv += abs(un[W - 1] - xr[W - 1])
+            if coupled and with_terms:
+                for j in range(W):
+                    tv += math.sqrt(tvacc[j])
+        parts[t, 0] = xAx
+        parts[t, 1] = bx
+        parts[t, 2] = xGx
+        parts[t, 3] = gx
+        parts[t, 4] = tv
+        parts[t, 5] = hh
+
+
+def hessian_terms(A, Ag, x, b, bgt, alpha, gamma, coupled=True, out=None):
+    """``(h, (⟨x,Ax⟩, ⟨b,x⟩, ⟨x,DᵀA_gDx⟩, ⟨Dᵀb_g,x⟩, TV(x)))`` in one pass (module doc).
+
+    ``A``, ``Ag`` (9, H, W) float32 stencils (``Ag`` None or gamma = 0: colour term only;
+    the gradient entries are then 0), ``x``, ``b``, ``bgt`` (C, H, W) float32 planar;
+    ``h`` = ``alpha·Ax + gamma·DᵀA_gDx`` is written to ``out`` (allocated when None).
+    Inner products are accumulated in float64."""
+    h, s = _run(A, Ag, x, b, bgt, alpha, gamma, coupled, True, out)
+    return h, (float(s[0]), float(s[1]), float(s[2]), float(s[3]), float(s[4]))
+
+
+def hessian_power(A, Ag, x, alpha, gamma, out=None):
+    """One power-iteration pass: ``h = alpha·Ax + gamma·DᵀA_gDx`` into ``out``, with
+    ``(⟨x,Ax⟩, ⟨x,DᵀA_gDx⟩, ‖h‖²)``; reads only the stencils and ``x`` (no energy terms)."""
+    h, s = _run(A, Ag, x, x, x, alpha, gamma, True, False, out)
+    return h, (float(s[0]), float(s[2]), float(s[5]))
+
+
+def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out):
+    C, H, W = x.shape
+    use_grad = Ag is not None and gamma != 0
+    if out is None:
+        out = np.empty_like(x)
+    n_bands = (H + BAND - 1) // BAND
+    parts = np.zeros((n_bands, 6))
+    if not use_grad:
+        Ag, bgt = A, b  # unused placeholders of the right types
+    _hessian_terms(A, Ag, x, b, bgt, np.float32(alpha), np.float32(gamma), use_grad, bool(coupled),
+                   bool(with_terms), BAND, out, parts)
+    return out, parts.sum(0)
+
+
+@njit(parallel=True, cache=True)
+def _power_start(out):
+    # a deterministic, zero-mean pseudo-random vector (splitmix-style integer hash): every
+    # eigenvector has a component, and it costs one write pass (no RNG state)
+    n = out.shape[0]
+    for i in prange(n):
+        z = np.uint64(i + 1) * np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(31))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = z ^ (z >> np.uint64(29))
+        out[i] = np.float32(np.float64(z >> np.uint64(40)) / 16777216.0 - 0.5)
+
+
+def power_start(shape):
+    """A deterministic start vector for power iterations (float32, uniform in [−½, ½))."""
+    out = np.empty(shape, np.float32)
+    _power_start(out.reshape(-1))
+    return out
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def _forward_kernel(x, xp, hx, hxp, r, beta, dinv, step, out):
+    # blocks of contiguous pixels, channels outside the inner loop: every stream is
+    # read sequentially and the inner loop vectorises
+    C, n = x.shape
+    use_d = dinv.shape[0] == n
+    blk = 4096
+    for t in prange((n + blk - 1) // blk):
+        i0 = t * blk
+        i1 = min(n, i0 + blk)
+        for c in range(C):
+            xc, xpc, hc, hpc, rc, oc = x[c], xp[c], hx[c], hxp[c], r[c], out[c]
+            if use_d:
+                for i in range(i0, i1):
+                    y = xc[i] + beta * (xc[i] - xpc[i])
+                    hy = hc[i] + beta * (hc[i] - hpc[i])
+                    oc[i] = y - step * dinv[i] * (hy - rc[i])
+            else:
+                for i in range(i0, i1):
+                    y = xc[i] + beta * (xc[i] - xpc[i])
+                    hy = hc[i] + beta * (hc[i] - hpc[i])
+                    oc[i] = y - step * (hy - rc[i])
+
+
+def forward_step(x, hx, r, step, dinv=None, x_prev=None, h_prev=None, beta=0.0, out=None):
+    """``y − step · d⁻¹ · (H y − r)`` at ``y = x + beta (x − x_prev)``, with
+    ``H y = hx + beta (hx − h_prev)``: planar (C, H, W) float32; ``dinv`` (H, W) or None."""
+    if x_prev is None or beta == 0.0:
+        x_prev, h_prev, beta = x, hx, 0.0
+    C = x.shape[0]
+    if out is None:
+        out = np.empty_like(x)
+    d = np.zeros(0, np.float32) if dinv is None else np.ascontiguousarray(dinv, np.float32).ravel()
+    flat = lambda a: a.reshape(C, -1)  # noqa: E731
+    _forward_kernel(flat(x), flat(x_prev), flat(hx), flat(h_prev), flat(r), np.float32(beta), d,
+                    np.float32(step), flat(out))
+    return out
