@@ -220,3 +220,30 @@ def test_render_samples_psf_parameter():
                           target_centre=tgt.camera.centre).params["psf"] == "footprint"
     with pytest.raises(VibrInputError):
         render_samples(S, "bvs", psf="box")
+
+
+def test_cli_psf_option(tmp_path, capsys):
+    """``vibr render --psf footprint`` at half the sources' resolution and ``vibr eval --psf``
+    (the report records the PSF)."""
+    import json
+
+    from vibr.cli import main
+    from vibr.io import load_scene, read_image, save_scene, write_camera_json
+    from vibr.synthetic import make_scene
+
+    save_scene(make_scene("grid", n_views=9, width=64, height=64, seed=1), tmp_path / "s")
+    sc = load_scene(tmp_path / "s")
+    cam = tmp_path / "half.json"
+    write_camera_json(cam, sc["view_004"].camera.scaled(0.5))
+    out = tmp_path / "half.png"
+    assert main(["render", str(tmp_path / "s"), "--target", str(cam), "-o", str(out), "--method", "bvs",
+                 "--sources", "view_000,view_001,view_002,view_003", "--psf", "footprint", "-q"]) == 0
+    assert read_image(out).shape == (32, 32, 3)
+    rep = tmp_path / "r.json"
+    assert main(["eval", str(tmp_path / "s"), "--target", "view_004", "--method", "bvs", "--psf", "footprint",
+                 "--json", str(rep), "-q"]) == 0
+    res = json.loads(rep.read_text())["results"]
+    assert [r["params"]["psf"] for r in res] == ["footprint"] and res[0]["psnr"] > 30
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(out), "--psf", "box"])
