@@ -59,6 +59,11 @@ def test_identity_jacobian_gives_bilinear_coefficients():
     fp = Splat(xy, (H, W), jac=np.broadcast_to(np.eye(2), (n, 2, 2)), psf="footprint")
     assert fp.n_shrunk == 0 and fp.n_degenerate == 0
     assert abs(explicit_B(fp) - explicit_B(bil)).max() < 1e-12
+    # far from the origin of a large image (the areas are computed in local coordinates)
+    xy = np.c_[rng.uniform(4000, 4999, n), rng.uniform(0, 7, n)]
+    bil = Splat(xy, (8, 5000))
+    fp = Splat(xy, (8, 5000), jac=np.broadcast_to(np.eye(2), (n, 2, 2)), psf="footprint")
+    assert abs(explicit_B(fp) - explicit_B(bil)).max() < 1e-12
 
 
 def test_closed_form_cases():

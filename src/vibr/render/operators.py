@@ -117,10 +117,11 @@ def _footprint_setup(xy, jac, H, W, coef, bx0, by0, flags):
 
     To keep each row of B on a 2×2 block (the 9-point stencil), a footprint whose bounding
     box is wider (higher) than one target pixel is shrunk about its centre along x (y),
-    i.e. row 0 (1) of J is scaled, until the box is exactly 1 px wide (high): ``flags[i]``
-    = 1 (when by more than 1e-6). Along an axis where it fits, the footprint keeps its exact extent; J = s·I with
-    s ≥ 1 (a coarser source) degrades to the unit square, i.e. the bilinear PSF. Non-finite
-    or singular J: the unit square (bilinear), ``flags[i]`` = 2. The centre is clamped to
+    i.e. row 0 (1) of J is scaled, until the box is exactly 1 px wide (high); ``flags[i]``
+    = 1 when it exceeded 1 px by more than 1e-6. Along an axis where it fits, the footprint
+    keeps its exact extent; J = s·I with s ≥ 1 (a coarser source) degrades to the unit
+    square, i.e. the bilinear PSF. Non-finite or singular J: the unit square (bilinear),
+    ``flags[i]`` = 2. The centre is clamped to
     ``[0, W-1] × [0, H-1]`` as for the bilinear PSF, so P never leaves the image domain.
     """
     n = xy.shape[0]
@@ -165,26 +166,28 @@ def _footprint_setup(xy, jac, H, W, coef, bx0, by0, flags):
             bx0[i] = xi
             by0[i] = yi
             flags[i] = flag
-            # corners in cyclic order: c + ½J(∓1, ∓1)
+            # corners in cyclic order, c + ½J(∓1, ∓1), relative to the block's inner
+            # corner (xi + ½, yi + ½) where its pixel borders cross (small numbers: the
+            # shoelace areas keep their precision whatever the image size)
+            ox = xc - (xi + 0.5)
+            oy = yc - (yi + 0.5)
             ax, ay = 0.5 * j00, 0.5 * j10  # ½ J e_x
             bx, by = 0.5 * j01, 0.5 * j11  # ½ J e_y
-            px[0] = xc - ax - bx
-            py[0] = yc - ay - by
-            px[1] = xc + ax - bx
-            py[1] = yc + ay - by
-            px[2] = xc + ax + bx
-            py[2] = yc + ay + by
-            px[3] = xc - ax + bx
-            py[3] = yc - ay + by
-            cx = xi + 0.5  # the block's inner pixel borders
-            cy = yi + 0.5
-            nl = _clip(px, py, 4, 0, cx, 1.0, lx, ly)  # left column
+            px[0] = ox - ax - bx
+            py[0] = oy - ay - by
+            px[1] = ox + ax - bx
+            py[1] = oy + ay - by
+            px[2] = ox + ax + bx
+            py[2] = oy + ay + by
+            px[3] = ox - ax + bx
+            py[3] = oy - ay + by
+            nl = _clip(px, py, 4, 0, 0.0, 1.0, lx, ly)  # left column (x <= 0)
             al = _poly_area(lx, ly, nl)
-            m = _clip(lx, ly, nl, 1, cy, 1.0, qx, qy)
+            m = _clip(lx, ly, nl, 1, 0.0, 1.0, qx, qy)  # its top pixel (y <= 0)
             a00 = _poly_area(qx, qy, m)
-            nr = _clip(px, py, 4, 0, cx, -1.0, lx, ly)  # right column
+            nr = _clip(px, py, 4, 0, 0.0, -1.0, lx, ly)  # right column (x >= 0)
             ar = _poly_area(lx, ly, nr)
-            m = _clip(lx, ly, nr, 1, cy, 1.0, qx, qy)
+            m = _clip(lx, ly, nr, 1, 0.0, 1.0, qx, qy)
             a01 = _poly_area(qx, qy, m)
             tot = al + ar
             c00 = a00 / tot
