@@ -76,6 +76,9 @@ def register(sub) -> None:
     p.add_argument("--mask", choices=["reconstructed", "all"], default="reconstructed",
                    help="pixels the metrics are taken over (default: reconstructed)")
     p.add_argument("--border", type=int, default=0, help="pixels excluded at the image border (default: 0)")
+    p.add_argument("--psf", choices=["bilinear", "footprint"], default=None,
+                   help="image-formation model of the variational methods: bilinear (default) or "
+                        "footprint (the source pixel's parallelogram)")
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
     add_quiet(p)
@@ -98,7 +101,8 @@ def run(args) -> int:
     report = evaluate(scene, args.target, settings, sources=args.sources, depth=args.depth,
                       depth_files=args.depth_files, n_views=args.views, mask=args.mask,
                       border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
-                      intensity_scale=args.intensity_scale)
+                      intensity_scale=args.intensity_scale,
+                      render_kw={"psf": args.psf} if args.psf else None)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")

@@ -48,6 +48,9 @@ def register(sub) -> None:
     p.add_argument("--outer", type=int, help="weight re-estimation passes (default 2)")
     p.add_argument("--iterations", type=int, help="FISTA iterations per pass at most (default 60)")
     p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
+    p.add_argument("--psf", choices=["bilinear", "footprint"],
+                   help="image-formation model: bilinear (default) or the source pixel's footprint "
+                        "parallelogram (worth it when the sources are finer than the target)")
     p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
     p.add_argument("--depth", default="auto", choices=["auto", "gt", "given", "estimated", "planar", "files"],
                    help="source geometry: the scene's depth maps (gt, alias given), depth estimated "
@@ -86,7 +89,7 @@ def run(args) -> int:
                               depth_files=args.depth_files, n_views=args.views)
     params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
                   scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
-                  precond=True if args.precond else None)
+                  precond=True if args.precond else None, psf=args.psf)
     if args.sigma_z is not None:
         params["sigma_z"] = args.sigma_z
     res = render(sources, target, args.method, depth="given", progress_bar=not is_quiet(),

@@ -44,7 +44,10 @@ class RenderResult:
         ``total``.
     method : str
     params : dict
-        The parameters used (defaults filled in).
+        The parameters used (defaults filled in), plus (variational methods) ``density``
+        (the normalisation rho), ``psf_shrunk`` (fraction of the samples whose footprint
+        was shrunk to fit a 2×2 block; 0 with the bilinear PSF) and ``psf_degenerate``
+        (fraction with a non-finite or singular Jacobian, given the unit-square PSF).
     n_samples : int
     metrics : dict
         ``psnr`` / ``ssim`` / ``dssim`` against the held-out view (when the target is a
@@ -91,7 +94,12 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
     s = float(p["scale"])
 
     t0 = time.perf_counter()
-    sp = Splat(samples.xy, (H, W))
+    if method != "ulr" and p["psf"] == "footprint":
+        # B_kmp = area(P_km ∩ p) / area(P_km), P_km the source pixel's parallelogram
+        # (paper §4.1, fig. discretization right); footprints over 1 px shrunk per axis
+        sp = Splat(samples.xy, (H, W), jac=samples.jac, psf="footprint")
+    else:
+        sp = Splat(samples.xy, (H, W))  # bilinear PSF (ulr: only its coverage)
     gamma = p["gamma"] if method == "gradient" else 0.0
     BtB = Btg = None
     cg_unit = 0.0
@@ -102,7 +110,7 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
         BtB, Btg, cg_unit = sp.normal(np.ones(len(samples), np.float32), grad_vals, dtype=np.float32)
         acc = BtB.sum(0, dtype=np.float64)
     else:
-        acc = sp.adjoint(np.ones(len(samples), np.float32))  # unweighted bilinear coverage
+        acc = sp.adjoint(np.ones(len(samples), np.float32))  # unweighted coverage Bᵀ1
     coverage = acc >= p["hole_threshold"]
     times["assembly"] += time.perf_counter() - t0
 
@@ -137,7 +145,7 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
     Wk = weights(None)
     t0 = time.perf_counter()
     A0, bw, _ = sp.normal(Wk, colour, dtype=np.float32)
-    wsum = A0.sum(0)  # Σ_s (BᵀWB)[s] = Bᵀ W 1: bilinear rows sum to one
+    wsum = A0.sum(0)  # Σ_s (BᵀWB)[s] = Bᵀ W 1: rows of B sum to one (either PSF)
     del A0
     blend = np.where(wsum > 0, bw / np.maximum(wsum, 1e-30), 0.0).transpose(1, 2, 0)
     # blend = Σ W b c / Σ W b (W-weighted bilinear splat); the push–pull weight is the plain
@@ -202,7 +210,7 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
         bar.close()
     times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
-    p = dict(p, density=rho)
+    p = dict(p, density=rho, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
     return RenderResult(img, coverage, energy, terms, outer, times,
                         method, p, len(samples), init=init, iterations=n_iter, power_iterations=n_power)
 
@@ -276,7 +284,11 @@ def render(sources: Scene, target: View | Camera, method: str = "gradient", *,
         images are [0, 1] internally), n_outer (2), max_iter (60), tol (1e-4, relative
         energy change), tv_iter (2), coupled_tv (True), grad_weighting ("visibility" | "none"
         | "W"), grad_max (64 grey levels / px), precond (False), hole_threshold (0.5),
-        ulr_k (4), ulr_beta_res (0.1). See :mod:`vibr.render.methods`.
+        ulr_k (4), ulr_beta_res (0.1), psf ("bilinear" | "footprint": the image-formation
+        model ``v_k = B_k u``, paper §4.1 eq. normal; with "footprint"
+        ``B_kmp = area(P_km ∩ p) / area(P_km)``, ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²``
+        the source pixel's parallelogram, footprints larger than one target pixel shrunk
+        per axis to 1 px; ulr ignores it). See :mod:`vibr.render.methods`.
 
     Returns
     -------

@@ -20,6 +20,13 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, METHO
 * ``sigma_s = 1.0`` sensor noise, grey levels of 255 (METHOD §3, the authors' value).
 * ``sigma_z = None`` depth std. dev., scene units: the samples' own (the geometry stage's
   per-view value, default 1 % of the median depth).
+* ``psf = "bilinear"`` the image-formation model ``v_k = B_k u`` (paper §4.1 eq. normal,
+  METHOD §4): ``"bilinear"`` (unit-square transformed PSF: the bilinear coefficients of
+  ``tau_k(x_m)``) or ``"footprint"`` (``B_kmp = area(P_km ∩ p) / area(P_km)``, the source
+  pixel's parallelogram ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²``, paper fig.
+  discretization right; footprints larger than a target pixel shrunk per axis to 1 px, see
+  :class:`vibr.render.operators.Splat`). Worth it when the sources are finer than the
+  target. ulr ignores it.
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ DEFAULTS = dict(
     alpha=1.0, gamma=1.0, lam=0.1, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
-    hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1,
+    hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
 )
 
 #: Per-method overrides.
@@ -43,6 +50,9 @@ METHOD_OVERRIDES = {
 }
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
+
+#: Image-formation models (:class:`vibr.render.operators.Splat`).
+PSFS = ("bilinear", "footprint")
 
 
 def method_params(method: str, **params) -> dict:
@@ -62,6 +72,8 @@ def method_params(method: str, **params) -> dict:
             if k == "gamma" and method != "gradient":
                 continue
             p[k] = v
+    if p["psf"] not in PSFS:
+        raise VibrInputError(f"psf must be one of {PSFS}, got {p['psf']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
     return p

@@ -1,8 +1,11 @@
 """Linear operators of the image-formation model (paper §4.1, METHOD §4-5), with adjoints.
 
-* ``B`` (:class:`Splat`): the bilinear PSF. Row m of ``B_k`` holds the 4 bilinear
-  coefficients of ``tau_k(x_m)`` in the target grid, ``(B u)(m) = Σ_p B_mp u(p)``
-  (METHOD §4, eq. v_k = B_k u). Its adjoint ``Bᵀ`` splats sample values back.
+* ``B`` (:class:`Splat`): the PSF matrix, ``(B u)(m) = Σ_p B_mp u(p)`` (paper §4.1
+  eq. normal, METHOD §4). Row m holds 4 coefficients on a 2×2 block of target pixels:
+  the bilinear coefficients of ``tau_k(x_m)`` (``psf="bilinear"``, the default), or the
+  overlap areas of the source pixel's footprint parallelogram with the block's pixels
+  (``psf="footprint"``, the paper's figure fig:discretization, right). Its adjoint ``Bᵀ``
+  splats sample values back.
 * The weighted normal operator ``A = Σ_k B_kᵀ W_k B_k``. Because each row of ``B`` touches
   a 2×2 block of target pixels, ``A`` only couples pixels at offsets in {-1,0,1}²:
   it is a **9-point stencil with spatially varying coefficients** whatever the warps.
@@ -26,7 +29,7 @@ import numpy as np
 from numba import njit, prange
 
 __all__ = [
-    "Splat", "assemble", "stencil_apply", "stencil_to_sparse", "explicit_B",
+    "PSFS", "Splat", "assemble", "stencil_apply", "stencil_to_sparse", "explicit_B",
     "grad_fwd", "div_bwd", "grad_central", "grad_central_adj", "dot", "norm_sq",
 ]
 
@@ -34,7 +37,7 @@ __all__ = [
 # ----------------------------------------------------------------------------- helpers
 @njit(cache=True)
 def _bucket_by_row(y0, n_rows):
-    """Counting sort of samples by their top bilinear row: (order, starts)."""
+    """Counting sort of samples by the top row of their 2×2 block: (order, starts)."""
     n = y0.shape[0]
     counts = np.zeros(n_rows + 1, np.int64)
     for i in range(n):
@@ -71,17 +74,153 @@ def _bilinear_setup(xy, H, W):
     return x0, y0, fx, fy
 
 
+@njit(cache=True)
+def _clip(px, py, n, axis, c, sign, qx, qy):
+    """Sutherland–Hodgman: the part of the convex polygon (px, py)[:n] where
+    ``sign · (coord − c) <= 0`` (coord = x for axis 0, y for axis 1), into (qx, qy);
+    returns its number of vertices."""
+    m = 0
+    for k in range(n):
+        k1 = k + 1 if k + 1 < n else 0
+        ax, ay = px[k], py[k]
+        bx, by = px[k1], py[k1]
+        da = sign * ((ax if axis == 0 else ay) - c)
+        db = sign * ((bx if axis == 0 else by) - c)
+        if da <= 0.0:
+            qx[m] = ax
+            qy[m] = ay
+            m += 1
+        if (da < 0.0 < db) or (db < 0.0 < da):
+            t = da / (da - db)
+            qx[m] = ax + t * (bx - ax)
+            qy[m] = ay + t * (by - ay)
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def _poly_area(px, py, n):
+    """|area| of a simple polygon (shoelace)."""
+    a = 0.0
+    for k in range(n):
+        k1 = k + 1 if k + 1 < n else 0
+        a += px[k] * py[k1] - px[k1] * py[k]
+    return abs(0.5 * a)
+
+
 @njit(parallel=True, cache=True)
-def _B_apply(u, x0, y0, fx, fy):
+def _footprint_setup(xy, jac, H, W, coef, bx0, by0, flags):
+    """Footprint PSF (paper §4.1, fig. discretization right): the source pixel's square
+    ``[-½, ½]²`` maps under the local linear warp to the parallelogram
+    ``P = tau(x_m) + J·[-½, ½]²``; ``coef[i, 2 dy + dx]`` = area(P ∩ pixel (by0 + dy,
+    bx0 + dx)) / area(P).
+
+    To keep each row of B on a 2×2 block (the 9-point stencil), a footprint whose bounding
+    box is wider (higher) than one target pixel is shrunk about its centre along x (y),
+    i.e. row 0 (1) of J is scaled, until the box is exactly 1 px wide (high); ``flags[i]``
+    = 1 when it exceeded 1 px by more than 1e-6. Along an axis where it fits, the footprint
+    keeps its exact extent; J = s·I with s ≥ 1 (a coarser source) degrades to the unit
+    square, i.e. the bilinear PSF. Non-finite or singular J: the unit square (bilinear),
+    ``flags[i]`` = 2. The centre is clamped to
+    ``[0, W-1] × [0, H-1]`` as for the bilinear PSF, so P never leaves the image domain.
+    """
+    n = xy.shape[0]
+    chunk = 2048
+    n_chunks = (n + chunk - 1) // chunk
+    for ch in prange(n_chunks):
+        px = np.empty(8)
+        py = np.empty(8)
+        lx = np.empty(8)
+        ly = np.empty(8)
+        qx = np.empty(8)
+        qy = np.empty(8)
+        for i in range(ch * chunk, min(n, (ch + 1) * chunk)):
+            xc = min(max(xy[i, 0], 0.0), W - 1.0)
+            yc = min(max(xy[i, 1], 0.0), H - 1.0)
+            j00, j01, j10, j11 = jac[i, 0, 0], jac[i, 0, 1], jac[i, 1, 0], jac[i, 1, 1]
+            flag = 0
+            ok = (np.isfinite(j00) and np.isfinite(j01) and np.isfinite(j10)
+                  and np.isfinite(j11))
+            if ok:
+                ex = abs(j00) + abs(j01)  # bounding-box width / height of P
+                ey = abs(j10) + abs(j11)
+                if ex > 1.0:
+                    j00 /= ex
+                    j01 /= ex
+                if ey > 1.0:
+                    j10 /= ey
+                    j11 /= ey
+                if max(ex, ey) > 1.0 + 1e-6:  # (rounding of an exact 1 px is not counted)
+                    flag = 1
+                ex = abs(j00) + abs(j01)
+                ey = abs(j10) + abs(j11)
+                ok = abs(j00 * j11 - j01 * j10) > 1e-9 * max(ex * ey, 1e-300)
+            if not ok:
+                j00, j01, j10, j11 = 1.0, 0.0, 0.0, 1.0
+                flag = 2
+            hx = 0.5 * (abs(j00) + abs(j01))
+            hy = 0.5 * (abs(j10) + abs(j11))
+            # the block's left column / top row: the pixel holding the box's left / top side
+            xi = min(max(int(np.floor(xc - hx + 0.5)), 0), max(W - 2, 0))
+            yi = min(max(int(np.floor(yc - hy + 0.5)), 0), max(H - 2, 0))
+            bx0[i] = xi
+            by0[i] = yi
+            flags[i] = flag
+            # corners in cyclic order, c + ½J(∓1, ∓1), relative to the block's inner
+            # corner (xi + ½, yi + ½) where its pixel borders cross (small numbers: the
+            # shoelace areas keep their precision whatever the image size)
+            ox = xc - (xi + 0.5)
+            oy = yc - (yi + 0.5)
+            ax, ay = 0.5 * j00, 0.5 * j10  # ½ J e_x
+            bx, by = 0.5 * j01, 0.5 * j11  # ½ J e_y
+            px[0] = ox - ax - bx
+            py[0] = oy - ay - by
+            px[1] = ox + ax - bx
+            py[1] = oy + ay - by
+            px[2] = ox + ax + bx
+            py[2] = oy + ay + by
+            px[3] = ox - ax + bx
+            py[3] = oy - ay + by
+            nl = _clip(px, py, 4, 0, 0.0, 1.0, lx, ly)  # left column (x <= 0)
+            al = _poly_area(lx, ly, nl)
+            m = _clip(lx, ly, nl, 1, 0.0, 1.0, qx, qy)  # its top pixel (y <= 0)
+            a00 = _poly_area(qx, qy, m)
+            nr = _clip(px, py, 4, 0, 0.0, -1.0, lx, ly)  # right column (x >= 0)
+            ar = _poly_area(lx, ly, nr)
+            m = _clip(lx, ly, nr, 1, 0.0, 1.0, qx, qy)
+            a01 = _poly_area(qx, qy, m)
+            tot = al + ar
+            c00 = a00 / tot
+            c01 = a01 / tot
+            c10 = max(al - a00, 0.0) / tot
+            c11 = max(ar - a01, 0.0) / tot
+            coef[i, 0] = c00
+            coef[i, 1] = c01
+            coef[i, 2] = c10
+            coef[i, 3] = c11
+
+
+@njit(parallel=True, cache=True)
+def _B_apply(u, x0, y0, fx, fy, coef):
+    """``B u`` at the 2×2 blocks (x0, y0): bilinear coefficients from (fx, fy) when
+    ``coef`` is empty, else ``coef`` (N, 4), order (top-left, top-right, bottom-left,
+    bottom-right)."""
     n = x0.shape[0]
     C = u.shape[2]
+    use_coef = coef.shape[0] == n and n > 0
     out = np.empty((n, C), np.float64)
     for i in prange(n):
-        a, b = fx[i], fy[i]
-        w00 = (1 - a) * (1 - b)
-        w01 = a * (1 - b)
-        w10 = (1 - a) * b
-        w11 = a * b
+        if use_coef:
+            w00 = coef[i, 0]
+            w01 = coef[i, 1]
+            w10 = coef[i, 2]
+            w11 = coef[i, 3]
+        else:
+            a, b = fx[i], fy[i]
+            w00 = (1 - a) * (1 - b)
+            w01 = a * (1 - b)
+            w10 = (1 - a) * b
+            w11 = a * b
         x, y = x0[i], y0[i]
         for c in range(C):
             out[i, c] = (w00 * u[y, x, c] + w01 * u[y, x + 1, c]
@@ -90,9 +229,10 @@ def _B_apply(u, x0, y0, fx, fy):
 
 
 @njit(parallel=True, cache=True)
-def _assemble_kernel(x0, y0, fx, fy, order, starts, w, vals, A, rhs, with_stencil):
+def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_stencil):
     """Σ Bᵀ diag(w) B (9-point stencil, into ``A``), Σ Bᵀ (w·vals) (into ``rhs``) and
-    returns ½ Σ w |vals|².
+    returns ½ Σ w |vals|². Row i of B: 2×2 block at (x0, y0), coefficients bilinear from
+    (fx, fy) when ``coef`` is empty, else ``coef[i]`` (see :func:`_B_apply`).
 
     Rows of samples are processed in two passes of even / odd top rows: a sample with
     top row r writes rows r and r+1 only, so buckets of one parity never collide. Each
@@ -104,6 +244,7 @@ def _assemble_kernel(x0, y0, fx, fy, order, starts, w, vals, A, rhs, with_stenci
     W = rhs.shape[2]
     n_rows = starts.shape[0] - 1
     S = 9 if with_stencil else 0
+    use_coef = coef.shape[0] == x0.shape[0] and x0.shape[0] > 0
     cpart = np.zeros(n_rows, np.float64)
     for parity in range(2):
         for r in prange(n_rows):
@@ -118,12 +259,18 @@ def _assemble_kernel(x0, y0, fx, fy, order, starts, w, vals, A, rhs, with_stenci
                 wi = np.float64(w[i])
                 if wi == 0.0:
                     continue
-                a = np.float64(fx[i])
-                b = np.float64(fy[i])
-                b0 = (1 - a) * (1 - b)
-                b1 = a * (1 - b)
-                b2 = (1 - a) * b
-                b3 = a * b
+                if use_coef:
+                    b0 = coef[i, 0]
+                    b1 = coef[i, 1]
+                    b2 = coef[i, 2]
+                    b3 = coef[i, 3]
+                else:
+                    a = np.float64(fx[i])
+                    b = np.float64(fy[i])
+                    b0 = (1 - a) * (1 - b)
+                    b1 = a * (1 - b)
+                    b2 = (1 - a) * b
+                    b3 = a * b
                 w0 = wi * b0
                 w1 = wi * b1
                 w2 = wi * b2
@@ -243,8 +390,11 @@ def norm_sq(a) -> float:
 
 
 # ----------------------------------------------------------------------------- B
+PSFS = ("bilinear", "footprint")
+
+
 class Splat:
-    """The bilinear PSF ``B`` of a set of sample positions (METHOD §4).
+    """The PSF matrix ``B`` of a set of sample positions (paper §4.1, METHOD §4).
 
     Parameters
     ----------
@@ -253,18 +403,82 @@ class Splat:
         pixel at (0, 0)), inside ``[0, W-1] × [0, H-1]`` (clamped otherwise).
     shape : (H, W)
         Target image shape.
+    jac : (N, 2, 2) float64, optional
+        ``∂tau/∂x_m`` (rows target x, y; columns source x, y), needed by ``psf="footprint"``.
+    psf : {"bilinear", "footprint"}
+        ``"bilinear"`` (default): the transformed PSF is a unit square centred at ``xy``
+        (the paper's simplification, fig. discretization left), whose overlaps with the
+        target pixels are the bilinear coefficients ``(1-fx)(1-fy), fx(1-fy), (1-fx)fy,
+        fx·fy`` of the cell containing ``xy``. ``"footprint"``: the square source pixel of
+        a uniformly sensitive sensor maps, under the locally linear warp, to the
+        parallelogram ``P_m = tau(x_m) + J_m·[-½, ½]²`` and
+        ``B_mp = area(P_m ∩ pixel p) / area(P_m)`` (paper eq. normal, fig. discretization
+        right); J = I gives the bilinear coefficients again.
 
-    ``B`` is N × (H·W) with 4 non-zeros per row: the bilinear coefficients
-    ``(1-fx)(1-fy), fx(1-fy), (1-fx)fy, fx·fy`` of the cell containing ``xy``.
+    Either way ``B`` is N × (H·W) with 4 non-zeros per row on a 2×2 block of pixels,
+    rows summing to one, so ``Σ BᵀWB`` stays a 9-point stencil. A footprint wider or higher
+    than one target pixel (a source coarser than the target along that axis) cannot be
+    held by a 2×2 block: it is shrunk about its centre along that axis until its bounding
+    box is 1 px (see :func:`_footprint_setup`); :attr:`shrunk_fraction` says how many
+    samples were. Along an axis where the footprint fits it keeps its exact extent, and a
+    uniformly coarser source (J = s·I, s ≥ 1) degrades to the bilinear model, the model
+    the default already uses at every sample.
+
+    Attributes
+    ----------
+    x0, y0, fx, fy : (N,)
+        The bilinear cell and fractions of ``xy`` (bilinear *interpolation* at ``tau``,
+        whatever the PSF: the weights of METHOD §3 sample ``∇u`` there).
+    bx0, by0 : (N,) int32
+        Top-left pixel of each row's 2×2 block (``x0``, ``y0`` for the bilinear PSF).
+    coef : (N, 4) float64
+        Footprint coefficients (top-left, top-right, bottom-left, bottom-right); empty for
+        the bilinear PSF (computed on the fly from fx, fy).
+    n_shrunk, n_degenerate : int
+        Footprints shrunk to fit a 2×2 block; non-finite or singular Jacobians (unit square).
     """
 
-    def __init__(self, xy, shape):
+    def __init__(self, xy, shape, jac=None, psf="bilinear"):
+        if psf not in PSFS:
+            raise ValueError(f"psf must be one of {PSFS}, got {psf!r}")
         self.shape = (int(shape[0]), int(shape[1]))
+        self.psf = psf
         H, W = self.shape
         xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
         self.n = xy.shape[0]
         self.x0, self.y0, self.fx, self.fy = _bilinear_setup(xy, H, W)
-        self.order, self.starts = _bucket_by_row(self.y0, max(H - 1, 1))
+        self.n_shrunk = self.n_degenerate = 0
+        if psf == "bilinear":
+            self.bx0, self.by0 = self.x0, self.y0
+            self.coef = np.zeros((0, 4), np.float64)
+        else:
+            if jac is None:
+                raise ValueError("psf='footprint' needs the warp Jacobians (jac)")
+            jac = np.ascontiguousarray(jac, dtype=np.float64).reshape(-1, 2, 2)
+            if jac.shape[0] != self.n:
+                raise ValueError(f"jac has {jac.shape[0]} rows for {self.n} samples")
+            self.coef = np.empty((self.n, 4), np.float64)
+            self.bx0 = np.empty(self.n, np.int32)
+            self.by0 = np.empty(self.n, np.int32)
+            flags = np.empty(self.n, np.int8)
+            _footprint_setup(xy, jac, H, W, self.coef, self.bx0, self.by0, flags)
+            counts = np.bincount(flags, minlength=3)
+            self.n_shrunk, self.n_degenerate = int(counts[1]), int(counts[2])
+        self.order, self.starts = _bucket_by_row(self.by0, max(H - 1, 1))
+
+    @property
+    def shrunk_fraction(self) -> float:
+        """Fraction of the samples whose footprint was shrunk to fit a 2×2 block (0 for
+        the bilinear PSF)."""
+        return self.n_shrunk / self.n if self.n else 0.0
+
+    def coefficients(self):
+        """``(bx0, by0, coef)``: each row's block and its 4 coefficients (N, 4) (top-left,
+        top-right, bottom-left, bottom-right), for either PSF."""
+        if self.psf == "footprint":
+            return self.bx0, self.by0, self.coef
+        a, b = self.fx, self.fy
+        return self.x0, self.y0, np.stack([(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b], 1)
 
     def apply(self, u) -> np.ndarray:
         """``B u``: (H, W, C) image (or (H, W)) → (N, C) float64 sample values."""
@@ -272,7 +486,7 @@ class Splat:
         squeeze = u.ndim == 2
         if squeeze:
             u = u[..., None]
-        out = _B_apply(np.ascontiguousarray(u), self.x0, self.y0, self.fx, self.fy)
+        out = _B_apply(np.ascontiguousarray(u), self.bx0, self.by0, self.fx, self.fy, self.coef)
         return out[:, 0] if squeeze else out
 
     def adjoint(self, vals, weight=None) -> np.ndarray:
@@ -284,7 +498,7 @@ class Splat:
         w = np.ones(self.n) if weight is None else np.ascontiguousarray(weight)
         H, W = self.shape
         rhs = np.zeros((vals.shape[1], H, W), np.float64)
-        _assemble_kernel(self.x0, self.y0, self.fx, self.fy, self.order, self.starts,
+        _assemble_kernel(self.bx0, self.by0, self.fx, self.fy, self.coef, self.order, self.starts,
                          w, np.ascontiguousarray(vals), np.zeros((0, 1, 1)), rhs, False)
         return rhs[0] if squeeze else np.ascontiguousarray(rhs.transpose(1, 2, 0))
 
@@ -307,7 +521,7 @@ class Splat:
         H, W = self.shape
         A = np.zeros((9, H, W), dtype)
         rhs = np.zeros((vals.shape[1], H, W), dtype)
-        c = _assemble_kernel(self.x0, self.y0, self.fx, self.fy, self.order, self.starts,
+        c = _assemble_kernel(self.bx0, self.by0, self.fx, self.fy, self.coef, self.order, self.starts,
                              w, vals, A, rhs, True)
         return A, rhs, c
 
@@ -330,16 +544,15 @@ def stencil_apply(A, u, out=None) -> np.ndarray:
 
 
 def explicit_B(splat: Splat):
-    """``B`` as a scipy.sparse CSR matrix N × (H·W) (for tests)."""
+    """``B`` as a scipy.sparse CSR matrix N × (H·W) (for tests), either PSF."""
     import scipy.sparse as sp
 
     H, W = splat.shape
-    a, b = splat.fx, splat.fy
+    x0, y0, coef = splat.coefficients()
     rows = np.repeat(np.arange(splat.n), 4)
-    y, x = splat.y0.astype(np.int64), splat.x0.astype(np.int64)
+    y, x = y0.astype(np.int64), x0.astype(np.int64)
     cols = np.stack([y * W + x, y * W + x + 1, (y + 1) * W + x, (y + 1) * W + x + 1], 1).ravel()
-    vals = np.stack([(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b], 1).ravel()
-    return sp.csr_matrix((vals, (rows, cols)), shape=(splat.n, H * W))
+    return sp.csr_matrix((coef.ravel(), (rows, cols)), shape=(splat.n, H * W))
 
 
 def stencil_to_sparse(A):
