@@ -25,7 +25,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .operators import _stencil_point
+from .operators import _stencil_row
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start"]
 
@@ -70,26 +70,6 @@ def _stencil_row_padded(A, k, um, u0, up, out):
         out[j] = (a0[j] * um[j] + a1[j] * um[j + 1] + a2[j] * um[j + 2]
                   + a3[j] * u0[j] + a4[j] * u0[j + 1] + a5[j] * u0[j + 2]
                   + a6[j] * up[j] + a7[j] * up[j + 1] + a8[j] * up[j + 2])
-
-
-@njit(cache=True, fastmath=True)
-def _stencil_row(A, u, c, i, out):
-    """Row i of the 9-point stencil ``A`` applied to channel c of ``u`` (C, H, W)."""
-    C, H, W = u.shape
-    if 0 < i < H - 1 and W > 2:
-        a0, a1, a2 = A[0, i], A[1, i], A[2, i]
-        a3, a4, a5 = A[3, i], A[4, i], A[5, i]
-        a6, a7, a8 = A[6, i], A[7, i], A[8, i]
-        um, u0, up = u[c, i - 1], u[c, i], u[c, i + 1]
-        for j in range(1, W - 1):
-            out[j] = (a0[j] * um[j - 1] + a1[j] * um[j] + a2[j] * um[j + 1]
-                      + a3[j] * u0[j - 1] + a4[j] * u0[j] + a5[j] * u0[j + 1]
-                      + a6[j] * up[j - 1] + a7[j] * up[j] + a8[j] * up[j + 1])
-        out[0] = _stencil_point(A, u, c, i, 0, H, W)
-        out[W - 1] = _stencil_point(A, u, c, i, W - 1, H, W)
-    else:
-        for j in range(W):
-            out[j] = _stencil_point(A, u, c, i, j, H, W)
 
 
 @njit(parallel=True, cache=True, fastmath=True)

@@ -335,32 +335,37 @@ def _stencil_point(A, u, c, i, j, H, W):
     return s
 
 
-@njit(parallel=True, cache=True, fastmath=True)
-def _stencil_apply(A, u, out):
-    """out[c] = Σ_s A[s] · shift_s(u[c]); planar (C, H, W) images, (9, H, W) stencil.
+@njit(cache=True, fastmath=True)
+def _stencil_row(A, u, c, i, out):
+    """Row i of the 9-point stencil ``A`` applied to channel c of ``u`` (C, H, W).
 
-    Interior pixels take the 9 products in one expression (one pass over the output row,
+    Interior rows take the 9 products in one expression (one pass over the output row,
     vectorisable); border pixels check their neighbours (entries pointing outside are
     ignored)."""
     C, H, W = u.shape
+    if 0 < i < H - 1 and W > 2:
+        a0, a1, a2 = A[0, i], A[1, i], A[2, i]
+        a3, a4, a5 = A[3, i], A[4, i], A[5, i]
+        a6, a7, a8 = A[6, i], A[7, i], A[8, i]
+        um, u0, up = u[c, i - 1], u[c, i], u[c, i + 1]
+        for j in range(1, W - 1):
+            out[j] = (a0[j] * um[j - 1] + a1[j] * um[j] + a2[j] * um[j + 1]
+                      + a3[j] * u0[j - 1] + a4[j] * u0[j] + a5[j] * u0[j + 1]
+                      + a6[j] * up[j - 1] + a7[j] * up[j] + a8[j] * up[j + 1])
+        out[0] = _stencil_point(A, u, c, i, 0, H, W)
+        out[W - 1] = _stencil_point(A, u, c, i, W - 1, H, W)
+    else:
+        for j in range(W):
+            out[j] = _stencil_point(A, u, c, i, j, H, W)
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def _stencil_apply(A, u, out):
+    """out[c] = Σ_s A[s] · shift_s(u[c]); planar (C, H, W) images, (9, H, W) stencil."""
+    C, H, W = u.shape
     for i in prange(H):
-        interior_row = 0 < i < H - 1
         for c in range(C):
-            o = out[c, i]
-            if interior_row and W > 2:
-                a0, a1, a2 = A[0, i], A[1, i], A[2, i]
-                a3, a4, a5 = A[3, i], A[4, i], A[5, i]
-                a6, a7, a8 = A[6, i], A[7, i], A[8, i]
-                um, u0, up = u[c, i - 1], u[c, i], u[c, i + 1]
-                for j in range(1, W - 1):
-                    o[j] = (a0[j] * um[j - 1] + a1[j] * um[j] + a2[j] * um[j + 1]
-                            + a3[j] * u0[j - 1] + a4[j] * u0[j] + a5[j] * u0[j + 1]
-                            + a6[j] * up[j - 1] + a7[j] * up[j] + a8[j] * up[j + 1])
-                o[0] = _stencil_point(A, u, c, i, 0, H, W)
-                o[W - 1] = _stencil_point(A, u, c, i, W - 1, H, W)
-            else:
-                for j in range(W):
-                    o[j] = _stencil_point(A, u, c, i, j, H, W)
+            _stencil_row(A, u, c, i, out[c, i])
     return out
 
 
