@@ -138,28 +138,34 @@ def _primal(z, p, mu, dinv, use_d, band, x):
 
 
 @njit(parallel=True, cache=True, fastmath=True, error_model="numpy")
-def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, band, p_new):
+def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, band, p_new, primal, x_out):
     """One accelerated dual step (Beck & Teboulle 2009, FGP): at r = p + beta (p − p_old),
-    x = z + mu d⁻¹ div r, p_new = P_{|·|≤1}(r + step ∇x).
+    x = z + mu d⁻¹ div r, p_new = P_{|·|≤1}(r + step ∇x); with ``primal``, also the
+    prox's result ``x_out = z + mu d⁻¹ div p_new`` (the last step of a call).
 
-    Each thread walks a band of rows keeping two-row rings of r and x, so every row of
-    r and x is formed once, in cache, and never stored: the pass reads z, p (and p_old
-    when beta ≠ 0) and writes p_new, which must not alias p or p_old."""
+    Each thread walks a band of rows keeping two-row rings of r, x and p_new, so every row
+    of them is formed once, in cache, and r and x are never stored: the pass reads z, p
+    (and p_old when beta ≠ 0) and writes p_new (and x_out). p_new must not alias p or
+    p_old. ``x_out`` at the band's first row needs p_new one row above: that row is
+    recomputed (halo) rather than read from another thread's band."""
     C, H, W = z.shape
     n_bands = (H + band - 1) // band
     for t in prange(n_bands):
         r0 = t * band
         r1 = min(H, r0 + band)
+        i0 = r0 - 1 if primal and r0 > 0 else r0
         rr = np.zeros((2, C, 2, W), np.float32)
         xr = np.empty((2, C, W), np.float32)
+        pr = np.zeros((2, C, 2, W), np.float32)
+        xo = np.empty((C, W), np.float32)
         q = np.empty((C, 2, W), np.float32)
         nrm = np.empty(W, np.float32)
         one = np.float32(1.0)
-        if r0 > 0:
-            _r_row(p, p_old, beta, r0 - 1, rr[(r0 - 1) % 2])
-        _r_row(p, p_old, beta, r0, rr[r0 % 2])
-        _x_row(z, rr[r0 % 2], rr[(r0 + 1) % 2], mu, dinv, use_d, r0, xr[r0 % 2])
-        for i in range(r0, r1):
+        if i0 > 0:
+            _r_row(p, p_old, beta, i0 - 1, rr[(i0 - 1) % 2])
+        _r_row(p, p_old, beta, i0, rr[i0 % 2])
+        _x_row(z, rr[i0 % 2], rr[(i0 + 1) % 2], mu, dinv, use_d, i0, xr[i0 % 2])
+        for i in range(i0, r1):
             if i + 1 < H:
                 # r row i−1 is no longer needed: its slot takes row i+1
                 _r_row(p, p_old, beta, i + 1, rr[(i + 1) % 2])
@@ -191,15 +197,25 @@ def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, band, p_new):
             if coupled:
                 for j in range(W):
                     nrm[j] = one / max(one, math.sqrt(nrm[j]))
+            pi = pr[i % 2]
             for c in range(C):
                 if not coupled:
                     for j in range(W):
                         nrm[j] = one / max(one, math.sqrt(q[c, 0, j] * q[c, 0, j] + q[c, 1, j] * q[c, 1, j]))
                 for d in range(2):
                     qd = q[c, d]
-                    pn = p_new[c, d, i]
+                    pd = pi[c, d]
                     for j in range(W):
-                        pn[j] = qd[j] * nrm[j]
+                        pd[j] = qd[j] * nrm[j]
+            if i < r0:
+                continue  # the halo row: only needed as p_new one row above r0
+            for c in range(C):
+                for d in range(2):
+                    p_new[c, d, i, :] = pi[c, d]
+            if primal:
+                _x_row(z, pi, pr[(i + 1) % 2], mu, dinv, use_d, i, xo)
+                for c in range(C):
+                    x_out[c, i, :] = xo[c]
 
 
 class TVProx:
@@ -231,6 +247,10 @@ class TVProx:
     def __call__(self, z, mu: float, d=None, out=None, n_iter=None) -> np.ndarray:
         """``argmin_x ½ Σ d |x − z|² + mu TV(x)`` for planar (C, H, W) float32 ``z``;
         ``d`` (H, W) or None."""
+        if out is not None and np.shares_memory(out, z):
+            # the fused last step reads z a row beyond each band while writing out
+            out[:] = self(z.copy(), mu, d, None, n_iter)
+            return out
         if out is None:
             out = np.empty_like(z)
         if mu <= 0:
@@ -247,13 +267,15 @@ class TVProx:
         p, p_old, free = self.p, self._r, self._s
         t = 1.0
         beta = 0.0
-        for _ in range(n):
+        for k in range(n):
+            # the last step also forms the primal result (no separate pass)
             _dual_step(z, p, p_old if beta != 0.0 else p, np.float32(beta), mu32, dinv, use_d, step,
-                       self.coupled, BAND, free)
+                       self.coupled, BAND, free, k == n - 1, out)
             p_old, p, free = p, free, p_old
             t_new = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
             beta = (t - 1.0) / t_new
             t = t_new
         self.p, self._r, self._s = p, p_old, free
-        _primal(z, self.p, mu32, dinv, use_d, BAND, out)
+        if n == 0:
+            _primal(z, self.p, mu32, dinv, use_d, BAND, out)
         return out
