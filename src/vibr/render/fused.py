@@ -20,12 +20,11 @@ Hessian products (f is quadratic, so ``H y`` is the same combination of ``H x`` 
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit, prange
 
-from .operators import _stencil_row
+from .operators import _central_adj_row, _stencil_row
+from .tv import _sqrt_sum, _tv_row
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start"]
 
@@ -120,32 +119,9 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms
                 br = b[c, i]
                 hr = h[c, i]
                 if use_grad:
-                    # Dᵀ(A_g D x) at row i (operators.grad_central_adj, per axis)
-                    gxx = gring[i % 3, c, 0]
-                    if W > 1:
-                        gx_row[0] = -0.5 * (gxx[1] + gxx[0])
-                        for j in range(1, W - 1):
-                            gx_row[j] = 0.5 * (gxx[j - 1] - gxx[j + 1])
-                        gx_row[W - 1] = 0.5 * (gxx[W - 2] + gxx[W - 1])
-                    else:
-                        gx_row[0] = 0.0
-                    if H > 1:
-                        if i >= 1:
-                            a_ = gring[(i - 1) % 3, c, 1]
-                            for j in range(W):
-                                gx_row[j] += 0.5 * a_[j]
-                        if i == H - 1:
-                            a_ = gring[i % 3, c, 1]
-                            for j in range(W):
-                                gx_row[j] += 0.5 * a_[j]
-                        if i <= H - 2:
-                            a_ = gring[(i + 1) % 3, c, 1]
-                            for j in range(W):
-                                gx_row[j] -= 0.5 * a_[j]
-                        if i == 0:
-                            a_ = gring[i % 3, c, 1]
-                            for j in range(W):
-                                gx_row[j] -= 0.5 * a_[j]
+                    # Dᵀ(A_g D x) at row i (slots of rows outside the image are not read)
+                    _central_adj_row(gring[i % 3, c, 0], gring[(i - 1) % 3, c, 1], gring[i % 3, c, 1],
+                                     gring[(i + 1) % 3, c, 1], i, H, gx_row)
                     if with_terms:
                         gr = bgt[c, i]
                         for j in range(W):
@@ -177,24 +153,9 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms
                         hh += np.float64(hv) * hv
                 if not with_terms:
                     continue
-                # TV (forward differences, Neumann: tv.tv_value)
-                un = x[c, nxt]
-                if coupled:
-                    for j in range(W - 1):
-                        dx_ = xr[j + 1] - xr[j]
-                        dy_ = un[j] - xr[j]
-                        tvacc[j] += dx_ * dx_ + dy_ * dy_
-                    dy_ = un[W - 1] - xr[W - 1]
-                    tvacc[W - 1] += dy_ * dy_
-                else:
-                    for j in range(W - 1):
-                        dx_ = xr[j + 1] - xr[j]
-                        dy_ = un[j] - xr[j]
-                        tv += math.sqrt(dx_ * dx_ + dy_ * dy_)
-                    tv += abs(un[W - 1] - xr[W - 1])
+                tv += _tv_row(xr, x[c, nxt], coupled, tvacc)
             if coupled and with_terms:
-                for j in range(W):
-                    tv += math.sqrt(tvacc[j])
+                tv += _sqrt_sum(tvacc)
         parts[t, 0] = xAx
         parts[t, 1] = bx
         parts[t, 2] = xGx

@@ -200,6 +200,17 @@ def _footprint_setup(xy, jac, H, W, coef, bx0, by0, flags):
             coef[i, 3] = c11
 
 
+@njit(cache=True)
+def _row_coef(fx, fy, coef, use_coef, i):
+    """Row i of B on its 2×2 block (top-left, top-right, bottom-left, bottom-right), in
+    float64: ``coef[i]`` (footprint) or the bilinear coefficients of (fx, fy)."""
+    if use_coef:
+        return coef[i, 0], coef[i, 1], coef[i, 2], coef[i, 3]
+    a = np.float64(fx[i])
+    b = np.float64(fy[i])
+    return (1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b
+
+
 @njit(parallel=True, cache=True)
 def _B_apply(u, x0, y0, fx, fy, coef):
     """``B u`` at the 2×2 blocks (x0, y0): bilinear coefficients from (fx, fy) when
@@ -210,17 +221,7 @@ def _B_apply(u, x0, y0, fx, fy, coef):
     use_coef = coef.shape[0] == n and n > 0
     out = np.empty((n, C), np.float64)
     for i in prange(n):
-        if use_coef:
-            w00 = coef[i, 0]
-            w01 = coef[i, 1]
-            w10 = coef[i, 2]
-            w11 = coef[i, 3]
-        else:
-            a, b = fx[i], fy[i]
-            w00 = (1 - a) * (1 - b)
-            w01 = a * (1 - b)
-            w10 = (1 - a) * b
-            w11 = a * b
+        w00, w01, w10, w11 = _row_coef(fx, fy, coef, use_coef, i)
         x, y = x0[i], y0[i]
         for c in range(C):
             out[i, c] = (w00 * u[y, x, c] + w01 * u[y, x + 1, c]
@@ -259,18 +260,7 @@ def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_
                 wi = np.float64(w[i])
                 if wi == 0.0:
                     continue
-                if use_coef:
-                    b0 = coef[i, 0]
-                    b1 = coef[i, 1]
-                    b2 = coef[i, 2]
-                    b3 = coef[i, 3]
-                else:
-                    a = np.float64(fx[i])
-                    b = np.float64(fy[i])
-                    b0 = (1 - a) * (1 - b)
-                    b1 = a * (1 - b)
-                    b2 = (1 - a) * b
-                    b3 = a * b
+                b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
                 w0 = wi * b0
                 w1 = wi * b1
                 w2 = wi * b2
@@ -663,38 +653,41 @@ def _grad_central(u, g):
     return g
 
 
+@njit(cache=True, fastmath=True)
+def _central_adj_row(gx, gym, gyi, gyp, i, H, o):
+    """Row i of ``Dᵀ g`` into ``o`` (W,), from the row's x component ``gx`` and the y
+    components of rows i−1, i, i+1 (``gym``, ``gyi``, ``gyp``; those outside are not read).
+    Per axis: out[k] = ½(g[k-1]·[k≥1] + g[k]·[k=n-1]) − ½(g[k+1]·[k≤n-2] + g[k]·[k=0])."""
+    W = o.shape[0]
+    if W > 1:
+        o[0] = -0.5 * (gx[1] + gx[0])
+        for j in range(1, W - 1):
+            o[j] = 0.5 * (gx[j - 1] - gx[j + 1])
+        o[W - 1] = 0.5 * (gx[W - 2] + gx[W - 1])
+    else:
+        o[0] = 0.0
+    if H > 1:
+        if i >= 1:
+            for j in range(W):
+                o[j] += 0.5 * gym[j]
+        if i == H - 1:
+            for j in range(W):
+                o[j] += 0.5 * gyi[j]
+        if i <= H - 2:
+            for j in range(W):
+                o[j] -= 0.5 * gyp[j]
+        if i == 0:
+            for j in range(W):
+                o[j] -= 0.5 * gyi[j]
+
+
 @njit(parallel=True, cache=True, fastmath=True)
 def _grad_central_adj(g, out):
-    # per axis: out[k] = ½(g[k-1]·[k≥1] + g[k]·[k=n-1]) − ½(g[k+1]·[k≤n-2] + g[k]·[k=0])
     C, _, H, W = g.shape
     for i in prange(H):
         for c in range(C):
-            gx = g[c, 0, i]
-            o = out[c, i]
-            if W > 1:
-                o[0] = -0.5 * (gx[1] + gx[0])
-                for j in range(1, W - 1):
-                    o[j] = 0.5 * (gx[j - 1] - gx[j + 1])
-                o[W - 1] = 0.5 * (gx[W - 2] + gx[W - 1])
-            else:
-                o[0] = 0.0
-            if H > 1:
-                if i >= 1:
-                    a = g[c, 1, i - 1]
-                    for j in range(W):
-                        o[j] += 0.5 * a[j]
-                if i == H - 1:
-                    a = g[c, 1, i]
-                    for j in range(W):
-                        o[j] += 0.5 * a[j]
-                if i <= H - 2:
-                    a = g[c, 1, i + 1]
-                    for j in range(W):
-                        o[j] -= 0.5 * a[j]
-                if i == 0:
-                    a = g[c, 1, i]
-                    for j in range(W):
-                        o[j] -= 0.5 * a[j]
+            _central_adj_row(g[c, 0, i], g[c, 1, max(i - 1, 0)], g[c, 1, i], g[c, 1, min(i + 1, H - 1)],
+                             i, H, out[c, i])
     return out
 
 

@@ -26,6 +26,37 @@ from numba import njit, prange
 __all__ = ["tv_value", "TVProx"]
 
 
+@njit(cache=True, fastmath=True)
+def _tv_row(ur, un, coupled, acc):
+    """One channel's share of a row of TV (forward differences, Neumann): ``ur`` the row,
+    ``un`` the next one (the row itself on the last row). Coupled: adds |∇u_c|² to ``acc``
+    (W,) and returns 0 (the caller sums √acc over channels); else returns Σ_j |∇u_c|."""
+    W = ur.shape[0]
+    s = 0.0
+    if coupled:
+        for j in range(W - 1):
+            gx = ur[j + 1] - ur[j]
+            gy = un[j] - ur[j]
+            acc[j] += gx * gx + gy * gy
+        gy = un[W - 1] - ur[W - 1]
+        acc[W - 1] += gy * gy
+    else:
+        for j in range(W - 1):
+            gx = ur[j + 1] - ur[j]
+            gy = un[j] - ur[j]
+            s += math.sqrt(gx * gx + gy * gy)
+        s += abs(un[W - 1] - ur[W - 1])
+    return s
+
+
+@njit(cache=True, fastmath=True)
+def _sqrt_sum(acc):
+    s = 0.0
+    for j in range(acc.shape[0]):
+        s += math.sqrt(acc[j])
+    return s
+
+
 @njit(parallel=True, cache=True, fastmath=True)
 def _tv_value(u, coupled):
     C, H, W = u.shape
@@ -35,24 +66,9 @@ def _tv_value(u, coupled):
         nxt = min(i + 1, H - 1)  # last row: gy = 0
         s = 0.0
         for c in range(C):
-            ur = u[c, i]
-            un = u[c, nxt]
-            if coupled:
-                for j in range(W - 1):
-                    gx = ur[j + 1] - ur[j]
-                    gy = un[j] - ur[j]
-                    acc[j] += gx * gx + gy * gy
-                gy = un[W - 1] - ur[W - 1]
-                acc[W - 1] += gy * gy
-            else:
-                for j in range(W - 1):
-                    gx = ur[j + 1] - ur[j]
-                    gy = un[j] - ur[j]
-                    s += math.sqrt(gx * gx + gy * gy)
-                s += abs(un[W - 1] - ur[W - 1])
+            s += _tv_row(u[c, i], u[c, nxt], coupled, acc)
         if coupled:
-            for j in range(W):
-                s += math.sqrt(acc[j])
+            s += _sqrt_sum(acc)
         rows[i] = s
     return rows.sum()
 
