@@ -392,3 +392,271 @@ def tv_l1(f, conf, g, lam, n_iter):
                 u[i, j] = v
                 ub[i, j] = 2.0 * v - uo
     return u
+
+
+# --------------------------------------------------------------------------- slanted-plane refinement
+@njit(cache=True, inline="always")
+def _hash01(k):
+    """Deterministic uniform number in [0, 1) from an integer key (splitmix64 finaliser):
+    the refinement's random proposals do not depend on the thread schedule."""
+    x = np.uint64(k)
+    x ^= x >> np.uint64(33)
+    x *= np.uint64(0xFF51AFD7ED558CCD)
+    x ^= x >> np.uint64(33)
+    x *= np.uint64(0xC4CEB9FE1A85EC53)
+    x ^= x >> np.uint64(33)
+    return float(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(parallel=True, cache=True)
+def support_weights(I, offs, sigma_c, sigma_s):
+    """Adaptive-support (bilateral) window weights of the reference image (Yoon & Kweon
+    2006; the bilateral NCC of Schönberger et al. 2016 §4.2):
+    ``ω_q = exp(−(I_q − I_p)²/(2σ_c²) − |q − p|²/(2σ_s²))`` for the window offsets ``offs``
+    (n,2) (dy, dx), 0 outside the image, normalised to sum 1 per pixel. Pixels of the
+    window that do not look like the centre (another surface across a depth edge) count
+    little, so the matching window does not straddle an occlusion boundary.
+
+    Returns ``(wts (H,W,n) float32, mu (H,W), sd (H,W))``: the weights, and the weighted
+    mean and standard deviation (without regulariser) of ``I`` in the window.
+    """
+    H, W = I.shape
+    n = offs.shape[0]
+    wts = np.zeros((H, W, n), np.float32)
+    mu = np.empty((H, W))
+    sd = np.empty((H, W))
+    ic = 0.5 / (sigma_c * sigma_c)
+    isp = 0.5 / (sigma_s * sigma_s)
+    for i in prange(H):
+        for j in range(W):
+            tot = 0.0
+            c = I[i, j]
+            for k in range(n):
+                qi = i + offs[k, 0]
+                qj = j + offs[k, 1]
+                if qi < 0 or qj < 0 or qi >= H or qj >= W:
+                    continue
+                d = I[qi, qj] - c
+                r2 = offs[k, 0] * offs[k, 0] + offs[k, 1] * offs[k, 1]
+                wk = np.exp(-d * d * ic - r2 * isp)
+                wts[i, j, k] = wk
+                tot += wk
+            m = 0.0
+            m2 = 0.0
+            for k in range(n):
+                wk = wts[i, j, k] / tot
+                wts[i, j, k] = wk
+                if wk > 0.0:
+                    v = I[i + offs[k, 0], j + offs[k, 1]]
+                    m += wk * v
+                    m2 += wk * v * v
+            mu[i, j] = m
+            var = m2 - m * m
+            sd[i, j] = np.sqrt(var) if var > 0.0 else 0.0
+    return wts, mu, sd
+
+
+@njit(cache=True)
+def _plane_cost(i, j, w, gx, gy, I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs):
+    """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
+    the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
+    reference pixel: the image of any 3D plane) at reference pixel (i, j). A view counts
+    when the centre lands inside it; 2 when none does or the plane is behind a camera."""
+    nv = srcs.shape[0]
+    nwin = offs.shape[0]
+    nval = 0
+    sI = np.sqrt(sdI[i, j] * sdI[i, j] + eps2)
+    for v in range(nv):
+        hv = sizes[v, 0]
+        wv = sizes[v, 1]
+        # homogeneous image of the centre, and its increments per window column / row
+        cx = A[v, 0, 0] * j + A[v, 0, 1] * i + A[v, 0, 2] + w * b[v, 0]
+        cy = A[v, 1, 0] * j + A[v, 1, 1] * i + A[v, 1, 2] + w * b[v, 1]
+        cz = A[v, 2, 0] * j + A[v, 2, 1] * i + A[v, 2, 2] + w * b[v, 2]
+        if cz <= 1e-12:
+            continue
+        xc = cx / cz
+        yc = cy / cz
+        if not ((xc > -0.5) and (yc > -0.5) and (xc < wv - 0.5) and (yc < hv - 0.5)):
+            continue
+        ex0 = A[v, 0, 0] + gx * b[v, 0]
+        ex1 = A[v, 1, 0] + gx * b[v, 1]
+        ex2 = A[v, 2, 0] + gx * b[v, 2]
+        ey0 = A[v, 0, 1] + gy * b[v, 0]
+        ey1 = A[v, 1, 1] + gy * b[v, 1]
+        ey2 = A[v, 2, 1] + gy * b[v, 2]
+        sJ = 0.0
+        sJJ = 0.0
+        sIJ = 0.0
+        bad = False
+        for k in range(nwin):
+            wk = wts[i, j, k]
+            if wk == 0.0:
+                continue
+            dy = offs[k, 0]
+            dx = offs[k, 1]
+            pz = cz + dx * ex2 + dy * ey2
+            if pz <= 1e-12:
+                bad = True
+                break
+            x = (cx + dx * ex0 + dy * ey0) / pz
+            y = (cy + dx * ex1 + dy * ey1) / pz
+            if x < 0.0:
+                x = 0.0
+            if y < 0.0:
+                y = 0.0
+            if x > wv - 1.0:
+                x = wv - 1.0
+            if y > hv - 1.0:
+                y = hv - 1.0
+            x0 = min(int(x), wv - 2) if wv > 1 else 0
+            y0 = min(int(y), hv - 2) if hv > 1 else 0
+            fx = x - x0
+            fy = y - y0
+            x1 = min(x0 + 1, wv - 1)
+            y1 = min(y0 + 1, hv - 1)
+            q = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
+                 + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
+            sJ += wk * q
+            sJJ += wk * q * q
+            sIJ += wk * q * I[i + dy, j + dx]
+        if bad:
+            continue
+        vJ = sJJ - sJ * sJ
+        if vJ < 0.0:
+            vJ = 0.0
+        ncc = (sIJ - mu[i, j] * sJ) / (sI * np.sqrt(vJ + eps2))
+        costs[nval] = 1.0 - ncc
+        nval += 1
+    if nval == 0:
+        return 2.0
+    m = min(n_best, nval)
+    c = 0.0
+    for q in range(m):
+        kmin = q
+        for r in range(q + 1, nval):
+            if costs[r] < costs[kmin]:
+                kmin = r
+        tmp = costs[q]
+        costs[q] = costs[kmin]
+        costs[kmin] = tmp
+        c += costs[q]
+    return c / m
+
+
+@njit(parallel=True, cache=True)
+def plane_costs(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy):
+    """:func:`_plane_cost` of every pixel's plane (w, gx, gy) (H,W) → (H,W) float64."""
+    H, W = I.shape
+    out = np.empty((H, W))
+    nv = srcs.shape[0]
+    for i in prange(H):
+        costs = np.empty(max(nv, 1))
+        for j in range(W):
+            out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], I, wts, mu, sdI, offs,
+                                    srcs, sizes, A, b, n_best, eps2, costs)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _try_plane(i, j, qi, qj, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best,
+               eps2, costs, wmin, wmax):
+    """Propagation: pixel (i, j) tries the plane of pixel (qi, qj), extended to it."""
+    cw = w[qi, qj] + gx[qi, qj] * (j - qj) + gy[qi, qj] * (i - qi)
+    if cw < wmin or cw > wmax:
+        return
+    c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], I, wts, mu, sdI, offs, srcs, sizes, A, b,
+                    n_best, eps2, costs)
+    if c < cost[i, j]:
+        cost[i, j] = c
+        w[i, j] = cw
+        gx[i, j] = gx[qi, qj]
+        gy[i, j] = gy[qi, qj]
+
+
+@njit(parallel=True, cache=True)
+def patchmatch_refine(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2,
+                      w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed):
+    """Slanted-plane PatchMatch refinement (Bleyer et al. 2011) of per-pixel planes
+    ``(w, gx, gy)`` (inverse depth at the pixel and its derivatives along x and y, per
+    pixel), in place, with their costs ``cost`` (:func:`_plane_cost`).
+
+    Each iteration runs four propagation sweeps, each parallel over the lines it does not
+    follow (rows left→right and right→left, columns top→bottom and bottom→top): a pixel
+    tries its predecessor's plane extended to it (``w_q + gx_q Δx + gy_q Δy``), so a good
+    plane can cross the whole image in one sweep. Then every pixel tries four random
+    perturbations of its plane: w and the normal together, w only, the normal only
+    (ranges ``dw·2^-it`` in w and a slope ``dn·2^-it``, converted to pixel units by the
+    focal length), and a random normal within 80° of the viewing ray at the same w. A
+    candidate replaces the plane when its cost is lower; ``w`` stays in [wmin, wmax].
+    Random numbers come from a hash of (seed, iteration, pixel): deterministic.
+    """
+    H, W = I.shape
+    nv = srcs.shape[0]
+    inv_f = Kinv[0, 0]
+    for it in range(n_iter):
+        scale = 0.5 ** it
+        for i in prange(H):
+            costs = np.empty(max(nv, 1))
+            for j in range(1, W):
+                _try_plane(i, j, i, j - 1, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax)
+            for j in range(W - 2, -1, -1):
+                _try_plane(i, j, i, j + 1, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax)
+        for j in prange(W):
+            costs = np.empty(max(nv, 1))
+            for i in range(1, H):
+                _try_plane(i, j, i - 1, j, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax)
+            for i in range(H - 2, -1, -1):
+                _try_plane(i, j, i + 1, j, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax)
+        for i in prange(H):
+            costs = np.empty(max(nv, 1))
+            for j in range(W):
+                bw = w[i, j]
+                bx = gx[i, j]
+                by = gy[i, j]
+                bc = cost[i, j]
+                # viewing ray r = K⁻¹ x̄ of the pixel
+                r0 = Kinv[0, 0] * j + Kinv[0, 1] * i + Kinv[0, 2]
+                r1 = Kinv[1, 0] * j + Kinv[1, 1] * i + Kinv[1, 2]
+                r2 = Kinv[2, 0] * j + Kinv[2, 1] * i + Kinv[2, 2]
+                rn = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+                key = ((seed * 64 + it) * H + i) * W + j
+                for r in range(4):
+                    u1 = 2.0 * _hash01(key * 16 + 3 * r) - 1.0
+                    u2 = 2.0 * _hash01(key * 16 + 3 * r + 1) - 1.0
+                    u3 = 2.0 * _hash01(key * 16 + 3 * r + 2) - 1.0
+                    if r < 3:
+                        cw = bw + (u1 * dw * scale if r != 2 else 0.0)
+                        sn = dn * scale * bw * inv_f
+                        cx = bx + (u2 * sn if r != 1 else 0.0)
+                        cy = by + (u3 * sn if r != 1 else 0.0)
+                    else:
+                        # random normal n (uniform direction: u in the unit ball), within
+                        # 80° of the ray: the plane n·X = d has w(x') = n·K⁻¹x̄'/d with
+                        # d = n·r/w, so gx = w n·K⁻¹e₁/(n·r), gy = w n·K⁻¹e₂/(n·r)
+                        nn = np.sqrt(u1 * u1 + u2 * u2 + u3 * u3)
+                        if nn < 1e-6 or nn > 1.0:
+                            continue
+                        nr = u1 * r0 + u2 * r1 + u3 * r2
+                        if abs(nr) < 0.17 * rn * nn:
+                            continue
+                        cw = bw
+                        cx = bw * (u1 * Kinv[0, 0] + u2 * Kinv[1, 0] + u3 * Kinv[2, 0]) / nr
+                        cy = bw * (u1 * Kinv[0, 1] + u2 * Kinv[1, 1] + u3 * Kinv[2, 1]) / nr
+                    if cw < wmin or cw > wmax:
+                        continue
+                    c = _plane_cost(i, j, cw, cx, cy, I, wts, mu, sdI, offs,
+                                    srcs, sizes, A, b, n_best, eps2, costs)
+                    if c < bc:
+                        bc = c
+                        bw = cw
+                        bx = cx
+                        by = cy
+                w[i, j] = bw
+                gx[i, j] = bx
+                gy[i, j] = by
+                cost[i, j] = bc
