@@ -58,7 +58,7 @@ def box_mean_std(img, radius, eps2):
 # --------------------------------------------------------------------------- plane sweep
 @njit(parallel=True, cache=True)
 def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, block,
-               J, HJ, HJJ, HIJ, ok, best_c, best_l, c_minus, c_plus, prev):
+               best_c, best_l, c_minus, c_plus, prev):
     """Process a slab of fronto-parallel planes of the reference camera (streaming WTA).
 
     For the plane of inverse depth ``w`` (orthogonal depth ``z = 1/w``) the reference pixel
@@ -68,141 +68,166 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
 
     ``A_v = K_v R_rel K_r⁻¹``, ``b_v = K_v t_rel`` (R_rel, t_rel: reference → source).
     Each source is resampled bilinearly (clamped at the border), the ZNCC in a
-    (2r+1)² window is computed from box sums, the per-view costs ``1 − ZNCC`` are
+    (2r+1)² window is computed from running box sums, the per-view costs ``1 − ZNCC`` are
     aggregated by the mean of the ``n_best`` lowest (occlusion robustness), and the
     running minimum over planes is kept together with the costs of its two neighbouring
-    labels (for the parabolic sub-label fit). Only O(views·H·W) memory: the full cost
-    volume is never stored.
+    labels (for the parabolic sub-label fit). The full cost volume is never stored.
+
+    One parallel region per slab: each task owns a band of ``block`` reference rows and
+    runs every plane of the slab on it, warping the ``radius`` rows above and below the
+    band again (instead of a second parallel region per plane and image-sized
+    intermediate arrays: the work stays in the task's cache-sized buffers).
 
     Arrays: I, mu, sd (H,W) reference grey / window mean / regularised std; srcs
     (nv,Hm,Wm) float32 source grey images (padded), sizes (nv,2) their (H,W); A (nv,3,3),
-    b (nv,3); winv (d,) inverse depths of this slab, first label index ``l0``; work buffers
-    J, HJ, HJJ, HIJ (nv,H,W), ok (nv,H,W) uint8; state best_c, best_l, c_minus, c_plus,
-    prev (H,W) updated in place.
+    b (nv,3); winv (d,) inverse depths of this slab, first label index ``l0``; state
+    best_c, best_l, c_minus, c_plus, prev (H,W) updated in place.
     """
     H, W = I.shape
     nv = srcs.shape[0]
-    for di in range(winv.shape[0]):
-        w = winv[di]
-        lab = l0 + di
-        # 1. warp every source onto the plane and take horizontal window sums
-        for k in prange(nv * H):
-            v = k // H
-            i = k - v * H
-            hv = sizes[v, 0]
-            wv = sizes[v, 1]
-            for j in range(W):
-                px = A[v, 0, 0] * j + A[v, 0, 1] * i + A[v, 0, 2] + w * b[v, 0]
-                py = A[v, 1, 0] * j + A[v, 1, 1] * i + A[v, 1, 2] + w * b[v, 1]
-                pz = A[v, 2, 0] * j + A[v, 2, 1] * i + A[v, 2, 2] + w * b[v, 2]
-                if pz <= 1e-12:
-                    ok[v, i, j] = 0
-                    J[v, i, j] = 0.0
-                    continue
-                x = px / pz
-                y = py / pz
-                inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
-                ok[v, i, j] = 1 if inside else 0
-                if x < 0.0:
-                    x = 0.0
-                if y < 0.0:
-                    y = 0.0
-                if x > wv - 1.0:
-                    x = wv - 1.0
-                if y > hv - 1.0:
-                    y = hv - 1.0
-                x0 = min(int(x), wv - 2) if wv > 1 else 0
-                y0 = min(int(y), hv - 2) if hv > 1 else 0
-                fx = x - x0
-                fy = y - y0
-                x1 = min(x0 + 1, wv - 1)
-                y1 = min(y0 + 1, hv - 1)
-                J[v, i, j] = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
-                              + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
-            # running horizontal window sums (window clipped at the border)
-            a = 0.0
-            a2 = 0.0
-            a3 = 0.0
-            for jj in range(min(W, radius)):
-                q = J[v, i, jj]
-                a += q
-                a2 += q * q
-                a3 += q * I[i, jj]
-            for j in range(W):
-                jn = j + radius
-                if jn < W:
-                    q = J[v, i, jn]
-                    a += q
-                    a2 += q * q
-                    a3 += q * I[i, jn]
-                jo = j - radius - 1
-                if jo >= 0:
-                    q = J[v, i, jo]
-                    a -= q
-                    a2 -= q * q
-                    a3 -= q * I[i, jo]
-                HJ[v, i, j] = a
-                HJJ[v, i, j] = a2
-                HIJ[v, i, j] = a3
-        # 2. vertical sums, ZNCC, robust aggregation over views, running minimum
-        nblk = (H + block - 1) // block
-        for blk in prange(nblk):
-            costs = np.empty(nv)
-            # running vertical sums of the horizontal sums, per view and column
-            VJ = np.zeros((nv, W))
-            VJJ = np.zeros((nv, W))
-            VIJ = np.zeros((nv, W))
-            ib0 = blk * block
-            ib1 = min(H, ib0 + block)
+    nblk = (H + block - 1) // block
+    inv_cols = np.empty(W)  # 1 / window width of each column (clipped at the border)
+    for j in range(W):
+        inv_cols[j] = 1.0 / (min(W, j + radius + 1) - max(0, j - radius))
+    for blk in prange(nblk):
+        ib0 = blk * block
+        ib1 = min(H, ib0 + block)
+        h0 = max(0, ib0 - radius)
+        h1 = min(H, ib1 + radius)
+        nb_ = ib1 - ib0
+        HJ = np.empty((h1 - h0, W), np.float32)
+        HJJ = np.empty((h1 - h0, W), np.float32)
+        HIJ = np.empty((h1 - h0, W), np.float32)
+        C = np.empty((nv, nb_, W), np.float32)
+        OK = np.empty((nv, nb_, W), np.uint8)
+        Jrow = np.empty(W, np.float32)
+        VJ = np.empty(W)
+        VJJ = np.empty(W)
+        VIJ = np.empty(W)
+        costs = np.empty(max(nv, 1))
+        for di in range(winv.shape[0]):
+            w = winv[di]
+            lab = l0 + di
             for v in range(nv):
-                for ii in range(max(0, ib0 - radius - 1), min(H, ib0 + radius)):
+                hv = sizes[v, 0]
+                wv = sizes[v, 1]
+                # 1. warp the band's rows (and the halo) and take horizontal window sums
+                for ii in range(h0, h1):
+                    inband = ii >= ib0 and ii < ib1
+                    px = A[v, 0, 1] * ii + A[v, 0, 2] + w * b[v, 0]
+                    py = A[v, 1, 1] * ii + A[v, 1, 2] + w * b[v, 1]
+                    pz = A[v, 2, 1] * ii + A[v, 2, 2] + w * b[v, 2]
                     for j in range(W):
-                        VJ[v, j] += HJ[v, ii, j]
-                        VJJ[v, j] += HJJ[v, ii, j]
-                        VIJ[v, j] += HIJ[v, ii, j]
-            for i in range(ib0, ib1):
-                i0 = max(0, i - radius)
-                i1 = min(H, i + radius + 1)
-                inew = i + radius
-                iold = i - radius - 1
-                for v in range(nv):
+                        qx = px + A[v, 0, 0] * j
+                        qy = py + A[v, 1, 0] * j
+                        qz = pz + A[v, 2, 0] * j
+                        if qz <= 1e-12:
+                            if inband:
+                                OK[v, ii - ib0, j] = 0
+                            Jrow[j] = 0.0
+                            continue
+                        iz = 1.0 / qz
+                        x = qx * iz
+                        y = qy * iz
+                        if inband:
+                            inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
+                            OK[v, ii - ib0, j] = 1 if inside else 0
+                        if x < 0.0:
+                            x = 0.0
+                        if y < 0.0:
+                            y = 0.0
+                        if x > wv - 1.0:
+                            x = wv - 1.0
+                        if y > hv - 1.0:
+                            y = hv - 1.0
+                        x0 = min(int(x), wv - 2) if wv > 1 else 0
+                        y0 = min(int(y), hv - 2) if hv > 1 else 0
+                        fx = x - x0
+                        fy = y - y0
+                        x1 = min(x0 + 1, wv - 1)
+                        y1 = min(y0 + 1, hv - 1)
+                        Jrow[j] = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
+                                   + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
+                    # running horizontal window sums (window clipped at the border)
+                    a = 0.0
+                    a2 = 0.0
+                    a3 = 0.0
+                    for jj in range(min(W, radius)):
+                        q = Jrow[jj]
+                        a += q
+                        a2 += q * q
+                        a3 += q * I[ii, jj]
+                    r = ii - h0
+                    for j in range(W):
+                        jn = j + radius
+                        if jn < W:
+                            q = Jrow[jn]
+                            a += q
+                            a2 += q * q
+                            a3 += q * I[ii, jn]
+                        jo = j - radius - 1
+                        if jo >= 0:
+                            q = Jrow[jo]
+                            a -= q
+                            a2 -= q * q
+                            a3 -= q * I[ii, jo]
+                        HJ[r, j] = a
+                        HJJ[r, j] = a2
+                        HIJ[r, j] = a3
+                # 2. running vertical sums and the ZNCC of view v on the band
+                VJ[:] = 0.0
+                VJJ[:] = 0.0
+                VIJ[:] = 0.0
+                for ii in range(max(0, ib0 - radius - 1), min(H, ib0 + radius)):
+                    if ii < h0:
+                        continue
+                    for j in range(W):
+                        VJ[j] += HJ[ii - h0, j]
+                        VJJ[j] += HJJ[ii - h0, j]
+                        VIJ[j] += HIJ[ii - h0, j]
+                for i in range(ib0, ib1):
+                    i0 = max(0, i - radius)
+                    i1 = min(H, i + radius + 1)
+                    inew = i + radius
+                    iold = i - radius - 1
                     if inew < H:
                         for j in range(W):
-                            VJ[v, j] += HJ[v, inew, j]
-                            VJJ[v, j] += HJJ[v, inew, j]
-                            VIJ[v, j] += HIJ[v, inew, j]
-                    if iold >= 0:
+                            VJ[j] += HJ[inew - h0, j]
+                            VJJ[j] += HJJ[inew - h0, j]
+                            VIJ[j] += HIJ[inew - h0, j]
+                    if iold >= h0:
                         for j in range(W):
-                            VJ[v, j] -= HJ[v, iold, j]
-                            VJJ[v, j] -= HJJ[v, iold, j]
-                            VIJ[v, j] -= HIJ[v, iold, j]
-                for j in range(W):
-                    n = (i1 - i0) * (min(W, j + radius + 1) - max(0, j - radius))
-                    nval = 0
-                    for v in range(nv):
-                        if ok[v, i, j] == 0:
-                            continue
-                        a = VJ[v, j]
-                        a2 = VJJ[v, j]
-                        a3 = VIJ[v, j]
-                        mJ = a / n
-                        vJ = a2 / n - mJ * mJ
+                            VJ[j] -= HJ[iold - h0, j]
+                            VJJ[j] -= HJJ[iold - h0, j]
+                            VIJ[j] -= HIJ[iold - h0, j]
+                    rn = 1.0 / (i1 - i0)
+                    for j in range(W):
+                        inv_n = rn * inv_cols[j]
+                        mJ = VJ[j] * inv_n
+                        vJ = VJJ[j] * inv_n - mJ * mJ
                         if vJ < 0.0:
                             vJ = 0.0
-                        ncc = (a3 / n - mu[i, j] * mJ) / (sd[i, j] * np.sqrt(vJ + eps2))
-                        costs[nval] = 1.0 - ncc
-                        nval += 1
+                        ncc = (VIJ[j] * inv_n - mu[i, j] * mJ) / (sd[i, j] * np.sqrt(vJ + eps2))
+                        C[v, i - ib0, j] = 1.0 - ncc
+            # 3. robust aggregation over views, running minimum
+            for i in range(ib0, ib1):
+                for j in range(W):
+                    nval = 0
+                    for v in range(nv):
+                        if OK[v, i - ib0, j] != 0:
+                            costs[nval] = C[v, i - ib0, j]
+                            nval += 1
                     if nval == 0:
                         c = 2.0  # seen by no source at this depth: worst cost
                     else:
-                        # partial selection sort of the n_best lowest (nv is small; no allocation)
+                        # partial selection sort of the n_best lowest (nv is small)
                         m = min(n_best, nval)
                         c = 0.0
                         for q in range(m):
                             kmin = q
-                            for r in range(q + 1, nval):
-                                if costs[r] < costs[kmin]:
-                                    kmin = r
+                            for r2 in range(q + 1, nval):
+                                if costs[r2] < costs[kmin]:
+                                    kmin = r2
                             tmp = costs[q]
                             costs[q] = costs[kmin]
                             costs[kmin] = tmp

@@ -39,7 +39,7 @@ from .planesweep import plane_sweep, refine_planes
 
 #: Default number of slanted-plane refinement iterations after the sweep (see
 #: :func:`estimate_depth` and docs/DEPTH.md for the measurements behind it).
-REFINE_ITER = 2
+REFINE_ITER = 1
 
 
 # --------------------------------------------------------------------------- helpers
@@ -187,7 +187,7 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
 # --------------------------------------------------------------------------- main API
 def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=None,
                    method: str = "auto", exclude=(), n_neighbours: int = 4,
-                   n_planes: int | None = None, step_px: float = 0.5, max_planes: int = 256, radius: int = 3,
+                   n_planes: int | None = None, step_px: float = 2.0, max_planes: int = 128, radius: int = 3,
                    n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
                    min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
                    n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,

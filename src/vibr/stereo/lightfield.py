@@ -108,7 +108,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                      refine: str = "sweep+tv", tv_lambda: float = 2.0, tv_iter: int = 200,
                      st_min_coherence: float = 0.7, margin_px: float = 0.3,
                      return_disparity: bool = False, eps: float = 0.001,
-                     st_max_disp: float = 2.5, pm_iter: int = 2, pm_views: int = 8,
+                     st_max_disp: float = 2.5, pm_iter: int = 1, pm_views: int = 8,
                      **_ignored):
     """Depth and sigma_z for grid view ``ref`` from the other (non-excluded) grid views.
 

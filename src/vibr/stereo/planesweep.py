@@ -9,7 +9,7 @@ the mean of the best ``n_best`` views (robust to occlusion). Winner-take-all wit
 parabolic sub-label fit gives the depth; the fit's curvature gives an uncertainty.
 
 Memory: the planes are processed in slabs and only the running minimum and its two
-neighbouring costs are kept (O(views · H · W) working memory, never a D × H × W volume).
+neighbouring costs are kept (O(H · W) working memory besides the images, never a D × H × W volume).
 For light fields with fronto-parallel, parallel cameras this sweep is exact as well.
 """
 
@@ -101,7 +101,7 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
         units in [0, 1]); flat windows get ncc → 0 instead of noise.
     max_cost : pixels with aggregated cost above this are not ``confident``.
     slab : planes per compiled call (for the progress bar); default chosen from mem_bytes.
-    mem_bytes : bound on the working memory (the sweep needs ~ 17 bytes · views · H · W,
+    mem_bytes : bound on the working memory (the sweep needs ~ (40 + 4 · views) bytes · H · W,
         independent of D; a ValueError is raised if that alone exceeds the bound).
 
     Returns
@@ -123,7 +123,7 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     near, far = float(depth_range[0]), float(depth_range[1])
     if not (0 < near < far):
         raise ValueError(f"bad depth range {depth_range}")
-    work = 17.0 * nv * H * W
+    work = (40.0 + 4.0 * nv) * H * W
     if work > mem_bytes:
         raise ValueError(f"plane sweep working set {work/1e9:.2f} GB exceeds mem_bytes")
     n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
@@ -141,12 +141,6 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     eps2 = float(eps) ** 2
     mu, sd = kern.box_mean_std(I, radius, eps2)
     J = np.empty((nv, H, W), np.float32)
-    # horizontal window sums in float32 (accumulated in float64 in the kernel): half the
-    # memory traffic of the sweep, which is bandwidth-bound
-    HJ = np.empty((nv, H, W), np.float32)
-    HJJ = np.empty((nv, H, W), np.float32)
-    HIJ = np.empty((nv, H, W), np.float32)
-    ok = np.empty((nv, H, W), np.uint8)
     best_c = np.full((H, W), np.inf)
     best_l = np.zeros((H, W), np.int64)
     c_minus = np.full((H, W), np.inf)
@@ -154,10 +148,12 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     prev = np.full((H, W), np.inf)
     D = len(winv)
     slab = max(1, int(slab) if slab else max(1, D // 16))
+    # row bands of the compiled sweep: enough bands for the threads, each a few windows tall
+    block = int(max(2 * radius + 2, min(32, -(-H // 8))))
     starts = range(0, D, slab)
     for l0 in progress(starts, desc=desc or "plane sweep", total=len(starts), unit="slab"):
         kern.sweep_slab(I, mu, sd, srcs, sizes, A, b, winv[l0 : l0 + slab], l0, int(radius),
-                        n_best, eps2, 16, J, HJ, HJJ, HIJ, ok, best_c, best_l, c_minus, c_plus, prev)
+                        n_best, eps2, block, best_c, best_l, c_minus, c_plus, prev)
     lab, curv = kern.subpixel(best_c, best_l, c_minus, c_plus)
     dw = winv[1] - winv[0] if D > 1 else 1.0 / near
     w = winv[0] + lab * dw
@@ -178,16 +174,16 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
 
 
 def window_offsets(radius: int, stride: int) -> np.ndarray:
-    """(n, 2) offsets (dy, dx) of a square window of half-size ``radius`` sampled every
-    ``stride`` pixels (the centre always included)."""
-    r = np.arange(-(radius // stride) * stride, radius + 1, stride)
+    """(n, 2) offsets (dy, dx) of a square window from ``−radius`` to ``radius`` sampled
+    every ``stride`` pixels (the centre is a sample when ``stride`` divides ``radius``)."""
+    r = np.arange(-radius, radius + 1, stride)
     dy, dx = np.meshgrid(r, r, indexing="ij")
     return np.ascontiguousarray(np.c_[dy.ravel(), dx.ravel()].astype(np.int64))
 
 
 def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
-                  src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 3,
-                  radius: int = 4, stride: int = 2, sigma_c: float = 0.05,
+                  src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 1,
+                  radius: int = 3, stride: int = 2, sigma_c: float = 0.05,
                   n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
                   dn: float = 1.0, seed: int = 0) -> SweepResult:
     """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
@@ -206,7 +202,8 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     ``sigma_c`` (:func:`vibr.stereo._kernels.support_weights`), and the views are
     aggregated as in the sweep (mean of the ``n_best`` best ``1 − ZNCC``).
 
-    Returns a :class:`SweepResult` with the refined depth and cost; ``confident`` = the
+    Returns a :class:`SweepResult` with the refined depth and cost (``meta["plane_gradient"]``
+    holds the planes' ``(gx, gy)``, inverse depth per pixel); ``confident`` = the
     sweep's textured test, cost ≤ ``max_cost`` and a depth inside the sweep's range (not
     at its ends); ``sigma_z`` keeps the sweep's inverse-depth width at the new depth.
     """
@@ -251,6 +248,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     confident = textured & (cost <= max_cost) & inside
     meta = dict(init.meta)
     meta.update({"refine_s": time.perf_counter() - t0, "refine_iter": int(n_iter),
+                 "plane_gradient": (gx, gy),
                  "time_s": init.meta.get("time_s", 0.0) + time.perf_counter() - t0})
     return SweepResult(depth=z.astype(np.float32), inv_depth=w, cost=cost, sigma_z=sigma_z,
                        confident=confident, winv=winv, meta=meta)
