@@ -273,7 +273,7 @@ def test_plane_cost_is_minimal_at_the_true_slanted_plane():
     ref, cams, views, res, n, d = _slanted_setup(8)
     I = to_grey(views[0][0]).astype(np.float64)
     offs = window_offsets(3, 2)
-    wts, mu, sdI = kern.support_weights(I, offs, 0.05, 3.0)
+    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0)
     np.testing.assert_allclose(wts.sum(-1), 1.0, atol=1e-5)
     srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
     sizes = np.array([[80, 96], [80, 96]], np.int64)
@@ -287,7 +287,7 @@ def test_plane_cost_is_minimal_at_the_true_slanted_plane():
     inner = (slice(5, -5), slice(5, -5))
 
     def cost(w_, gx_, gy_):
-        return kern.plane_costs(I, wts, mu, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w_, gx_, gy_)[inner]
+        return kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w_, gx_, gy_)[inner]
 
     c_true = cost(w, gx, gy)
     assert np.median(c_true) < 0.02

@@ -442,13 +442,15 @@ def support_weights(I, offs, sigma_c, sigma_s):
     window that do not look like the centre (another surface across a depth edge) count
     little, so the matching window does not straddle an occlusion boundary.
 
-    Returns ``(wts (H,W,n) float32, mu (H,W), sd (H,W))``: the weights, and the weighted
-    mean and standard deviation (without regulariser) of ``I`` in the window.
+    Returns ``(wts (H,W,n) float32, wI (H,W,n) float32, sd (H,W))``: the weights, the
+    weighted centred reference samples ``ω_q (I_q − μ)`` (μ the weighted window mean; the
+    weighted covariance with any J is then ``Σ wI_q J_q``), and the weighted standard
+    deviation (without regulariser) of ``I`` in the window.
     """
     H, W = I.shape
     n = offs.shape[0]
     wts = np.zeros((H, W, n), np.float32)
-    mu = np.empty((H, W))
+    wI = np.zeros((H, W, n), np.float32)
     sd = np.empty((H, W))
     ic = 0.5 / (sigma_c * sigma_c)
     isp = 0.5 / (sigma_s * sigma_s)
@@ -475,14 +477,16 @@ def support_weights(I, offs, sigma_c, sigma_s):
                     v = I[i + offs[k, 0], j + offs[k, 1]]
                     m += wk * v
                     m2 += wk * v * v
-            mu[i, j] = m
+            for k in range(n):
+                if wts[i, j, k] > 0.0:
+                    wI[i, j, k] = wts[i, j, k] * (I[i + offs[k, 0], j + offs[k, 1]] - m)
             var = m2 - m * m
             sd[i, j] = np.sqrt(var) if var > 0.0 else 0.0
-    return wts, mu, sd
+    return wts, wI, sd
 
 
 @njit(cache=True)
-def _plane_cost(i, j, w, gx, gy, I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs):
+def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs):
     """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
     the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
     reference pixel: the image of any 3D plane) at reference pixel (i, j). A view counts
@@ -524,8 +528,9 @@ def _plane_cost(i, j, w, gx, gy, I, wts, mu, sdI, offs, srcs, sizes, A, b, n_bes
             if pz <= 1e-12:
                 bad = True
                 break
-            x = (cx + dx * ex0 + dy * ey0) / pz
-            y = (cy + dx * ex1 + dy * ey1) / pz
+            iz = 1.0 / pz
+            x = (cx + dx * ex0 + dy * ey0) * iz
+            y = (cy + dx * ex1 + dy * ey1) * iz
             if x < 0.0:
                 x = 0.0
             if y < 0.0:
@@ -542,15 +547,16 @@ def _plane_cost(i, j, w, gx, gy, I, wts, mu, sdI, offs, srcs, sizes, A, b, n_bes
             y1 = min(y0 + 1, hv - 1)
             q = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
                  + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
-            sJ += wk * q
-            sJJ += wk * q * q
-            sIJ += wk * q * I[i + dy, j + dx]
+            wq = wk * q
+            sJ += wq
+            sJJ += wq * q
+            sIJ += wI[i, j, k] * q
         if bad:
             continue
         vJ = sJJ - sJ * sJ
         if vJ < 0.0:
             vJ = 0.0
-        ncc = (sIJ - mu[i, j] * sJ) / (sI * np.sqrt(vJ + eps2))
+        ncc = sIJ / (sI * np.sqrt(vJ + eps2))
         costs[nval] = 1.0 - ncc
         nval += 1
     if nval == 0:
@@ -570,27 +576,27 @@ def _plane_cost(i, j, w, gx, gy, I, wts, mu, sdI, offs, srcs, sizes, A, b, n_bes
 
 
 @njit(parallel=True, cache=True)
-def plane_costs(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy):
+def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy):
     """:func:`_plane_cost` of every pixel's plane (w, gx, gy) (H,W) → (H,W) float64."""
-    H, W = I.shape
+    H, W = w.shape
     out = np.empty((H, W))
     nv = srcs.shape[0]
     for i in prange(H):
         costs = np.empty(max(nv, 1))
         for j in range(W):
-            out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], I, wts, mu, sdI, offs,
+            out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], wts, wI, sdI, offs,
                                     srcs, sizes, A, b, n_best, eps2, costs)
     return out
 
 
 @njit(cache=True, inline="always")
-def _try_plane(i, j, qi, qj, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best,
+def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A, b, n_best,
                eps2, costs, wmin, wmax):
     """Propagation: pixel (i, j) tries the plane of pixel (qi, qj), extended to it."""
     cw = w[qi, qj] + gx[qi, qj] * (j - qj) + gy[qi, qj] * (i - qi)
     if cw < wmin or cw > wmax:
         return
-    c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], I, wts, mu, sdI, offs, srcs, sizes, A, b,
+    c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], wts, wI, sdI, offs, srcs, sizes, A, b,
                     n_best, eps2, costs)
     if c < cost[i, j]:
         cost[i, j] = c
@@ -600,7 +606,7 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes
 
 
 @njit(parallel=True, cache=True)
-def patchmatch_refine(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2,
+def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                       w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed):
     """Slanted-plane PatchMatch refinement (Bleyer et al. 2011) of per-pixel planes
     ``(w, gx, gy)`` (inverse depth at the pixel and its derivatives along x and y, per
@@ -616,7 +622,7 @@ def patchmatch_refine(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2,
     candidate replaces the plane when its cost is lower; ``w`` stays in [wmin, wmax].
     Random numbers come from a hash of (seed, iteration, pixel): deterministic.
     """
-    H, W = I.shape
+    H, W = w.shape
     nv = srcs.shape[0]
     inv_f = Kinv[0, 0]
     for it in range(n_iter):
@@ -624,18 +630,18 @@ def patchmatch_refine(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2,
         for i in prange(H):
             costs = np.empty(max(nv, 1))
             for j in range(1, W):
-                _try_plane(i, j, i, j - 1, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                _try_plane(i, j, i, j - 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
                            A, b, n_best, eps2, costs, wmin, wmax)
             for j in range(W - 2, -1, -1):
-                _try_plane(i, j, i, j + 1, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                _try_plane(i, j, i, j + 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
                            A, b, n_best, eps2, costs, wmin, wmax)
         for j in prange(W):
             costs = np.empty(max(nv, 1))
             for i in range(1, H):
-                _try_plane(i, j, i - 1, j, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                _try_plane(i, j, i - 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
                            A, b, n_best, eps2, costs, wmin, wmax)
             for i in range(H - 2, -1, -1):
-                _try_plane(i, j, i + 1, j, w, gx, gy, cost, I, wts, mu, sdI, offs, srcs, sizes,
+                _try_plane(i, j, i + 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
                            A, b, n_best, eps2, costs, wmin, wmax)
         for i in prange(H):
             costs = np.empty(max(nv, 1))
@@ -674,7 +680,7 @@ def patchmatch_refine(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                         cy = bw * (u1 * Kinv[0, 1] + u2 * Kinv[1, 1] + u3 * Kinv[2, 1]) / nr
                     if cw < wmin or cw > wmax:
                         continue
-                    c = _plane_cost(i, j, cw, cx, cy, I, wts, mu, sdI, offs,
+                    c = _plane_cost(i, j, cw, cx, cy, wts, wI, sdI, offs,
                                     srcs, sizes, A, b, n_best, eps2, costs)
                     if c < bc:
                         bc = c

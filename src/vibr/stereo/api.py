@@ -39,7 +39,7 @@ from .planesweep import plane_sweep, refine_planes
 
 #: Default number of slanted-plane refinement iterations after the sweep (see
 #: :func:`estimate_depth` and docs/DEPTH.md for the measurements behind it).
-REFINE_ITER = 1
+REFINE_ITER = 2
 
 
 # --------------------------------------------------------------------------- helpers

@@ -222,21 +222,21 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
         sizes[v] = g.shape
     A, b = plane_homographies(ref_camera, list(src_cameras))
     offs = window_offsets(int(radius), int(stride))
-    wts, mu, sdI = kern.support_weights(I, offs, float(sigma_c), float(max(radius, 1)))
+    wts, wI, sdI = kern.support_weights(I, offs, float(sigma_c), float(max(radius, 1)))
     eps2 = float(eps) ** 2
     winv = init.winv
     step = abs(winv[1] - winv[0]) if len(winv) > 1 else 0.05 * winv[0]
     wmin, wmax = float(winv.min()), float(winv.max())
     w = np.clip(np.asarray(init.inv_depth, np.float64), wmin, wmax)
     zero = np.zeros((H, W))
-    c0 = kern.plane_costs(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero)
+    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero)
     gy, gx = np.gradient(w)
-    c1 = kern.plane_costs(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy)
+    c1 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy)
     better = c1 < c0
     gx = np.where(better, gx, 0.0)
     gy = np.where(better, gy, 0.0)
     cost = np.where(better, c1, c0)
-    kern.patchmatch_refine(I, wts, mu, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
+    kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
                            cost, int(n_iter), 2.0 * step, float(dn), np.linalg.inv(ref_camera.K),
                            wmin, wmax, int(seed))
     z = 1.0 / w
