@@ -232,7 +232,7 @@ def _slanted_setup(n_planes, blur=3.0):
     K = ref.K
     src2 = Camera.look_at([-0.4, -0.1, 0.1], [-0.1, 0, 5], [0, -1, 0], K, 96, 80)
     cams = [ref, src, src2]
-    n, d = np.array([0.45, -0.3, 1.0]), 4.0  # strongly slanted: 1/z varies by ~35 % across
+    n, d = np.array([0.45, -0.3, 1.0]), 4.0  # strongly slanted: depth 3.1 … 5.5 across the image
     # texture blurred by 3 texels (~1.5 px): band-limited like a camera image, so that the
     # views agree (with the aliased 1.2-texel texture the exact plane costs ~0.08)
     views = _textured_plane_views((n, d), cams, blur=blur)
@@ -242,7 +242,7 @@ def _slanted_setup(n_planes, blur=3.0):
 
 
 def test_refine_planes_slanted_plane_within_1pct():
-    """A very coarse sweep (8 planes, ~8 px of parallax apart) on a strongly slanted
+    """A very coarse sweep (8 planes, ~2 px of parallax apart) on a strongly slanted
     textured plane leaves a quantised depth; the slanted-plane refinement recovers ≥ 95 %
     of the pixels within 1 % and the plane's inverse-depth gradient."""
     from vibr.stereo.planesweep import refine_planes
