@@ -140,7 +140,6 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     A, b = plane_homographies(ref_camera, list(src_cameras))
     eps2 = float(eps) ** 2
     mu, sd = kern.box_mean_std(I, radius, eps2)
-    J = np.empty((nv, H, W), np.float32)
     best_c = np.full((H, W), np.inf)
     best_l = np.zeros((H, W), np.int64)
     c_minus = np.full((H, W), np.inf)
@@ -182,7 +181,7 @@ def window_offsets(radius: int, stride: int) -> np.ndarray:
 
 
 def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
-                  src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 1,
+                  src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 2,
                   radius: int = 3, stride: int = 2, sigma_c: float = 0.05,
                   n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
                   dn: float = 1.0, seed: int = 0) -> SweepResult:
@@ -194,10 +193,10 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     Here every pixel carries a plane ``w(x') = w + g·(x' − x)`` in inverse depth (affine in
     the reference pixel, which is exactly the image of a 3D plane), initialised from the
     sweep (fronto-parallel, or slanted by the finite-difference gradient of the sweep's
-    inverse depth, whichever costs less), and ``n_iter`` red-black PatchMatch iterations
-    (:func:`vibr.stereo._kernels.patchmatch_refine`: propagation from the neighbours and
-    random perturbations of halving size) minimise the multi-view cost over continuous
-    depths and orientations. The matching window is ``(2·radius+1)²`` sampled every
+    inverse depth, whichever costs less), and ``n_iter`` PatchMatch iterations
+    (:func:`vibr.stereo._kernels.patchmatch_refine`: propagation sweeps along the rows and
+    the columns, then random perturbations of halving size) minimise the multi-view cost
+    over continuous depths and orientations. The matching window is ``(2·radius+1)²`` sampled every
     ``stride`` pixels with adaptive-support (bilateral) weights of grey-level scale
     ``sigma_c`` (:func:`vibr.stereo._kernels.support_weights`), and the views are
     aggregated as in the sweep (mean of the ``n_best`` best ``1 − ZNCC``).
