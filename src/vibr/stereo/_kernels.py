@@ -490,7 +490,13 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
     """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
     the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
     reference pixel: the image of any 3D plane) at reference pixel (i, j). A view counts
-    when the centre lands inside it; 2 when none does or the plane is behind a camera."""
+    when the centre lands inside it; 2 when none does or the plane is behind a camera.
+
+    ``wts``, ``wI``, ``sdI``: the window weights, weighted centred reference samples and
+    weighted reference std of :func:`support_weights` for the window offsets ``offs``;
+    ``srcs``, ``sizes``, ``A``, ``b`` as in :func:`sweep_slab`; ``costs`` (≥ nv,) scratch.
+    The ZNCC is ``Σ wI J / (√(sdI² + eps2) √(var_w(J) + eps2))``, J sampled bilinearly
+    (clamped) at the plane's image of each window pixel."""
     nv = srcs.shape[0]
     nwin = offs.shape[0]
     nval = 0
