@@ -486,7 +486,7 @@ def support_weights(I, offs, sigma_c, sigma_s):
 
 
 @njit(cache=True)
-def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs):
+def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs, lam1):
     """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
     the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
     reference pixel: the image of any 3D plane) at reference pixel (i, j). A view counts
@@ -578,11 +578,14 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
         costs[q] = costs[kmin]
         costs[kmin] = tmp
         c += costs[q]
-    return c / m
+    c /= m
+    if lam1 >= 0.0 and m > 1 and costs[0] + lam1 < c:
+        c = costs[0] + lam1
+    return c
 
 
 @njit(parallel=True, cache=True)
-def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy):
+def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1):
     """:func:`_plane_cost` of every pixel's plane (w, gx, gy) (H,W) → (H,W) float64."""
     H, W = w.shape
     out = np.empty((H, W))
@@ -591,19 +594,19 @@ def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy):
         costs = np.empty(max(nv, 1))
         for j in range(W):
             out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], wts, wI, sdI, offs,
-                                    srcs, sizes, A, b, n_best, eps2, costs)
+                                    srcs, sizes, A, b, n_best, eps2, costs, lam1)
     return out
 
 
 @njit(cache=True, inline="always")
 def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A, b, n_best,
-               eps2, costs, wmin, wmax):
+               eps2, costs, wmin, wmax, lam1):
     """Propagation: pixel (i, j) tries the plane of pixel (qi, qj), extended to it."""
     cw = w[qi, qj] + gx[qi, qj] * (j - qj) + gy[qi, qj] * (i - qi)
     if cw < wmin or cw > wmax:
         return
     c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], wts, wI, sdI, offs, srcs, sizes, A, b,
-                    n_best, eps2, costs)
+                    n_best, eps2, costs, lam1)
     if c < cost[i, j]:
         cost[i, j] = c
         w[i, j] = cw
@@ -613,7 +616,7 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A
 
 @njit(parallel=True, cache=True)
 def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
-                      w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed):
+                      w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed, lam1):
     """Slanted-plane PatchMatch refinement (Bleyer et al. 2011) of per-pixel planes
     ``(w, gx, gy)`` (inverse depth at the pixel and its derivatives along x and y, per
     pixel), in place, with their costs ``cost`` (:func:`_plane_cost`).
@@ -637,18 +640,18 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
             costs = np.empty(max(nv, 1))
             for j in range(1, W):
                 _try_plane(i, j, i, j - 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                           A, b, n_best, eps2, costs, wmin, wmax)
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
             for j in range(W - 2, -1, -1):
                 _try_plane(i, j, i, j + 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                           A, b, n_best, eps2, costs, wmin, wmax)
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
         for j in prange(W):
             costs = np.empty(max(nv, 1))
             for i in range(1, H):
                 _try_plane(i, j, i - 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                           A, b, n_best, eps2, costs, wmin, wmax)
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
             for i in range(H - 2, -1, -1):
                 _try_plane(i, j, i + 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                           A, b, n_best, eps2, costs, wmin, wmax)
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
         for i in prange(H):
             costs = np.empty(max(nv, 1))
             for j in range(W):
@@ -687,7 +690,7 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                     if cw < wmin or cw > wmax:
                         continue
                     c = _plane_cost(i, j, cw, cx, cy, wts, wI, sdI, offs,
-                                    srcs, sizes, A, b, n_best, eps2, costs)
+                                    srcs, sizes, A, b, n_best, eps2, costs, lam1)
                     if c < bc:
                         bc = c
                         bw = cw

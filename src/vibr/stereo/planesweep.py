@@ -184,7 +184,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
                   src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 2,
                   radius: int = 3, stride: int = 2, sigma_c: float = 0.05,
                   n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
-                  dn: float = 1.0, seed: int = 0) -> SweepResult:
+                  dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1) -> SweepResult:
     """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
 
     The sweep is winner-take-all over fronto-parallel planes: its depth is quantised (the
@@ -199,7 +199,10 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     over continuous depths and orientations. The matching window is ``(2·radius+1)²`` sampled every
     ``stride`` pixels with adaptive-support (bilateral) weights of grey-level scale
     ``sigma_c`` (:func:`vibr.stereo._kernels.support_weights`), and the views are
-    aggregated as in the sweep (mean of the ``n_best`` best ``1 − ZNCC``).
+    aggregated as in the sweep (mean of the ``n_best`` best ``1 − ZNCC``), except that the
+    best view alone plus ``single_view_penalty`` replaces that mean when lower (a point
+    seen by a single partner: the mean would average in a view that sees something else;
+    ``None``: never).
 
     Returns a :class:`SweepResult` with the refined depth and cost (``meta["plane_gradient"]``
     holds the planes' ``(gx, gy)``, inverse depth per pixel); ``confident`` = the
@@ -211,6 +214,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     I = to_grey(ref_image).astype(np.float64)
     nv = len(src_images)
     n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
+    lam1 = -1.0 if single_view_penalty is None else float(single_view_penalty)
     greys = [to_grey(s) for s in src_images]
     Hm = max(g.shape[0] for g in greys)
     Wm = max(g.shape[1] for g in greys)
@@ -228,16 +232,16 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     wmin, wmax = float(winv.min()), float(winv.max())
     w = np.clip(np.asarray(init.inv_depth, np.float64), wmin, wmax)
     zero = np.zeros((H, W))
-    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero)
+    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero, lam1)
     gy, gx = np.gradient(w)
-    c1 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy)
+    c1 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1)
     better = c1 < c0
     gx = np.where(better, gx, 0.0)
     gy = np.where(better, gy, 0.0)
     cost = np.where(better, c1, c0)
     kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
                            cost, int(n_iter), 2.0 * step, float(dn), np.linalg.inv(ref_camera.K),
-                           wmin, wmax, int(seed))
+                           wmin, wmax, int(seed), lam1)
     z = 1.0 / w
     sigma_w = init.sigma_z.astype(np.float64) / np.asarray(init.depth, np.float64) ** 2
     sigma_z = (z * z * sigma_w).astype(np.float32)
