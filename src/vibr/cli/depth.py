@@ -11,8 +11,9 @@ _DESC = """\
 Estimate orthogonal depth maps and their uncertainty sigma_z for the views of a scene, on
 the CPU: light fields (scene with a grid) by the EPI structure tensor refined by a fine
 plane sweep over the grid and TV-L1; other scenes by plane-sweep multi-view stereo (ZNCC
-over the nearest views, sub-plane refinement, cross-view consistency check). Pixels whose
-depth is unreliable or inconsistent are written as unknown (0 in the .npy files).
+over the nearest views, slanted-plane PatchMatch refinement, cross-view consistency
+check). Pixels whose depth is unreliable or inconsistent are written as unknown (0 in the
+.npy files).
 
 The result is the scene saved as a nerfstudio transforms.json folder (OUT/transforms.json,
 OUT/depth/*.npy, OUT/sigma_z/*.npy). Without -o, a SCENE that is itself a transforms.json
@@ -22,7 +23,7 @@ folder is updated in place (the new folder replaces it only once complete).
 _EPILOG = """\
 examples:
   vibr depth ../shared/data/strecha_fountain-P11 -o fountain_depth/ --resize 0.25
-  vibr depth ../shared/data/strecha_fountain-P11 -o f/ --resize 0.25 --step-px 1 --max-planes 128   (fast)
+  vibr depth ../shared/data/strecha_fountain-P11 -o f/ --resize 0.25 --refine-iter 1   (faster)
   vibr depth ../shared/data/hci2016_cotton -o cotton_depth/ --views input_Cam040
   vibr depth fountain_depth/ --views 5 --exclude 4          update in place, never using view 4
   vibr depth SCENE -o out/ --scale 0.5 --depth-range 4 20   estimate at half resolution
@@ -47,9 +48,14 @@ def register(sub) -> None:
     p.add_argument("--neighbours", type=int, default=4, help="stereo partners per view (MVS, default 4)")
     p.add_argument("--depth-range", type=float, nargs=2, metavar=("NEAR", "FAR"), default=None,
                    help="depth range in scene units (default: from sparse points or a coarse sweep)")
-    p.add_argument("--step-px", type=float, default=0.5,
-                   help="parallax between consecutive planes on the farthest partner, px (MVS, default 0.5)")
-    p.add_argument("--max-planes", type=int, default=256, help="most planes per view (MVS, default 256)")
+    p.add_argument("--step-px", type=float, default=None,
+                   help="parallax between consecutive planes on the farthest partner, px "
+                   "(MVS; default that of vibr.stereo.estimate_depth, 2)")
+    p.add_argument("--max-planes", type=int, default=None,
+                   help="most planes per view (MVS; default that of estimate_depth, 128)")
+    p.add_argument("--refine-iter", type=int, default=None,
+                   help="slanted-plane refinement iterations after the sweep, 0 for none "
+                   "(default that of estimate_depth, 2)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
     p.add_argument("--force", action="store_true", help="replace OUT if it exists")
     add_quiet(p)
@@ -77,11 +83,12 @@ def run(args) -> int:
     else:
         out = Path(args.out)
     scene = load_scene(args.scene, scale=args.resize)
+    opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                             ("refine_iter", args.refine_iter)) if v is not None}
     est = estimate_depth(scene, views=_split(args.views), scale=args.scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
-                         consistency=not args.no_consistency, step_px=args.step_px,
-                         max_planes=args.max_planes)
+                         consistency=not args.no_consistency, **opt)
     info = est.meta["depth_estimation"]
     save_scene(est, out, overwrite=in_place or args.force)
     kept = [v["kept"] for v in info["views"].values() if v.get("role") == "target"]

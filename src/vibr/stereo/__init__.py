@@ -2,6 +2,7 @@
 
 * :func:`estimate_depth` — the entry point (light-field or plane-sweep MVS).
 * :func:`plane_sweep` — plane-sweep stereo for one reference view.
+* :func:`refine_planes` — slanted-plane PatchMatch refinement of a sweep.
 * :func:`check_consistency` — forward-backward geometric consistency across views.
 * :func:`epi_disparity`, :func:`lightfield_depth` — light-field estimators.
 """
@@ -9,8 +10,8 @@
 from .api import default_depth_range, estimate_depth, select_neighbours, upsample_depth
 from .consistency import ConsistencyResult, check_consistency
 from .lightfield import disparity_model, epi_disparity, lightfield_depth
-from .planesweep import SweepResult, plane_homographies, plane_sweep
+from .planesweep import SweepResult, plane_homographies, plane_sweep, refine_planes
 
 __all__ = ["estimate_depth", "default_depth_range", "select_neighbours", "upsample_depth",
-           "plane_sweep", "plane_homographies", "SweepResult", "check_consistency",
+           "plane_sweep", "plane_homographies", "refine_planes", "SweepResult", "check_consistency",
            "ConsistencyResult", "epi_disparity", "disparity_model", "lightfield_depth"]

@@ -58,7 +58,7 @@ def box_mean_std(img, radius, eps2):
 # --------------------------------------------------------------------------- plane sweep
 @njit(parallel=True, cache=True)
 def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, block,
-               J, HJ, HJJ, HIJ, ok, best_c, best_l, c_minus, c_plus, prev):
+               best_c, best_l, c_minus, c_plus, prev):
     """Process a slab of fronto-parallel planes of the reference camera (streaming WTA).
 
     For the plane of inverse depth ``w`` (orthogonal depth ``z = 1/w``) the reference pixel
@@ -68,141 +68,166 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
 
     ``A_v = K_v R_rel K_r⁻¹``, ``b_v = K_v t_rel`` (R_rel, t_rel: reference → source).
     Each source is resampled bilinearly (clamped at the border), the ZNCC in a
-    (2r+1)² window is computed from box sums, the per-view costs ``1 − ZNCC`` are
+    (2r+1)² window is computed from running box sums, the per-view costs ``1 − ZNCC`` are
     aggregated by the mean of the ``n_best`` lowest (occlusion robustness), and the
     running minimum over planes is kept together with the costs of its two neighbouring
-    labels (for the parabolic sub-label fit). Only O(views·H·W) memory: the full cost
-    volume is never stored.
+    labels (for the parabolic sub-label fit). The full cost volume is never stored.
+
+    One parallel region per slab: each task owns a band of ``block`` reference rows and
+    runs every plane of the slab on it, warping the ``radius`` rows above and below the
+    band again (instead of a second parallel region per plane and image-sized
+    intermediate arrays: the work stays in the task's cache-sized buffers).
 
     Arrays: I, mu, sd (H,W) reference grey / window mean / regularised std; srcs
     (nv,Hm,Wm) float32 source grey images (padded), sizes (nv,2) their (H,W); A (nv,3,3),
-    b (nv,3); winv (d,) inverse depths of this slab, first label index ``l0``; work buffers
-    J, HJ, HJJ, HIJ (nv,H,W), ok (nv,H,W) uint8; state best_c, best_l, c_minus, c_plus,
-    prev (H,W) updated in place.
+    b (nv,3); winv (d,) inverse depths of this slab, first label index ``l0``; state
+    best_c, best_l, c_minus, c_plus, prev (H,W) updated in place.
     """
     H, W = I.shape
     nv = srcs.shape[0]
-    for di in range(winv.shape[0]):
-        w = winv[di]
-        lab = l0 + di
-        # 1. warp every source onto the plane and take horizontal window sums
-        for k in prange(nv * H):
-            v = k // H
-            i = k - v * H
-            hv = sizes[v, 0]
-            wv = sizes[v, 1]
-            for j in range(W):
-                px = A[v, 0, 0] * j + A[v, 0, 1] * i + A[v, 0, 2] + w * b[v, 0]
-                py = A[v, 1, 0] * j + A[v, 1, 1] * i + A[v, 1, 2] + w * b[v, 1]
-                pz = A[v, 2, 0] * j + A[v, 2, 1] * i + A[v, 2, 2] + w * b[v, 2]
-                if pz <= 1e-12:
-                    ok[v, i, j] = 0
-                    J[v, i, j] = 0.0
-                    continue
-                x = px / pz
-                y = py / pz
-                inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
-                ok[v, i, j] = 1 if inside else 0
-                if x < 0.0:
-                    x = 0.0
-                if y < 0.0:
-                    y = 0.0
-                if x > wv - 1.0:
-                    x = wv - 1.0
-                if y > hv - 1.0:
-                    y = hv - 1.0
-                x0 = min(int(x), wv - 2) if wv > 1 else 0
-                y0 = min(int(y), hv - 2) if hv > 1 else 0
-                fx = x - x0
-                fy = y - y0
-                x1 = min(x0 + 1, wv - 1)
-                y1 = min(y0 + 1, hv - 1)
-                J[v, i, j] = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
-                              + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
-            # running horizontal window sums (window clipped at the border)
-            a = 0.0
-            a2 = 0.0
-            a3 = 0.0
-            for jj in range(min(W, radius)):
-                q = J[v, i, jj]
-                a += q
-                a2 += q * q
-                a3 += q * I[i, jj]
-            for j in range(W):
-                jn = j + radius
-                if jn < W:
-                    q = J[v, i, jn]
-                    a += q
-                    a2 += q * q
-                    a3 += q * I[i, jn]
-                jo = j - radius - 1
-                if jo >= 0:
-                    q = J[v, i, jo]
-                    a -= q
-                    a2 -= q * q
-                    a3 -= q * I[i, jo]
-                HJ[v, i, j] = a
-                HJJ[v, i, j] = a2
-                HIJ[v, i, j] = a3
-        # 2. vertical sums, ZNCC, robust aggregation over views, running minimum
-        nblk = (H + block - 1) // block
-        for blk in prange(nblk):
-            costs = np.empty(nv)
-            # running vertical sums of the horizontal sums, per view and column
-            VJ = np.zeros((nv, W))
-            VJJ = np.zeros((nv, W))
-            VIJ = np.zeros((nv, W))
-            ib0 = blk * block
-            ib1 = min(H, ib0 + block)
+    nblk = (H + block - 1) // block
+    inv_cols = np.empty(W)  # 1 / window width of each column (clipped at the border)
+    for j in range(W):
+        inv_cols[j] = 1.0 / (min(W, j + radius + 1) - max(0, j - radius))
+    for blk in prange(nblk):
+        ib0 = blk * block
+        ib1 = min(H, ib0 + block)
+        h0 = max(0, ib0 - radius)
+        h1 = min(H, ib1 + radius)
+        nb_ = ib1 - ib0
+        HJ = np.empty((h1 - h0, W), np.float32)
+        HJJ = np.empty((h1 - h0, W), np.float32)
+        HIJ = np.empty((h1 - h0, W), np.float32)
+        C = np.empty((nv, nb_, W), np.float32)
+        OK = np.empty((nv, nb_, W), np.uint8)
+        Jrow = np.empty(W, np.float32)
+        VJ = np.empty(W)
+        VJJ = np.empty(W)
+        VIJ = np.empty(W)
+        costs = np.empty(max(nv, 1))
+        for di in range(winv.shape[0]):
+            w = winv[di]
+            lab = l0 + di
             for v in range(nv):
-                for ii in range(max(0, ib0 - radius - 1), min(H, ib0 + radius)):
+                hv = sizes[v, 0]
+                wv = sizes[v, 1]
+                # 1. warp the band's rows (and the halo) and take horizontal window sums
+                for ii in range(h0, h1):
+                    inband = ii >= ib0 and ii < ib1
+                    px = A[v, 0, 1] * ii + A[v, 0, 2] + w * b[v, 0]
+                    py = A[v, 1, 1] * ii + A[v, 1, 2] + w * b[v, 1]
+                    pz = A[v, 2, 1] * ii + A[v, 2, 2] + w * b[v, 2]
                     for j in range(W):
-                        VJ[v, j] += HJ[v, ii, j]
-                        VJJ[v, j] += HJJ[v, ii, j]
-                        VIJ[v, j] += HIJ[v, ii, j]
-            for i in range(ib0, ib1):
-                i0 = max(0, i - radius)
-                i1 = min(H, i + radius + 1)
-                inew = i + radius
-                iold = i - radius - 1
-                for v in range(nv):
+                        qx = px + A[v, 0, 0] * j
+                        qy = py + A[v, 1, 0] * j
+                        qz = pz + A[v, 2, 0] * j
+                        if qz <= 1e-12:
+                            if inband:
+                                OK[v, ii - ib0, j] = 0
+                            Jrow[j] = 0.0
+                            continue
+                        iz = 1.0 / qz
+                        x = qx * iz
+                        y = qy * iz
+                        if inband:
+                            inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
+                            OK[v, ii - ib0, j] = 1 if inside else 0
+                        if x < 0.0:
+                            x = 0.0
+                        if y < 0.0:
+                            y = 0.0
+                        if x > wv - 1.0:
+                            x = wv - 1.0
+                        if y > hv - 1.0:
+                            y = hv - 1.0
+                        x0 = min(int(x), wv - 2) if wv > 1 else 0
+                        y0 = min(int(y), hv - 2) if hv > 1 else 0
+                        fx = x - x0
+                        fy = y - y0
+                        x1 = min(x0 + 1, wv - 1)
+                        y1 = min(y0 + 1, hv - 1)
+                        Jrow[j] = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
+                                   + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
+                    # running horizontal window sums (window clipped at the border)
+                    a = 0.0
+                    a2 = 0.0
+                    a3 = 0.0
+                    for jj in range(min(W, radius)):
+                        q = Jrow[jj]
+                        a += q
+                        a2 += q * q
+                        a3 += q * I[ii, jj]
+                    r = ii - h0
+                    for j in range(W):
+                        jn = j + radius
+                        if jn < W:
+                            q = Jrow[jn]
+                            a += q
+                            a2 += q * q
+                            a3 += q * I[ii, jn]
+                        jo = j - radius - 1
+                        if jo >= 0:
+                            q = Jrow[jo]
+                            a -= q
+                            a2 -= q * q
+                            a3 -= q * I[ii, jo]
+                        HJ[r, j] = a
+                        HJJ[r, j] = a2
+                        HIJ[r, j] = a3
+                # 2. running vertical sums and the ZNCC of view v on the band
+                VJ[:] = 0.0
+                VJJ[:] = 0.0
+                VIJ[:] = 0.0
+                for ii in range(max(0, ib0 - radius - 1), min(H, ib0 + radius)):
+                    if ii < h0:
+                        continue
+                    for j in range(W):
+                        VJ[j] += HJ[ii - h0, j]
+                        VJJ[j] += HJJ[ii - h0, j]
+                        VIJ[j] += HIJ[ii - h0, j]
+                for i in range(ib0, ib1):
+                    i0 = max(0, i - radius)
+                    i1 = min(H, i + radius + 1)
+                    inew = i + radius
+                    iold = i - radius - 1
                     if inew < H:
                         for j in range(W):
-                            VJ[v, j] += HJ[v, inew, j]
-                            VJJ[v, j] += HJJ[v, inew, j]
-                            VIJ[v, j] += HIJ[v, inew, j]
-                    if iold >= 0:
+                            VJ[j] += HJ[inew - h0, j]
+                            VJJ[j] += HJJ[inew - h0, j]
+                            VIJ[j] += HIJ[inew - h0, j]
+                    if iold >= h0:
                         for j in range(W):
-                            VJ[v, j] -= HJ[v, iold, j]
-                            VJJ[v, j] -= HJJ[v, iold, j]
-                            VIJ[v, j] -= HIJ[v, iold, j]
-                for j in range(W):
-                    n = (i1 - i0) * (min(W, j + radius + 1) - max(0, j - radius))
-                    nval = 0
-                    for v in range(nv):
-                        if ok[v, i, j] == 0:
-                            continue
-                        a = VJ[v, j]
-                        a2 = VJJ[v, j]
-                        a3 = VIJ[v, j]
-                        mJ = a / n
-                        vJ = a2 / n - mJ * mJ
+                            VJ[j] -= HJ[iold - h0, j]
+                            VJJ[j] -= HJJ[iold - h0, j]
+                            VIJ[j] -= HIJ[iold - h0, j]
+                    rn = 1.0 / (i1 - i0)
+                    for j in range(W):
+                        inv_n = rn * inv_cols[j]
+                        mJ = VJ[j] * inv_n
+                        vJ = VJJ[j] * inv_n - mJ * mJ
                         if vJ < 0.0:
                             vJ = 0.0
-                        ncc = (a3 / n - mu[i, j] * mJ) / (sd[i, j] * np.sqrt(vJ + eps2))
-                        costs[nval] = 1.0 - ncc
-                        nval += 1
+                        ncc = (VIJ[j] * inv_n - mu[i, j] * mJ) / (sd[i, j] * np.sqrt(vJ + eps2))
+                        C[v, i - ib0, j] = 1.0 - ncc
+            # 3. robust aggregation over views, running minimum
+            for i in range(ib0, ib1):
+                for j in range(W):
+                    nval = 0
+                    for v in range(nv):
+                        if OK[v, i - ib0, j] != 0:
+                            costs[nval] = C[v, i - ib0, j]
+                            nval += 1
                     if nval == 0:
                         c = 2.0  # seen by no source at this depth: worst cost
                     else:
-                        # partial selection sort of the n_best lowest (nv is small; no allocation)
+                        # partial selection sort of the n_best lowest (nv is small)
                         m = min(n_best, nval)
                         c = 0.0
                         for q in range(m):
                             kmin = q
-                            for r in range(q + 1, nval):
-                                if costs[r] < costs[kmin]:
-                                    kmin = r
+                            for r2 in range(q + 1, nval):
+                                if costs[r2] < costs[kmin]:
+                                    kmin = r2
                             tmp = costs[q]
                             costs[q] = costs[kmin]
                             costs[kmin] = tmp
@@ -392,3 +417,286 @@ def tv_l1(f, conf, g, lam, n_iter):
                 u[i, j] = v
                 ub[i, j] = 2.0 * v - uo
     return u
+
+
+# --------------------------------------------------------------------------- slanted-plane refinement
+@njit(cache=True, inline="always")
+def _hash01(k):
+    """Deterministic uniform number in [0, 1) from an integer key (splitmix64 finaliser):
+    the refinement's random proposals do not depend on the thread schedule."""
+    x = np.uint64(k)
+    x ^= x >> np.uint64(33)
+    x *= np.uint64(0xFF51AFD7ED558CCD)
+    x ^= x >> np.uint64(33)
+    x *= np.uint64(0xC4CEB9FE1A85EC53)
+    x ^= x >> np.uint64(33)
+    return float(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(parallel=True, cache=True)
+def support_weights(I, offs, sigma_c, sigma_s):
+    """Adaptive-support (bilateral) window weights of the reference image (Yoon & Kweon
+    2006; the bilateral NCC of Schönberger et al. 2016 §4.2):
+    ``ω_q = exp(−(I_q − I_p)²/(2σ_c²) − |q − p|²/(2σ_s²))`` for the window offsets ``offs``
+    (n,2) (dy, dx), 0 outside the image, normalised to sum 1 per pixel. Pixels of the
+    window that do not look like the centre (another surface across a depth edge) count
+    little, so the matching window does not straddle an occlusion boundary.
+
+    Returns ``(wts (H,W,n) float32, wI (H,W,n) float32, sd (H,W))``: the weights, the
+    weighted centred reference samples ``ω_q (I_q − μ)`` (μ the weighted window mean; the
+    weighted covariance with any J is then ``Σ wI_q J_q``), and the weighted standard
+    deviation (without regulariser) of ``I`` in the window.
+    """
+    H, W = I.shape
+    n = offs.shape[0]
+    wts = np.zeros((H, W, n), np.float32)
+    wI = np.zeros((H, W, n), np.float32)
+    sd = np.empty((H, W))
+    ic = 0.5 / (sigma_c * sigma_c)
+    isp = 0.5 / (sigma_s * sigma_s)
+    for i in prange(H):
+        for j in range(W):
+            tot = 0.0
+            c = I[i, j]
+            for k in range(n):
+                qi = i + offs[k, 0]
+                qj = j + offs[k, 1]
+                if qi < 0 or qj < 0 or qi >= H or qj >= W:
+                    continue
+                d = I[qi, qj] - c
+                r2 = offs[k, 0] * offs[k, 0] + offs[k, 1] * offs[k, 1]
+                wk = np.exp(-d * d * ic - r2 * isp)
+                wts[i, j, k] = wk
+                tot += wk
+            m = 0.0
+            m2 = 0.0
+            for k in range(n):
+                wk = wts[i, j, k] / tot
+                wts[i, j, k] = wk
+                if wk > 0.0:
+                    v = I[i + offs[k, 0], j + offs[k, 1]]
+                    m += wk * v
+                    m2 += wk * v * v
+            for k in range(n):
+                if wts[i, j, k] > 0.0:
+                    wI[i, j, k] = wts[i, j, k] * (I[i + offs[k, 0], j + offs[k, 1]] - m)
+            var = m2 - m * m
+            sd[i, j] = np.sqrt(var) if var > 0.0 else 0.0
+    return wts, wI, sd
+
+
+@njit(cache=True)
+def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs, lam1):
+    """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
+    the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
+    reference pixel: the image of any 3D plane) at reference pixel (i, j). A view counts
+    when the centre lands inside it; 2 when none does or the plane is behind a camera.
+
+    ``wts``, ``wI``, ``sdI``: the window weights, weighted centred reference samples and
+    weighted reference std of :func:`support_weights` for the window offsets ``offs``;
+    ``srcs``, ``sizes``, ``A``, ``b`` as in :func:`sweep_slab`; ``costs`` (≥ nv,) scratch.
+    The ZNCC is ``Σ wI J / (√(sdI² + eps2) √(var_w(J) + eps2))``, J sampled bilinearly
+    (clamped) at the plane's image of each window pixel."""
+    nv = srcs.shape[0]
+    nwin = offs.shape[0]
+    nval = 0
+    sI = np.sqrt(sdI[i, j] * sdI[i, j] + eps2)
+    for v in range(nv):
+        hv = sizes[v, 0]
+        wv = sizes[v, 1]
+        # homogeneous image of the centre, and its increments per window column / row
+        cx = A[v, 0, 0] * j + A[v, 0, 1] * i + A[v, 0, 2] + w * b[v, 0]
+        cy = A[v, 1, 0] * j + A[v, 1, 1] * i + A[v, 1, 2] + w * b[v, 1]
+        cz = A[v, 2, 0] * j + A[v, 2, 1] * i + A[v, 2, 2] + w * b[v, 2]
+        if cz <= 1e-12:
+            continue
+        xc = cx / cz
+        yc = cy / cz
+        if not ((xc > -0.5) and (yc > -0.5) and (xc < wv - 0.5) and (yc < hv - 0.5)):
+            continue
+        ex0 = A[v, 0, 0] + gx * b[v, 0]
+        ex1 = A[v, 1, 0] + gx * b[v, 1]
+        ex2 = A[v, 2, 0] + gx * b[v, 2]
+        ey0 = A[v, 0, 1] + gy * b[v, 0]
+        ey1 = A[v, 1, 1] + gy * b[v, 1]
+        ey2 = A[v, 2, 1] + gy * b[v, 2]
+        sJ = 0.0
+        sJJ = 0.0
+        sIJ = 0.0
+        bad = False
+        for k in range(nwin):
+            wk = wts[i, j, k]
+            if wk == 0.0:
+                continue
+            dy = offs[k, 0]
+            dx = offs[k, 1]
+            pz = cz + dx * ex2 + dy * ey2
+            if pz <= 1e-12:
+                bad = True
+                break
+            iz = 1.0 / pz
+            x = (cx + dx * ex0 + dy * ey0) * iz
+            y = (cy + dx * ex1 + dy * ey1) * iz
+            if x < 0.0:
+                x = 0.0
+            if y < 0.0:
+                y = 0.0
+            if x > wv - 1.0:
+                x = wv - 1.0
+            if y > hv - 1.0:
+                y = hv - 1.0
+            x0 = min(int(x), wv - 2) if wv > 1 else 0
+            y0 = min(int(y), hv - 2) if hv > 1 else 0
+            fx = x - x0
+            fy = y - y0
+            x1 = min(x0 + 1, wv - 1)
+            y1 = min(y0 + 1, hv - 1)
+            q = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
+                 + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
+            wq = wk * q
+            sJ += wq
+            sJJ += wq * q
+            sIJ += wI[i, j, k] * q
+        if bad:
+            continue
+        vJ = sJJ - sJ * sJ
+        if vJ < 0.0:
+            vJ = 0.0
+        ncc = sIJ / (sI * np.sqrt(vJ + eps2))
+        costs[nval] = 1.0 - ncc
+        nval += 1
+    if nval == 0:
+        return 2.0
+    m = min(n_best, nval)
+    c = 0.0
+    for q in range(m):
+        kmin = q
+        for r in range(q + 1, nval):
+            if costs[r] < costs[kmin]:
+                kmin = r
+        tmp = costs[q]
+        costs[q] = costs[kmin]
+        costs[kmin] = tmp
+        c += costs[q]
+    c /= m
+    if lam1 >= 0.0 and m > 1 and costs[0] + lam1 < c:
+        c = costs[0] + lam1
+    return c
+
+
+@njit(parallel=True, cache=True)
+def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1):
+    """:func:`_plane_cost` of every pixel's plane (w, gx, gy) (H,W) → (H,W) float64."""
+    H, W = w.shape
+    out = np.empty((H, W))
+    nv = srcs.shape[0]
+    for i in prange(H):
+        costs = np.empty(max(nv, 1))
+        for j in range(W):
+            out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], wts, wI, sdI, offs,
+                                    srcs, sizes, A, b, n_best, eps2, costs, lam1)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A, b, n_best,
+               eps2, costs, wmin, wmax, lam1):
+    """Propagation: pixel (i, j) tries the plane of pixel (qi, qj), extended to it."""
+    cw = w[qi, qj] + gx[qi, qj] * (j - qj) + gy[qi, qj] * (i - qi)
+    if cw < wmin or cw > wmax:
+        return
+    c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], wts, wI, sdI, offs, srcs, sizes, A, b,
+                    n_best, eps2, costs, lam1)
+    if c < cost[i, j]:
+        cost[i, j] = c
+        w[i, j] = cw
+        gx[i, j] = gx[qi, qj]
+        gy[i, j] = gy[qi, qj]
+
+
+@njit(parallel=True, cache=True)
+def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
+                      w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed, lam1):
+    """Slanted-plane PatchMatch refinement (Bleyer et al. 2011) of per-pixel planes
+    ``(w, gx, gy)`` (inverse depth at the pixel and its derivatives along x and y, per
+    pixel), in place, with their costs ``cost`` (:func:`_plane_cost`).
+
+    Each iteration runs four propagation sweeps, each parallel over the lines it does not
+    follow (rows left→right and right→left, columns top→bottom and bottom→top): a pixel
+    tries its predecessor's plane extended to it (``w_q + gx_q Δx + gy_q Δy``), so a good
+    plane can cross the whole image in one sweep. Then every pixel tries four random
+    perturbations of its plane: w and the normal together, w only, the normal only
+    (ranges ``dw·2^-it`` in w and a slope ``dn·2^-it``, converted to pixel units by the
+    focal length), and a random normal within 80° of the viewing ray at the same w. A
+    candidate replaces the plane when its cost is lower; ``w`` stays in [wmin, wmax].
+    Random numbers come from a hash of (seed, iteration, pixel): deterministic.
+    """
+    H, W = w.shape
+    nv = srcs.shape[0]
+    inv_f = Kinv[0, 0]
+    for it in range(n_iter):
+        scale = 0.5 ** it
+        for i in prange(H):
+            costs = np.empty(max(nv, 1))
+            for j in range(1, W):
+                _try_plane(i, j, i, j - 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
+            for j in range(W - 2, -1, -1):
+                _try_plane(i, j, i, j + 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
+        for j in prange(W):
+            costs = np.empty(max(nv, 1))
+            for i in range(1, H):
+                _try_plane(i, j, i - 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
+            for i in range(H - 2, -1, -1):
+                _try_plane(i, j, i + 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
+                           A, b, n_best, eps2, costs, wmin, wmax, lam1)
+        for i in prange(H):
+            costs = np.empty(max(nv, 1))
+            for j in range(W):
+                bw = w[i, j]
+                bx = gx[i, j]
+                by = gy[i, j]
+                bc = cost[i, j]
+                # viewing ray r = K⁻¹ x̄ of the pixel
+                r0 = Kinv[0, 0] * j + Kinv[0, 1] * i + Kinv[0, 2]
+                r1 = Kinv[1, 0] * j + Kinv[1, 1] * i + Kinv[1, 2]
+                r2 = Kinv[2, 0] * j + Kinv[2, 1] * i + Kinv[2, 2]
+                rn = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+                key = ((seed * 64 + it) * H + i) * W + j
+                for r in range(4):
+                    u1 = 2.0 * _hash01(key * 16 + 3 * r) - 1.0
+                    u2 = 2.0 * _hash01(key * 16 + 3 * r + 1) - 1.0
+                    u3 = 2.0 * _hash01(key * 16 + 3 * r + 2) - 1.0
+                    if r < 3:
+                        cw = bw + (u1 * dw * scale if r != 2 else 0.0)
+                        sn = dn * scale * bw * inv_f
+                        cx = bx + (u2 * sn if r != 1 else 0.0)
+                        cy = by + (u3 * sn if r != 1 else 0.0)
+                    else:
+                        # random normal n (uniform direction: u in the unit ball), within
+                        # 80° of the ray: the plane n·X = d has w(x') = n·K⁻¹x̄'/d with
+                        # d = n·r/w, so gx = w n·K⁻¹e₁/(n·r), gy = w n·K⁻¹e₂/(n·r)
+                        nn = np.sqrt(u1 * u1 + u2 * u2 + u3 * u3)
+                        if nn < 1e-6 or nn > 1.0:
+                            continue
+                        nr = u1 * r0 + u2 * r1 + u3 * r2
+                        if abs(nr) < 0.17 * rn * nn:
+                            continue
+                        cw = bw
+                        cx = bw * (u1 * Kinv[0, 0] + u2 * Kinv[1, 0] + u3 * Kinv[2, 0]) / nr
+                        cy = bw * (u1 * Kinv[0, 1] + u2 * Kinv[1, 1] + u3 * Kinv[2, 1]) / nr
+                    if cw < wmin or cw > wmax:
+                        continue
+                    c = _plane_cost(i, j, cw, cx, cy, wts, wI, sdI, offs,
+                                    srcs, sizes, A, b, n_best, eps2, costs, lam1)
+                    if c < bc:
+                        bc = c
+                        bw = cw
+                        bx = cx
+                        by = cy
+                w[i, j] = bw
+                gx[i, j] = bx
+                gy[i, j] = by
+                cost[i, j] = bc

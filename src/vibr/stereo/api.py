@@ -34,7 +34,12 @@ from ..errors import VibrInputError
 from ..progress import log
 from ..scene import Scene
 from .consistency import check_consistency
-from .planesweep import plane_sweep
+from .planesweep import plane_sweep, refine_planes
+
+
+#: Default number of slanted-plane refinement iterations after the sweep (see
+#: :func:`estimate_depth` and docs/DEPTH.md for the measurements behind it).
+REFINE_ITER = 2
 
 
 # --------------------------------------------------------------------------- helpers
@@ -182,10 +187,11 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
 # --------------------------------------------------------------------------- main API
 def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=None,
                    method: str = "auto", exclude=(), n_neighbours: int = 4,
-                   n_planes: int | None = None, step_px: float = 0.5, max_planes: int = 256, radius: int = 3,
+                   n_planes: int | None = None, step_px: float = 2.0, max_planes: int = 128, radius: int = 3,
                    n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
                    min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
-                   n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9, **lf_params) -> Scene:
+                   n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
+                   refine_iter: int = REFINE_ITER, **lf_params) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
 
     Parameters
@@ -217,6 +223,9 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     min_agree, rel_tol, px_tol : consistency check parameters
         (:func:`vibr.stereo.consistency.check_consistency`).
     mem_bytes : memory bound of one plane sweep's working set.
+    refine_iter : iterations of the slanted-plane PatchMatch refinement after the sweep
+        (:func:`~vibr.stereo.planesweep.refine_planes`; 0: the sweep's winner-take-all
+        depth). The light-field method takes it too (its ``pm_iter``).
     **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
         ``max_views``, ``refine``, ``tv_lambda``, ...). The light-field method uses
         ``depth_range``, ``radius`` (default 3 here; 2 when called directly), ``max_cost``
@@ -276,9 +285,11 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
 
         results = {}
         for i in targets:
+            lf = dict(lf_params)
+            lf.setdefault("pm_iter", refine_iter)
             results[i] = lightfield_depth(scene, i, cams, img, inputs, depth_range=depth_range,
                                           radius=radius, max_cost=max_cost, mem_bytes=mem_bytes,
-                                          **lf_params)
+                                          **lf)
         stats = {scene.views[i].name: dict(results[i][2], role="target") for i in targets}
         depths = {i: results[i][0] for i in targets}
         sigmas = {i: results[i][1] for i in targets}
@@ -307,6 +318,9 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
             res = plane_sweep(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], dr,
                               n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
                               eps=eps, mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
+            if refine_iter > 0:
+                res = refine_planes(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], res,
+                                    n_iter=refine_iter, n_best=n_best, eps=eps, max_cost=max_cost)
             d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
             raw[i] = (d, res.sigma_z)
             stats[scene.views[i].name] = {

@@ -9,7 +9,7 @@ the mean of the best ``n_best`` views (robust to occlusion). Winner-take-all wit
 parabolic sub-label fit gives the depth; the fit's curvature gives an uncertainty.
 
 Memory: the planes are processed in slabs and only the running minimum and its two
-neighbouring costs are kept (O(views · H · W) working memory, never a D × H × W volume).
+neighbouring costs are kept (O(H · W) working memory besides the images, never a D × H × W volume).
 For light fields with fronto-parallel, parallel cameras this sweep is exact as well.
 """
 
@@ -101,7 +101,7 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
         units in [0, 1]); flat windows get ncc → 0 instead of noise.
     max_cost : pixels with aggregated cost above this are not ``confident``.
     slab : planes per compiled call (for the progress bar); default chosen from mem_bytes.
-    mem_bytes : bound on the working memory (the sweep needs ~ 29 bytes · views · H · W,
+    mem_bytes : bound on the working memory (the sweep needs ~ (40 + 4 · views) bytes · H · W,
         independent of D; a ValueError is raised if that alone exceeds the bound).
 
     Returns
@@ -123,7 +123,7 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     near, far = float(depth_range[0]), float(depth_range[1])
     if not (0 < near < far):
         raise ValueError(f"bad depth range {depth_range}")
-    work = 29.0 * nv * H * W
+    work = (40.0 + 4.0 * nv) * H * W
     if work > mem_bytes:
         raise ValueError(f"plane sweep working set {work/1e9:.2f} GB exceeds mem_bytes")
     n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
@@ -140,11 +140,6 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     A, b = plane_homographies(ref_camera, list(src_cameras))
     eps2 = float(eps) ** 2
     mu, sd = kern.box_mean_std(I, radius, eps2)
-    J = np.empty((nv, H, W), np.float32)
-    HJ = np.empty((nv, H, W))
-    HJJ = np.empty((nv, H, W))
-    HIJ = np.empty((nv, H, W))
-    ok = np.empty((nv, H, W), np.uint8)
     best_c = np.full((H, W), np.inf)
     best_l = np.zeros((H, W), np.int64)
     c_minus = np.full((H, W), np.inf)
@@ -152,10 +147,12 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     prev = np.full((H, W), np.inf)
     D = len(winv)
     slab = max(1, int(slab) if slab else max(1, D // 16))
+    # row bands of the compiled sweep: enough bands for the threads, each a few windows tall
+    block = int(max(2 * radius + 2, min(32, -(-H // 8))))
     starts = range(0, D, slab)
     for l0 in progress(starts, desc=desc or "plane sweep", total=len(starts), unit="slab"):
         kern.sweep_slab(I, mu, sd, srcs, sizes, A, b, winv[l0 : l0 + slab], l0, int(radius),
-                        n_best, eps2, 16, J, HJ, HJJ, HIJ, ok, best_c, best_l, c_minus, c_plus, prev)
+                        n_best, eps2, block, best_c, best_l, c_minus, c_plus, prev)
     lab, curv = kern.subpixel(best_c, best_l, c_minus, c_plus)
     dw = winv[1] - winv[0] if D > 1 else 1.0 / near
     w = winv[0] + lab * dw
@@ -173,3 +170,88 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
         meta={"time_s": time.perf_counter() - t0, "n_planes": D, "n_views": nv, "n_best": n_best,
               "radius": radius, "depth_range": (near, far), "max_cost": max_cost},
     )
+
+
+def window_offsets(radius: int, stride: int) -> np.ndarray:
+    """(n, 2) offsets (dy, dx) of a square window from ``−radius`` to ``radius`` sampled
+    every ``stride`` pixels (the centre is a sample when ``stride`` divides ``radius``)."""
+    r = np.arange(-radius, radius + 1, stride)
+    dy, dx = np.meshgrid(r, r, indexing="ij")
+    return np.ascontiguousarray(np.c_[dy.ravel(), dx.ravel()].astype(np.int64))
+
+
+def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
+                  src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 2,
+                  radius: int = 3, stride: int = 2, sigma_c: float = 0.05,
+                  n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
+                  dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1) -> SweepResult:
+    """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
+
+    The sweep is winner-take-all over fronto-parallel planes: its depth is quantised (the
+    parabola fit only partly recovers the sub-plane position) and its square window is
+    wrong on slanted surfaces (a floor seen at a grazing angle) and across depth edges.
+    Here every pixel carries a plane ``w(x') = w + g·(x' − x)`` in inverse depth (affine in
+    the reference pixel, which is exactly the image of a 3D plane), initialised from the
+    sweep (fronto-parallel, or slanted by the finite-difference gradient of the sweep's
+    inverse depth, whichever costs less), and ``n_iter`` PatchMatch iterations
+    (:func:`vibr.stereo._kernels.patchmatch_refine`: propagation sweeps along the rows and
+    the columns, then random perturbations of halving size) minimise the multi-view cost
+    over continuous depths and orientations. The matching window is ``(2·radius+1)²`` sampled every
+    ``stride`` pixels with adaptive-support (bilateral) weights of grey-level scale
+    ``sigma_c`` (:func:`vibr.stereo._kernels.support_weights`), and the views are
+    aggregated as in the sweep (mean of the ``n_best`` best ``1 − ZNCC``), except that the
+    best view alone plus ``single_view_penalty`` replaces that mean when lower (a point
+    seen by a single partner: the mean would average in a view that sees something else;
+    ``None``: never).
+
+    Returns a :class:`SweepResult` with the refined depth and cost (``meta["plane_gradient"]``
+    holds the planes' ``(gx, gy)``, inverse depth per pixel); ``confident`` = the
+    sweep's textured test, cost ≤ ``max_cost`` and a depth inside the sweep's range (not
+    at its ends); ``sigma_z`` keeps the sweep's inverse-depth width at the new depth.
+    """
+    t0 = time.perf_counter()
+    H, W = ref_camera.shape
+    I = to_grey(ref_image).astype(np.float64)
+    nv = len(src_images)
+    n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
+    lam1 = -1.0 if single_view_penalty is None else float(single_view_penalty)
+    greys = [to_grey(s) for s in src_images]
+    Hm = max(g.shape[0] for g in greys)
+    Wm = max(g.shape[1] for g in greys)
+    srcs = np.zeros((nv, Hm, Wm), np.float32)
+    sizes = np.zeros((nv, 2), np.int64)
+    for v, g in enumerate(greys):
+        srcs[v, : g.shape[0], : g.shape[1]] = g
+        sizes[v] = g.shape
+    A, b = plane_homographies(ref_camera, list(src_cameras))
+    offs = window_offsets(int(radius), int(stride))
+    wts, wI, sdI = kern.support_weights(I, offs, float(sigma_c), float(max(radius, 1)))
+    eps2 = float(eps) ** 2
+    winv = init.winv
+    step = abs(winv[1] - winv[0]) if len(winv) > 1 else 0.05 * winv[0]
+    wmin, wmax = float(winv.min()), float(winv.max())
+    w = np.clip(np.asarray(init.inv_depth, np.float64), wmin, wmax)
+    zero = np.zeros((H, W))
+    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero, lam1)
+    gy, gx = np.gradient(w)
+    c1 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1)
+    better = c1 < c0
+    gx = np.where(better, gx, 0.0)
+    gy = np.where(better, gy, 0.0)
+    cost = np.where(better, c1, c0)
+    kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
+                           cost, int(n_iter), 2.0 * step, float(dn), np.linalg.inv(ref_camera.K),
+                           wmin, wmax, int(seed), lam1)
+    z = 1.0 / w
+    sigma_w = init.sigma_z.astype(np.float64) / np.asarray(init.depth, np.float64) ** 2
+    sigma_z = (z * z * sigma_w).astype(np.float32)
+    _, sd_box = kern.box_mean_std(I, int(init.meta.get("radius", 3)), eps2)
+    textured = sd_box > 2.0 * eps
+    inside = (w > wmin + 0.5 * step) & (w < wmax - 0.5 * step)
+    confident = textured & (cost <= max_cost) & inside
+    meta = dict(init.meta)
+    meta.update({"refine_s": time.perf_counter() - t0, "refine_iter": int(n_iter),
+                 "plane_gradient": (gx, gy),
+                 "time_s": init.meta.get("time_s", 0.0) + time.perf_counter() - t0})
+    return SweepResult(depth=z.astype(np.float32), inv_depth=w, cost=cost, sigma_z=sigma_z,
+                       confident=confident, winv=winv, meta=meta)
