@@ -54,9 +54,9 @@ PAPER_FOUNTAIN = {
 }
 PAPER_SETTINGS = [(1.0, 0.0, 0.002), (1.0, 0.0, 0.003), (0.1, 1.0, 0.002)]
 EXTRA_SETTING = (0.1, 0.5, 0.002)
-#: Depth estimation for fountain (vibr.stereo.estimate_depth): the "fast setting" of
-#: docs/DEPTH.md (1 px parallax step between planes, at most 128 planes).
-FOUNTAIN_ESTIMATE = {"step_px": 1.0, "max_planes": 128}
+#: Depth estimation for fountain (vibr.stereo.estimate_depth): the library's defaults
+#: (what a user of ``vibr eval --depth estimated`` gets; docs/DEPTH.md).
+FOUNTAIN_ESTIMATE: dict = {}
 #: Parameters that are physical quantities in grey levels of 8-bit images, whatever the
 #: scale lambda is read on: converted when the intensity scale is 1.
 GREY_LEVEL_PARAMS = {"sigma_s": 1.0, "grad_max": 64.0}
@@ -477,11 +477,12 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
             " to see which way the image scale moves the numbers" if large else "") + ".",
          "* **Depth**: estimated by vibr from the source views only (the target is held out of depth "
          "estimation): cotton with the light-field estimator (`vibr.stereo.estimate_depth`, method "
-         "\"lightfield\", defaults: plane sweep over the grid views + TV-L1), fountain with the plane-sweep MVS "
-         f"at `{FOUNTAIN_ESTIMATE}` (docs/DEPTH.md's fast setting: 1 px parallax between planes, ≤ 128 planes; "
-         "there it gave the same view-5 rendering quality as the 0.5 px / 256-plane default at ~55 % of the "
-         "time). Depth is estimated once per target (per stride for cotton) and shared by every setting; the "
-         "warped samples are computed once per geometry.",
+         "\"lightfield\", defaults: plane sweep over the grid views, slanted-plane refinement, TV-L1), fountain "
+         "with the plane-sweep MVS at its defaults (planes 2 px of parallax apart, ≤ 128, slanted-plane "
+         "refinement, consistency check; docs/DEPTH.md)"
+         + (f" with `{FOUNTAIN_ESTIMATE}`" if FOUNTAIN_ESTIMATE else "") + ". Depth is estimated once per "
+         "target (per stride for cotton) and shared by every setting; the warped samples are computed once per "
+         "geometry.",
          "* The paper's structured experiments used other light fields (buddha, stillLife, …) with "
          "Wanner–Goldluecke disparity; cotton is not in the paper, so the structured table has no paper "
          "numbers to set beside it — its point is the *ordering* of the methods (SAVSR, BVS, γ = 0 … 3) "
