@@ -80,6 +80,19 @@ def plane_homographies(ref: Camera, srcs: list[Camera]) -> tuple[np.ndarray, np.
     return A, b
 
 
+def _stack_greys(images):
+    """Grey versions of the source images in one zero-padded (n, Hmax, Wmax) float32 stack
+    (the kernels index views by number) and their (H, W) sizes."""
+    greys = [to_grey(s) for s in images]
+    srcs = np.zeros((len(greys), max(g.shape[0] for g in greys), max(g.shape[1] for g in greys)),
+                    np.float32)
+    sizes = np.zeros((len(greys), 2), np.int64)
+    for v, g in enumerate(greys):
+        srcs[v, : g.shape[0], : g.shape[1]] = g
+        sizes[v] = g.shape
+    return srcs, sizes
+
+
 def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
                 src_cameras: list[Camera], depth_range: tuple[float, float], *,
                 n_planes: int = 128, radius: int = 3, n_best: int | None = None,
@@ -129,14 +142,7 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
     # planes from far to near, uniform in inverse depth
     winv = np.linspace(1.0 / far, 1.0 / near, int(n_planes))
-    greys = [to_grey(s) for s in src_images]
-    Hm = max(g.shape[0] for g in greys)
-    Wm = max(g.shape[1] for g in greys)
-    srcs = np.zeros((nv, Hm, Wm), np.float32)
-    sizes = np.zeros((nv, 2), np.int64)
-    for v, g in enumerate(greys):
-        srcs[v, : g.shape[0], : g.shape[1]] = g
-        sizes[v] = g.shape
+    srcs, sizes = _stack_greys(src_images)
     A, b = plane_homographies(ref_camera, list(src_cameras))
     eps2 = float(eps) ** 2
     mu, sd = kern.box_mean_std(I, radius, eps2)
@@ -215,14 +221,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     nv = len(src_images)
     n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
     lam1 = -1.0 if single_view_penalty is None else float(single_view_penalty)
-    greys = [to_grey(s) for s in src_images]
-    Hm = max(g.shape[0] for g in greys)
-    Wm = max(g.shape[1] for g in greys)
-    srcs = np.zeros((nv, Hm, Wm), np.float32)
-    sizes = np.zeros((nv, 2), np.int64)
-    for v, g in enumerate(greys):
-        srcs[v, : g.shape[0], : g.shape[1]] = g
-        sizes[v] = g.shape
+    srcs, sizes = _stack_greys(src_images)
     A, b = plane_homographies(ref_camera, list(src_cameras))
     offs = window_offsets(int(radius), int(stride))
     wts, wI, sdI = kern.support_weights(I, offs, float(sigma_c), float(max(radius, 1)))
