@@ -9,11 +9,14 @@ The smooth part is quadratic: ``f(u) = ½⟨u, Hu⟩ − ⟨r, u⟩ + c`` with
 ``H = alpha·A + gamma·Dᵀ A_g D``, ``A = Σ BᵀWB`` and ``A_g = Σ BᵀCB`` two 9-point stencils
 (:mod:`vibr.render.operators`) assembled once per weight update. The solver is the
 monotone FISTA (MFISTA, Beck & Teboulle 2009, IEEE TIP 18(11)) with the TV proximal step of
-:class:`~vibr.render.tv.TVProx` (warm-started dual). Because ``f`` is quadratic, the
-products ``(A x, DᵀA_g D x)`` are linear in ``x``: the extrapolated point's products are the
-same combination of stored products, so each iteration costs one stencil pair, and the
-forward step at the extrapolated point is computed in one pass from the stored iterates
-(:meth:`QuadraticModel.forward`) without storing that point.
+:class:`~vibr.render.tv.TVProx` (warm-started dual). Because ``f`` is quadratic, ``H x`` is
+linear in ``x``: the extrapolated point's product is the same combination of the stored
+``H x`` and ``H x_prev``, so each iteration costs one Hessian product, computed together
+with every inner product of the energy in one pass over memory
+(:func:`vibr.render.fused.hessian_terms`), and the forward step at the extrapolated point
+is one more pass from the stored iterates (:meth:`QuadraticModel.forward`) without storing
+that point. The loop allocates nothing: three image buffers and three product buffers
+rotate between x, x_prev and the candidate.
 
 **Intensity scale.** Images are [0, 1]; the parameters refer to intensities on the scale
 ``s`` (default 255). The energy is ``s²·E`` of the [0, 1] image, so the TV weight inside is
