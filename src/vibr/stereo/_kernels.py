@@ -30,6 +30,24 @@ def _bilinear_clamped(srcs, v, x, y, hv, wv):
             + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
 
 
+@njit(cache=True, inline="always")
+def _mean_lowest(costs, nval, n_best):
+    """Mean of the ``n_best`` lowest of ``costs[:nval]`` (nval ≥ 1), which are moved to the
+    front in increasing order (partial selection sort: the views are few)."""
+    m = min(n_best, nval)
+    c = 0.0
+    for q in range(m):
+        kmin = q
+        for r in range(q + 1, nval):
+            if costs[r] < costs[kmin]:
+                kmin = r
+        tmp = costs[q]
+        costs[q] = costs[kmin]
+        costs[kmin] = tmp
+        c += costs[q]
+    return c / m
+
+
 @njit(parallel=True, cache=True)
 def box_mean_std(img, radius, eps2):
     """Mean and regularised standard deviation of ``img`` (H×W) in (2r+1)² windows.
@@ -218,22 +236,8 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
                         if OK[v, i - ib0, j] != 0:
                             costs[nval] = C[v, i - ib0, j]
                             nval += 1
-                    if nval == 0:
-                        c = 2.0  # seen by no source at this depth: worst cost
-                    else:
-                        # partial selection sort of the n_best lowest (nv is small)
-                        m = min(n_best, nval)
-                        c = 0.0
-                        for q in range(m):
-                            kmin = q
-                            for r2 in range(q + 1, nval):
-                                if costs[r2] < costs[kmin]:
-                                    kmin = r2
-                            tmp = costs[q]
-                            costs[q] = costs[kmin]
-                            costs[kmin] = tmp
-                            c += costs[q]
-                        c /= m
+                    # seen by no source at this depth: worst cost
+                    c = 2.0 if nval == 0 else _mean_lowest(costs, nval, n_best)
                     if c < best_c[i, j]:
                         best_c[i, j] = c
                         best_l[i, j] = lab
@@ -554,17 +558,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
     if nval == 0:
         return 2.0
     m = min(n_best, nval)
-    c = 0.0
-    for q in range(m):
-        kmin = q
-        for r in range(q + 1, nval):
-            if costs[r] < costs[kmin]:
-                kmin = r
-        tmp = costs[q]
-        costs[q] = costs[kmin]
-        costs[kmin] = tmp
-        c += costs[q]
-    c /= m
+    c = _mean_lowest(costs, nval, n_best)
     if lam1 >= 0.0 and m > 1 and costs[0] + lam1 < c:
         c = costs[0] + lam1
     return c
