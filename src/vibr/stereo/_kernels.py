@@ -14,40 +14,6 @@ from numba import njit, prange
 
 
 # --------------------------------------------------------------------------- windows
-@njit(cache=True, inline="always")
-def _bilinear_clamped(srcs, v, x, y, hv, wv):
-    """Bilinear sample of view v of the stacked images at (x, y), the point clamped to the
-    view's (hv, wv) extent (pixel centres at integers)."""
-    x = min(max(x, 0.0), wv - 1.0)
-    y = min(max(y, 0.0), hv - 1.0)
-    x0 = min(int(x), wv - 2) if wv > 1 else 0
-    y0 = min(int(y), hv - 2) if hv > 1 else 0
-    fx = x - x0
-    fy = y - y0
-    x1 = min(x0 + 1, wv - 1)
-    y1 = min(y0 + 1, hv - 1)
-    return ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
-            + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
-
-
-@njit(cache=True, inline="always")
-def _mean_lowest(costs, nval, n_best):
-    """Mean of the ``n_best`` lowest of ``costs[:nval]`` (nval ≥ 1), which are moved to the
-    front in increasing order (partial selection sort: the views are few)."""
-    m = min(n_best, nval)
-    c = 0.0
-    for q in range(m):
-        kmin = q
-        for r in range(q + 1, nval):
-            if costs[r] < costs[kmin]:
-                kmin = r
-        tmp = costs[q]
-        costs[q] = costs[kmin]
-        costs[kmin] = tmp
-        c += costs[q]
-    return c / m
-
-
 @njit(parallel=True, cache=True)
 def box_mean_std(img, radius, eps2):
     """Mean and regularised standard deviation of ``img`` (H×W) in (2r+1)² windows.
@@ -166,7 +132,22 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
                         if inband:
                             inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
                             OK[v, ii - ib0, j] = 1 if inside else 0
-                        Jrow[j] = _bilinear_clamped(srcs, v, x, y, hv, wv)
+                        if x < 0.0:
+                            x = 0.0
+                        if y < 0.0:
+                            y = 0.0
+                        if x > wv - 1.0:
+                            x = wv - 1.0
+                        if y > hv - 1.0:
+                            y = hv - 1.0
+                        x0 = min(int(x), wv - 2) if wv > 1 else 0
+                        y0 = min(int(y), hv - 2) if hv > 1 else 0
+                        fx = x - x0
+                        fy = y - y0
+                        x1 = min(x0 + 1, wv - 1)
+                        y1 = min(y0 + 1, hv - 1)
+                        Jrow[j] = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
+                                   + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
                     # running horizontal window sums (window clipped at the border)
                     a = 0.0
                     a2 = 0.0
@@ -236,8 +217,22 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
                         if OK[v, i - ib0, j] != 0:
                             costs[nval] = C[v, i - ib0, j]
                             nval += 1
-                    # seen by no source at this depth: worst cost
-                    c = 2.0 if nval == 0 else _mean_lowest(costs, nval, n_best)
+                    if nval == 0:
+                        c = 2.0  # seen by no source at this depth: worst cost
+                    else:
+                        # partial selection sort of the n_best lowest (nv is small)
+                        m = min(n_best, nval)
+                        c = 0.0
+                        for q in range(m):
+                            kmin = q
+                            for r2 in range(q + 1, nval):
+                                if costs[r2] < costs[kmin]:
+                                    kmin = r2
+                            tmp = costs[q]
+                            costs[q] = costs[kmin]
+                            costs[kmin] = tmp
+                            c += costs[q]
+                        c /= m
                     if c < best_c[i, j]:
                         best_c[i, j] = c
                         best_l[i, j] = lab
@@ -542,7 +537,22 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
             iz = 1.0 / pz
             x = (cx + dx * ex0 + dy * ey0) * iz
             y = (cy + dx * ex1 + dy * ey1) * iz
-            q = _bilinear_clamped(srcs, v, x, y, hv, wv)
+            if x < 0.0:
+                x = 0.0
+            if y < 0.0:
+                y = 0.0
+            if x > wv - 1.0:
+                x = wv - 1.0
+            if y > hv - 1.0:
+                y = hv - 1.0
+            x0 = min(int(x), wv - 2) if wv > 1 else 0
+            y0 = min(int(y), hv - 2) if hv > 1 else 0
+            fx = x - x0
+            fy = y - y0
+            x1 = min(x0 + 1, wv - 1)
+            y1 = min(y0 + 1, hv - 1)
+            q = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
+                 + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
             wq = wk * q
             sJ += wq
             sJJ += wq * q
@@ -558,7 +568,17 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
     if nval == 0:
         return 2.0
     m = min(n_best, nval)
-    c = _mean_lowest(costs, nval, n_best)
+    c = 0.0
+    for q in range(m):
+        kmin = q
+        for r in range(q + 1, nval):
+            if costs[r] < costs[kmin]:
+                kmin = r
+        tmp = costs[q]
+        costs[q] = costs[kmin]
+        costs[kmin] = tmp
+        c += costs[q]
+    c /= m
     if lam1 >= 0.0 and m > 1 and costs[0] + lam1 < c:
         c = costs[0] + lam1
     return c
