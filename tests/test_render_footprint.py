@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from vibr.render.operators import Splat, explicit_B, stencil_apply, stencil_to_sparse
+from vibr.render.operators import Splat, explicit_B, stencil_to_sparse
+from _checks import assert_quadratic_form
 
 
 def _rot(t):
@@ -146,13 +147,7 @@ def test_footprint_stencil_equals_sparse_normal_operator():
     A_sp = sum(explicit_B(s).T @ sp.diags(w) @ explicit_B(s) for s, w in zip(parts, ws))
     assert abs(stencil_to_sparse(A_st) - A_sp).max() < 1e-12 * abs(A_sp).max()
     # the quadratic form of one part equals the weighted residual
-    s, w = parts[0], ws[0]
-    v = rng.standard_normal((s.n, 3))
-    A, b, c = s.normal(w, v)
-    u = rng.standard_normal((3, H, W))
-    direct = 0.5 * np.sum(w[:, None] * (s.apply(u.transpose(1, 2, 0)) - v) ** 2)
-    quad = 0.5 * np.sum(u * stencil_apply(A, u)) - np.sum(b * u) + c
-    assert abs(direct - quad) < 1e-9 * direct
+    assert_quadratic_form(parts[0], ws[0], rng)
 
 
 def test_big_footprints_are_shrunk_per_axis():

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from _checks import assert_quadratic_form
 from vibr.render.operators import (Splat, div_bwd, explicit_B, grad_central, grad_central_adj,
                                    grad_fwd, stencil_apply, stencil_to_sparse)
 from vibr.render.pushpull import push_pull
@@ -58,14 +59,7 @@ def test_stencil_equals_sparse_normal_operator():
 def test_quadratic_form_equals_weighted_residual():
     rng = np.random.default_rng(2)
     s, _ = _random_splat(rng)
-    H, W = s.shape
-    w = rng.uniform(0, 2, s.n)
-    v = rng.standard_normal((s.n, 3))
-    A, b, c = s.normal(w, v)
-    u = rng.standard_normal((3, H, W))
-    direct = 0.5 * np.sum(w[:, None] * (s.apply(u.transpose(1, 2, 0)) - v) ** 2)
-    quad = 0.5 * np.sum(u * stencil_apply(A, u)) - np.sum(b * u) + c
-    assert abs(direct - quad) < 1e-9 * direct
+    assert_quadratic_form(s, rng.uniform(0, 2, s.n), rng)
 
 
 @pytest.mark.parametrize("H,W", [(7, 9), (1, 5), (6, 1)])
