@@ -264,6 +264,37 @@ def test_refine_planes_slanted_plane_within_1pct():
         assert np.median(np.abs(g[inner] - want)) < 0.5 * abs(want)
 
 
+def test_support_weights_closed_form_and_colour_guide():
+    """Adaptive-support weights are exp(−‖ΔG‖²/(2σ_c² C) − r²/(2σ_s²)), normalised; with the
+    colour image as guide, two surfaces of equal luma but different hue are told apart
+    (the grey guide cannot)."""
+    from vibr.stereo import _kernels as kern
+    from vibr.stereo.planesweep import to_grey, window_offsets
+
+    H, W = 9, 12
+    img = np.empty((H, W, 3), np.float32)
+    img[:, :6] = (0.6, 0.3, 0.3)  # reddish
+    luma = float(to_grey(img[:1, :1])[0, 0])
+    g = (luma - 0.299 * 0.3 - 0.114 * 0.3) / 0.587  # equal luma, greenish: (0.3, g, 0.3)
+    img[:, 6:] = (0.3, g, 0.3)
+    I = to_grey(img).astype(np.float64)
+    np.testing.assert_allclose(I, luma, atol=1e-6)
+    offs = window_offsets(2, 1)
+    sc, ss = 0.05, 2.0
+    w_grey = kern.support_weights(I, offs, sc, ss, np.ascontiguousarray(I[..., None]))[0]
+    w_col = kern.support_weights(I, offs, sc, ss, np.ascontiguousarray(img))[0]
+    i, j = 4, 5  # last red column: the window's right part is green
+    k_across = [k for k, (dy, dx) in enumerate(offs) if dx > 0]
+    r2 = (offs ** 2).sum(1)
+    d2 = np.where(offs[:, 1] > 0, ((img[0, 0] - img[0, -1]) ** 2).sum(), 0.0)
+    expect = np.exp(-d2 / (2 * sc * sc * 3) - r2 / (2 * ss * ss))
+    np.testing.assert_allclose(w_col[i, j], expect / expect.sum(), rtol=1e-5, atol=1e-12)
+    assert w_col[i, j, k_across].sum() < 1e-3 < 0.3 < w_grey[i, j, k_across].sum()
+    # grey guide: a flat image, purely spatial weights
+    sp = np.exp(-r2 / (2 * ss * ss))
+    np.testing.assert_allclose(w_grey[i, j], sp / sp.sum(), rtol=1e-5)
+
+
 def test_plane_cost_is_minimal_at_the_true_slanted_plane():
     """The refinement's cost (bilateral-weighted ZNCC over a slanted window) is ~0 at the
     exact plane and grows when its depth or its slant is wrong."""
@@ -273,7 +304,7 @@ def test_plane_cost_is_minimal_at_the_true_slanted_plane():
     ref, cams, views, res, n, d = _slanted_setup(8)
     I = to_grey(views[0][0]).astype(np.float64)
     offs = window_offsets(3, 2)
-    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0)
+    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(I[..., None]))
     np.testing.assert_allclose(wts.sum(-1), 1.0, atol=1e-5)
     srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
     sizes = np.array([[80, 96], [80, 96]], np.int64)

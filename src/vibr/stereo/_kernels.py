@@ -434,11 +434,14 @@ def _hash01(k):
 
 
 @njit(parallel=True, cache=True)
-def support_weights(I, offs, sigma_c, sigma_s):
+def support_weights(I, offs, sigma_c, sigma_s, guide):
     """Adaptive-support (bilateral) window weights of the reference image (Yoon & Kweon
     2006; the bilateral NCC of Schönberger et al. 2016 §4.2):
-    ``ω_q = exp(−(I_q − I_p)²/(2σ_c²) − |q − p|²/(2σ_s²))`` for the window offsets ``offs``
-    (n,2) (dy, dx), 0 outside the image, normalised to sum 1 per pixel. Pixels of the
+    ``ω_q = exp(−‖G_q − G_p‖²/(2σ_c² C) − |q − p|²/(2σ_s²))`` for the window offsets ``offs``
+    (n,2) (dy, dx), 0 outside the image, normalised to sum 1 per pixel. ``guide`` G
+    (H,W,C) is the image the weights look at (the colour image, C = 3: two surfaces of
+    equal luma but different hue are told apart; ``I[..., None]`` for grey); ``‖·‖²/C``
+    is the mean squared channel difference, so σ_c is in grey levels either way. Pixels of the
     window that do not look like the centre (another surface across a depth edge) count
     little, so the matching window does not straddle an occlusion boundary.
 
@@ -452,20 +455,23 @@ def support_weights(I, offs, sigma_c, sigma_s):
     wts = np.zeros((H, W, n), np.float32)
     wI = np.zeros((H, W, n), np.float32)
     sd = np.empty((H, W))
-    ic = 0.5 / (sigma_c * sigma_c)
+    nc = guide.shape[2]
+    ic = 0.5 / (sigma_c * sigma_c * nc)
     isp = 0.5 / (sigma_s * sigma_s)
     for i in prange(H):
         for j in range(W):
             tot = 0.0
-            c = I[i, j]
             for k in range(n):
                 qi = i + offs[k, 0]
                 qj = j + offs[k, 1]
                 if qi < 0 or qj < 0 or qi >= H or qj >= W:
                     continue
-                d = I[qi, qj] - c
+                d2 = 0.0
+                for ch in range(nc):
+                    d = guide[qi, qj, ch] - guide[i, j, ch]
+                    d2 += d * d
                 r2 = offs[k, 0] * offs[k, 0] + offs[k, 1] * offs[k, 1]
-                wk = np.exp(-d * d * ic - r2 * isp)
+                wk = np.exp(-d2 * ic - r2 * isp)
                 wts[i, j, k] = wk
                 tot += wk
             m = 0.0

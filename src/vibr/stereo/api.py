@@ -214,7 +214,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     step_px : parallax step between planes on the farthest partner, in pixels.
     max_planes : upper bound on the number of planes per view.
     radius : ZNCC window half-size.
-    n_best : views averaged per pixel and plane (default half of the partners).
+    n_best : views averaged per pixel and plane (default half of the partners; for light
+        fields see :func:`~vibr.stereo.lightfield.lightfield_depth`).
     max_cost : aggregated ``1 − ZNCC`` above which a pixel is unknown.
     eps : ZNCC regulariser (intensity std, images in [0, 1]); see
         :func:`~vibr.stereo.planesweep.plane_sweep`.
@@ -289,7 +290,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
             lf.setdefault("pm_iter", refine_iter)
             results[i] = lightfield_depth(scene, i, cams, img, inputs, depth_range=depth_range,
                                           radius=radius, max_cost=max_cost, mem_bytes=mem_bytes,
-                                          **lf)
+                                          n_best=n_best, **lf)
         stats = {scene.views[i].name: dict(results[i][2], role="target") for i in targets}
         depths = {i: results[i][0] for i in targets}
         sigmas = {i: results[i][1] for i in targets}

@@ -109,7 +109,8 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                      st_min_coherence: float = 0.7, margin_px: float = 0.3,
                      return_disparity: bool = False, eps: float = 0.001,
                      st_max_disp: float = 2.5, pm_iter: int = 2, pm_views: int | None = None,
-                     pm_stride: int = 1, **_ignored):
+                     pm_stride: int = 1, n_best: int | None = None, pm_sigma_c: float = 0.03,
+                     pm_sigma_s: float = 2.0, **_ignored):
     """Depth and sigma_z for grid view ``ref`` from the other (non-excluded) grid views.
 
     Parameters
@@ -131,6 +132,14 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         views) and the sampling step of its window (the sweep's ``radius``). A dense window
         (stride 1) and all the sweep's views: the grid's small baselines need them (on
         cotton 9×9, 8 views and a 2-px stride made BadPix 3× worse than the sweep's).
+    pm_sigma_c, pm_sigma_s : grey-level and spatial scales of the refinement's
+        adaptive-support weights on the colour image. Tighter than the MVS defaults
+        (0.05, the radius): the dense window has samples next to the centre to weigh, and
+        on the grids measured it moved the pixels next to depth edges most (docs/DEPTH.md).
+    n_best : views whose costs are averaged per pixel and plane (the lowest ones), in the
+        sweep and the refinement. Default: a quarter of the views, at least 2, for a
+        single ring of neighbours (≤ 8 views: next to an occlusion edge only the views
+        along the edge see the point), half of them for larger stars.
 
     Returns
     -------
@@ -228,18 +237,28 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
             star = dr_ == 0 or dc_ == 0 or abs(dr_) == abs(dc_)
             return (0 if star else 1, max(abs(dr_), abs(dc_)), abs(dr_) + abs(dc_))
         nb = sorted(others, key=key)[:max_views]
+        if n_best is None:
+            # Occlusions: next to a depth edge only the views whose baseline runs along the
+            # edge match cleanly, a quarter of a full star (one of its 4 directions). With
+            # a single ring (≤ 8 views) that is 2 views, and averaging only those beats the
+            # best half on every grid measured (docs/DEPTH.md); with more rings the best
+            # half keeps the noise down (cotton 9×9: a quarter was worse).
+            n_best = max(2, len(nb) // 4) if len(nb) <= 8 else len(nb) // 2
+        n_best = max(1, min(int(n_best), len(nb)))
         res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
-                          n_planes=D, radius=radius, n_best=max(1, len(nb) // 2),
+                          n_planes=D, radius=radius, n_best=n_best,
                           max_cost=max_cost, mem_bytes=mem_bytes, eps=eps,
                           desc=f"light-field sweep {scene.views[ref].name}")
         if pm_iter > 0:
             nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
             res = refine_planes(img(ref), cam, [img(k) for k in nbr], [cams[k] for k in nbr], res,
-                                n_iter=pm_iter, n_best=max(1, len(nbr) // 2), eps=eps,
-                                max_cost=max_cost, radius=radius, stride=pm_stride)
+                                n_iter=pm_iter, n_best=min(n_best, len(nbr)), eps=eps,
+                                max_cost=max_cost, radius=radius, stride=pm_stride,
+                                sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
         disp = -(a + b * res.inv_depth)
         conf = res.confident
-        stats.update({"depth_range": dr, "n_planes": D, "n_views": len(nb), "pm_iter": int(pm_iter),
+        stats.update({"depth_range": dr, "n_planes": D, "n_views": len(nb), "n_best": n_best,
+                      "pm_iter": int(pm_iter),
                       "confident": float(conf.mean()), "sweep_s": res.meta["time_s"]})
         sigma_d = res.sigma_z / np.maximum(res.depth, 1e-12) ** 2 * abs(b)
         if refine == "sweep+tv":

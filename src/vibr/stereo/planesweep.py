@@ -189,6 +189,7 @@ def window_offsets(radius: int, stride: int) -> np.ndarray:
 def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
                   src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 2,
                   radius: int = 3, stride: int = 2, sigma_c: float = 0.05,
+                  sigma_s: float | None = None,
                   n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
                   dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1) -> SweepResult:
     """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
@@ -224,7 +225,10 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     srcs, sizes = _stack_greys(src_images)
     A, b = plane_homographies(ref_camera, list(src_cameras))
     offs = window_offsets(int(radius), int(stride))
-    wts, wI, sdI = kern.support_weights(I, offs, float(sigma_c), float(max(radius, 1)))
+    guide = np.asarray(ref_image, np.float32)
+    guide = np.ascontiguousarray(guide if guide.ndim == 3 else guide[..., None])
+    wts, wI, sdI = kern.support_weights(I, offs, float(sigma_c),
+                                        float(sigma_s or max(radius, 1)), guide)
     eps2 = float(eps) ** 2
     winv = init.winv
     step = abs(winv[1] - winv[0]) if len(winv) > 1 else 0.05 * winv[0]
