@@ -82,6 +82,27 @@ def test_determinism_and_seed():
     assert not f1[0].allclose(f3[0])
 
 
+def test_handheld_layout_bounded_baselines_and_overlap():
+    from vibr.synthetic import handheld_cameras
+
+    cams = handheld_cameras(7, seed=2, width=64, height=48)
+    assert cams[0].allclose(handheld_cameras(7, seed=2, width=64, height=48)[0])
+    np.testing.assert_allclose(cams[0].centre, (0.0, -0.3, 0.0), atol=1e-12)
+    off = np.array([c.centre - cams[0].centre for c in cams[1:]])
+    lateral = np.hypot(off[:, 0], off[:, 1])
+    assert np.all((lateral >= 0.3 - 1e-9) & (lateral <= 0.6 + 1e-9)) and np.all(np.abs(off[:, 2]) <= 0.15)
+    # directions spread around the reference: consecutive views ~ 60° apart (± 20° each)
+    ang = np.degrees(np.arctan2(off[:, 1], off[:, 0])) % 360
+    gaps = np.diff(np.sort(ang))
+    assert gaps.max() < 110, ang
+    s = make_scene("handheld", width=64, height=48, seed=2)
+    assert len(s) == 7 and s.meta["layout"] == "handheld"
+    # every view sees the scene centre
+    for c in cams:
+        xy, z = c.project(np.array([SCENE_CENTRE]))
+        assert z[0] > 0 and 0 < xy[0, 0] < 63 and 0 < xy[0, 1] < 47
+
+
 def test_unknown_layout():
     with pytest.raises(VibrInputError, match="layout"):
         make_scene("spiral")

@@ -5,7 +5,7 @@ one object id) and spheres. :meth:`World.raycast` finds the nearest hit of arbit
 (numba, parallel); :func:`render_view` renders a :class:`~vibr.camera.Camera` with
 supersampling and returns the image and the exact orthogonal depth (vibr's conventions,
 see :mod:`vibr.camera`); :func:`make_scene` builds a whole :class:`~vibr.scene.Scene`
-(light-field grid, arc or free camera layout).
+(light-field grid, arc, free or hand-held camera layout).
 
 World coordinates of :func:`default_world` follow the grid cameras' axes: x to the right,
 **y down** (world up is ``-y``), z forward, scene units ~ metres. Everything lies in the
@@ -48,6 +48,7 @@ __all__ = [
     "arc_cameras",
     "free_cameras",
     "make_scene",
+    "handheld_cameras",
     "degrade_depth",
     "planar_depth",
     "TEXTURES",
@@ -713,6 +714,38 @@ def free_cameras(n: int = 5, seed: int = 0, *, width: int = 128, height: int = 1
     return cams
 
 
+def handheld_cameras(n: int = 7, seed: int = 0, *, width: int = 128, height: int = 128,
+                     fov_deg: float = 55.0, eye=(0.0, -0.3, 0.0), target=SCENE_CENTRE,
+                     baseline=(0.3, 0.6), z_jitter: float = 0.15, aim_jitter: float = 0.2,
+                     roll_deg: float = 4.0) -> list[Camera]:
+    """A hand-held capture around a reference viewpoint: view 0 at ``eye``, the others
+    displaced from it in random directions spread around it (view k near the angle
+    ``2π(k−1)/(n−1)``, ± 20°) by a random distance in ``baseline`` (scene units) across the
+    line of sight and ± ``z_jitter`` along it; every view looks at ``target`` ± ``aim_jitter``
+    per axis, rolled by ± ``roll_deg``. Unlike :func:`free_cameras`, every view sees most of
+    what the reference sees and the baselines are bounded below (depth precision grows with
+    the baseline), so the layout is free (no grid, general rotations) yet triangulable.
+    Deterministic for a seed."""
+    if n < 1:
+        raise ValueError("handheld_cameras: n must be >= 1")
+    rng = np.random.default_rng(seed)
+    K = Camera.intrinsics(_focal(width, fov_deg), width, height)
+    e0, t0 = np.asarray(eye, np.float64), np.asarray(target, np.float64)
+    cams = []
+    for k in range(n):
+        off = np.zeros(3)
+        if k > 0:
+            a = 2 * math.pi * (k - 1) / max(n - 1, 1) + rng.uniform(-0.35, 0.35)
+            r = rng.uniform(*baseline)
+            off = np.array([r * math.cos(a), r * math.sin(a), rng.uniform(-z_jitter, z_jitter)])
+        e = e0 + off
+        cam = _look_at(e, t0 + rng.uniform(-aim_jitter, aim_jitter, 3), K, width, height)
+        g = math.radians(rng.uniform(-roll_deg, roll_deg))
+        Rz = np.array([[math.cos(g), -math.sin(g), 0], [math.sin(g), math.cos(g), 0], [0, 0, 1]])
+        cams.append(Camera.from_centre(K, Rz @ cam.R, e, width, height))
+    return cams
+
+
 def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 128,
                height: int = 128, seed: int = 0, world: World | None = None, *,
                grid: tuple[int, int] | None = None, baseline: float = 0.1,
@@ -722,16 +755,17 @@ def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 12
 
     Parameters
     ----------
-    layout : "grid" | "arc" | "free"
-        Camera layout (:func:`grid_cameras`, :func:`arc_cameras`, :func:`free_cameras`).
+    layout : "grid" | "arc" | "free" | "handheld"
+        Camera layout (:func:`grid_cameras`, :func:`arc_cameras`, :func:`free_cameras`,
+        :func:`handheld_cameras`).
     n_views : int, optional
         Number of views. Grid: a perfect square gives a square grid, otherwise one row
-        (overridden by ``grid``); default 3×3. Arc and free: default 5.
+        (overridden by ``grid``); default 3×3. Arc and free: default 5; handheld: 7.
     width, height : int
         Image size; the default 128×128 renders in a fraction of a second, 768×768 is a
         large scene.
     seed : int
-        Seed of the world (:func:`default_world`) and of the free layout's poses.
+        Seed of the world (:func:`default_world`) and of the free and hand-held layouts' poses.
     world : World, optional
         Defaults to ``default_world(seed)``.
     grid : (rows, cols), optional
@@ -761,8 +795,10 @@ def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 12
         cams = arc_cameras(5 if n_views is None else int(n_views), **kw)
     elif layout == "free":
         cams = free_cameras(5 if n_views is None else int(n_views), seed, **kw)
+    elif layout == "handheld":
+        cams = handheld_cameras(7 if n_views is None else int(n_views), seed, **kw)
     else:
-        raise VibrInputError(f"unknown synthetic layout {layout!r} (grid, arc or free)")
+        raise VibrInputError(f"unknown synthetic layout {layout!r} (grid, arc, free or handheld)")
     views = []
     for i, cam in enumerate(cams):
         img, depth = render_view(world, cam, supersample)

@@ -611,6 +611,10 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A
     cw = w[qi, qj] + gx[qi, qj] * (j - qj) + gy[qi, qj] * (i - qi)
     if cw < wmin or cw > wmax:
         return
+    # the pixel may already carry this very plane (it spread here in an earlier sweep):
+    # the cost would be the same, so it could not win
+    if cw == w[i, j] and gx[qi, qj] == gx[i, j] and gy[qi, qj] == gy[i, j]:
+        return
     c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], wts, wI, sdI, offs, srcs, sizes, A, b,
                     n_best, eps2, costs, lam1)
     if c < cost[i, j]:
