@@ -50,7 +50,7 @@ def register(sub) -> None:
                    help="depth range in scene units (default: from sparse points or a coarse sweep)")
     p.add_argument("--step-px", type=float, default=None,
                    help="parallax between consecutive planes on the farthest partner, px "
-                   "(MVS; default that of vibr.stereo.estimate_depth, 2)")
+                   "(MVS; default that of vibr.stereo.estimate_depth, 3)")
     p.add_argument("--max-planes", type=int, default=None,
                    help="most planes per view (MVS; default that of estimate_depth, 128)")
     p.add_argument("--refine-iter", type=int, default=None,

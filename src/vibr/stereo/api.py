@@ -187,7 +187,7 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
 # --------------------------------------------------------------------------- main API
 def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=None,
                    method: str = "auto", exclude=(), n_neighbours: int = 4,
-                   n_planes: int | None = None, step_px: float = 2.0, max_planes: int = 128, radius: int = 3,
+                   n_planes: int | None = None, step_px: float = 3.0, max_planes: int = 128, radius: int = 3,
                    n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
                    min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
                    n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
@@ -211,7 +211,10 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     exclude : views never used as inputs (e.g. an evaluation's held-out target).
     n_neighbours : stereo partners per reference view (MVS).
     n_planes : planes of the sweep (default: from ``step_px``, 64 … ``max_planes``).
-    step_px : parallax step between planes on the farthest partner, in pixels.
+    step_px : parallax step between planes on the farthest partner, in pixels. The
+        slanted-plane refinement then searches depth continuously, so the sweep only has
+        to put each pixel in the right basin of its cost; 3 px (under half the 7×7 window)
+        does (docs/DEPTH.md: fountain kept 86.1 % vs 86.2 % at 2 px, 7 s faster).
     max_planes : upper bound on the number of planes per view.
     radius : ZNCC window half-size.
     n_best : views averaged per pixel and plane (default half of the partners; for light
