@@ -187,7 +187,7 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
 # --------------------------------------------------------------------------- main API
 def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=None,
                    method: str = "auto", exclude=(), n_neighbours: int = 4,
-                   n_planes: int | None = None, step_px: float = 3.0, max_planes: int = 128, radius: int = 3,
+                   n_planes: int | None = None, step_px: float = 3.0, max_planes: int = 128, radius: int | None = None,
                    n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
                    min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
                    n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
@@ -216,7 +216,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         to put each pixel in the right basin of its cost; 3 px (under half the 7×7 window)
         does (docs/DEPTH.md: fountain kept 86.1 % vs 86.2 % at 2 px, 7 s faster).
     max_planes : upper bound on the number of planes per view.
-    radius : ZNCC window half-size.
+    radius : ZNCC window half-size (default 3 for MVS; light fields: see
+        :func:`~vibr.stereo.lightfield.lightfield_depth`).
     n_best : views averaged per pixel and plane (default half of the partners; for light
         fields see :func:`~vibr.stereo.lightfield.lightfield_depth`).
     max_cost : aggregated ``1 − ZNCC`` above which a pixel is unknown.
@@ -232,7 +233,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         depth). The light-field method takes it too (its ``pm_iter``).
     **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
         ``max_views``, ``refine``, ``tv_lambda``, ...). The light-field method uses
-        ``depth_range``, ``radius`` (default 3 here; 2 when called directly), ``max_cost``
+        ``depth_range``, ``radius``, ``max_cost``
         and ``mem_bytes``; it ignores ``n_neighbours``, ``step_px`` and the consistency
         options (its sweep already uses the grid views; its eps defaults to 0.001).
 
@@ -320,11 +321,12 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
             dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb)
             D = n_planes or _planes_for(cams[i], [cams[j] for j in nb], dr, step_px, min(64, max_planes), max_planes)
             res = plane_sweep(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], dr,
-                              n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
+                              n_planes=D, radius=radius or 3, n_best=n_best, max_cost=max_cost,
                               eps=eps, mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
             if refine_iter > 0:
                 res = refine_planes(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], res,
-                                    n_iter=refine_iter, n_best=n_best, eps=eps, max_cost=max_cost)
+                                    n_iter=refine_iter, n_best=n_best, eps=eps, max_cost=max_cost,
+                                    radius=radius or 3)
             d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
             raw[i] = (d, res.sigma_z)
             stats[scene.views[i].name] = {

@@ -103,7 +103,7 @@ def epi_disparity(stack: np.ndarray, offsets: np.ndarray, axis: str = "x", *,
 
 
 def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: list[int], *,
-                     depth_range=None, radius: int = 2, max_cost: float = 0.6,
+                     depth_range=None, radius: int | None = None, max_cost: float = 0.6,
                      mem_bytes: float = 2e9, max_views: int = 32, step: float = 0.03,
                      refine: str = "sweep+tv", tv_lambda: float = 2.0, tv_iter: int = 200,
                      st_min_coherence: float = 0.7, margin_px: float = 0.3,
@@ -119,6 +119,10 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     inputs : indices usable as inputs (``ref`` itself is the reference).
     max_views : at most this many neighbours in the sweep: the nearest in grid distance,
         preferring the reference's row, column and diagonals (the star of the grid).
+    radius : ZNCC window half-size of the sweep and the refinement. Default 3 (7×7) with up
+        to 8 views, 2 (5×5) with more: the matching noise falls with window area × views,
+        and a smaller window fattens depth edges less (cotton 9×9: BadPix 2.30 at 5×5,
+        2.65 at 7×7; 3×3 block: 6.19 at 7×7, docs/DEPTH.md).
     step : disparity step between planes (pixels per grid step).
     refine : "st" (local estimate only), "sweep" or "sweep+tv".
     tv_lambda, tv_iter : data weight and iterations of the TV-L1 refinement.
@@ -137,9 +141,9 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         (0.05, the radius): the dense window has samples next to the centre to weigh, and
         on the grids measured it moved the pixels next to depth edges most (docs/DEPTH.md).
     n_best : views whose costs are averaged per pixel and plane (the lowest ones), in the
-        sweep and the refinement. Default: a quarter of the views, at least 2, for a
-        single ring of neighbours (≤ 8 views: next to an occlusion edge only the views
-        along the edge see the point), half of them for larger stars.
+        sweep and the refinement. Default: a quarter of the views, at least 2: next to an
+        occlusion edge only the views whose baseline runs along the edge (one of the
+        star's four directions) match the background cleanly.
 
     Returns
     -------
@@ -239,11 +243,12 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         nb = sorted(others, key=key)[:max_views]
         if n_best is None:
             # Occlusions: next to a depth edge only the views whose baseline runs along the
-            # edge match cleanly, a quarter of a full star (one of its 4 directions). With
-            # a single ring (≤ 8 views) that is 2 views, and averaging only those beats the
-            # best half on every grid measured (docs/DEPTH.md); with more rings the best
-            # half keeps the noise down (cotton 9×9: a quarter was worse).
-            n_best = max(2, len(nb) // 4) if len(nb) <= 8 else len(nb) // 2
+            # edge match cleanly, one of the star's 4 directions, a quarter of its views
+            n_best = max(2, len(nb) // 4)
+        if radius is None:
+            # the ZNCC noise falls with the samples compared, window area × views: with more
+            # than one ring of views a 5×5 window suffices and fattens depth edges less
+            radius = 3 if len(nb) <= 8 else 2
         n_best = max(1, min(int(n_best), len(nb)))
         res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
                           n_planes=D, radius=radius, n_best=n_best,
