@@ -111,7 +111,8 @@ def bench_fountain(args) -> None:
               f"{100 * st['kept']:>7.1f} {st.get('reproj_px', float('nan')):>9.3f} {st['time_s']:>7.1f}")
     kept = np.mean([st["kept"] for st in info.values()])
     rep = np.nanmedian([st.get("reproj_px", np.nan) for st in info.values()])
-    print(f"total depth time {statistics.median(times):.1f} s (median of {len(times)}), "
+    print(f"total depth time {statistics.median(times):.1f} s (median of {len(times)}: "
+          f"{', '.join(f'{x:.1f}' for x in sorted(times))}), "
           f"mean kept {100 * kept:.1f} %, median of per-view mean reprojection error {rep:.3f} px")
     zs = np.concatenate([v.depth[np.isfinite(v.depth)] for v in est.views])
     print(f"estimated depth percentiles 1/50/99: {np.percentile(zs, [1, 50, 99]).round(2).tolist()}")
