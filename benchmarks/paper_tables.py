@@ -57,6 +57,15 @@ EXTRA_SETTING = (0.1, 0.5, 0.002)
 #: Depth estimation for fountain (vibr.stereo.estimate_depth): the library's defaults
 #: (what a user of ``vibr eval --depth estimated`` gets; docs/DEPTH.md).
 FOUNTAIN_ESTIMATE: dict = {}
+def _mvs_default(name: str):
+    """A default of vibr.stereo.estimate_depth, read from its signature (the text stays true)."""
+    import inspect
+
+    from vibr.stereo import estimate_depth
+
+    return inspect.signature(estimate_depth).parameters[name].default
+
+
 #: Parameters that are physical quantities in grey levels of 8-bit images, whatever the
 #: scale lambda is read on: converted when the intensity scale is 1.
 GREY_LEVEL_PARAMS = {"sigma_s": 1.0, "grad_max": 64.0}
@@ -478,7 +487,8 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "* **Depth**: estimated by vibr from the source views only (the target is held out of depth "
          "estimation): cotton with the light-field estimator (`vibr.stereo.estimate_depth`, method "
          "\"lightfield\", defaults: plane sweep over the grid views, slanted-plane refinement, TV-L1), fountain "
-         "with the plane-sweep MVS at its defaults (planes 2 px of parallax apart, ≤ 128, slanted-plane "
+         f"with the plane-sweep MVS at its defaults (planes {_mvs_default('step_px'):g} px of parallax apart, "
+         f"≤ {_mvs_default('max_planes')}, slanted-plane "
          "refinement, consistency check; docs/DEPTH.md)"
          + (f" with `{FOUNTAIN_ESTIMATE}`" if FOUNTAIN_ESTIMATE else "") + ". Depth is estimated once per "
          "target (per stride for cotton) and shared by every setting; the warped samples are computed once per "
