@@ -691,6 +691,15 @@ def arc_cameras(n: int = 5, *, arc_deg: float = 30.0, radius: float = 3.6, width
     return cams
 
 
+def _aimed_rolled(eye, target, rng, aim_jitter, roll_deg, K, width, height) -> Camera:
+    """Camera at ``eye`` looking at ``target`` ± ``aim_jitter`` per axis, rolled about its
+    optical axis by ± ``roll_deg`` (uniform draws from ``rng``, in that order)."""
+    cam = _look_at(eye, target + rng.uniform(-aim_jitter, aim_jitter, 3), K, width, height)
+    g = math.radians(rng.uniform(-roll_deg, roll_deg))
+    Rz = np.array([[math.cos(g), -math.sin(g), 0], [math.sin(g), math.cos(g), 0], [0, 0, 1]])
+    return Camera.from_centre(K, Rz @ cam.R, eye, width, height)
+
+
 def free_cameras(n: int = 5, seed: int = 0, *, width: int = 128, height: int = 128,
                  fov_deg: float = 55.0, eye=(0.0, -0.3, 0.0), target=SCENE_CENTRE,
                  pos_jitter: float = 0.25, aim_jitter: float = 0.2,
@@ -706,11 +715,7 @@ def free_cameras(n: int = 5, seed: int = 0, *, width: int = 128, height: int = 1
     cams = []
     for _ in range(n):
         e = e0 + rng.uniform(-pos_jitter, pos_jitter, 3)
-        t = t0 + rng.uniform(-aim_jitter, aim_jitter, 3)
-        cam = _look_at(e, t, K, width, height)
-        g = math.radians(rng.uniform(-roll_deg, roll_deg))
-        Rz = np.array([[math.cos(g), -math.sin(g), 0], [math.sin(g), math.cos(g), 0], [0, 0, 1]])
-        cams.append(Camera.from_centre(K, Rz @ cam.R, e, width, height))
+        cams.append(_aimed_rolled(e, t0, rng, aim_jitter, roll_deg, K, width, height))
     return cams
 
 
@@ -738,11 +743,7 @@ def handheld_cameras(n: int = 7, seed: int = 0, *, width: int = 128, height: int
             a = 2 * math.pi * (k - 1) / max(n - 1, 1) + rng.uniform(-0.35, 0.35)
             r = rng.uniform(*baseline)
             off = np.array([r * math.cos(a), r * math.sin(a), rng.uniform(-z_jitter, z_jitter)])
-        e = e0 + off
-        cam = _look_at(e, t0 + rng.uniform(-aim_jitter, aim_jitter, 3), K, width, height)
-        g = math.radians(rng.uniform(-roll_deg, roll_deg))
-        Rz = np.array([[math.cos(g), -math.sin(g), 0], [math.sin(g), math.cos(g), 0], [0, 0, 1]])
-        cams.append(Camera.from_centre(K, Rz @ cam.R, e, width, height))
+        cams.append(_aimed_rolled(e0 + off, t0, rng, aim_jitter, roll_deg, K, width, height))
     return cams
 
 
