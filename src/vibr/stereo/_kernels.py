@@ -56,6 +56,22 @@ def box_mean_std(img, radius, eps2):
 
 
 # --------------------------------------------------------------------------- plane sweep
+@njit(cache=True, inline="always")
+def _bilinear_clamped(srcs, v, x, y, wv, hv):
+    """Bilinear sample of view ``v`` of the zero-padded stack ``srcs`` at (x, y), the
+    coordinates clamped to its own ``hv × wv`` image (edge pixels extend outwards)."""
+    x = min(max(x, 0.0), wv - 1.0)
+    y = min(max(y, 0.0), hv - 1.0)
+    x0 = min(int(x), wv - 2) if wv > 1 else 0
+    y0 = min(int(y), hv - 2) if hv > 1 else 0
+    fx = x - x0
+    fy = y - y0
+    x1 = min(x0 + 1, wv - 1)
+    y1 = min(y0 + 1, hv - 1)
+    return ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
+            + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
+
+
 @njit(parallel=True, cache=True)
 def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, block,
                best_c, best_l, c_minus, c_plus, prev):
@@ -132,22 +148,7 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
                         if inband:
                             inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
                             OK[v, ii - ib0, j] = 1 if inside else 0
-                        if x < 0.0:
-                            x = 0.0
-                        if y < 0.0:
-                            y = 0.0
-                        if x > wv - 1.0:
-                            x = wv - 1.0
-                        if y > hv - 1.0:
-                            y = hv - 1.0
-                        x0 = min(int(x), wv - 2) if wv > 1 else 0
-                        y0 = min(int(y), hv - 2) if hv > 1 else 0
-                        fx = x - x0
-                        fy = y - y0
-                        x1 = min(x0 + 1, wv - 1)
-                        y1 = min(y0 + 1, hv - 1)
-                        Jrow[j] = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
-                                   + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
+                        Jrow[j] = _bilinear_clamped(srcs, v, x, y, wv, hv)
                     # running horizontal window sums (window clipped at the border)
                     a = 0.0
                     a2 = 0.0
@@ -543,22 +544,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
             iz = 1.0 / pz
             x = (cx + dx * ex0 + dy * ey0) * iz
             y = (cy + dx * ex1 + dy * ey1) * iz
-            if x < 0.0:
-                x = 0.0
-            if y < 0.0:
-                y = 0.0
-            if x > wv - 1.0:
-                x = wv - 1.0
-            if y > hv - 1.0:
-                y = hv - 1.0
-            x0 = min(int(x), wv - 2) if wv > 1 else 0
-            y0 = min(int(y), hv - 2) if hv > 1 else 0
-            fx = x - x0
-            fy = y - y0
-            x1 = min(x0 + 1, wv - 1)
-            y1 = min(y0 + 1, hv - 1)
-            q = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x1])
-                 + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
+            q = _bilinear_clamped(srcs, v, x, y, wv, hv)
             wq = wk * q
             sJ += wq
             sJJ += wq * q
