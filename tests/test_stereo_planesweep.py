@@ -118,6 +118,52 @@ def test_select_neighbours_nearest_first():
     assert select_neighbours(cams, 0, [0, 1, 2, 3], 2) == [2, 3]
 
 
+def test_frustum_coverage_closed_form():
+    from vibr.stereo.api import frustum_coverage
+
+    # a camera translated by b along x with the same K and R sees the reference pixel x
+    # at depth z at x − f b / z: the sample is seen iff that lands inside the image
+    f, W, H = 100.0, 64, 48
+    K = Camera.intrinsics(f, W, H)
+    ref = Camera.from_centre(K, np.eye(3), [0, 0, 0], W, H)
+    srcs = [Camera.from_centre(K, np.eye(3), [b, 0, 0], W, H) for b in (0.5, -1.0, 3.0)]
+    seen = frustum_coverage(ref, srcs, (5.0, 10.0), n_xy=16, n_depth=4)
+    ny = int(round(16 * H / W))
+    xs = (np.arange(16) + 0.5) * W / 16 - 0.5
+    z = 1.0 / np.linspace(0.1, 0.2, 4)
+    xx = np.broadcast_to(xs[None, None, :], (4, ny, 16)).reshape(-1)
+    zz = np.broadcast_to(z[:, None, None], (4, ny, 16)).reshape(-1)
+    for v, b in enumerate((0.5, -1.0, 3.0)):
+        u = xx - f * b / zz
+        assert np.array_equal(seen[v], (u > -0.5) & (u < W - 0.5))
+    assert 0 < seen[0].mean() < 1 and seen[2].mean() < seen[0].mean()
+    away = Camera.from_centre(K, np.diag([-1.0, 1.0, -1.0]), [0, 0, 0.0], W, H)
+    assert not frustum_coverage(ref, [away], (5.0, 10.0)).any()
+
+
+def test_complete_coverage_adds_the_view_that_sees_the_missing_side():
+    from vibr.stereo.api import complete_coverage, frustum_coverage
+
+    K = Camera.intrinsics(100.0, 64, 48)
+    xs = (0.0, 1.0, 1.5, -2.0)  # reference, nearest, second nearest (same side), far other side
+    cams = [Camera.from_centre(K, np.eye(3), [x, 0, 0], 64, 48) for x in xs]
+    cams.append(Camera.from_centre(K, np.diag([-1.0, 1.0, -1.0]), [0, 0, 20.0], 64, 48))  # facing back
+    dr = (5.0, 10.0)
+    near = select_neighbours(cams, 0, list(range(5)), 1)
+    assert near == [1]
+    # the nearest partner misses the reference's left side; the view at x = +1.5 misses
+    # it too, the one at x = −2 sees it: it is the one added
+    out = complete_coverage(cams, 0, near, list(range(5)), dr, 1)
+    assert out == [1, 3]
+    cov = frustum_coverage(cams[0], [cams[j] for j in out], dr).sum(0)
+    assert (cov >= 1).mean() > (frustum_coverage(cams[0], [cams[1]], dr)[0]).mean()
+    # nothing is added when the gain is below min_gain, or when coverage is complete
+    assert complete_coverage(cams, 0, near, list(range(5)), dr, 1, min_gain=1.0) == [1]
+    assert complete_coverage(cams, 0, [1, 3], list(range(5)), dr, 1, min_gain=0.0) == [1, 3]
+    # a view turned away (180° from the reference) is never a candidate
+    assert 4 not in complete_coverage(cams, 0, near, list(range(5)), dr, 2, min_gain=0.0, max_extra=4)
+
+
 def test_estimate_depth_excluded_views_never_used():
     from vibr.synthetic import make_scene
 

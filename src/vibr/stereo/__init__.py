@@ -7,11 +7,13 @@
 * :func:`epi_disparity`, :func:`lightfield_depth` — light-field estimators.
 """
 
-from .api import default_depth_range, estimate_depth, select_neighbours, upsample_depth
+from .api import (complete_coverage, default_depth_range, estimate_depth, frustum_coverage,
+                  select_neighbours, upsample_depth)
 from .consistency import ConsistencyResult, check_consistency
 from .lightfield import disparity_model, epi_disparity, lightfield_depth
 from .planesweep import SweepResult, plane_homographies, plane_sweep, refine_planes
 
-__all__ = ["estimate_depth", "default_depth_range", "select_neighbours", "upsample_depth",
+__all__ = ["estimate_depth", "default_depth_range", "select_neighbours", "complete_coverage",
+           "frustum_coverage", "upsample_depth",
            "plane_sweep", "plane_homographies", "refine_planes", "SweepResult", "check_consistency",
            "ConsistencyResult", "epi_disparity", "disparity_model", "lightfield_depth"]

@@ -5,7 +5,8 @@ The paper's first stage (Nieto et al. 2016, §5.3) computes the geometric proxy 
 Goldluecke 2012) for light fields. vibr does both on the CPU:
 
 * ``method="mvs"``: plane sweep (:func:`vibr.stereo.planesweep.plane_sweep`) over the
-  ``n_neighbours`` best neighbouring views, then the forward-backward consistency check
+  ``n_neighbours`` nearest views (plus views that see what they miss,
+  :func:`complete_coverage`) and slanted-plane refinement, then the forward-backward consistency check
   across the estimated views (:mod:`vibr.stereo.consistency`); unreliable or inconsistent
   pixels become NaN (the geometry stage's bilateral filter fills them).
 * ``method="lightfield"``: :func:`vibr.stereo.lightfield.lightfield_depth` (structure
@@ -110,6 +111,67 @@ def select_neighbours(cameras: list[Camera], ref: int, candidates: list[int], k:
     return [j for _, j in scored[:k]]
 
 
+def frustum_coverage(ref: Camera, srcs: list[Camera], depth_range, *, n_xy: int = 24,
+                     n_depth: int = 8) -> np.ndarray:
+    """Which source views see samples of the reference's viewing frustum.
+
+    The reference image is sampled on an ``n_xy``-wide grid (rows in proportion) at
+    ``n_depth`` depths uniform in inverse depth over ``depth_range`` (near, far); a sample
+    is seen by a source when it lies in front of it and projects inside its image.
+    Occlusions are ignored (the geometry is not known yet). Returns (n_src, n_samples) bool.
+    """
+    near, far = float(depth_range[0]), float(depth_range[1])
+    ny = max(2, int(round(n_xy * ref.height / ref.width)))
+    xs = (np.arange(n_xy) + 0.5) * ref.width / n_xy - 0.5
+    ys = (np.arange(ny) + 0.5) * ref.height / ny - 0.5
+    xy = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    z = 1.0 / np.linspace(1.0 / far, 1.0 / near, n_depth)
+    X = ref.camera_to_world(ref.pixel_rays(xy)[None] * z[:, None, None]).reshape(-1, 3)
+    seen = np.zeros((len(srcs), len(X)), bool)
+    for v, c in enumerate(srcs):
+        p, zc = c.project(X)
+        seen[v] = (zc > 0) & (p[:, 0] > -0.5) & (p[:, 1] > -0.5) & (p[:, 0] < c.width - 0.5) & (p[:, 1] < c.height - 0.5)
+    return seen
+
+
+def complete_coverage(cameras: list[Camera], ref: int, chosen: list[int], candidates: list[int],
+                      depth_range, n_need: int, *, min_gain: float = 0.02, max_extra: int = 4,
+                      max_angle_deg: float = 60.0) -> list[int]:
+    """Add partners to ``chosen`` until the reference's frustum is seen by ``n_need`` views.
+
+    Nearest-first partners (:func:`select_neighbours`) can all sit on one side of a free
+    (hand-held) layout and leave part of the reference image, e.g. the near ground at its
+    bottom, outside every partner, where no depth can be matched. Here the frustum
+    samples of :func:`frustum_coverage` seen by fewer than ``n_need`` chosen views are the
+    deficit, and the candidate that removes the most of it is added, as long as it
+    removes at least ``min_gain`` of the samples (a partner costs as much time as any
+    other; a sliver of coverage is not worth it), at most ``max_extra`` times. This is
+    the coverage side of Goesele et al. (2007, §4.1)'s view selection; candidates turned
+    by more than ``max_angle_deg`` from the reference are not considered.
+    """
+    cr = cameras[ref]
+    pool = [j for j in candidates if j != ref and j not in chosen
+            and np.degrees(np.arccos(np.clip(cr.optical_axis @ cameras[j].optical_axis, -1, 1))) <= max_angle_deg
+            and np.linalg.norm(cameras[j].centre - cr.centre) > 1e-12]
+    if not pool or n_need < 1:
+        return list(chosen)
+    seen = frustum_coverage(cr, [cameras[j] for j in list(chosen) + pool], depth_range)
+    count = seen[: len(chosen)].sum(0)
+    out = list(chosen)
+    for _ in range(max_extra):
+        short = count < n_need
+        if not short.any() or not pool:
+            break
+        gains = [(seen[len(chosen) + p] & short).mean() for p in range(len(pool))]
+        p = int(np.argmax(gains))
+        if gains[p] < min_gain:
+            break
+        out.append(pool.pop(p))
+        count = count + seen[len(chosen) + p]
+        seen = np.delete(seen, len(chosen) + p, axis=0)
+    return out
+
+
 def _parallax_rate(ref: Camera, src: Camera) -> float:
     """Pixels of parallax in ``src`` per unit of inverse depth ``w`` of the reference
     image centre's ray: ``|p(w=1) − p(w=0)|`` (the plane homography is affine in w)."""
@@ -191,7 +253,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                    n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
                    min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
                    n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
-                   refine_iter: int = REFINE_ITER, **lf_params) -> Scene:
+                   refine_iter: int = REFINE_ITER, coverage_gain: float | None = 0.02,
+                   **lf_params) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
 
     Parameters
@@ -209,7 +272,14 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     method : "auto" | "mvs" | "lightfield"
         "auto" is "lightfield" when ``scene.grid`` is set, else "mvs".
     exclude : views never used as inputs (e.g. an evaluation's held-out target).
-    n_neighbours : stereo partners per reference view (MVS).
+    n_neighbours : stereo partners per reference view (MVS), nearest first
+        (:func:`select_neighbours`).
+    coverage_gain : when the nearest partners leave part of the reference's frustum seen by
+        fewer than ``n_best`` of them, add the candidate that sees most of that part, while
+        it adds at least this fraction of the frustum (:func:`complete_coverage`, at most 4
+        extra views; ``None``: never). In a hand-held layout the nearest views can all miss
+        the near ground at the bottom of the image; in a sequence (fountain) only its end
+        views get a fifth partner.
     n_planes : planes of the sweep (default: from ``step_px``, 64 … ``max_planes``).
     step_px : parallax step between planes on the farthest partner, in pixels. The
         slanted-plane refinement then searches depth continuously, so the sweep only has
@@ -319,13 +389,19 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
             if not nb:
                 continue
             dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb)
+            # the views averaged per pixel stay those the nearest-first set implies; the
+            # coverage partners only stand in where that set does not see
+            nbest_i = n_best or max(1, len(nb) // 2)
+            if coverage_gain is not None:
+                nb = complete_coverage(cams, i, nb, inputs, dr, nbest_i, min_gain=coverage_gain)
+                nbrs[i] = nb
             D = n_planes or _planes_for(cams[i], [cams[j] for j in nb], dr, step_px, min(64, max_planes), max_planes)
             res = plane_sweep(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], dr,
-                              n_planes=D, radius=radius or 3, n_best=n_best, max_cost=max_cost,
+                              n_planes=D, radius=radius or 3, n_best=nbest_i, max_cost=max_cost,
                               eps=eps, mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
             if refine_iter > 0:
                 res = refine_planes(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], res,
-                                    n_iter=refine_iter, n_best=n_best, eps=eps, max_cost=max_cost,
+                                    n_iter=refine_iter, n_best=nbest_i, eps=eps, max_cost=max_cost,
                                     radius=radius or 3)
             d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
             raw[i] = (d, res.sigma_z)
