@@ -392,3 +392,50 @@ def test_refine_planes_point_seen_by_one_partner():
         fr[pen] = np.mean((np.abs(out.depth - gt) / gt)[inner] < 0.01)
     assert fr[None] < 0.6, fr
     assert fr[0.1] >= 0.9, fr
+
+
+def _plane_result(w, gx, gy, confident):
+    from vibr.stereo.planesweep import SweepResult
+
+    z = 1.0 / w
+    return SweepResult(depth=z.astype(np.float32), inv_depth=w, cost=np.zeros_like(w),
+                       sigma_z=(0.01 * z * z).astype(np.float32), confident=confident,
+                       winv=np.linspace(0.01, 1.0, 8), meta={"plane_gradient": (gx, gy)})
+
+
+def test_median_planes_restores_a_plane_and_keeps_an_edge():
+    """Votes are planes extended to the voter's neighbour, so on one planar surface every
+    vote is the exact value: a slanted plane comes back unchanged, and a band of outliers
+    on it (a wrong plane on pixels of the surface's colour, as edge fattening leaves) is
+    outvoted back to the exact plane. Across a colour edge the other surface does not
+    vote, and unknown pixels never do."""
+    from vibr.stereo.planesweep import median_planes
+
+    H, W = 40, 60
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
+    a, bx, by = 0.3, 0.002, -0.001
+    w_true = a + bx * xx + by * yy
+    img = np.zeros((H, W, 3), np.float32)
+    img[:, :30] = (0.8, 0.3, 0.2)       # left surface: the slanted plane
+    img[:, 30:] = (0.2, 0.3, 0.8)       # right surface: a fronto-parallel plane at w 0.6
+    w = np.where(xx < 30, w_true, 0.6)
+    gx = np.where(xx < 30, bx, 0.0)
+    gy = np.where(xx < 30, by, 0.0)
+    conf = np.ones((H, W), bool)
+    out = median_planes(img, _plane_result(w, gx, gy, conf))
+    assert np.allclose(out.inv_depth, w, rtol=0, atol=1e-12)
+    assert np.allclose(out.meta["plane_gradient"][0], gx) and np.allclose(out.meta["plane_gradient"][1], gy)
+    # a 3-px band of the left surface next to the edge carries the right surface's plane
+    band = (xx >= 27) & (xx < 30)
+    wf = np.where(band, 0.6, w)
+    out = median_planes(img, _plane_result(wf, np.where(band, 0.0, gx), np.where(band, 0.0, gy), conf))
+    assert np.allclose(out.inv_depth, w, rtol=0, atol=1e-12)
+    # unknown pixels neither vote nor become known; known pixels do not see their values
+    unk = (yy % 7 == 3) & (xx % 5 == 1)
+    wu = np.where(unk, 5.0, w)
+    out = median_planes(img, _plane_result(wu, gx, gy, conf & ~unk))
+    assert np.array_equal(out.confident, conf & ~unk)
+    assert np.allclose(out.inv_depth[~unk], w[~unk], rtol=0, atol=1e-12)
+    assert np.allclose(out.inv_depth[unk], w[unk], rtol=0, atol=1e-12)  # from their neighbours
+    # sigma_z keeps its inverse-depth width: sigma_z / z² unchanged
+    assert np.allclose(out.sigma_z / out.depth.astype(np.float64) ** 2, 0.01, rtol=1e-5)

@@ -11,9 +11,9 @@ from .api import (complete_coverage, default_depth_range, estimate_depth, frustu
                   select_neighbours, upsample_depth)
 from .consistency import ConsistencyResult, check_consistency
 from .lightfield import disparity_model, epi_disparity, lightfield_depth
-from .planesweep import SweepResult, plane_homographies, plane_sweep, refine_planes
+from .planesweep import SweepResult, median_planes, plane_homographies, plane_sweep, refine_planes
 
 __all__ = ["estimate_depth", "default_depth_range", "select_neighbours", "complete_coverage",
            "frustum_coverage", "upsample_depth",
-           "plane_sweep", "plane_homographies", "refine_planes", "SweepResult", "check_consistency",
+           "plane_sweep", "plane_homographies", "refine_planes", "median_planes", "SweepResult", "check_consistency",
            "ConsistencyResult", "epi_disparity", "disparity_model", "lightfield_depth"]

@@ -696,3 +696,71 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                 gx[i, j] = bx
                 gy[i, j] = by
                 cost[i, j] = bc
+
+
+# --------------------------------------------------------------------------- plane-vote median
+@njit(parallel=True, cache=True)
+def plane_median(w, gx, gy, known, guide, offs, sigma_c, sigma_s):
+    """Joint weighted median of per-pixel planes in inverse depth (Ma et al. 2013's
+    weighted median filter for stereo, with plane votes).
+
+    Every known pixel q of the window ``offs`` (n,2) (dy, dx) around p votes for its plane
+    extended to p, ``w_q + gx_q (x_p − x_q) + gy_q (y_p − y_q)``, with the weight
+    ``exp(−‖G_p − G_q‖²/(2σ_c² C) − |p − q|²/(2σ_s²))`` (G the (H,W,C) colour guide, the
+    bilateral weights of :func:`support_weights`); p takes the weighted median of the votes
+    and the slopes of the plane that cast it. Pixels with no known voter keep their plane.
+    Returns the filtered ``(w, gx, gy)``, (H,W) float64 each.
+    """
+    H, W = w.shape
+    n = offs.shape[0]
+    nc = guide.shape[2]
+    ic = 0.5 / (sigma_c * sigma_c * nc)
+    ws = np.empty(n)
+    for k in range(n):
+        ws[k] = np.exp(-(offs[k, 0] * offs[k, 0] + offs[k, 1] * offs[k, 1]) * (0.5 / (sigma_s * sigma_s)))
+    out = w.copy()
+    ox = gx.copy()
+    oy = gy.copy()
+    for i in prange(H):
+        vals = np.empty(n)
+        wts = np.empty(n)
+        src = np.empty(n, np.int64)
+        for j in range(W):
+            m = 0
+            tot = 0.0
+            for k in range(n):
+                qi = i + offs[k, 0]
+                qj = j + offs[k, 1]
+                if qi < 0 or qj < 0 or qi >= H or qj >= W or not known[qi, qj]:
+                    continue
+                d2 = 0.0
+                for ch in range(nc):
+                    t = guide[i, j, ch] - guide[qi, qj, ch]
+                    d2 += t * t
+                wk = ws[k] * np.exp(-d2 * ic)
+                v = w[qi, qj] - gx[qi, qj] * offs[k, 1] - gy[qi, qj] * offs[k, 0]
+                # insertion into the sorted votes (n ≤ a few dozen: faster than argsort)
+                p = m
+                while p > 0 and vals[p - 1] > v:
+                    vals[p] = vals[p - 1]
+                    wts[p] = wts[p - 1]
+                    src[p] = src[p - 1]
+                    p -= 1
+                vals[p] = v
+                wts[p] = wk
+                src[p] = qi * W + qj
+                tot += wk
+                m += 1
+            if m == 0 or tot <= 0.0:
+                continue
+            acc = 0.0
+            half = 0.5 * tot
+            for k in range(m):
+                acc += wts[k]
+                if acc >= half:
+                    out[i, j] = vals[k]
+                    q = src[k]
+                    ox[i, j] = gx[q // W, q % W]
+                    oy[i, j] = gy[q // W, q % W]
+                    break
+    return out, ox, oy

@@ -35,7 +35,7 @@ from ..errors import VibrInputError
 from ..progress import log
 from ..scene import Scene
 from .consistency import check_consistency
-from .planesweep import plane_sweep, refine_planes
+from .planesweep import median_planes, plane_sweep, refine_planes
 
 
 #: Default number of slanted-plane refinement iterations after the sweep (see
@@ -253,7 +253,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                    n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
                    min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
                    n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
-                   refine_iter: int = REFINE_ITER, coverage_gain: float | None = 0.02,
+                   refine_iter: int = REFINE_ITER, median_radius: int = 9,
+                   coverage_gain: float | None = 0.02,
                    **lf_params) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
 
@@ -301,6 +302,10 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     refine_iter : iterations of the slanted-plane PatchMatch refinement after the sweep
         (:func:`~vibr.stereo.planesweep.refine_planes`; 0: the sweep's winner-take-all
         depth). The light-field method takes it too (its ``pm_iter``).
+    median_radius : half-size of the window of the joint weighted median of the planes
+        after the refinement (MVS; :func:`~vibr.stereo.planesweep.median_planes`,
+        19×19 sampled every 3 px by default, about three times the matching window;
+        0: none).
     **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
         ``max_views``, ``refine``, ``tv_lambda``, ...). The light-field method uses
         ``depth_range``, ``radius``, ``max_cost``
@@ -403,6 +408,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                 res = refine_planes(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], res,
                                     n_iter=refine_iter, n_best=nbest_i, eps=eps, max_cost=max_cost,
                                     radius=radius or 3)
+            if median_radius:
+                res = median_planes(img(i), res, radius=median_radius)
             d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
             raw[i] = (d, res.sigma_z)
             stats[scene.views[i].name] = {
