@@ -11,8 +11,8 @@ _DESC = """\
 Estimate orthogonal depth maps and their uncertainty sigma_z for the views of a scene, on
 the CPU: light fields (scene with a grid) by the EPI structure tensor refined by a fine
 plane sweep over the grid and TV-L1; other scenes by plane-sweep multi-view stereo (ZNCC
-over the nearest views, slanted-plane PatchMatch refinement, cross-view consistency
-check). Pixels whose depth is unreliable or inconsistent are written as unknown (0 in the
+over the nearest views, slanted-plane PatchMatch refinement, a colour-guided weighted
+median of the planes, cross-view consistency check). Pixels whose depth is unreliable or inconsistent are written as unknown (0 in the
 .npy files).
 
 The result is the scene saved as a nerfstudio transforms.json folder (OUT/transforms.json,
@@ -45,7 +45,9 @@ def register(sub) -> None:
                    help="load the scene resized by this factor; the output has that size (default 1)")
     p.add_argument("--method", choices=["auto", "mvs", "lightfield"], default="auto",
                    help="auto: lightfield when the scene is a grid, else mvs")
-    p.add_argument("--neighbours", type=int, default=4, help="stereo partners per view (MVS, default 4)")
+    p.add_argument("--neighbours", type=int, default=4,
+                   help="nearest stereo partners per view (MVS, default 4; views that see what "
+                   "they miss are added)")
     p.add_argument("--depth-range", type=float, nargs=2, metavar=("NEAR", "FAR"), default=None,
                    help="depth range in scene units (default: from sparse points or a coarse sweep)")
     p.add_argument("--step-px", type=float, default=None,
@@ -56,6 +58,9 @@ def register(sub) -> None:
     p.add_argument("--refine-iter", type=int, default=None,
                    help="slanted-plane refinement iterations after the sweep, 0 for none "
                    "(default that of estimate_depth, 2)")
+    p.add_argument("--median-radius", type=int, default=None,
+                   help="window half-size of the colour-guided weighted median of the refined "
+                   "planes, 0 for none (default that of estimate_depth, 9)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
     p.add_argument("--force", action="store_true", help="replace OUT if it exists")
     add_quiet(p)
@@ -84,7 +89,8 @@ def run(args) -> int:
         out = Path(args.out)
     scene = load_scene(args.scene, scale=args.resize)
     opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
-                             ("refine_iter", args.refine_iter)) if v is not None}
+                             ("refine_iter", args.refine_iter),
+                             ("median_radius", args.median_radius)) if v is not None}
     est = estimate_depth(scene, views=_split(args.views), scale=args.scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,

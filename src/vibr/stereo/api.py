@@ -303,7 +303,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         (:func:`~vibr.stereo.planesweep.refine_planes`; 0: the sweep's winner-take-all
         depth). The light-field method takes it too (its ``pm_iter``).
     median_radius : half-size of the window of the joint weighted median of the planes
-        after the refinement (MVS; :func:`~vibr.stereo.planesweep.median_planes`,
+        after the refinement (both methods; :func:`~vibr.stereo.planesweep.median_planes`,
         19×19 sampled every 3 px by default, about three times the matching window;
         0: none).
     **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
@@ -367,6 +367,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         for i in targets:
             lf = dict(lf_params)
             lf.setdefault("pm_iter", refine_iter)
+            lf.setdefault("median_radius", median_radius)
             results[i] = lightfield_depth(scene, i, cams, img, inputs, depth_range=depth_range,
                                           radius=radius, max_cost=max_cost, mem_bytes=mem_bytes,
                                           n_best=n_best, **lf)

@@ -18,8 +18,10 @@ coherent one.
 
 Refinement (this module's default): a plane sweep over the grid neighbours with planes
 ``step`` px of disparity apart (:func:`vibr.stereo.planesweep.plane_sweep`, exact for
-parallel cameras), in the disparity range of the coherent local estimates, followed by the
-weighted TV-L1 of :func:`vibr.stereo._kernels.tv_l1` (edge-aware weights from the image).
+parallel cameras), in the disparity range of the coherent local estimates, the
+slanted-plane refinement and the joint weighted median of its planes
+(:func:`~vibr.stereo.planesweep.refine_planes`, :func:`~vibr.stereo.planesweep.median_planes`),
+followed by the weighted TV-L1 of :func:`vibr.stereo._kernels.tv_l1` (edge-aware weights from the image).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene
 from . import _kernels as kern
-from .planesweep import plane_sweep, refine_planes, to_grey
+from .planesweep import median_planes, plane_sweep, refine_planes, to_grey
 
 
 def disparity_model(ref: Camera, right: Camera) -> tuple[float, float]:
@@ -110,7 +112,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                      return_disparity: bool = False, eps: float = 0.001,
                      st_max_disp: float = 2.5, pm_iter: int = 2, pm_views: int | None = None,
                      pm_stride: int = 1, n_best: int | None = None, pm_sigma_c: float = 0.03,
-                     pm_sigma_s: float = 2.0, **_ignored):
+                     pm_sigma_s: float = 2.0, median_radius: int = 9, **_ignored):
     """Depth and sigma_z for grid view ``ref`` from the other (non-excluded) grid views.
 
     Parameters
@@ -140,6 +142,9 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         adaptive-support weights on the colour image. Tighter than the MVS defaults
         (0.05, the radius): the dense window has samples next to the centre to weigh, and
         on the grids measured it moved the pixels next to depth edges most (docs/DEPTH.md).
+    median_radius : window half-size of the joint weighted median of the refined planes
+        (:func:`vibr.stereo.planesweep.median_planes`; 0: none). On cotton it removes the
+        outliers the TV-L1 otherwise spreads (docs/DEPTH.md).
     n_best : views whose costs are averaged per pixel and plane (the lowest ones), in the
         sweep and the refinement. Default: a quarter of the views, at least 2: next to an
         occlusion edge only the views whose baseline runs along the edge (one of the
@@ -260,6 +265,8 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                                 n_iter=pm_iter, n_best=min(n_best, len(nbr)), eps=eps,
                                 max_cost=max_cost, radius=radius, stride=pm_stride,
                                 sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
+        if median_radius:
+            res = median_planes(img(ref), res, radius=median_radius)
         disp = -(a + b * res.inv_depth)
         conf = res.confident
         stats.update({"depth_range": dr, "n_planes": D, "n_views": len(nb), "n_best": n_best,
