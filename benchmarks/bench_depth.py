@@ -319,7 +319,8 @@ def main(argv=None) -> None:
     p.add_argument("--refine-iter", type=int, default=DEFAULTS["refine_iter"],
                    help="slanted-plane refinement iterations (0: sweep only)")
     p.add_argument("--median-radius", type=int, default=DEFAULTS["median_radius"],
-                   help="weighted median of the planes, window half-size (0: none)")
+                   help="weighted median of the planes, window half-size (0: none; default "
+                   "estimate_depth's: 9 for MVS, none for light fields)")
     p.add_argument("--synthetic-size", type=int, nargs="+", default=[256, 512],
                    help="synthetic image widths (height 4/5 of it); one table each")
     p.add_argument("--no-render", action="store_true")

@@ -60,7 +60,8 @@ def register(sub) -> None:
                    "(default that of estimate_depth, 2)")
     p.add_argument("--median-radius", type=int, default=None,
                    help="window half-size of the colour-guided weighted median of the refined "
-                   "planes, 0 for none (default that of estimate_depth, 9)")
+                   "planes, 0 for none (default that of estimate_depth: 9 for MVS, none "
+                   "for light fields)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
     p.add_argument("--force", action="store_true", help="replace OUT if it exists")
     add_quiet(p)

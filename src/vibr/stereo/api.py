@@ -253,7 +253,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                    n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
                    min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
                    n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
-                   refine_iter: int = REFINE_ITER, median_radius: int = 9,
+                   refine_iter: int = REFINE_ITER, median_radius: int | None = None,
                    coverage_gain: float | None = 0.02,
                    **lf_params) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
@@ -303,9 +303,11 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         (:func:`~vibr.stereo.planesweep.refine_planes`; 0: the sweep's winner-take-all
         depth). The light-field method takes it too (its ``pm_iter``).
     median_radius : half-size of the window of the joint weighted median of the planes
-        after the refinement (both methods; :func:`~vibr.stereo.planesweep.median_planes`,
-        19×19 sampled every 3 px by default, about three times the matching window;
-        0: none).
+        after the refinement (:func:`~vibr.stereo.planesweep.median_planes`, sampled
+        every 3 px; 0: none). Default: 9 for MVS (19×19, about three times the matching
+        window), none for light fields. On cotton the median lowers the centre view's
+        BadPix and MSE but costs 0.5–1.25 dB when the held-out view is rendered from the
+        estimated source depths (docs/DEPTH.md); on fountain the render gains.
     **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
         ``max_views``, ``refine``, ``tv_lambda``, ...). The light-field method uses
         ``depth_range``, ``radius``, ``max_cost``
@@ -367,7 +369,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         for i in targets:
             lf = dict(lf_params)
             lf.setdefault("pm_iter", refine_iter)
-            lf.setdefault("median_radius", median_radius)
+            if median_radius is not None:
+                lf.setdefault("median_radius", median_radius)
             results[i] = lightfield_depth(scene, i, cams, img, inputs, depth_range=depth_range,
                                           radius=radius, max_cost=max_cost, mem_bytes=mem_bytes,
                                           n_best=n_best, **lf)
@@ -409,8 +412,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                 res = refine_planes(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], res,
                                     n_iter=refine_iter, n_best=nbest_i, eps=eps, max_cost=max_cost,
                                     radius=radius or 3)
-            if median_radius:
-                res = median_planes(img(i), res, radius=median_radius)
+            if median_radius is None or median_radius > 0:
+                res = median_planes(img(i), res, radius=9 if median_radius is None else median_radius)
             d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
             raw[i] = (d, res.sigma_z)
             stats[scene.views[i].name] = {
