@@ -97,18 +97,16 @@ def select_neighbours(cameras: list[Camera], ref: int, candidates: list[int], k:
     plane sweep's robust aggregation copes with the loss of depth precision).
     """
     cr = cameras[ref]
-    scored = []
-    for j in candidates:
-        if j == ref:
-            continue
-        cj = cameras[j]
-        cosang = float(np.clip(cr.optical_axis @ cj.optical_axis, -1, 1))
-        dist = float(np.linalg.norm(cj.centre - cr.centre))
-        if np.degrees(np.arccos(cosang)) > max_angle_deg or dist < 1e-12:
-            continue
-        scored.append((dist, j))
-    scored.sort()
+    scored = sorted((float(np.linalg.norm(cameras[j].centre - cr.centre)), j) for j in candidates
+                    if j != ref and _admissible(cr, cameras[j], max_angle_deg))
     return [j for _, j in scored[:k]]
+
+
+def _admissible(ref: Camera, cam: Camera, max_angle_deg: float) -> bool:
+    """A stereo partner for ``ref``: its optical axis within ``max_angle_deg`` of the
+    reference's and its centre elsewhere (a zero baseline has no parallax)."""
+    cosang = float(np.clip(ref.optical_axis @ cam.optical_axis, -1, 1))
+    return np.degrees(np.arccos(cosang)) <= max_angle_deg and np.linalg.norm(cam.centre - ref.centre) >= 1e-12
 
 
 def frustum_coverage(ref: Camera, srcs: list[Camera], depth_range, *, n_xy: int = 24,
@@ -150,25 +148,23 @@ def complete_coverage(cameras: list[Camera], ref: int, chosen: list[int], candid
     by more than ``max_angle_deg`` from the reference are not considered.
     """
     cr = cameras[ref]
-    pool = [j for j in candidates if j != ref and j not in chosen
-            and np.degrees(np.arccos(np.clip(cr.optical_axis @ cameras[j].optical_axis, -1, 1))) <= max_angle_deg
-            and np.linalg.norm(cameras[j].centre - cr.centre) > 1e-12]
-    if not pool or n_need < 1:
-        return list(chosen)
-    seen = frustum_coverage(cr, [cameras[j] for j in list(chosen) + pool], depth_range)
-    count = seen[: len(chosen)].sum(0)
+    pool = [j for j in candidates
+            if j != ref and j not in chosen and _admissible(cr, cameras[j], max_angle_deg)]
     out = list(chosen)
+    if not pool or n_need < 1:
+        return out
+    seen = frustum_coverage(cr, [cameras[j] for j in out + pool], depth_range)
+    count = seen[: len(out)].sum(0)
+    pool_seen = dict(zip(pool, seen[len(out):]))
     for _ in range(max_extra):
         short = count < n_need
-        if not short.any() or not pool:
+        if not short.any() or not pool_seen:
             break
-        gains = [(seen[len(chosen) + p] & short).mean() for p in range(len(pool))]
-        p = int(np.argmax(gains))
-        if gains[p] < min_gain:
+        best = max(pool_seen, key=lambda j: (pool_seen[j] & short).mean())
+        if (pool_seen[best] & short).mean() < min_gain:
             break
-        out.append(pool.pop(p))
-        count = count + seen[len(chosen) + p]
-        seen = np.delete(seen, len(chosen) + p, axis=0)
+        out.append(best)
+        count = count + pool_seen.pop(best)
     return out
 
 
