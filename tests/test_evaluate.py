@@ -49,11 +49,14 @@ def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monke
     assert len(calls) == 1  # one geometry for the four settings
     assert rep["n_samples"] > 0 and rep["samples_seconds"] >= 0
 
-    # the same numbers as rendering directly, geometry recomputed by render itself
+    # the same numbers as rendering directly, geometry recomputed by render itself. Not to
+    # the last bit: the solver's fastmath reductions may sum in another order from one call
+    # to the next (up to 3.6e-7 dB apart, measured); a different geometry moves PSNR by far
+    # more than the 1e-5 dB allowed here.
     src, tview = prepare(scene, "view_004", depth="gt")
     for s, entry in zip(settings, rep["results"]):
         res = render(src, tview, method=s.method, **FAST, **s.params)
-        assert entry["psnr"] == pytest.approx(psnr(res.image, tview.image, mask=res.coverage), abs=1e-9)
+        assert entry["psnr"] == pytest.approx(psnr(res.image, tview.image, mask=res.coverage), abs=1e-5)
         assert entry["params"]["scale"] == 255.0 and entry["intensity_scale"] == 255.0
     assert len(calls) == 1 + len(settings)
 
