@@ -209,19 +209,15 @@ def _surface_textured(img, depth, r=3, thr=0.02, tol=0.02):
     return (np.sqrt(np.maximum(s2 / np.maximum(n, 1) - mu * mu, 0)) > thr) & np.isfinite(depth)
 
 
-def _seen_elsewhere(scene, ref: int, tol: float = 0.02) -> np.ndarray:
-    """Pixels of view ``ref`` whose exact 3D point is visible in at least one other view:
-    it projects inside that view and the view's exact depth at the nearest pixel agrees
-    within ``tol`` (relative). A pixel seen by no other view cannot be triangulated."""
+def _seen_count(scene, ref: int, views, tol: float = 0.02) -> np.ndarray:
+    """How many of ``views`` see the exact 3D point of each pixel of view ``ref``: it
+    projects inside the view and the view's exact depth at the nearest pixel agrees
+    within ``tol`` (relative). (H, W) int."""
     cam, gt = scene[ref].camera, scene[ref].depth
-    g = cam.pixel_grid().reshape(-1, 2)
-    z = gt.reshape(-1)
-    ok = np.isfinite(z)
-    X = cam.backproject(g[ok], z[ok])
-    seen = np.zeros(ok.sum(), bool)
-    for j in range(len(scene)):
-        if j == ref:
-            continue
+    ok = np.isfinite(gt)
+    X = cam.backproject(cam.pixel_grid()[ok], gt[ok])
+    cnt = np.zeros(ok.sum(), int)
+    for j in views:
         c, dj = scene[j].camera, scene[j].depth
         xy, zz = c.project(X)
         u = np.round(xy[:, 0]).astype(int)
@@ -229,10 +225,16 @@ def _seen_elsewhere(scene, ref: int, tol: float = 0.02) -> np.ndarray:
         ins = (zz > 0) & (u >= 0) & (v >= 0) & (u < c.width) & (v < c.height)
         d = np.full(len(zz), np.nan)
         d[ins] = dj[v[ins], u[ins]]
-        seen |= ins & (np.abs(d - zz) <= tol * zz)
-    out = np.zeros(z.shape, bool)
-    out[ok] = seen
-    return out.reshape(gt.shape)
+        cnt += ins & (np.abs(d - zz) <= tol * zz)
+    out = np.zeros(gt.shape, int)
+    out[ok] = cnt
+    return out
+
+
+def _seen_elsewhere(scene, ref: int, tol: float = 0.02) -> np.ndarray:
+    """Pixels of view ``ref`` whose exact 3D point is visible in at least one other view
+    (:func:`_seen_count`). A pixel seen by no other view cannot be triangulated."""
+    return _seen_count(scene, ref, [j for j in range(len(scene)) if j != ref], tol) > 0
 
 
 def bench_synthetic(args) -> None:

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_depth import _surface_textured, _textured  # noqa: E402
+from bench_depth import _seen_count, _surface_textured, _textured  # noqa: E402
 
 import vibr.stereo.api as api  # noqa: E402
 from vibr.stereo import _kernels as kern  # noqa: E402
@@ -121,25 +121,6 @@ def _sphere_centre(seed: int) -> np.ndarray:
     jit = (lambda s: rng.uniform(-s, s)) if seed else (lambda s: 0.0)
     jit(0.2), jit(0.2), jit(10.0)  # the box's x, z and yaw
     return np.array([1.0 + jit(0.2), 1.5 - 0.7, 3.3 + jit(0.2)])
-
-
-def _seen_count(scene, ref: int, views, tol: float = 0.02) -> np.ndarray:
-    """How many of ``views`` see the exact 3D point of each reference pixel."""
-    cam, gt = scene[ref].camera, scene[ref].depth
-    ok = np.isfinite(gt)
-    X = cam.backproject(cam.pixel_grid()[ok], gt[ok])
-    cnt = np.zeros(ok.sum(), int)
-    for j in views:
-        c, dj = scene[j].camera, scene[j].depth
-        xy, zz = c.project(X)
-        u, v = np.round(xy[:, 0]).astype(int), np.round(xy[:, 1]).astype(int)
-        ins = (zz > 0) & (u >= 0) & (v >= 0) & (u < c.width) & (v < c.height)
-        d = np.full(len(zz), np.nan)
-        d[ins] = dj[v[ins], u[ins]]
-        cnt += ins & (np.abs(d - zz) <= tol * zz)
-    out = np.zeros(gt.shape, int)
-    out[ok] = cnt
-    return out
 
 
 def _splat(depth, cam_from, cam_to) -> np.ndarray:
