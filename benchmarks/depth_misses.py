@@ -5,8 +5,8 @@ layout. This script takes the reference view (view 0) of ``make_scene("handheld"
 runs :func:`vibr.stereo.estimate_depth` on every view (as ``bench_depth.py synthetic``
 does), and splits the misses:
 
-* by the object the exact 3D point lies on (back wall, floor, sphere, rest: box and card),
-  with the share whose own surface is flat (``bench_depth._surface_textured``), unknown
+* by the object of the synthetic world that each pixel's centre ray hits (back wall,
+  floor, box, sphere, card), with the share whose own surface is flat (``bench_depth._surface_textured``), unknown
   (NaN) and estimated nearer than the truth;
 * by the number of the reference's stereo partners that see the exact point;
 * by the distance to a depth edge of the exact depth map.
@@ -35,6 +35,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import inspect
 import sys
 import time
 from pathlib import Path
@@ -48,7 +49,7 @@ from bench_depth import _seen_count, _surface_textured, _textured  # noqa: E402
 import vibr.stereo.api as api  # noqa: E402
 from vibr.stereo import _kernels as kern  # noqa: E402
 from vibr.stereo import planesweep as ps  # noqa: E402
-from vibr.synthetic import make_scene  # noqa: E402
+from vibr.synthetic import default_world, make_scene  # noqa: E402
 
 _SHIFT = 3
 _DIRS = [(0, 0), (0, _SHIFT), (0, -_SHIFT), (_SHIFT, 0), (-_SHIFT, 0),
@@ -90,17 +91,19 @@ def _redecide_shiftable(res, ref_image, ref_camera, src_images, src_cameras, n_b
     I = ps.to_grey(ref_image).astype(np.float64)
     srcs, sizes = ps._stack_greys(src_images)
     A, b = ps.plane_homographies(ref_camera, list(src_cameras))
-    offs = ps.window_offsets(3, 2)
+    d = {k: p.default for k, p in inspect.signature(ps.refine_planes).parameters.items()}
+    offs = ps.window_offsets(d["radius"], d["stride"])
     guide = np.ascontiguousarray(np.asarray(ref_image, np.float32))
-    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, guide)
+    wts, wI, sdI = kern.support_weights(I, offs, d["sigma_c"], float(d["sigma_s"] or d["radius"]), guide)
     best = np.full(res.inv_depth.shape, np.inf)
     bw, bx, by = (a.copy() for a in (res.inv_depth, *res.meta["plane_gradient"]))
     for wp, xq, yq in _neighbour_planes(res):
         C = np.full(best.shape, np.inf)
         for sy, sx in _DIRS[:5]:
             wc = wp + xq * sx + yq * sy
-            cc = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 0.002 ** 2,
-                                  _shifted(wc, sy, sx), _shifted(xq, sy, sx), _shifted(yq, sy, sx), 0.1)
+            cc = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, d["eps"] ** 2,
+                                  _shifted(wc, sy, sx), _shifted(xq, sy, sx), _shifted(yq, sy, sx),
+                                  d["single_view_penalty"])
             C = np.minimum(C, _shifted(cc, -sy, -sx))
         better = C < best
         best = np.where(better, C, best)
@@ -109,18 +112,6 @@ def _redecide_shiftable(res, ref_image, ref_camera, src_images, src_cameras, n_b
     return ps.SweepResult(depth=(1 / bw).astype(np.float32), inv_depth=bw, cost=res.cost,
                           sigma_z=res.sigma_z, confident=res.confident, winv=res.winv,
                           meta=dict(res.meta, plane_gradient=(bx, by)))
-
-
-def _sphere_centre(seed: int) -> np.ndarray:
-    """Centre of the sphere of ``default_world(seed)`` (its random draws, replayed)."""
-    rng = np.random.default_rng(seed)
-    photos, grounds = ["a", "b", "c", "d"], ["a", "b", "c"]
-    if seed:
-        rng.shuffle(photos)
-        rng.shuffle(grounds)
-    jit = (lambda s: rng.uniform(-s, s)) if seed else (lambda s: 0.0)
-    jit(0.2), jit(0.2), jit(10.0)  # the box's x, z and yaw
-    return np.array([1.0 + jit(0.2), 1.5 - 0.7, 3.3 + jit(0.2)])
 
 
 def _splat(depth, cam_from, cam_to) -> np.ndarray:
@@ -190,18 +181,16 @@ def run(seed: int, size: int, args) -> None:
     d0, nb_depths, nb_cams = rec["before_check"]
     ok0 = _within(d0, gt)
     print(f"  before the consistency check {100 * ok0[tex].mean():.2f} %")
-    # objects, from the exact 3D point
+    # objects: the world's object hit by each pixel's centre ray
     cam = scene[0].camera
-    X = np.full(gt.shape + (3,), np.nan)
+    world = default_world(seed)
     fin = np.isfinite(gt)
-    X[fin] = cam.backproject(cam.pixel_grid()[fin], gt[fin])
-    lab = np.full(gt.shape, "box, card", object)
-    lab[np.abs(X[..., 2] - 6.0) < 1e-3] = "back wall"
-    lab[np.abs(X[..., 1] - 1.5) < 1e-3] = "floor"
-    lab[np.abs(np.linalg.norm(X - _sphere_centre(seed), axis=-1) - 0.7) < 1e-3] = "sphere"
+    X = cam.backproject(cam.pixel_grid()[fin], gt[fin])
+    lab = np.full(gt.shape, "", object)
+    lab[fin] = [world.names.get(int(o), "") for o in world.raycast(cam.centre[None], X - cam.centre)[1]]
     print(f"  {'object':<12} {'% of tex.':>9} {'within 1 %':>10} {'misses':>7} {'flat own surf.':>14} "
           f"{'unknown':>8} {'nearer':>7}   (misses and their parts: % of all textured pixels)")
-    for name in ("back wall", "floor", "sphere", "box, card"):
+    for name in world.names.values():
         m = tex & (lab == name)
         if m.any():
             mm = miss & m
