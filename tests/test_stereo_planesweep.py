@@ -244,15 +244,19 @@ def _reference_sweep_costs(I, srcs, A, b, winv, radius, n_best, eps):
     return out
 
 
-def test_sweep_kernel_matches_reference_implementation():
+@pytest.mark.parametrize("n_best", [1, 2, 3])
+def test_sweep_kernel_matches_reference_implementation(n_best):
     """The fused compiled sweep (row bands with halos, running sums) gives the winner and
-    the costs of a plain numpy implementation, on an image taller than several bands."""
+    the costs of a plain numpy implementation, on an image taller than several bands,
+    for the one-pass aggregation of n_best ≤ 2 and the partial sort above it. The third
+    source sees only part of the reference: pixels seen by fewer than n_best views."""
     from vibr.stereo import _kernels as kern
     from vibr.stereo.planesweep import to_grey
 
     ref, src = _cams()
     src2 = Camera.look_at([-0.3, 0.2, 0.0], [0.0, 0.1, 5], [0, -1, 0], ref.K, 96, 80)
-    cams = [ref, src, src2]
+    src3 = Camera.look_at([0.9, -0.2, 0.3], [1.2, 0.0, 5], [0, -1, 0], ref.K, 96, 80)
+    cams = [ref, src, src2, src3]
     views = _textured_plane_views(((0.1, -0.05, 1.0), 4.5), cams, seed=3)
     I = to_grey(views[0][0]).astype(np.float64)
     srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
@@ -264,11 +268,11 @@ def test_sweep_kernel_matches_reference_implementation():
     best_c = np.full((H, W), np.inf)
     best_l = np.zeros((H, W), np.int64)
     cm, cp, prev = (np.full((H, W), np.inf) for _ in range(3))
-    sizes = np.array([[80, 96], [80, 96]], np.int64)
+    sizes = np.array([[80, 96]] * 3, np.int64)
     for l0 in range(0, 12, 5):  # three slabs, the running state carried across them
-        kern.sweep_slab(I, mu, sd, srcs, sizes, A, b, winv[l0:l0 + 5], l0, radius, 1, eps ** 2,
-                        7, best_c, best_l, cm, cp, prev)
-    want = _reference_sweep_costs(I, list(srcs.astype(np.float64)), A, b, winv, radius, 1, eps)
+        kern.sweep_slab(I, mu, sd, srcs, sizes, A, b, winv[l0:l0 + 5], l0, radius, n_best,
+                        eps ** 2, 7, best_c, best_l, cm, cp, prev)
+    want = _reference_sweep_costs(I, list(srcs.astype(np.float64)), A, b, winv, radius, n_best, eps)
     np.testing.assert_allclose(best_c, want.min(0), atol=2e-5)
     assert np.mean(best_l == want.argmin(0)) > 0.999
 
@@ -339,6 +343,81 @@ def test_support_weights_closed_form_and_colour_guide():
     # grey guide: a flat image, purely spatial weights
     sp = np.exp(-r2 / (2 * ss * ss))
     np.testing.assert_allclose(w_grey[i, j], sp / sp.sum(), rtol=1e-5)
+
+
+def _reference_plane_costs(wts, wI, sdI, offs, srcs, A, b, n_best, eps2, w, gx, gy, lam1):
+    """Plain numpy re-implementation of the refinement's plane cost (every window sample
+    clamped and bilinearly interpolated, weighted ZNCC per view, mean of the n_best best,
+    the single-view rule): (H, W)."""
+    H, W = w.shape
+    ii, jj = np.mgrid[0:H, 0:W].astype(float)
+    sI = np.sqrt(sdI ** 2 + eps2)
+    per_view = []
+    for v, S in enumerate(srcs):
+        hv, wv = S.shape
+        c = np.stack([jj, ii, np.ones_like(ii)], -1) @ A[v].T + w[..., None] * b[v]
+        ok = (c[..., 2] > 1e-12)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xc, yc = c[..., 0] / c[..., 2], c[..., 1] / c[..., 2]
+        ok &= (xc > -0.5) & (yc > -0.5) & (xc < wv - 0.5) & (yc < hv - 0.5)
+        ex = A[v][:, 0][None, None] + gx[..., None] * b[v]
+        ey = A[v][:, 1][None, None] + gy[..., None] * b[v]
+        sJ = np.zeros((H, W))
+        sJJ = np.zeros((H, W))
+        sIJ = np.zeros((H, W))
+        for k, (dy, dx) in enumerate(offs):
+            p = c + dx * ex + dy * ey
+            ok &= p[..., 2] > 1e-12
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = np.clip(np.nan_to_num(p[..., 0] / p[..., 2]), 0, wv - 1)
+                y = np.clip(np.nan_to_num(p[..., 1] / p[..., 2]), 0, hv - 1)
+            x0 = np.minimum(x.astype(int), wv - 2)
+            y0 = np.minimum(y.astype(int), hv - 2)
+            fx, fy = x - x0, y - y0
+            q = ((1 - fy) * ((1 - fx) * S[y0, x0] + fx * S[y0, x0 + 1])
+                 + fy * ((1 - fx) * S[y0 + 1, x0] + fx * S[y0 + 1, x0 + 1]))
+            sJ += wts[..., k] * q
+            sJJ += wts[..., k] * q * q
+            sIJ += wI[..., k] * q
+        vJ = np.maximum(sJJ - sJ ** 2, 0)
+        per_view.append(np.where(ok, 1 - sIJ / (sI * np.sqrt(vJ + eps2)), np.inf))
+    cs = np.sort(np.array(per_view), axis=0)
+    nval = np.isfinite(cs).sum(0)
+    m = np.minimum(n_best, nval)
+    tot = np.where(np.arange(len(srcs))[:, None, None] < m, np.where(np.isfinite(cs), cs, 0), 0).sum(0)
+    out = np.where(nval > 0, tot / np.maximum(m, 1), 2.0)
+    if lam1 >= 0:
+        out = np.where((m > 1) & (cs[0] + lam1 < out), cs[0] + lam1, out)
+    return out
+
+
+def test_plane_cost_kernel_matches_reference_implementation():
+    """The compiled plane cost (a fast path without clamping for windows that land inside
+    the source, the clamped sampler elsewhere) equals a plain numpy implementation, for
+    random slanted planes whose windows fall inside, across and outside the sources."""
+    from vibr.stereo import _kernels as kern
+    from vibr.stereo.planesweep import to_grey, window_offsets
+
+    ref, cams, views, res, n, d = _slanted_setup(8)
+    src3 = Camera.look_at([0.9, -0.2, 0.3], [1.2, 0.0, 5], [0, -1, 0], ref.K, 96, 80)
+    views.append(_textured_plane_views((n, d), [src3], blur=3.0)[0])
+    cams = cams + [src3]
+    I = to_grey(views[0][0]).astype(np.float64)
+    offs = window_offsets(3, 2)
+    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(views[0][0]))
+    srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
+    sizes = np.array([[80, 96]] * 3, np.int64)
+    A, b = plane_homographies(ref, cams[1:])
+    rng = np.random.default_rng(1)
+    w = rng.uniform(1 / 8, 1 / 2.5, ref.shape)
+    gx, gy = (rng.normal(0, 2e-3, ref.shape) for _ in range(2))
+    for n_best, lam1 in ((1, -1.0), (2, 0.1), (3, -1.0)):
+        got = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 0.002 ** 2, w, gx, gy, lam1)
+        want = _reference_plane_costs(wts.astype(np.float64), wI.astype(np.float64), sdI, offs,
+                                      list(srcs.astype(np.float64)), A, b, n_best, 0.002 ** 2,
+                                      w, gx, gy, lam1)
+        assert (want == 2.0).mean() > 0.01 and (want < 2.0).mean() > 0.5  # both kinds occur
+        np.testing.assert_allclose(got, want, atol=1e-5)
 
 
 def test_plane_cost_is_minimal_at_the_true_slanted_plane():

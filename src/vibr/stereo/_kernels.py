@@ -72,6 +72,47 @@ def _bilinear_clamped(srcs, v, x, y, wv, hv):
             + fy * ((1 - fx) * srcs[v, y1, x0] + fx * srcs[v, y1, x1]))
 
 
+@njit(cache=True, inline="always")
+def _mean_lowest(costs, nval, n_best):
+    """Mean of the ``min(n_best, nval)`` lowest of ``costs[:nval]`` (partially sorted in
+    place, the lowest first); 2 (the worst cost) when ``nval`` is 0."""
+    if nval == 0:
+        return 2.0
+    m = min(n_best, nval)
+    c = 0.0
+    for q in range(m):
+        kmin = q
+        for r in range(q + 1, nval):
+            if costs[r] < costs[kmin]:
+                kmin = r
+        tmp = costs[q]
+        costs[q] = costs[kmin]
+        costs[kmin] = tmp
+        c += costs[q]
+    return c / m
+
+
+@njit(cache=True, inline="always")
+def _mean_two_lowest(C, OK, r, j, nv, n_best):
+    """:func:`_mean_lowest` for ``n_best`` ≤ 2 of the views ``v`` with ``OK[v, r, j]``,
+    from ``C[v, r, j]``, in one pass of min/max: the same sums, without the selection
+    sort's data-dependent branches (they mispredict at every plane of the sweep)."""
+    m1 = np.inf
+    m2 = np.inf
+    nval = 0
+    for v in range(nv):
+        if OK[v, r, j] != 0:
+            cv = np.float64(C[v, r, j])
+            m2 = min(m2, max(m1, cv))
+            m1 = min(m1, cv)
+            nval += 1
+    if nval == 0:
+        return 2.0
+    if n_best == 1 or nval == 1:
+        return m1
+    return (m1 + m2) / 2
+
+
 @njit(parallel=True, cache=True)
 def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, block,
                best_c, best_l, c_minus, c_plus, prev):
@@ -213,27 +254,15 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
             # 3. robust aggregation over views, running minimum
             for i in range(ib0, ib1):
                 for j in range(W):
-                    nval = 0
-                    for v in range(nv):
-                        if OK[v, i - ib0, j] != 0:
-                            costs[nval] = C[v, i - ib0, j]
-                            nval += 1
-                    if nval == 0:
-                        c = 2.0  # seen by no source at this depth: worst cost
+                    if n_best <= 2:
+                        c = _mean_two_lowest(C, OK, i - ib0, j, nv, n_best)
                     else:
-                        # partial selection sort of the n_best lowest (nv is small)
-                        m = min(n_best, nval)
-                        c = 0.0
-                        for q in range(m):
-                            kmin = q
-                            for r2 in range(q + 1, nval):
-                                if costs[r2] < costs[kmin]:
-                                    kmin = r2
-                            tmp = costs[q]
-                            costs[q] = costs[kmin]
-                            costs[kmin] = tmp
-                            c += costs[q]
-                        c /= m
+                        nval = 0
+                        for v in range(nv):
+                            if OK[v, i - ib0, j] != 0:
+                                costs[nval] = C[v, i - ib0, j]
+                                nval += 1
+                        c = _mean_lowest(costs, nval, n_best)
                     if c < best_c[i, j]:
                         best_c[i, j] = c
                         best_l[i, j] = lab
@@ -492,7 +521,7 @@ def support_weights(I, offs, sigma_c, sigma_s, guide):
     return wts, wI, sd
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs, lam1):
     """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
     the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
@@ -508,6 +537,9 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
     nwin = offs.shape[0]
     nval = 0
     sI = np.sqrt(sdI[i, j] * sdI[i, j] + eps2)
+    rwin = 0
+    for k in range(nwin):
+        rwin = max(rwin, abs(offs[k, 0]), abs(offs[k, 1]))
     for v in range(nv):
         hv = sizes[v, 0]
         wv = sizes[v, 1]
@@ -531,6 +563,50 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
         sJJ = 0.0
         sIJ = 0.0
         bad = False
+        # Fast path: when the window's four corners land in front of the camera and inside
+        # [0, wv−1) × [0, hv−1), so do all its samples (pz is affine in the offset and the
+        # homography maps the square onto a convex quadrilateral): no clamping, no test
+        # per sample, the same numbers as the clamped sampler.
+        inside = True
+        for cyi in range(2):
+            for cxi in range(2):
+                ody = rwin if cyi else -rwin
+                odx = rwin if cxi else -rwin
+                pz = cz + odx * ex2 + ody * ey2
+                if pz <= 1e-12:
+                    inside = False
+                    break
+                x = (cx + odx * ex0 + ody * ey0) / pz
+                y = (cy + odx * ex1 + ody * ey1) / pz
+                if not (x >= 0.0 and y >= 0.0 and x < wv - 1.0 and y < hv - 1.0):
+                    inside = False
+                    break
+            if not inside:
+                break
+        if inside:
+            for k in range(nwin):
+                wk = wts[i, j, k]
+                dy = offs[k, 0]
+                dx = offs[k, 1]
+                iz = 1.0 / (cz + dx * ex2 + dy * ey2)
+                x = (cx + dx * ex0 + dy * ey0) * iz
+                y = (cy + dx * ex1 + dy * ey1) * iz
+                x0 = int(x)
+                y0 = int(y)
+                fx = x - x0
+                fy = y - y0
+                q = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x0 + 1])
+                     + fy * ((1 - fx) * srcs[v, y0 + 1, x0] + fx * srcs[v, y0 + 1, x0 + 1]))
+                wq = wk * q
+                sJ += wq
+                sJJ += wq * q
+                sIJ += wI[i, j, k] * q
+            vJ = sJJ - sJ * sJ
+            if vJ < 0.0:
+                vJ = 0.0
+            costs[nval] = 1.0 - sIJ / (sI * np.sqrt(vJ + eps2))
+            nval += 1
+            continue
         for k in range(nwin):
             wk = wts[i, j, k]
             if wk == 0.0:
@@ -559,18 +635,8 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
         nval += 1
     if nval == 0:
         return 2.0
+    c = _mean_lowest(costs, nval, n_best)
     m = min(n_best, nval)
-    c = 0.0
-    for q in range(m):
-        kmin = q
-        for r in range(q + 1, nval):
-            if costs[r] < costs[kmin]:
-                kmin = r
-        tmp = costs[q]
-        costs[q] = costs[kmin]
-        costs[kmin] = tmp
-        c += costs[q]
-    c /= m
     if lam1 >= 0.0 and m > 1 and costs[0] + lam1 < c:
         c = costs[0] + lam1
     return c
