@@ -99,7 +99,7 @@ def bench_fountain(args) -> None:
         est = estimate_depth(scene, method="mvs", n_neighbours=args.neighbours,
                              step_px=args.step_px, max_planes=args.max_planes,
                              refine_iter=args.refine_iter,
-                             median_radius=args.median_radius)
+                             median_radius=args.median_radius, sweep_scale=args.sweep_scale)
         times.append(time.perf_counter() - t)
     info = est.meta["depth_estimation"]["views"]
     print(f"\nstrecha_fountain-P11, all 11 views at {w}x{h} (load {t_load:.1f} s, not counted); "
@@ -131,7 +131,7 @@ def bench_fountain(args) -> None:
     held = estimate_depth(scene, views=[i for i in range(len(scene)) if i != tgt], exclude=[tgt],
                           method="mvs", n_neighbours=args.neighbours, step_px=args.step_px,
                           max_planes=args.max_planes, refine_iter=args.refine_iter,
-                             median_radius=args.median_radius)
+                          median_radius=args.median_radius, sweep_scale=args.sweep_scale)
     t_held = time.perf_counter() - t
     sources, target = held.split(tgt)
     for method in args.methods.split(","):
@@ -273,7 +273,7 @@ def _bench_synthetic_at(args, W: int) -> None:
         t = time.perf_counter()
         est = estimate_depth(scene, views=which, method=method, step_px=args.step_px,
                              max_planes=args.max_planes, refine_iter=args.refine_iter,
-                             median_radius=args.median_radius)
+                             median_radius=args.median_radius, sweep_scale=args.sweep_scale)
         t = time.perf_counter() - t
         gt, d = scene[ref].depth, est[ref].depth
         tex = _textured(scene[ref].image) & np.isfinite(gt)
@@ -302,7 +302,7 @@ def _defaults() -> dict:
     from vibr.stereo import estimate_depth
 
     ps = inspect.signature(estimate_depth).parameters
-    return {k: ps[k].default for k in ("step_px", "max_planes", "refine_iter", "median_radius")}
+    return {k: ps[k].default for k in ("step_px", "max_planes", "refine_iter", "median_radius", "sweep_scale")}
 
 
 def main(argv=None) -> None:
@@ -325,6 +325,8 @@ def main(argv=None) -> None:
                    "estimate_depth's: 9 for MVS, none for light fields)")
     p.add_argument("--synthetic-size", type=int, nargs="+", default=[256, 512],
                    help="synthetic image widths (height 4/5 of it); one table each")
+    p.add_argument("--sweep-scale", type=float, default=DEFAULTS["sweep_scale"],
+                   help="image scale of the plane sweep that initialises the refinement")
     p.add_argument("--no-render", action="store_true")
     args = p.parse_args(argv)
     from vibr.progress import set_quiet
