@@ -578,7 +578,9 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
                     break
                 x = (cx + odx * ex0 + ody * ey0) / pz
                 y = (cy + odx * ex1 + ody * ey1) / pz
-                if not (x >= 0.0 and y >= 0.0 and x < wv - 1.0 and y < hv - 1.0):
+                # (a margin at the far edges: under fastmath a sample's x·(1/pz) may round
+                # differently from the corner's x/pz, and must not reach column wv − 1)
+                if not (x >= 0.0 and y >= 0.0 and x < wv - 1.0 - 1e-6 and y < hv - 1.0 - 1e-6):
                     inside = False
                     break
             if not inside:
