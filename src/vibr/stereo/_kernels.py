@@ -73,6 +73,18 @@ def _bilinear_clamped(srcs, v, x, y, wv, hv):
 
 
 @njit(cache=True, inline="always")
+def _bilinear_inside(srcs, v, x, y):
+    """:func:`_bilinear_clamped` for a point known to lie in [0, wv−1) × [0, hv−1) of view
+    ``v``: the same value, without the clamping."""
+    x0 = int(x)
+    y0 = int(y)
+    fx = x - x0
+    fy = y - y0
+    return ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x0 + 1])
+            + fy * ((1 - fx) * srcs[v, y0 + 1, x0] + fx * srcs[v, y0 + 1, x0 + 1]))
+
+
+@njit(cache=True, inline="always")
 def _mean_lowest(costs, nval, n_best):
     """Mean of the ``min(n_best, nval)`` lowest of ``costs[:nval]`` (partially sorted in
     place, the lowest first); 2 (the worst cost) when ``nval`` is 0."""
@@ -593,12 +605,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
                 iz = 1.0 / (cz + dx * ex2 + dy * ey2)
                 x = (cx + dx * ex0 + dy * ey0) * iz
                 y = (cy + dx * ex1 + dy * ey1) * iz
-                x0 = int(x)
-                y0 = int(y)
-                fx = x - x0
-                fy = y - y0
-                q = ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x0 + 1])
-                     + fy * ((1 - fx) * srcs[v, y0 + 1, x0] + fx * srcs[v, y0 + 1, x0 + 1]))
+                q = _bilinear_inside(srcs, v, x, y)
                 wq = wk * q
                 sJ += wq
                 sJJ += wq * q
