@@ -99,7 +99,8 @@ def bench_fountain(args) -> None:
         est = estimate_depth(scene, method="mvs", n_neighbours=args.neighbours,
                              step_px=args.step_px, max_planes=args.max_planes,
                              refine_iter=args.refine_iter,
-                             median_radius=args.median_radius, sweep_scale=args.sweep_scale)
+                             median_radius=args.median_radius, sweep_scale=args.sweep_scale,
+                             coarse_iter=args.coarse_iter)
         times.append(time.perf_counter() - t)
     info = est.meta["depth_estimation"]["views"]
     print(f"\nstrecha_fountain-P11, all 11 views at {w}x{h} (load {t_load:.1f} s, not counted); "
@@ -131,7 +132,8 @@ def bench_fountain(args) -> None:
     held = estimate_depth(scene, views=[i for i in range(len(scene)) if i != tgt], exclude=[tgt],
                           method="mvs", n_neighbours=args.neighbours, step_px=args.step_px,
                           max_planes=args.max_planes, refine_iter=args.refine_iter,
-                          median_radius=args.median_radius, sweep_scale=args.sweep_scale)
+                          median_radius=args.median_radius, sweep_scale=args.sweep_scale,
+                          coarse_iter=args.coarse_iter)
     t_held = time.perf_counter() - t
     sources, target = held.split(tgt)
     for method in args.methods.split(","):
@@ -157,7 +159,8 @@ def bench_temple(args) -> None:
     t = time.perf_counter()
     est = estimate_depth(scene, method="mvs", n_neighbours=args.neighbours, step_px=args.step_px,
                          max_planes=args.max_planes, refine_iter=args.refine_iter,
-                             median_radius=args.median_radius)
+                         median_radius=args.median_radius, sweep_scale=args.sweep_scale,
+                         coarse_iter=args.coarse_iter)
     t = time.perf_counter() - t
     info = est.meta["depth_estimation"]["views"]
     kept = np.mean([st["kept"] for st in info.values()])
@@ -273,7 +276,8 @@ def _bench_synthetic_at(args, W: int) -> None:
         t = time.perf_counter()
         est = estimate_depth(scene, views=which, method=method, step_px=args.step_px,
                              max_planes=args.max_planes, refine_iter=args.refine_iter,
-                             median_radius=args.median_radius, sweep_scale=args.sweep_scale)
+                             median_radius=args.median_radius, sweep_scale=args.sweep_scale,
+                             coarse_iter=args.coarse_iter)
         t = time.perf_counter() - t
         gt, d = scene[ref].depth, est[ref].depth
         tex = _textured(scene[ref].image) & np.isfinite(gt)
@@ -302,7 +306,7 @@ def _defaults() -> dict:
     from vibr.stereo import estimate_depth
 
     ps = inspect.signature(estimate_depth).parameters
-    return {k: ps[k].default for k in ("step_px", "max_planes", "refine_iter", "median_radius", "sweep_scale")}
+    return {k: ps[k].default for k in ("step_px", "max_planes", "refine_iter", "median_radius", "sweep_scale", "coarse_iter")}
 
 
 def main(argv=None) -> None:
@@ -326,7 +330,9 @@ def main(argv=None) -> None:
     p.add_argument("--synthetic-size", type=int, nargs="+", default=[256, 512],
                    help="synthetic image widths (height 4/5 of it); one table each")
     p.add_argument("--sweep-scale", type=float, default=DEFAULTS["sweep_scale"],
-                   help="image scale of the plane sweep that initialises the refinement")
+                   help="image scale of the coarse level (sweep and --coarse-iter iterations); 1: none")
+    p.add_argument("--coarse-iter", type=int, default=DEFAULTS["coarse_iter"],
+                   help="refinement iterations at the coarse level")
     p.add_argument("--no-render", action="store_true")
     args = p.parse_args(argv)
     from vibr.progress import set_quiet

@@ -179,9 +179,13 @@ def test_estimate_depth_excluded_views_never_used():
         estimate_depth(s, views=[1], exclude=[1])
     with pytest.raises(VibrInputError, match="sweep_scale"):
         estimate_depth(s, views=[0], sweep_scale=0.0)
-    # the half-size sweep path returns maps at the scene's size
-    h = estimate_depth(s, views=[0], n_planes=32, method="mvs", sweep_scale=0.5, consistency=False)
-    assert h[0].depth.shape == s[0].depth.shape and np.isfinite(h[0].depth).mean() > 0.5
+    with pytest.raises(VibrInputError, match="coarse_iter"):
+        estimate_depth(s, views=[0], coarse_iter=-1)
+    # the coarse-level path (the default) and the full-size sweep both return maps at the
+    # scene's size
+    for kw in ({}, {"sweep_scale": 1.0}):
+        h = estimate_depth(s, views=[0], n_planes=32, method="mvs", consistency=False, **kw)
+        assert h[0].depth.shape == s[0].depth.shape and np.isfinite(h[0].depth).mean() > 0.5
 
 
 def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):
@@ -345,9 +349,11 @@ def test_upsample_sweep_is_exact_for_an_affine_inverse_depth():
     assert up.winv is res.winv
 
 
-def test_half_size_sweep_then_refinement_within_1pct():
-    """The refinement started from a half-size sweep (estimate_depth's sweep_scale) recovers
-    a strongly slanted textured plane as well as from the full-size sweep: ≥ 95 % of the
+@pytest.mark.parametrize("coarse_iter", [0, 1])
+def test_half_size_sweep_then_refinement_within_1pct(coarse_iter):
+    """Coarse to fine as in estimate_depth (sweep_scale 0.5): the sweep, and ``coarse_iter``
+    refinement iterations, at half size, upsampled, then refined at full size, recover a
+    strongly slanted textured plane as well as from the full-size sweep: ≥ 95 % of the
     pixels within 1 %."""
     from vibr.stereo.api import resize_image, upsample_sweep
     from vibr.stereo.planesweep import refine_planes
@@ -356,7 +362,11 @@ def test_half_size_sweep_then_refinement_within_1pct():
     small = [c.scaled(0.5) for c in cams]
     ims = [resize_image(v[0], c) for v, c in zip(views, small)]
     coarse = plane_sweep(ims[0], small[0], ims[1:], small[1:], (2.5, 8.0), n_planes=16, radius=3)
+    if coarse_iter:
+        coarse = refine_planes(ims[0], small[0], ims[1:], small[1:], coarse, n_iter=coarse_iter)
+        assert coarse.inv_depth.shape == small[0].shape
     init = upsample_sweep(coarse, small[0], ref)
+    assert init.inv_depth.shape == ref.shape
     out = refine_planes(views[0][0], ref, [v[0] for v in views[1:]], cams[1:], init, n_iter=2)
     gt = views[0][1]
     inner = (slice(5, -5), slice(5, -5))

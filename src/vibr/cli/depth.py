@@ -63,9 +63,12 @@ def register(sub) -> None:
                    "planes, 0 for none (default that of estimate_depth: 9 for MVS, none "
                    "for light fields)")
     p.add_argument("--sweep-scale", type=float, default=None,
-                   help="image scale of the plane sweep that initialises the refinement, in "
-                   "(0, 1] (MVS; default 1; 0.5: fountain in 59 s instead of 77-85 s, the "
-                   "hand-held synthetic scenes 0-0.6 points less accurate: docs/DEPTH.md)")
+                   help="image scale of the coarse level (the plane sweep and --coarse-iter "
+                   "refinement iterations), in (0, 1]; 1: sweep at full size, no coarse level "
+                   "(MVS; default that of estimate_depth, 0.5: docs/DEPTH.md)")
+    p.add_argument("--coarse-iter", type=int, default=None,
+                   help="refinement iterations at the coarse level before the full-size ones "
+                   "(MVS; default that of estimate_depth, 1)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
     p.add_argument("--force", action="store_true", help="replace OUT if it exists")
     add_quiet(p)
@@ -96,7 +99,8 @@ def run(args) -> int:
     opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                              ("refine_iter", args.refine_iter),
                              ("median_radius", args.median_radius),
-                             ("sweep_scale", args.sweep_scale)) if v is not None}
+                             ("sweep_scale", args.sweep_scale),
+                             ("coarse_iter", args.coarse_iter)) if v is not None}
     est = estimate_depth(scene, views=_split(args.views), scale=args.scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
