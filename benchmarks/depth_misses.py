@@ -9,7 +9,9 @@ does), and splits the misses:
   floor, box, sphere, card), with the share whose own surface is flat (``bench_depth._surface_textured``), unknown
   (NaN) and estimated nearer than the truth;
 * by the number of the reference's stereo partners that see the exact point;
-* by the distance to a depth edge of the exact depth map.
+* by the distance to a depth edge of the exact depth map;
+* what the consistency check drops, right or wrong before it, by what the partners say
+  there (agree, see farther, see nearer, have no depth).
 
 Two oracles bound what choosing among existing hypotheses could give, on the depth before
 the consistency check:
@@ -228,6 +230,39 @@ def run(seed: int, size: int, args) -> None:
             planes_ok |= _within(1.0 / wp, gt)
     print(f"  oracles on the depth before the check: any partner's depth map within 1 % "
           f"{100 * views_ok[tex].mean():.2f} %; any plane 3 px away within 1 % {100 * planes_ok[tex].mean():.2f} %")
+    _check_breakdown(d0, d, gt, tex, cam, nb_depths, nb_cams)
+
+
+def _check_breakdown(d0, d, gt, tex, cam, nb_depths, nb_cams, rel_tol: float = 0.01) -> None:
+    """What the consistency check drops, by what the consistency partners say at the
+    reference point's projection: a partner agrees (its depth within ``rel_tol``), sees
+    farther (free-space violation: the point would hide what it sees), sees nearer (the
+    point may be occluded there: no evidence), or has no depth there (unknown or outside)."""
+    n = tex.sum()
+    known = np.isfinite(d0)
+    X = cam.backproject(cam.pixel_grid().reshape(-1, 2), np.where(known, d0, 1.0).ravel())
+    agree = np.zeros(d0.shape, bool)
+    farther = np.zeros(d0.shape, bool)
+    nearer = np.zeros(d0.shape, bool)
+    for Dv, cv in zip(nb_depths, nb_cams):
+        xy, zv = cv.project(X)
+        u, v = np.floor(xy[:, 0] + 0.5).astype(int), np.floor(xy[:, 1] + 0.5).astype(int)
+        ins = (zv > 0) & (u >= 0) & (v >= 0) & (u < cv.width) & (v < cv.height)
+        dv = np.full(zv.shape, np.nan)
+        dv[ins] = Dv[v[ins], u[ins]]
+        with np.errstate(invalid="ignore"):
+            agree |= (np.abs(dv - zv) <= rel_tol * zv).reshape(d0.shape)
+            farther |= (dv > zv * (1 + rel_tol)).reshape(d0.shape)
+            nearer |= (dv < zv * (1 - rel_tol)).reshape(d0.shape)
+    dropped = known & ~np.isfinite(d)
+    right = _within(d0, gt)
+    print("  dropped by the consistency check (% of textured pixels), by what the partners say:")
+    for name, sel in (("right before the check", right), ("wrong before the check", ~right)):
+        m = tex & dropped & sel
+        print(f"    {name}: {100 * m.sum() / n:.2f} = depth agrees but round trip fails "
+              f"{100 * (m & agree).sum() / n:.2f}, a partner sees farther {100 * (m & ~agree & farther).sum() / n:.2f}, "
+              f"only nearer (occlusion possible) {100 * (m & ~agree & ~farther & nearer).sum() / n:.2f}, "
+              f"no depth there {100 * (m & ~agree & ~farther & ~nearer).sum() / n:.2f}")
 
 
 def main(argv=None) -> None:

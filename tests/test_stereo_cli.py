@@ -41,3 +41,23 @@ def test_vibr_depth_bad_input(tmp_path, capsys):
     # in place on a folder that is not a transforms.json scene
     (tmp_path / "x").mkdir()
     assert main(["-q", "depth", str(tmp_path / "x")]) == 2
+
+
+def test_vibr_depth_coarse_level_options(tmp_path, capsys):
+    """--sweep-scale/--coarse-iter reach estimate_depth: a bad value is a one-line error
+    with exit 2 and no output folder; the full-size sweep (no coarse level) runs."""
+    from vibr.io import load_scene, save_scene
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=3, width=64, height=48, seed=2)
+    src = save_scene(s, tmp_path / "scene")
+    out = tmp_path / "bad"
+    assert main(["-q", "depth", str(src), "-o", str(out), "--views", "view_000",
+                 "--coarse-iter", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "coarse_iter" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    out = tmp_path / "full"
+    assert main(["-q", "depth", str(src), "-o", str(out), "--views", "view_000",
+                 "--sweep-scale", "1", "--coarse-iter", "0", "--no-consistency"]) == 0
+    assert np.isfinite(load_scene(out)[0].depth).mean() > 0.15
