@@ -81,21 +81,25 @@ def upsample_depth(depth: np.ndarray, camera_lo: Camera, camera_hi: Camera) -> n
 
 
 def upsample_sweep(res: SweepResult, camera_lo: Camera, camera_hi: Camera) -> SweepResult:
-    """A plane-sweep result computed on ``camera_lo``'s grid, brought to ``camera_hi``'s as
-    an initialisation of :func:`~vibr.stereo.planesweep.refine_planes`: inverse depth
-    bilinear (every pixel of a sweep has one), its inverse-depth width (sigma_z / z²) and
-    ``confident`` nearest-neighbour; the planes ``winv`` are the same."""
+    """A plane-sweep (or coarse refinement) result computed on ``camera_lo``'s grid,
+    brought to ``camera_hi``'s as an initialisation of
+    :func:`~vibr.stereo.planesweep.refine_planes`: inverse depth bilinear (every pixel of a
+    sweep has one), its inverse-depth width (sigma_z / z²) and ``confident``
+    nearest-neighbour; the planes ``winv`` are the same. A coarse refinement's per-pixel
+    slopes (``meta["plane_gradient"]``, on the coarse grid) are dropped: the full-size
+    refinement starts from the finite differences of the upsampled inverse depth."""
     yl, xl = _lo_coords(camera_lo, camera_hi)
     w = map_coordinates(np.asarray(res.inv_depth, np.float64), [yl, xl], order=1, mode="nearest")
     sigma_w = res.sigma_z.astype(np.float64) * np.asarray(res.inv_depth, np.float64) ** 2
     sigma_w = map_coordinates(sigma_w, [yl, xl], order=0, mode="nearest")
     z = 1.0 / w
+    meta = {k: v for k, v in res.meta.items() if k != "plane_gradient"}
     return SweepResult(depth=z.astype(np.float32), inv_depth=w,
                        cost=map_coordinates(res.cost, [yl, xl], order=0, mode="nearest"),
                        sigma_z=(z * z * sigma_w).astype(np.float32),
                        confident=map_coordinates(res.confident.astype(np.uint8), [yl, xl], order=0,
                                                  mode="nearest").astype(bool),
-                       winv=res.winv, meta=dict(res.meta))
+                       winv=res.winv, meta=meta)
 
 
 def upsample_map(m: np.ndarray, camera_lo: Camera, camera_hi: Camera) -> np.ndarray:
@@ -332,8 +336,9 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         and at half size it costs a quarter as much. 1: the sweep at full size, no coarse
         level. Default 0.5, measured against the full-size sweep (docs/DEPTH.md): fountain
         kept 88.7 % instead of 88.2 %, reprojection error 0.224 px instead of 0.230 px, in
-        47.5 s instead of 70.9 s; the hand-held synthetic scenes at 512 px within 1 %
-        equal or better on five seeds of seven, 0.03 points lower on the other two.
+        45.2 and 49.4 s against 56.8 and 62.6 s in alternating runs; the hand-held
+        synthetic scenes at 512 px within 1 % better on five seeds of seven, 0.03 points
+        lower on the other two.
     coarse_iter : slanted-plane refinement iterations at ``sweep_scale`` before the
         upsampling (ignored when ``sweep_scale`` is 1). Without it the half-size sweep
         lost up to 0.6 points on the hand-held scenes: a plane refined at the coarse level
@@ -504,6 +509,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         new_views[i] = v.replace(depth=d, sigma_z=s)
     meta = dict(scene.meta)
     meta["depth_estimation"] = {"method": method, "scale": scale, "views": stats,
+                                "sweep_scale": sweep_scale, "coarse_iter": int(coarse_iter),
                                 "excluded": [scene.views[i].name for i in sorted(excl)],
                                 "time_s": time.perf_counter() - t_all}
     log(f"depth: {len(targets)} view(s) by {method} in {time.perf_counter() - t_all:.1f} s")
