@@ -206,6 +206,18 @@ def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):
     assert 0.45 < z_c < 0.7
     assert near < 0.9 * z_c and far > 1.1 * z_c
 
+    # the resized images kept across references give the same range, each image resized once
+    images = {i: v.image for i, v in enumerate(sc.views)}
+    cache: dict = {}
+    assert default_depth_range(sc, ref, cams, images, nb, cache=cache) == (near, far)
+    assert len(cache) == len(nb) + 1
+    nb1 = select_neighbours(cams, 1, [i for i in range(len(cams)) if i != 1], 4)
+    cached = {k: id(v) for k, v in cache.items()}
+    r1 = default_depth_range(sc, 1, cams, images, nb1, cache=cache)
+    assert r1 == default_depth_range(sc, 1, cams, images, nb1)
+    assert all(id(cache[k]) == i for k, i in cached.items())  # reused, not resized again
+    assert len(cache) == len(set(nb) | set(nb1) | {0, 1})
+
 
 def _reference_sweep_costs(I, srcs, A, b, winv, radius, n_best, eps):
     """Plain numpy re-implementation of the sweep's cost (warp, clipped-window ZNCC,
@@ -368,10 +380,16 @@ def test_half_size_sweep_then_refinement_within_1pct(coarse_iter):
     init = upsample_sweep(coarse, small[0], ref)
     # the coarse slopes (on the coarse grid) do not travel with the upsampled result
     assert init.inv_depth.shape == ref.shape and "plane_gradient" not in init.meta
-    out = refine_planes(views[0][0], ref, [v[0] for v in views[1:]], cams[1:], init, n_iter=2)
+    # as estimate_depth: after a refined coarse level, no fronto-parallel start and no
+    # joint random perturbation at full size
+    lean = dict(fronto_init=False, joint_perturbation=False) if coarse_iter else {}
+    out = refine_planes(views[0][0], ref, [v[0] for v in views[1:]], cams[1:], init, n_iter=2, **lean)
     gt = views[0][1]
     inner = (slice(5, -5), slice(5, -5))
     assert np.mean((np.abs(out.depth - gt) / gt)[inner] < 0.01) >= 0.95
+    if coarse_iter:
+        full = refine_planes(views[0][0], ref, [v[0] for v in views[1:]], cams[1:], init, n_iter=2)
+        assert out.meta["refine_evals"] < 0.9 * full.meta["refine_evals"]
 
 
 def test_support_weights_closed_form_and_colour_guide():
@@ -478,6 +496,38 @@ def test_plane_cost_kernel_matches_reference_implementation():
                                       w, gx, gy, lam1)
         assert (want == 2.0).mean() > 0.01 and (want < 2.0).mean() > 0.5  # both kinds occur
         np.testing.assert_allclose(got, want, atol=1e-5)
+
+
+def test_patchmatch_memo_skips_evaluations_without_changing_the_result():
+    """Skipping the propagation candidates whose source pixel has not changed since they
+    were last tried gives exactly the planes and costs of trying them all, with fewer
+    cost evaluations (the second iteration onwards)."""
+    from vibr.stereo import _kernels as kern
+    from vibr.stereo.planesweep import to_grey, window_offsets
+
+    ref, cams, views, res, n, d = _slanted_setup(8)
+    I = to_grey(views[0][0]).astype(np.float64)
+    offs = window_offsets(3, 2)
+    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(views[0][0]))
+    srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
+    sizes = np.array([[80, 96]] * 2, np.int64)
+    A, b = plane_homographies(ref, cams[1:])
+    w0 = np.asarray(res.inv_depth, np.float64)
+    zero = np.zeros(w0.shape)
+    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w0, zero, zero, 0.1)
+    out = {}
+    for memo in (False, True):
+        w, gx, gy, cost = w0.copy(), zero.copy(), zero.copy(), c0.copy()
+        n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w, gx,
+                                        gy, cost, 3, 2 * abs(res.winv[1] - res.winv[0]), 1.0,
+                                        np.linalg.inv(ref.K), res.winv.min(), res.winv.max(), 0,
+                                        0.1, 0, memo)
+        out[memo] = (w, gx, gy, cost, n_eval)
+    for a, b_ in zip(out[False][:4], out[True][:4]):
+        np.testing.assert_array_equal(a, b_)
+    # 6 % fewer evaluations here (3 iterations on a small image)
+    assert out[True][4] < 0.97 * out[False][4], (out[True][4], out[False][4])
+    assert np.all(out[True][3] <= c0)
 
 
 def test_plane_cost_is_minimal_at_the_true_slanted_plane():

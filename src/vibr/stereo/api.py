@@ -204,7 +204,7 @@ def _parallax_rate(ref: Camera, src: Camera) -> float:
 def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: dict,
                         neighbours: list[int], *, coarse_width: int = 192,
                         max_parallax: float = 0.5, margin: float = 0.15,
-                        use_points: bool = True) -> tuple[float, float]:
+                        use_points: bool = True, cache: dict | None = None) -> tuple[float, float]:
     """A depth range for the reference view when none is given.
 
     1. Sparse points (``scene.points``), when present: the 2nd–98th percentile of the
@@ -216,6 +216,10 @@ def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: d
        and ``[z_c / 2, 2 z_c]`` is not already inside,
        uniform in inverse depth; the 2nd–98th percentile of the confident coarse inverse
        depths, widened by ``margin`` of their span.
+
+    ``cache``: a dict kept across calls (views) for the resized images of step 2, keyed
+    by view and size, so that each image is resized once per scene rather than once per
+    reference that uses it.
     """
     cam = cameras[ref]
     if use_points and scene.points is not None and len(scene.points) >= 20:
@@ -242,8 +246,15 @@ def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: d
     cref = cam.scaled(s)
     csrc = [cameras[j].scaled(s) for j in neighbours]
     n_planes = int(np.clip(np.ceil(max_parallax * cref.width / 0.75), 32, 256))
-    res = plane_sweep(resize_image(images[ref], cref), cref,
-                      [resize_image(images[j], c) for j, c in zip(neighbours, csrc)], csrc,
+    cache = {} if cache is None else cache
+
+    def small(j, c):
+        key = (j, c.shape)
+        if key not in cache:
+            cache[key] = resize_image(images[j], c)
+        return cache[key]
+
+    res = plane_sweep(small(ref, cref), cref, [small(j, c) for j, c in zip(neighbours, csrc)], csrc,
                       (1.0 / w_max, 1.0 / w_min), n_planes=n_planes, radius=2,
                       desc="coarse depth range")
     good = res.confident & (res.cost < 0.5 * res.meta.get("max_cost", 0.6))
@@ -333,12 +344,18 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         resized by it, their planes are upsampled (:func:`upsample_sweep`), and the last
         ``refine_iter`` iterations, the median and the check run at full size
         (coarse to fine). The sweep only has to put each pixel in the basin of its cost,
-        and at half size it costs a quarter as much. 1: the sweep at full size, no coarse
-        level. Default 0.5, measured against the full-size sweep (docs/DEPTH.md): fountain
-        kept 88.7 % instead of 88.2 %, reprojection error 0.224 px instead of 0.230 px, in
-        45.2 and 49.4 s against 56.8 and 62.6 s in alternating runs; on the hand-held
-        synthetic scenes at 512 px, % within 1 % within 0.03 points of the full-size sweep
-        or above it on all seven seeds (+0.49 on seed 6).
+        and at half size it costs a quarter as much; its planes are ``step_px`` apart in
+        the resized images' pixels. After the coarse iterations, the full-size ones start
+        from the upsampled slopes alone and leave out the joint random perturbation
+        (``refine_planes(fronto_init=False, joint_perturbation=False)``). 1: the sweep at
+        full size, no coarse level. Default 0.5, measured against the full-size sweep
+        (docs/DEPTH.md, sixth session): fountain kept 88.7 % instead of 88.2 %,
+        reprojection error 0.224 px instead of 0.230 px, in 45.2 and 49.4 s against 56.8
+        and 62.6 s in alternating runs; on the hand-held synthetic scenes at 512 px, % within
+        1 % within 0.03 points of the full-size sweep or above it on all seven seeds. The
+        leaner full-size level (seventh session): fountain 88.6 %, 0.223 px, 56.1 and
+        59.0 s against 75.9 and 68.8 s on a slow machine state; hand-held +0.45 points
+        summed over the seven seeds.
     coarse_iter : slanted-plane refinement iterations at ``sweep_scale`` before the
         upsampling (ignored when ``sweep_scale`` is 1). Without it the half-size sweep
         lost up to 0.6 points on the hand-held scenes: a plane refined at the coarse level
@@ -438,12 +455,14 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                         nbrs[j] = select_neighbours(cams, j, inputs, n_neighbours)
         depths, sigmas, stats = {}, {}, {}
         raw = {}
+        range_cache: dict = {}
         for i in est:
             t0 = time.perf_counter()
             nb = nbrs[i]
             if not nb:
                 continue
-            dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb)
+            dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb,
+                                                    cache=range_cache)
             # the views averaged per pixel stay those the nearest-first set implies; the
             # coverage partners only stand in where that set does not see
             nbest_i = n_best or max(1, len(nb) // 2)
@@ -451,26 +470,34 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                 nb = complete_coverage(cams, i, nb, inputs, dr, nbest_i, min_gain=coverage_gain)
                 nbrs[i] = nb
             D = n_planes or _planes_for(cams[i], [cams[j] for j in nb], dr, step_px, min(64, max_planes), max_planes)
+            coarse_done = False
             if refine_iter > 0 and sweep_scale < 1.0:
                 # coarse level: the sweep only has to put each pixel in the basin of its
                 # cost, and at a reduced size it costs sweep_scale² as much
                 cs = [cams[j].scaled(sweep_scale) for j in [i] + nb]
                 ims = [small(j, c) for j, c in zip([i] + nb, cs)]
+                if not n_planes:  # step_px is in pixels of the images swept
+                    D = _planes_for(cs[0], cs[1:], dr, step_px, min(64, max_planes), max_planes)
                 res = plane_sweep(ims[0], cs[0], ims[1:], cs[1:], dr, n_planes=D,
                                   radius=radius or 3, n_best=nbest_i, max_cost=max_cost, eps=eps,
                                   mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
                 if coarse_iter > 0:
                     res = refine_planes(ims[0], cs[0], ims[1:], cs[1:], res, n_iter=int(coarse_iter),
                                         n_best=nbest_i, eps=eps, max_cost=max_cost, radius=radius or 3)
+                    coarse_done = True
                 res = upsample_sweep(res, cs[0], cams[i])
             else:
                 res = plane_sweep(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], dr,
                                   n_planes=D, radius=radius or 3, n_best=nbest_i, max_cost=max_cost,
                                   eps=eps, mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
             if refine_iter > 0:
+                # after a refined coarse level the upsampled inverse depth carries its
+                # slopes and the joint random moves have been made at the coarse size: the
+                # fronto-parallel start and the joint perturbation are not worth their costs
                 res = refine_planes(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], res,
                                     n_iter=refine_iter, n_best=nbest_i, eps=eps, max_cost=max_cost,
-                                    radius=radius or 3)
+                                    radius=radius or 3, fronto_init=not coarse_done,
+                                    joint_perturbation=not coarse_done)
             if median_radius is None or median_radius > 0:
                 res = median_planes(img(i), res, radius=9 if median_radius is None else median_radius)
             d = np.where(res.confident, res.depth, np.nan).astype(np.float32)

@@ -191,7 +191,8 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
                   radius: int = 3, stride: int = 2, sigma_c: float = 0.05,
                   sigma_s: float | None = None,
                   n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
-                  dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1) -> SweepResult:
+                  dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1,
+                  fronto_init: bool = True, joint_perturbation: bool = True) -> SweepResult:
     """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
 
     The sweep is winner-take-all over fronto-parallel planes: its depth is quantised (the
@@ -210,6 +211,18 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     best view alone plus ``single_view_penalty`` replaces that mean when lower (a point
     seen by a single partner: the mean would average in a view that sees something else;
     ``None``: never).
+
+    ``fronto_init``: whether the initial plane may be fronto-parallel. Without it every
+    pixel starts slanted by the finite differences of ``init``'s inverse depth, one cost
+    evaluation per pixel instead of two: for an initialisation that is itself refined
+    (the coarse level of :func:`~vibr.stereo.estimate_depth`, upsampled), whose inverse
+    depth already carries the slopes.
+
+    ``joint_perturbation``: whether the random search tries a perturbation of the depth
+    and the normal together, besides the depth alone and the normal alone (which, tried
+    in turn from the best plane so far, also move both). Without it, one evaluation in
+    eight fewer per iteration, for a refinement that starts from a refined plane (the
+    full-size iterations after the coarse level).
 
     Returns a :class:`SweepResult` with the refined depth and cost (``meta["plane_gradient"]``
     holds the planes' ``(gx, gy)``, inverse depth per pixel); ``confident`` = the
@@ -235,16 +248,17 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     wmin, wmax = float(winv.min()), float(winv.max())
     w = np.clip(np.asarray(init.inv_depth, np.float64), wmin, wmax)
     zero = np.zeros((H, W))
-    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero, lam1)
     gy, gx = np.gradient(w)
-    c1 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1)
-    better = c1 < c0
-    gx = np.where(better, gx, 0.0)
-    gy = np.where(better, gy, 0.0)
-    cost = np.where(better, c1, c0)
-    kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
+    cost = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1)
+    if fronto_init:
+        c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero, lam1)
+        fronto = c0 <= cost
+        gx = np.where(fronto, 0.0, gx)
+        gy = np.where(fronto, 0.0, gy)
+        cost = np.where(fronto, c0, cost)
+    n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
                            cost, int(n_iter), 2.0 * step, float(dn), np.linalg.inv(ref_camera.K),
-                           wmin, wmax, int(seed), lam1)
+                           wmin, wmax, int(seed), lam1, 0 if joint_perturbation else 1)
     z = 1.0 / w
     sigma_w = init.sigma_z.astype(np.float64) / np.asarray(init.depth, np.float64) ** 2
     sigma_z = (z * z * sigma_w).astype(np.float32)
@@ -254,6 +268,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     confident = textured & (cost <= max_cost) & inside
     meta = dict(init.meta)
     meta.update({"refine_s": time.perf_counter() - t0, "refine_iter": int(n_iter),
+                 "refine_evals": int(n_eval),
                  "plane_gradient": (gx, gy),
                  "time_s": init.meta.get("time_s", 0.0) + time.perf_counter() - t0})
     return SweepResult(depth=z.astype(np.float32), inv_depth=w, cost=cost, sigma_z=sigma_z,
