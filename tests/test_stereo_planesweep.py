@@ -469,23 +469,33 @@ def _reference_plane_costs(wts, wI, sdI, offs, srcs, A, b, n_best, eps2, w, gx, 
     return out
 
 
+def _kernel_inputs(views, cams):
+    """The plane-cost kernels' inputs for reference ``views[0]`` and sources ``views[1:]``
+    (7×7 window every 2 px, σ_c 0.05, σ_s 3, as refine_planes): ``offs, wts, wI, sdI,
+    srcs, sizes, A, b``."""
+    from vibr.stereo import _kernels as kern
+    from vibr.stereo.planesweep import to_grey, window_offsets
+
+    I = to_grey(views[0][0]).astype(np.float64)
+    offs = window_offsets(3, 2)
+    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(views[0][0]))
+    srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
+    sizes = np.array([v[0].shape[:2] for v in views[1:]], np.int64)
+    A, b = plane_homographies(cams[0], cams[1:])
+    return offs, wts, wI, sdI, srcs, sizes, A, b
+
+
 def test_plane_cost_kernel_matches_reference_implementation():
     """The compiled plane cost (a fast path without clamping for windows that land inside
     the source, the clamped sampler elsewhere) equals a plain numpy implementation, for
     random slanted planes whose windows fall inside, across and outside the sources."""
     from vibr.stereo import _kernels as kern
-    from vibr.stereo.planesweep import to_grey, window_offsets
 
     ref, cams, views, res, n, d = _slanted_setup(8)
     src3 = Camera.look_at([0.9, -0.2, 0.3], [1.2, 0.0, 5], [0, -1, 0], ref.K, 96, 80)
     views.append(_textured_plane_views((n, d), [src3], blur=3.0)[0])
     cams = cams + [src3]
-    I = to_grey(views[0][0]).astype(np.float64)
-    offs = window_offsets(3, 2)
-    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(views[0][0]))
-    srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
-    sizes = np.array([[80, 96]] * 3, np.int64)
-    A, b = plane_homographies(ref, cams[1:])
+    offs, wts, wI, sdI, srcs, sizes, A, b = _kernel_inputs(views, cams)
     rng = np.random.default_rng(1)
     w = rng.uniform(1 / 8, 1 / 2.5, ref.shape)
     gx, gy = (rng.normal(0, 2e-3, ref.shape) for _ in range(2))
@@ -503,15 +513,9 @@ def test_patchmatch_memo_skips_evaluations_without_changing_the_result():
     were last tried gives exactly the planes and costs of trying them all, with fewer
     cost evaluations (the second iteration onwards)."""
     from vibr.stereo import _kernels as kern
-    from vibr.stereo.planesweep import to_grey, window_offsets
 
     ref, cams, views, res, n, d = _slanted_setup(8)
-    I = to_grey(views[0][0]).astype(np.float64)
-    offs = window_offsets(3, 2)
-    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(views[0][0]))
-    srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
-    sizes = np.array([[80, 96]] * 2, np.int64)
-    A, b = plane_homographies(ref, cams[1:])
+    offs, wts, wI, sdI, srcs, sizes, A, b = _kernel_inputs(views, cams)
     w0 = np.asarray(res.inv_depth, np.float64)
     zero = np.zeros(w0.shape)
     c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w0, zero, zero, 0.1)
