@@ -418,12 +418,14 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
             images[i] = resize_image(scene.views[i].image, cams[i])
         return images[i]
 
-    smalls: dict[int, np.ndarray] = {}
+    # reduced-size images (coarse level, depth-range sweep), each resized once per size
+    resized: dict[tuple, np.ndarray] = {}
 
-    def small(i, camera):  # the images of the reduced-size sweep, each resized once
-        if i not in smalls:
-            smalls[i] = resize_image(img(i), camera)
-        return smalls[i]
+    def small(i, camera):
+        key = (i, camera.shape)
+        if key not in resized:
+            resized[key] = resize_image(img(i), camera)
+        return resized[key]
 
     if method == "lightfield":
         from .lightfield import lightfield_depth
@@ -455,14 +457,13 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                         nbrs[j] = select_neighbours(cams, j, inputs, n_neighbours)
         depths, sigmas, stats = {}, {}, {}
         raw = {}
-        range_cache: dict = {}
         for i in est:
             t0 = time.perf_counter()
             nb = nbrs[i]
             if not nb:
                 continue
             dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb,
-                                                    cache=range_cache)
+                                                    cache=resized)
             # the views averaged per pixel stay those the nearest-first set implies; the
             # coverage partners only stand in where that set does not see
             nbest_i = n_best or max(1, len(nb) // 2)
