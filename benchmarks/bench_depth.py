@@ -100,23 +100,27 @@ def bench_fountain(args) -> None:
                              step_px=args.step_px, max_planes=args.max_planes,
                              refine_iter=args.refine_iter,
                              median_radius=args.median_radius, sweep_scale=args.sweep_scale,
-                             coarse_iter=args.coarse_iter)
+                             coarse_iter=args.coarse_iter, fill_segments=args.fill_segments)
         times.append(time.perf_counter() - t)
     info = est.meta["depth_estimation"]["views"]
     print(f"\nstrecha_fountain-P11, all 11 views at {w}x{h} (load {t_load:.1f} s, not counted); "
           f"{args.neighbours} neighbours, step {args.step_px} px, <= {args.max_planes} planes; "
           f"load average {os.getloadavg()[0]:.1f}")
     print(f"{'view':<6} {'range (near..far)':>18} {'planes':>6} {'confident %':>11} {'kept %':>7} "
-          f"{'reproj px':>9} {'time s':>7}")
+          f"{'filled %':>8} {'reproj px':>9} {'time s':>7}")
     for name, st in info.items():
         dr = st["depth_range"]
         print(f"{name:<6} {dr[0]:>8.2f}..{dr[1]:<8.2f} {st['n_planes']:>6} {100 * st['confident']:>11.1f} "
-              f"{100 * st['kept']:>7.1f} {st.get('reproj_px', float('nan')):>9.3f} {st['time_s']:>7.1f}")
+              f"{100 * st['kept']:>7.1f} {100 * st.get('filled', 0.0):>8.1f} "
+              f"{st.get('reproj_px', float('nan')):>9.3f} {st['time_s']:>7.1f}")
     kept = np.mean([st["kept"] for st in info.values()])
+    filled = np.mean([st.get("filled", 0.0) for st in info.values()])
     rep = np.nanmedian([st.get("reproj_px", np.nan) for st in info.values()])
     print(f"total depth time {statistics.median(times):.1f} s (median of {len(times)}: "
           f"{', '.join(f'{x:.1f}' for x in sorted(times))}), "
-          f"mean kept {100 * kept:.1f} %, median of per-view mean reprojection error {rep:.3f} px")
+          f"mean kept {100 * kept:.1f} % (after the consistency check"
+          + (f"; then filled from segment planes {100 * filled:.1f} %" if args.fill_segments else "")
+          + f"), median of per-view mean reprojection error {rep:.3f} px")
     zs = np.concatenate([v.depth[np.isfinite(v.depth)] for v in est.views])
     print(f"estimated depth percentiles 1/50/99: {np.percentile(zs, [1, 50, 99]).round(2).tolist()}")
     if args.no_render:
@@ -133,7 +137,7 @@ def bench_fountain(args) -> None:
                           method="mvs", n_neighbours=args.neighbours, step_px=args.step_px,
                           max_planes=args.max_planes, refine_iter=args.refine_iter,
                           median_radius=args.median_radius, sweep_scale=args.sweep_scale,
-                          coarse_iter=args.coarse_iter)
+                          coarse_iter=args.coarse_iter, fill_segments=args.fill_segments)
     t_held = time.perf_counter() - t
     sources, target = held.split(tgt)
     for method in args.methods.split(","):
@@ -160,7 +164,7 @@ def bench_temple(args) -> None:
     est = estimate_depth(scene, method="mvs", n_neighbours=args.neighbours, step_px=args.step_px,
                          max_planes=args.max_planes, refine_iter=args.refine_iter,
                          median_radius=args.median_radius, sweep_scale=args.sweep_scale,
-                         coarse_iter=args.coarse_iter)
+                         coarse_iter=args.coarse_iter, fill_segments=args.fill_segments)
     t = time.perf_counter() - t
     info = est.meta["depth_estimation"]["views"]
     kept = np.mean([st["kept"] for st in info.values()])
@@ -277,7 +281,7 @@ def _bench_synthetic_at(args, W: int) -> None:
         est = estimate_depth(scene, views=which, method=method, step_px=args.step_px,
                              max_planes=args.max_planes, refine_iter=args.refine_iter,
                              median_radius=args.median_radius, sweep_scale=args.sweep_scale,
-                             coarse_iter=args.coarse_iter)
+                             coarse_iter=args.coarse_iter, fill_segments=args.fill_segments)
         t = time.perf_counter() - t
         gt, d = scene[ref].depth, est[ref].depth
         tex = _textured(scene[ref].image) & np.isfinite(gt)
@@ -333,6 +337,9 @@ def main(argv=None) -> None:
                    help="image scale of the coarse level (sweep and --coarse-iter iterations); 1: none")
     p.add_argument("--coarse-iter", type=int, default=DEFAULTS["coarse_iter"],
                    help="refinement iterations at the coarse level")
+    p.add_argument("--fill-segments", action="store_true",
+                   help="dense output: segment-plane completion after the consistency check "
+                   "(estimate_depth(fill_segments=True))")
     p.add_argument("--no-render", action="store_true")
     args = p.parse_args(argv)
     from vibr.progress import set_quiet

@@ -32,6 +32,13 @@ def test_vibr_depth_in_place_and_out(tmp_path, capsys):
     e2 = load_scene(src)
     assert e2[1].depth is not None
     assert "depth" in json.dumps(json.load(open(src / "transforms.json")))
+    # --fill-segments reaches estimate_depth: no fewer known pixels, and the report says so
+    capsys.readouterr()
+    out2 = tmp_path / "out_fill"
+    assert main(["depth", str(src), "-o", str(out2), "--views", "view_000", "--exclude", "view_003",
+                 "--fill-segments"]) == 0
+    assert np.isfinite(load_scene(out2)[0].depth).sum() > np.isfinite(e[0].depth).sum()
+    assert "filled from segment planes" in capsys.readouterr().out
 
 
 def test_vibr_depth_bad_input(tmp_path, capsys):
