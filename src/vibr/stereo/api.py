@@ -492,6 +492,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                         nbrs[j] = select_neighbours(cams, j, inputs, n_neighbours)
         depths, sigmas, stats = {}, {}, {}
         raw = {}
+        med_r = 9 if median_radius is None else int(median_radius)  # MVS default: 19×19 window
         for i in est:
             t0 = time.perf_counter()
             nb = nbrs[i]
@@ -534,8 +535,8 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                                     n_iter=refine_iter, n_best=nbest_i, eps=eps, max_cost=max_cost,
                                     radius=radius or 3, fronto_init=not coarse_done,
                                     joint_perturbation=not coarse_done)
-            if median_radius is None or median_radius > 0:
-                res = median_planes(img(i), res, radius=9 if median_radius is None else median_radius)
+            if med_r > 0:
+                res = median_planes(img(i), res, radius=med_r)
             d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
             raw[i] = (d, res.sigma_z, res.meta.get("plane_gradient"), dr)
             stats[scene.views[i].name] = {
@@ -563,8 +564,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                 t0 = time.perf_counter()
                 # segmented at half size: the segmentation costs 0.6 s a view at 768x512
                 small_img = small(i, cams[i].scaled(0.5))
-                d, s, n_filled = _segment_completion(img(i), small_img, cams[i], d, s, grad, dr, rel_tol,
-                                                     9 if median_radius is None else median_radius)
+                d, s, n_filled = _segment_completion(img(i), small_img, cams[i], d, s, grad, dr, rel_tol, med_r)
                 st["filled"] = n_filled / d.size
                 st["segments_s"] = time.perf_counter() - t0
             depths[i], sigmas[i] = d, s
