@@ -229,6 +229,18 @@ def _B_apply(u, x0, y0, fx, fy, coef):
     return out
 
 
+@njit(cache=True)
+def _sum_in_order(a):
+    """Σ a in index order. Inside a ``parallel=True`` kernel ``a.sum()`` becomes a parallel
+    reduction whose partial sums depend on the number of threads; this sum does not, so a
+    result is the same bit for bit on 1 thread or 16 (a process pool of N workers gives
+    each cores // N threads)."""
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += a[i]
+    return s
+
+
 @njit(parallel=True, cache=True)
 def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_stencil):
     """Σ Bᵀ diag(w) B (9-point stencil, into ``A``), Σ Bᵀ (w·vals) (into ``rhs``) and
@@ -307,7 +319,7 @@ def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_
                     rk = rhs[k, ya]
                     for j in range(jmin, jmax + 1):
                         rk[j] += la[ra, j, S + k]
-    return cpart.sum()
+    return _sum_in_order(cpart)
 
 
 @njit(cache=True, fastmath=True)
@@ -372,7 +384,7 @@ def _dot(a, b):
         for i in range(k * chunk, min(n, (k + 1) * chunk)):
             s += np.float64(a1[i]) * np.float64(b1[i])
         parts[k] = s
-    return parts.sum()
+    return _sum_in_order(parts)
 
 
 def dot(a, b) -> float:
