@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import add_quiet
+from ._executor import add_executor_args, executor_from_args
 
 _DESC = """\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
@@ -48,7 +49,10 @@ def register(sub) -> None:
     p = sub.add_parser("eval", help="render held-out views and measure PSNR / DSSIM (paper protocol)",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene folder or transforms.json")
-    p.add_argument("--target", required=True, help="view to hold out and render (name or index)")
+    p.add_argument("--target", required=True,
+                   help="view to hold out and render (name or index); 'all' or a comma list: "
+                        "leave-one-out over those views (one task each, see --workers / --dask), "
+                        "--json then holds per-view results and their mean / median")
     p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
     p.add_argument("--views", type=int, metavar="K", help="use only the K best source views for the target")
     p.add_argument("--depth", default="gt", choices=["gt", "auto", "estimated", "planar", "files"],
@@ -81,6 +85,7 @@ def register(sub) -> None:
                         "footprint (the source pixel's parallelogram)")
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
+    add_executor_args(p)
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -94,10 +99,13 @@ def run(args) -> int:
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
+    executor = executor_from_args(args)
     scene = load_scene(args.scene, scale=args.scale)
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                                      ("depth_range", args.depth_range)) if v is not None}
+    if args.target.strip().lower() == "all" or "," in args.target:
+        return _run_all(args, scene, settings, executor, estimate_kw)
     report = evaluate(scene, args.target, settings, sources=args.sources, depth=args.depth,
                       depth_files=args.depth_files, n_views=args.views, mask=args.mask,
                       border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
@@ -106,4 +114,26 @@ def run(args) -> int:
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")
+    return 0
+
+
+def _run_all(args, scene, settings, executor, estimate_kw) -> int:
+    """``--target all`` / a comma list: one leave-one-out task per view (vibr.evaluate_all)."""
+    from pathlib import Path
+
+    from ..evaluate import write_report
+    from ..evaluate_all import evaluate_all, format_all_table, resolve_targets
+
+    targets = resolve_targets(scene, args.target)
+    out = Path(args.json)
+    views_dir = out.with_name(out.stem + "_views")
+    report = evaluate_all(args.scene, targets, settings, views_dir=views_dir, scale=args.scale,
+                          executor=executor, sources=args.sources, depth=args.depth,
+                          depth_files=args.depth_files, n_views=args.views, mask=args.mask,
+                          border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
+                          intensity_scale=args.intensity_scale,
+                          render_kw={"psf": args.psf} if args.psf else None)
+    write_report(report, out)
+    print(format_all_table(report))
+    print(f"wrote {out} (per-view reports in {views_dir}/)")
     return 0

@@ -1,0 +1,36 @@
+"""The scale-out flags shared by subcommands: ``--workers N`` and ``--dask ADDRESS|local``."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_executor_args(p: argparse.ArgumentParser) -> None:
+    """Add ``--workers`` and ``--dask`` (mutually exclusive) to a subcommand's parser."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, metavar="N", default=None,
+                   help="run the independent tasks on N local processes, each with "
+                        "NUMBA_NUM_THREADS = cores // N (default: one after the other here)")
+    g.add_argument("--dask", metavar="ADDRESS|local", default=None,
+                   help="run the tasks on the Dask scheduler at ADDRESS (e.g. tcp://host:8786), or "
+                        "'local' for a LocalCluster of 2 workers x 1 thread started for this command; "
+                        "needs the dask extra: pip install 'vibr[dask]'")
+
+
+def executor_from_args(args):
+    """The ``executor`` argument of :func:`vibr.executor.run_tasks` for parsed flags."""
+    from ..errors import VibrInputError
+    from ..executor import parse_executor, require_distributed
+
+    workers, dask = getattr(args, "workers", None), getattr(args, "dask", None)
+    if dask is not None:
+        if not dask.strip():
+            raise VibrInputError("--dask needs a scheduler address or 'local'")
+        require_distributed()
+        parse_executor(dask)
+        return dask
+    if workers is not None:
+        if workers < 1:
+            raise VibrInputError(f"--workers must be >= 1, got {workers}")
+        return workers
+    return None

@@ -1,0 +1,197 @@
+"""Leave-one-out over many views: :func:`vibr.evaluate.evaluate` once per target, through
+:func:`vibr.executor.run_tasks`.
+
+Each held-out view is one task: the worker loads the scene once (:func:`load_context`),
+evaluates its target (:func:`evaluate_target`, the target never takes part in the depth
+estimation of its sources) and writes that target's report atomically to
+``VIEWS_DIR/TARGET.json``. A rerun with the same settings finds those files and skips their
+targets. The driver gathers the per-target reports into one report, in the spirit of 3D
+Gaussian Splatting's ``per_view.json`` / ``results.json``: ``per_view`` (target → report)
+and ``summary`` (per setting: mean and median PSNR, SSIM and DSSIM over the targets).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .errors import VibrInputError
+from .evaluate import Setting, write_report
+
+logger = logging.getLogger(__name__)
+
+#: Fields of a per-target report that vary from run to run (times, machine), not results.
+VOLATILE = ("seconds", "depth_seconds", "samples_seconds", "geometry_seconds", "wall_seconds",
+            "machine", "time_s", "skipped")
+
+
+def resolve_targets(scene, spec: str | Sequence[str]) -> list[str]:
+    """View names for ``spec``: ``"all"`` (every view, in scene order), a comma list or a
+    sequence of names / indices."""
+    if isinstance(spec, str):
+        if spec.strip().lower() == "all":
+            return list(scene.names)
+        spec = [s.strip() for s in spec.split(",") if s.strip()]
+    names = [scene.views[scene.index(int(s) if isinstance(s, str) and s.isdigit() and s not in scene.names
+                                     else s)].name for s in spec]
+    if not names:
+        raise VibrInputError("no target view given")
+    if len(set(names)) != len(names):
+        raise VibrInputError(f"a target is given twice: {', '.join(names)}")
+    return names
+
+
+def load_context(scene_path, scale: float):
+    """Per-worker setup: the scene, loaded once (``scene.meta['scale']`` recorded)."""
+    from .io import load_scene
+
+    scene = load_scene(scene_path, scale=scale)
+    scene.meta.setdefault("scale", scale)
+    return scene
+
+
+def _config_key(task: dict) -> str:
+    """A hash of everything that decides a target's numbers (not where files go)."""
+    cfg = {k: v for k, v in task.items() if k not in ("report", "eval_kw")}
+    cfg["eval_kw"] = {k: v for k, v in task["eval_kw"].items() if k != "figures"}
+    cfg["settings"] = [(s.method, s.params) for s in task["settings"]]
+    blob = json.dumps(cfg, sort_keys=True, default=str)
+    return hashlib.sha1(blob.encode()).hexdigest()[:16]
+
+
+def evaluate_target(scene, task: dict) -> dict:
+    """One leave-one-out evaluation (a task of :func:`vibr.executor.run_tasks`).
+
+    ``task``: ``target``, ``settings``, ``eval_kw`` (keyword arguments of
+    :func:`vibr.evaluate.evaluate`), ``report`` (the JSON file to write), ``config`` (hash
+    of the settings). Returns the target's report; when ``report`` already holds a report
+    with the same ``config``, returns it without recomputing (``"skipped": true``).
+    """
+    from .evaluate import evaluate
+
+    path = Path(task["report"])
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, ValueError):
+            old = None
+        if isinstance(old, dict) and old.get("config") == task["config"]:
+            return {**old, "skipped": True}
+    t0 = time.perf_counter()
+    rep = evaluate(scene, task["target"], task["settings"], **task["eval_kw"])
+    rep["wall_seconds"] = round(time.perf_counter() - t0, 3)
+    rep["config"] = task["config"]
+    rep["worker_pid"] = os.getpid()
+    write_report(rep, path)
+    return rep
+
+
+def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting], *, views_dir,
+                 scale: float = 1.0, executor=None, retries: int = 2, **eval_kw) -> dict:
+    """Leave-one-out evaluation of every view in ``targets`` (module docstring).
+
+    Parameters
+    ----------
+    scene_path : path
+        The scene (each worker loads it once, at ``scale``).
+    targets : sequence of str
+        View names (:func:`resolve_targets`).
+    settings : sequence of Setting
+    views_dir : path
+        Folder of the per-target reports ``TARGET.json`` (kept: a rerun skips them).
+    executor
+        :func:`vibr.executor.run_tasks`'s engine: None, N processes, "local", an address.
+    **eval_kw
+        Keyword arguments of :func:`vibr.evaluate.evaluate` (depth, n_views, mask, ...).
+
+    Returns
+    -------
+    dict
+        ``scene``, ``targets``, ``settings`` (labels), ``per_view`` (target → report),
+        ``summary`` (:func:`summarise`), ``wall_seconds``.
+    """
+    from .executor import run_tasks
+
+    targets = list(targets)
+    settings = list(settings)
+    views_dir = Path(views_dir)
+    scene_path = str(Path(scene_path).resolve())
+    tasks = []
+    for t in targets:
+        task = {"scene": scene_path, "scale": float(scale), "target": t, "settings": settings,
+                "eval_kw": dict(eval_kw), "report": str(views_dir / f"{t}.json")}
+        task["config"] = _config_key(task)
+        tasks.append(task)
+    t0 = time.perf_counter()
+    reports = run_tasks(evaluate_target, tasks, setup=load_context, setup_args=(scene_path, float(scale)),
+                        executor=executor, desc="leave-one-out", retries=retries)
+    skipped = sum(bool(r.get("skipped")) for r in reports)
+    if skipped:
+        logger.info("%d of %d targets were already evaluated (%s)", skipped, len(targets), views_dir)
+    return {
+        "scene": reports[0]["scene"],
+        "scene_path": scene_path,
+        "scale": float(scale),
+        "targets": targets,
+        "settings": [s.label for s in settings],
+        "views_dir": str(views_dir),
+        "wall_seconds": round(time.perf_counter() - t0, 3),
+        "summary": summarise(reports),
+        "per_view": {t: r for t, r in zip(targets, reports)},
+    }
+
+
+def summarise(reports: Sequence[dict]) -> dict:
+    """Per setting label: ``n`` targets and mean / median of PSNR, SSIM and DSSIM."""
+    by: dict[str, dict[str, list]] = {}
+    for rep in reports:
+        for r in rep["results"]:
+            d = by.setdefault(r["label"], {"method": r["method"], "psnr": [], "ssim": [], "dssim": []})
+            for k in ("psnr", "ssim", "dssim"):
+                d[k].append(r[k])
+    out = {}
+    for label, d in by.items():
+        out[label] = {"method": d["method"], "n": len(d["psnr"])}
+        for k in ("psnr", "ssim", "dssim"):
+            a = np.asarray(d[k], float)
+            out[label][k] = {"mean": float(a.mean()), "median": float(np.median(a))}
+    return out
+
+
+def results_only(report: dict) -> dict:
+    """``report`` without the fields that change from run to run (times, machine, pids):
+    what two runs of the same evaluation must agree on exactly."""
+    if isinstance(report, dict):
+        return {k: results_only(v) for k, v in report.items()
+                if k not in VOLATILE and k not in ("worker_pid", "views_dir", "figures")}
+    if isinstance(report, list):
+        return [results_only(v) for v in report]
+    return report
+
+
+def format_all_table(report: dict) -> str:
+    """Per-view table (PSNR / DSSIM of each setting, depth and wall time) and the summary."""
+    labels = report["settings"]
+    w = max(12, *(len(lb) for lb in labels))
+    head = f"{'target':<10}" + "".join(f" {lb[:w]:>{w}}" for lb in labels) + f" {'depth s':>8} {'wall s':>7}"
+    lines = [f"{report['scene']}: leave-one-out over {len(report['targets'])} views "
+             f"(PSNR dB / DSSIM; image scale {report['scale']:g})", head]
+    for t in report["targets"]:
+        rep = report["per_view"][t]
+        cells = {r["label"]: f"{r['psnr']:.2f} / {r['dssim']:.0f}" for r in rep["results"]}
+        lines.append(f"{t:<10}" + "".join(f" {cells.get(lb, '-'):>{w}}" for lb in labels)
+                     + f" {rep.get('depth_seconds', 0):>8.1f} {rep.get('wall_seconds', 0):>7.1f}"
+                     + (" (done before)" if rep.get("skipped") else ""))
+    s = report["summary"]
+    for stat in ("mean", "median"):
+        lines.append(f"{stat:<10}" + "".join(
+            f" {s[lb]['psnr'][stat]:>{w - 8}.2f} / {s[lb]['dssim'][stat]:>5.0f}" for lb in labels))
+    lines.append(f"SSIM mean: " + ", ".join(f"{lb} {s[lb]['ssim']['mean']:.4f}" for lb in labels))
+    return "\n".join(lines)

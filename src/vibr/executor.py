@@ -1,0 +1,345 @@
+"""One seam for running many independent tasks: serially, on local processes, or on Dask.
+
+vibr's heavy jobs (the frames of a fly-through, the held-out views of a leave-one-out
+evaluation, the cases of a benchmark) are independent tasks. :func:`run_tasks` runs a
+top-level function over a list of tasks with one of three engines and gives the results back
+in task order; it does not schedule anything itself:
+
+``executor=None`` (or ``"serial"``, ``1``)
+    one after the other in this process (the default).
+``executor=N`` (int ≥ 2) or ``"processes:N"``
+    N local processes (:class:`concurrent.futures.ProcessPoolExecutor`, *spawn* start
+    method). Each process gets ``NUMBA_NUM_THREADS = cores // N`` in its environment
+    before it starts (numba reads it once, when it is first imported), so that N processes
+    do not run N × cores threads on the cores.
+``executor="local"`` or ``"local:N"``
+    a Dask ``LocalCluster`` started for this call (N worker processes, default 2, one
+    thread each, numba threads = cores // N) and closed at the end.
+``executor="tcp://HOST:PORT"`` (or any other string), or a ``distributed.Client``
+    the Dask scheduler at that address (:mod:`dask.distributed`, the ``vibr[dask]`` extra).
+
+The task contract (what makes the engines interchangeable):
+
+* ``fn(context, task)`` and ``setup(*setup_args)`` are top-level (picklable) functions;
+  ``setup`` runs once per worker (once in this process for the serial engine) and its
+  result, the *context* (typically the loaded scene), is ``fn``'s first argument. On Dask
+  the setup arguments are scattered to every worker once and the context is cached in the
+  worker process, so a task ships only its own small description.
+* A task writes its own result files, atomically (:func:`vibr.io.atomic.atomic_path`), and
+  returns a small summary (a dict of numbers, a file name): a lost worker then loses no
+  finished result, and the driver never holds the images.
+* A task whose output already exists (and was made with the same settings) returns at once:
+  a rerun of an interrupted job redoes only what is missing. Checking that is the task
+  function's job (it knows its files).
+* A task that raises, or whose worker process dies, is run again, up to ``retries`` more
+  times (Dask: ``Client.submit(retries=...)``, and Dask's scheduler moves the tasks of a
+  lost worker elsewhere; processes: a pool broken by a dead process is replaced and the
+  unfinished tasks resubmitted, each charged one attempt). The serial engine runs each task
+  once and lets its exception through. :class:`vibr.VibrInputError` (bad input) is never
+  retried by the process engine.
+
+Results are identical whatever the engine when ``fn`` is deterministic and does not depend
+on the number of numba threads (docs/SCALE.md reports what was checked).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing
+import os
+import threading
+import uuid
+from typing import Any, Callable, Sequence
+
+from .errors import VibrInputError
+from .progress import progress
+
+logger = logging.getLogger(__name__)
+
+DASK_HINT = "pip install 'vibr[dask]'"
+
+_THREADS_VAR = "NUMBA_NUM_THREADS"
+
+
+def available_cores() -> int:
+    """CPU cores this process may run on (its affinity mask when the OS has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def threads_per_worker(n_workers: int, cores: int | None = None) -> int:
+    """numba threads for each of ``n_workers`` processes sharing ``cores``: ``cores // n``, ≥ 1."""
+    return max(1, (cores or available_cores()) // max(1, int(n_workers)))
+
+
+def parse_executor(executor) -> tuple[str, Any]:
+    """``(kind, arg)`` for an ``executor`` argument of :func:`run_tasks`.
+
+    kind is ``"serial"`` (arg None), ``"processes"`` (arg N), ``"dask-local"`` (arg N
+    workers), ``"dask"`` (arg: a scheduler address) or ``"dask-client"`` (arg: a Client).
+    """
+    if executor is None:
+        return "serial", None
+    if isinstance(executor, bool):
+        raise VibrInputError(f"executor must be None, a number of processes or a Dask address, not {executor!r}")
+    if isinstance(executor, int):
+        if executor < 1:
+            raise VibrInputError(f"--workers must be >= 1, got {executor}")
+        return ("serial", None) if executor == 1 else ("processes", executor)
+    if isinstance(executor, str):
+        s = executor.strip()
+        if s in ("", "serial"):
+            return "serial", None
+        low = s.lower()
+        if low.startswith("processes:") or low.startswith("local:") or low == "local":
+            head, _, num = low.partition(":")
+            if head == "local" and not num:
+                return "dask-local", 2
+            try:
+                n = int(num)
+            except ValueError:
+                raise VibrInputError(f"bad executor {executor!r}: expected {head}:N with N a whole number") from None
+            if n < 1:
+                raise VibrInputError(f"bad executor {executor!r}: N must be >= 1")
+            if head == "processes":
+                return ("serial", None) if n == 1 else ("processes", n)
+            return "dask-local", n
+        return "dask", s
+    if hasattr(executor, "submit") and hasattr(executor, "scheduler_info"):
+        return "dask-client", executor
+    raise VibrInputError(f"executor must be None, a number of processes, 'local' or a Dask address, "
+                         f"not {executor!r}")
+
+
+def require_distributed():
+    """Import :mod:`distributed` or raise a one-line :class:`VibrInputError` saying how to install it."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise VibrInputError(f"--dask needs dask.distributed, which is not installed: {DASK_HINT}") from None
+    return distributed
+
+
+def run_tasks(fn: Callable, tasks: Sequence, *, setup: Callable | None = None, setup_args: Sequence = (),
+              executor=None, desc: str = "tasks", retries: int = 2) -> list:
+    """Run ``fn(context, task)`` for every task; return the results in task order.
+
+    Parameters
+    ----------
+    fn : callable
+        A top-level function ``fn(context, task) -> summary`` (module docstring: it writes
+        its own outputs atomically, skips them when present, returns something small).
+    tasks : sequence
+        Picklable task descriptions (e.g. a view name and an output path).
+    setup : callable, optional
+        Top-level ``setup(*setup_args) -> context``, run once per worker; without it
+        ``context`` is None.
+    setup_args : sequence
+        Arguments of ``setup`` (picklable; sent once to each worker).
+    executor : None, int, str or distributed.Client
+        The engine (module docstring): None serial, N processes, "local" a Dask
+        LocalCluster, an address a running Dask scheduler.
+    desc : str
+        Label of the progress bar (one bar over the tasks, advanced as tasks complete).
+    retries : int
+        Extra attempts for a failed task (parallel engines only).
+
+    Returns
+    -------
+    list
+        ``fn``'s return values, in the order of ``tasks``.
+    """
+    tasks = list(tasks)
+    retries = int(retries)
+    if retries < 0:
+        raise VibrInputError(f"retries must be >= 0, got {retries}")
+    kind, arg = parse_executor(executor)
+    if not tasks:
+        return []
+    if kind == "serial":
+        return _run_serial(fn, tasks, setup, tuple(setup_args), desc)
+    if kind == "processes":
+        return _run_processes(fn, tasks, setup, tuple(setup_args), arg, desc, retries)
+    require_distributed()
+    return _run_dask(fn, tasks, setup, tuple(setup_args), kind, arg, desc, retries)
+
+
+# -- serial ------------------------------------------------------------------------------------
+def _run_serial(fn, tasks, setup, setup_args, desc):
+    context = setup(*setup_args) if setup is not None else None
+    out = []
+    with progress(total=len(tasks), desc=desc) as bar:
+        for t in tasks:
+            out.append(fn(context, t))
+            bar.update(1)
+    return out
+
+
+# -- local processes ---------------------------------------------------------------------------
+_PROCESS_CONTEXT: Any = None
+
+
+def _init_process(threads: int, setup, setup_args) -> None:
+    """Pool initializer: check the numba thread count, then build this process's context once."""
+    global _PROCESS_CONTEXT
+    os.environ[_THREADS_VAR] = str(threads)  # already inherited; kept for what imports numba later
+    _quiet_worker()
+    _PROCESS_CONTEXT = setup(*setup_args) if setup is not None else None
+
+
+def _quiet_worker() -> None:
+    """No progress bars or status lines from workers: the driver's bar counts their tasks."""
+    from .progress import set_quiet
+
+    set_quiet(True)
+
+
+def _call_in_process(fn, task):
+    return fn(_PROCESS_CONTEXT, task)
+
+
+@contextlib.contextmanager
+def _environ(**values):
+    """Set environment variables for processes spawned inside the block, then restore them.
+
+    A spawned child copies the parent's environment when it starts, so this is how a value
+    reaches the child before anything in it imports numba. (This process's numba read its own
+    value when it was imported; it does not compile while it only waits for results.)
+    """
+    old = {k: os.environ.get(k) for k in values}
+    os.environ.update({k: str(v) for k, v in values.items()})
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    threads = threads_per_worker(n)
+    logger.info("%s: %d tasks on %d processes (%d numba threads each)", desc, len(tasks), n, threads)
+    results: list = [None] * len(tasks)
+    attempts = [0] * len(tasks)
+    pending = list(range(len(tasks)))
+    ctx = multiprocessing.get_context("spawn")
+    pool = None
+    with _environ(**{_THREADS_VAR: threads}), progress(total=len(tasks), desc=desc) as bar:
+        try:
+            while pending:
+                if pool is None:
+                    pool = ProcessPoolExecutor(max_workers=min(n, len(pending)), mp_context=ctx,
+                                               initializer=_init_process, initargs=(threads, setup, setup_args))
+                futs = {pool.submit(_call_in_process, fn, tasks[i]): i for i in pending}
+                pending = []
+                for f in as_completed(futs):
+                    i = futs[f]
+                    try:
+                        results[i] = f.result()
+                        bar.update(1)
+                        continue
+                    except VibrInputError:
+                        raise
+                    except BrokenProcessPool as exc:
+                        err = exc
+                        why = "its worker process died"
+                    except Exception as exc:  # noqa: BLE001 - any task failure is retried
+                        err = exc
+                        why = f"{type(exc).__name__}: {exc}"
+                    attempts[i] += 1
+                    if attempts[i] > retries:
+                        raise RuntimeError(f"{desc}: task {i} failed {attempts[i]} times ({why})") from err
+                    logger.warning("%s: task %d failed (%s); retrying (attempt %d of %d)",
+                                   desc, i, why, attempts[i] + 1, retries + 1)
+                    pending.append(i)
+                if pending and getattr(pool, "_broken", False):
+                    pool.shutdown(wait=True, cancel_futures=True)
+                    pool = None
+                pending.sort()
+        finally:
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
+    return results
+
+
+# -- Dask --------------------------------------------------------------------------------------
+_WORKER_CONTEXTS: dict = {}
+_WORKER_LOCK = threading.Lock()
+
+
+def _dask_call(fn, setup, setup_args, token, task):
+    """Run on a Dask worker: build the context once per worker process (cached by run), then fn."""
+    with _WORKER_LOCK:
+        if token not in _WORKER_CONTEXTS:
+            _WORKER_CONTEXTS.clear()  # keep only the current run's context in a long-lived worker
+            _quiet_worker()
+            _WORKER_CONTEXTS[token] = setup(*setup_args) if setup is not None else None
+        context = _WORKER_CONTEXTS[token]
+    return fn(context, task)
+
+
+def _dask_forget(token) -> None:
+    with _WORKER_LOCK:
+        _WORKER_CONTEXTS.pop(token, None)
+
+
+def start_local_cluster(n_workers: int = 2):
+    """A Dask ``LocalCluster`` of ``n_workers`` processes × 1 thread, each with
+    ``NUMBA_NUM_THREADS = cores // n_workers`` set in its environment before it starts."""
+    import logging as _logging
+
+    from distributed import LocalCluster
+
+    threads = threads_per_worker(n_workers)
+    return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                        env={_THREADS_VAR: str(threads)}, silence_logs=_logging.ERROR)
+
+
+def _run_dask(fn, tasks, setup, setup_args, kind, arg, desc, retries):
+    from distributed import Client, as_completed
+
+    cluster = client = None
+    own_client = kind != "dask-client"
+    try:
+        if kind == "dask-local":
+            cluster = start_local_cluster(arg)
+            client = Client(cluster)
+        elif kind == "dask":
+            try:
+                client = Client(arg, timeout="20s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise VibrInputError(f"cannot reach the Dask scheduler at {arg}: {exc}") from None
+        else:
+            client = arg
+        n = len(client.scheduler_info(n_workers=-1).get("workers", {})) if kind != "dask-local" else arg
+        logger.info("%s: %d tasks on Dask (%s, %d workers)", desc, len(tasks), client.scheduler.address, n)
+        token = uuid.uuid4().hex
+        args_f = client.scatter([setup_args], broadcast=True, hash=False)[0]
+        futs = [client.submit(_dask_call, fn, setup, args_f, token, t, key=f"vibr-{desc}-{i}-{token[:8]}",
+                              retries=retries, pure=False) for i, t in enumerate(tasks)]
+        index = {f.key: i for i, f in enumerate(futs)}
+        results: list = [None] * len(tasks)
+        with progress(total=len(tasks), desc=desc) as bar:
+            try:
+                for f in as_completed(futs):
+                    results[index[f.key]] = f.result()
+                    bar.update(1)
+            except BaseException:
+                client.cancel(futs)
+                raise
+        with contextlib.suppress(Exception):
+            client.run(_dask_forget, token)
+        return results
+    finally:
+        if own_client and client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()

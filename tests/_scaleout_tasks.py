@@ -1,0 +1,58 @@
+"""Top-level task functions for tests/test_executor.py (workers import them by name)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def setup_probe(folder):
+    """Per-worker setup: record this process once (O_EXCL: a second setup in the same
+    process fails), and what numba sees here."""
+    import numba
+
+    fd = os.open(os.path.join(folder, f"setup_{os.getpid()}"), os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    os.close(fd)
+    return {"pid": os.getpid(), "env": os.environ.get("NUMBA_NUM_THREADS"),
+            "numba_threads": int(numba.get_num_threads()), "folder": folder}
+
+
+def square_probe(ctx, task):
+    """A task: its result with the worker's pid and numba thread count."""
+    return {"value": task * task, "pid": ctx["pid"], "env": ctx["env"], "numba_threads": ctx["numba_threads"]}
+
+
+def write_or_die(ctx, task):
+    """Write ``out/TASK.txt`` atomically; the task ``victim`` kills its own worker process the
+    first time it runs (marker file), as a crashing worker would."""
+    from vibr.io.atomic import atomic_path
+
+    folder = Path(ctx)
+    out = folder / f"{task}.txt"
+    if out.exists():
+        return {"task": task, "skipped": True}
+    if task == "victim":
+        marker = folder / "victim.killed"
+        if not marker.exists():
+            marker.write_text(str(os.getpid()))
+            os._exit(17)
+    with atomic_path(out) as tmp:
+        Path(tmp).write_text(f"result of {task}\n")
+    return {"task": task, "pid": os.getpid()}
+
+
+def identity(ctx, task):
+    return ctx, task
+
+
+def fail_once(ctx, task):
+    """Raise the first time (marker file), succeed after: a transient error."""
+    marker = Path(ctx) / f"failed_{task}"
+    if not marker.exists():
+        marker.write_text("x")
+        raise RuntimeError(f"transient failure of {task}")
+    return task
+
+
+def die_always(ctx, task):
+    os._exit(17)
