@@ -23,6 +23,12 @@ geometry (``vibr.evaluate.evaluate``). Nothing is cached between runs.
 
     python benchmarks/paper_tables.py                 # everything, writes docs/RESULTS.md
     python benchmarks/paper_tables.py --quick         # a small smoke run (not for the docs)
+    python benchmarks/paper_tables.py --dask local    # the cases (one per table column group) on a
+                                                      # Dask LocalCluster; --workers N: N processes
+
+Every case (cotton stride × depth, fountain target) is one task of
+``vibr.executor.run_tasks``: serial by default, the same numbers on processes or Dask
+(docs/SCALE.md); each worker loads a scene once.
 
 JSON reports go to ``--out`` (default ``out/paper_tables``) and the figures to
 ``--figures`` (default ``out/paper_tables/figures``), both git-ignored: the figures show the
@@ -95,34 +101,43 @@ def cotton_neighbours(scene, s):
 
 
 # --------------------------------------------------------------------------------------------
-def run_cotton(args, data, out, figdir, log):
-    from vibr.evaluate import Setting, evaluate, write_report
-    from vibr.io import load_scene
+def cotton_settings():
+    from vibr.evaluate import Setting
 
-    scene = load_scene(data / "hci2016_cotton")
-    scene.meta.setdefault("scale", 1.0)
-    settings = ([Setting("ulr"), Setting("savsr", {"alpha": 1.0, "lam": 0.1}),
-                 Setting("bvs", {"alpha": 1.0, "lam": 0.1})]
-                + [Setting("gradient", {"alpha": 1.0, "gamma": float(g), "lam": 0.1}) for g in (0, 1, 2, 3)])
-    fig_labels = [settings[i].label for i in (0, 1, 2, 4, 6)]  # ulr, savsr, bvs, gamma 1, gamma 3
-    reports = []
+    return ([Setting("ulr"), Setting("savsr", {"alpha": 1.0, "lam": 0.1}),
+             Setting("bvs", {"alpha": 1.0, "lam": 0.1})]
+            + [Setting("gradient", {"alpha": 1.0, "gamma": float(g), "lam": 0.1}) for g in (0, 1, 2, 3)])
+
+
+def cotton_cases(args, out, figdir):
+    """One case per (stride, depth): a task of vibr.executor.run_tasks (see run_case)."""
+    cases = []
     for s in args.strides:
         for depth in args.cotton_depths:
-            t0 = time.perf_counter()
             figs = figdir if (s == args.figure_stride and depth in ("estimated", "planar")) else None
-            rep = evaluate(scene, "input_Cam040", settings, sources=cotton_neighbours(scene, s), depth=depth,
-                           border=2, mask="reconstructed", figures=figs, figure_labels=fig_labels,
-                           figure_prefix=f"cotton_s{s}_{depth}", figure_downscale=2, view_split=4,
-                           use_lpips=False)
-            rep["stride"] = s
-            rep["wall_seconds"] = round(time.perf_counter() - t0, 2)
-            rep["report_file"] = str(out / f"cotton_s{s}_{depth}.json")
-            write_report(rep, rep["report_file"])
-            reports.append(rep)
-            best = max(rep["results"], key=lambda r: r["psnr"])
-            log(f"cotton stride {s} {depth}: {rep['wall_seconds']:.0f} s (depth {rep['depth_seconds']:.0f} s); "
-                f"best {best['label']} {best['psnr']:.2f} dB")
-    return reports
+            cases.append({"kind": "cotton", "stride": s, "depth": depth, "figures": figs and str(figs),
+                          "report_file": str(out / f"cotton_s{s}_{depth}.json")})
+    return cases
+
+
+def _cotton_case(scene, case):
+    from vibr.evaluate import evaluate
+
+    s, depth = case["stride"], case["depth"]
+    settings = cotton_settings()
+    fig_labels = [settings[i].label for i in (0, 1, 2, 4, 6)]  # ulr, savsr, bvs, gamma 1, gamma 3
+    rep = evaluate(scene, "input_Cam040", settings, sources=cotton_neighbours(scene, s), depth=depth,
+                   border=2, mask="reconstructed", figures=case["figures"], figure_labels=fig_labels,
+                   figure_prefix=f"cotton_s{s}_{depth}", figure_downscale=2, view_split=4,
+                   use_lpips=False)
+    rep["stride"] = s
+    return rep
+
+
+def cotton_log(rep):
+    best = max(rep["results"], key=lambda r: r["psnr"])
+    return (f"cotton stride {rep['stride']} {rep['depth']}: {rep['wall_seconds']:.0f} s "
+            f"(depth {rep['depth_seconds']:.0f} s); best {best['label']} {best['psnr']:.2f} dB")
 
 
 def fountain_settings():
@@ -156,28 +171,69 @@ def fountain_figure_labels(settings):
     return out
 
 
-def run_fountain(args, data, out, figdir, log, scale, targets, settings=None, tag=""):
-    from vibr.evaluate import evaluate, write_report
-    from vibr.io import load_scene
+def fountain_cases(out, figdir, scale, targets, settings=None, tag=""):
+    """One case per fountain target at image scale ``scale`` (see run_case)."""
+    return [{"kind": "fountain", "scale": scale, "target": t, "settings": settings, "tag": tag,
+             "figures": str(figdir), "report_file": str(out / f"fountain_{t}{tag}.json")} for t in targets]
+
+
+def _fountain_case(scene, case):
+    from vibr.evaluate import evaluate
+
+    settings = case["settings"] or fountain_settings()
+    scale, t = case["scale"], case["target"]
+    return evaluate(scene, t, settings, depth="estimated", estimate_kw=dict(FOUNTAIN_ESTIMATE), border=2,
+                    mask="reconstructed", figures=case["figures"], figure_labels=fountain_figure_labels(settings),
+                    figure_prefix=f"fountain_{t}{case['tag']}", figure_downscale=max(1, round(12 * scale)),
+                    view_split=2, use_lpips=False)
+
+
+def fountain_log(rep):
+    return (f"fountain {rep['target']} at scale {rep['scale']:g}: {rep['wall_seconds']:.0f} s "
+            f"(depth {rep['depth_seconds']:.0f} s)")
+
+
+class SceneCache:
+    """Per-worker context of run_case: each scene (name, image scale) loaded once per worker."""
+
+    def __init__(self, data):
+        self.data = Path(data)
+        self.scenes = {}
+
+    def get(self, name, scale):
+        from vibr.io import load_scene
+
+        if (name, scale) not in self.scenes:
+            sc = load_scene(self.data / name, scale=scale)
+            sc.meta["scale"] = scale
+            self.scenes[(name, scale)] = sc
+        return self.scenes[(name, scale)]
+
+
+def run_case(cache, case):
+    """One table case (a task of vibr.executor.run_tasks): evaluate, write the JSON report
+    atomically, return it. A benchmark measures: existing reports are recomputed, not skipped."""
+    from vibr.evaluate import write_report
 
     t0 = time.perf_counter()
-    scene = load_scene(data / "strecha_fountain-P11", scale=scale)
-    scene.meta["scale"] = scale
-    log(f"fountain loaded at scale {scale:g} ({scene.views[0].shape[1]}x{scene.views[0].shape[0]}) "
-        f"in {time.perf_counter() - t0:.1f} s")
-    settings = settings or fountain_settings()
-    reports = []
-    for t in targets:
-        t0 = time.perf_counter()
-        rep = evaluate(scene, t, settings, depth="estimated", estimate_kw=dict(FOUNTAIN_ESTIMATE), border=2,
-                       mask="reconstructed", figures=figdir, figure_labels=fountain_figure_labels(settings),
-                       figure_prefix=f"fountain_{t}{tag}", figure_downscale=max(1, round(12 * scale)),
-                       view_split=2, use_lpips=False)
-        rep["wall_seconds"] = round(time.perf_counter() - t0, 2)
-        rep["report_file"] = str(out / f"fountain_{t}{tag}.json")
-        write_report(rep, rep["report_file"])
-        reports.append(rep)
-        log(f"fountain {t} at scale {scale:g}: {rep['wall_seconds']:.0f} s (depth {rep['depth_seconds']:.0f} s)")
+    if case["kind"] == "cotton":
+        rep = _cotton_case(cache.get("hci2016_cotton", 1.0), case)
+    else:
+        rep = _fountain_case(cache.get("strecha_fountain-P11", case["scale"]), case)
+    rep["wall_seconds"] = round(time.perf_counter() - t0, 2)
+    rep["report_file"] = case["report_file"]
+    write_report(rep, rep["report_file"])
+    return rep
+
+
+def run_cases(args, data, cases, log):
+    """All cases through the executor (--workers / --dask; serial by default), logged in order."""
+    from vibr.executor import run_tasks
+
+    reports = run_tasks(run_case, cases, setup=SceneCache, setup_args=(str(data),), executor=args.executor,
+                        desc="paper tables")
+    for rep in reports:
+        log(cotton_log(rep) if "stride" in rep else fountain_log(rep))
     return reports
 
 
@@ -553,7 +609,19 @@ def main(argv=None):
     ap.add_argument("--report-only", action="store_true",
                     help="only rewrite --doc from the JSON reports of the last run in --out")
     ap.add_argument("--quick", action="store_true", help="smoke run: stride 2, gt+planar, view 5 at 0.0625, no large row")
+    ex = ap.add_mutually_exclusive_group()
+    ex.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes (vibr.executor)")
+    ex.add_argument("--dask", metavar="ADDRESS|local", help="run the cases on a Dask scheduler, or 'local' "
+                    "(a LocalCluster of 2 workers x 1 thread); needs pip install 'vibr[dask]'")
     args = ap.parse_args(argv)
+    args.executor = args.dask if args.dask else args.workers
+    if args.dask:
+        from vibr.executor import require_distributed
+
+        try:
+            require_distributed()
+        except Exception as exc:  # one line, no traceback
+            sys.exit(f"paper_tables.py: {exc}")
     if args.quick:
         args.strides, args.cotton_depths, args.targets = "2", "gt,planar", "0005"
         args.fountain_scale, args.large_scale = 0.0625, 0.0
@@ -589,16 +657,20 @@ def main(argv=None):
 
     log(f"python {platform.python_version()}, {os.cpu_count()} CPUs, NUMBA_NUM_THREADS="
         f"{os.environ.get('NUMBA_NUM_THREADS', 'unset')}, load {load0[0]:.2f}")
-    cotton = [] if "cotton" in skip else run_cotton(args, data, args.out, figdir, log)
     targets = [t for t in args.targets.split(",") if t]
-    fountain = [] if "fountain" in skip else run_fountain(args, data, args.out, figdir, log, args.fountain_scale, targets)
-    large = []
+    cases = [] if "cotton" in skip else cotton_cases(args, args.out, figdir)
+    if "fountain" not in skip:
+        cases += fountain_cases(args.out, figdir, args.fountain_scale, targets)
     if args.large_scale and "large" not in skip:
         from vibr.evaluate import Setting
 
         st = [Setting("ulr")] + [Setting("gradient", {"alpha": a, "gamma": g, "lam": l}) for a, g, l in PAPER_SETTINGS]
-        large = run_fountain(args, data, args.out, figdir, log, args.large_scale, [args.large_target],
-                             settings=st, tag=f"_x{args.large_scale:g}")
+        cases += fountain_cases(args.out, figdir, args.large_scale, [args.large_target], settings=st,
+                                tag=f"_x{args.large_scale:g}")
+    reports = run_cases(args, data, cases, log)
+    cotton = [r for r, c in zip(reports, cases) if c["kind"] == "cotton"]
+    fountain = [r for r, c in zip(reports, cases) if c["kind"] == "fountain" and not c["tag"]]
+    large = [r for r, c in zip(reports, cases) if c["kind"] == "fountain" and c["tag"]]
     t_total = time.perf_counter() - t_all
     log(f"total {t_total:.0f} s")
     name = lambda r: Path(r["report_file"]).name  # noqa: E731
