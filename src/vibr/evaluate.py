@@ -22,7 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import VibrInputError
-from .metrics import dssim, psnr, ssim
+from .metrics import METRIC_BORDER, dssim, psnr, view_metrics
 from .progress import progress
 from .render.methods import METHODS
 from .scene import Scene
@@ -69,7 +69,7 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = (0
 def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
              sources: Sequence[int | str] | None = None, depth: str = "auto",
              depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
-             border: int = 0, figures: str | Path | None = None, estimate_kw: dict | None = None,
+             border: int = METRIC_BORDER, figures: str | Path | None = None, estimate_kw: dict | None = None,
              render_kw: dict | None = None, intensity_scale: float | None = None,
              geometry_kw: dict | None = None, figure_labels: Sequence[str] | None = None,
              figure_prefix: str | None = None, figure_downscale: int = 1,
@@ -165,9 +165,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
             "params": {**used, **s.params},
             "intensity_scale": float(used.get("scale", intensity_scale)),
             "depth": depth,
-            "psnr": float(psnr(res.image, ref, mask=m, border=border)),
-            "ssim": float(ssim(res.image, ref, mask=m, border=border)),
-            "dssim": float(dssim(res.image, ref, mask=m, border=border)),
+            **{k: float(v) for k, v in view_metrics(res.image, ref, m, border).items()},
             "seconds": round(dt, 3),
             "coverage": float(np.asarray(res.coverage, bool).mean()),
             "iterations": len(getattr(res, "energy", []) or []),
