@@ -24,7 +24,7 @@ import numpy as np
 from .errors import VibrInputError
 from .metrics import METRIC_BORDER, dssim, psnr, view_metrics
 from .progress import progress
-from .render.methods import METHODS
+from .render.methods import METHODS, get_method
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -49,11 +49,10 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = (0
     every variational method once per alpha and lambda given."""
     out = []
     for m in methods:
-        if m not in METHODS:
-            raise VibrInputError(f"unknown method {m!r} (choose from {', '.join(METHODS)})")
-        gs = list(gammas) if m == "gradient" else [None]
-        al = [None] if (m == "ulr" or not alphas) else list(alphas)
-        lm = [None] if (m == "ulr" or not lams) else list(lams)
+        spec = get_method(m)  # what the method uses decides which parameters vary
+        gs = list(gammas) if spec.gradient else [None]
+        al = [None] if (not spec.solve or not alphas) else list(alphas)
+        lm = [None] if (not spec.solve or not lams) else list(lams)
         for g, a, l in itertools.product(gs, al, lm):
             p = {}
             if a is not None:
@@ -115,7 +114,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
     from .render import render
 
     if mask not in ("reconstructed", "all"):
-        raise VibrInputError(f"--mask must be 'reconstructed' or 'all', not {mask!r}")
+        raise VibrInputError(f"mask must be 'reconstructed' or 'all', not {mask!r}")
     settings = list(settings)
     if not settings:
         raise VibrInputError("no setting to evaluate")
