@@ -42,6 +42,7 @@ def register(sub) -> None:
     p.add_argument("--exclude", default=None, help="comma-separated views never used as inputs")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.25; the output has that size (default 1)")
+    p.add_argument("--resize", dest="scale", type=float, help=argparse.SUPPRESS)  # the old name
     p.add_argument("--depth-scale", type=float, default=1.0,
                    help="scale of the estimation relative to the loaded scene; the maps are "
                         "upsampled back to its size (default 1)")
