@@ -77,7 +77,7 @@ def run(args) -> int:
         raise VibrInputError(f"--views must be at least 1, got {args.views}")
     sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views)
-    res = render(sources, target, args.method, progress_bar=True, verbose=True, **render_params(args))
+    res = render(sources, target, args.method, progress_bar=True, **render_params(args))  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth)
     t = res.times
     logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
