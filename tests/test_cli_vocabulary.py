@@ -11,9 +11,7 @@ def scene_dir(tmp_path_factory):
     from vibr.io import save_scene
     from vibr.synthetic import make_scene
 
-    d = tmp_path_factory.mktemp("vocab")
-    save_scene(make_scene("grid", n_views=9, width=48, height=48, seed=2), d / "s")
-    return d / "s"
+    return save_scene(make_scene("grid", n_views=9, width=48, height=48, seed=2), tmp_path_factory.mktemp("v") / "s")
 
 
 def test_render_bit_depth_and_metric_rule(scene_dir, tmp_path, capsys):

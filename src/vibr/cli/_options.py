@@ -99,3 +99,15 @@ def add_bit_depth_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
                    help="bits per channel of the PNG written (default: 8; 16 keeps the solver's "
                         "precision)")
+
+
+def names(text: str) -> list[str]:
+    """'a, b,3' → ['a', 'b', '3'] (an argparse type)."""
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def add_source_options(p: argparse.ArgumentParser) -> None:
+    """``--sources`` (a list) and ``--views K`` (the K best), as :func:`vibr.pipeline.prepare`."""
+    p.add_argument("--sources", type=names, help="comma-separated source views (default: all others)")
+    p.add_argument("--views", type=int, metavar="K",
+                   help="render from the K best source views for the target (ULR ranking; default: all)")

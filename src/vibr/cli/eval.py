@@ -7,8 +7,8 @@ import argparse
 from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS
 from . import add_quiet
-from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, check_depth_args,
-                       method_help)
+from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
+                       check_depth_args, method_help, names)
 
 _DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
@@ -49,19 +49,14 @@ def _floats(s):
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}") from None
 
 
-def _names(s):
-    return [x.strip() for x in s.split(",") if x.strip()]
-
-
 def register(sub) -> None:
     p = sub.add_parser("eval", help="render held-out views and measure PSNR / DSSIM (paper protocol)",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene folder or transforms.json")
     p.add_argument("--target", required=True, help="view to hold out and render (name or index)")
-    p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
-    p.add_argument("--views", type=int, metavar="K", help="use only the K best source views for the target")
+    add_source_options(p)
     add_depth_options(p)
-    p.add_argument("--method", type=_names, default=list(METHODS),
+    p.add_argument("--method", type=names, default=list(METHODS),
                    help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
     p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)})")

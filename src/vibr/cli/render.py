@@ -8,7 +8,7 @@ import os
 
 from . import add_quiet
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
-                       add_render_params, check_depth_args, render_params)
+                       add_render_params, add_source_options, check_depth_args, render_params)
 
 logger = logging.getLogger(__name__)
 
@@ -30,10 +30,6 @@ examples:
 """
 
 
-def _names(s):
-    return [x.strip() for x in s.split(",") if x.strip()]
-
-
 def register(sub) -> None:
     p = sub.add_parser("render", help="render a view (held-out view or camera file) of a scene",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -45,10 +41,8 @@ def register(sub) -> None:
     add_bit_depth_option(p)
     add_method_option(p)
     add_render_params(p)
-    p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
+    add_source_options(p)
     add_depth_options(p)
-    p.add_argument("--views", type=int, metavar="K",
-                   help="render from the K best source views for the target (ULR ranking; default: all)")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.5; a camera-file target is scaled "
                         "with it (default 1)")
