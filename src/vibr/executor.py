@@ -191,10 +191,9 @@ def _init_process(threads: int, setup, setup_args) -> None:
 
 
 def _quiet_worker() -> None:
-    """No progress bars or status lines from workers: the driver's bar counts their tasks."""
-    from .progress import set_quiet
-
-    set_quiet(True)
+    """No progress bars or status lines from workers (warnings only): the driver's bar counts
+    their tasks."""
+    logging.getLogger("vibr").setLevel(logging.WARNING)
 
 
 def _call_in_process(fn, task):

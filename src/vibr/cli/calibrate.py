@@ -29,7 +29,8 @@ def register(sub) -> None:
     p.add_argument("photos", metavar="PHOTOS_DIR", help="folder of photos (jpg/png/tif), not recursive")
     p.add_argument("out", metavar="OUT_SCENE", help="output scene folder (must not exist unless --overwrite)")
     p.add_argument("--scale", type=float, default=1.0,
-                   help="resize the photos by this factor first (e.g. 0.5: 3072x2048 -> 1536x1024; default 1)")
+                   help="image scale the photos are calibrated at, e.g. 0.5: 3072x2048 -> 1536x1024 "
+                        "(default 1)")
     p.add_argument("--matcher", choices=["exhaustive", "sequential"], default="exhaustive",
                    help="exhaustive: all pairs (default, best up to ~100 photos); "
                    "sequential: neighbours in file-name order (video-like captures)")
@@ -50,14 +51,13 @@ def register(sub) -> None:
     p.add_argument("--work", metavar="DIR", default=None,
                    help="keep COLMAP's database, model and undistorted images here")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_SCENE if it exists")
-    p.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
     add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..calibrate import calibrate
-    from ..progress import log
+    from . import verbosity
 
     scene = calibrate(
         args.photos,
@@ -73,7 +73,7 @@ def run(args) -> int:
         num_threads=args.threads,
         seed=args.seed,
         work_dir=args.work,
-        verbose=args.verbose,
+        verbose=verbosity(args) > 0,  # -v shows COLMAP's own log
     )
-    log(f"calibrate: wrote {len(scene)} views to {args.out}")
+    print(f"calibrate: wrote {len(scene)} views to {args.out}")
     return 0

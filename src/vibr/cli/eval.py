@@ -4,15 +4,20 @@ from __future__ import annotations
 
 import argparse
 
+from ..metrics import METRIC_BORDER
+from ..render.methods import DEFAULTS, METHODS
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
+from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
+                       check_depth_args, method_help, names)
 
-_DESC = """\
+_DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
 and setting, and compare with the real photograph: PSNR (dB, higher is better) and
 DSSIM = 1e4 * (1 - SSIM) (Wang et al. 2004, Gaussian window sigma 1.5; lower is better),
 over the pixels every method reconstructed (--mask reconstructed, as in the paper) or over
-the whole image. The target never takes part in depth estimation.
+the whole image, a {METRIC_BORDER}-px border excluded (--border): the rule of vibr render. The target
+never takes part in depth estimation.
 """
 
 _EPILOG = """\
@@ -34,15 +39,15 @@ variational method, and default to the renderer's documented defaults.
 """
 
 
+#: The gamma values of the paper's tables (one row each for the gradient method).
+GAMMAS = (0, 1, 2, 3)
+
+
 def _floats(s):
     try:
         return [float(x) for x in s.split(",") if x.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}") from None
-
-
-def _names(s):
-    return [x.strip() for x in s.split(",") if x.strip()]
 
 
 def register(sub) -> None:
@@ -53,23 +58,17 @@ def register(sub) -> None:
                    help="view to hold out and render (name or index); 'all' or a comma list: "
                         "leave-one-out over those views (one task each, see --workers / --dask), "
                         "--json then holds per-view results and their mean / median")
-    p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
-    p.add_argument("--views", type=int, metavar="K", help="use only the K best source views for the target")
-    p.add_argument("--depth", default="gt", choices=["gt", "auto", "estimated", "planar", "files"],
-                   help="geometry of the sources (default: gt, the depth given with the scene; auto: "
-                        "gt when the scene has depth, else estimated)")
-    p.add_argument("--depth-files", metavar="DIR", help="folder of NAME.npy/.pfm/.png depth maps for --depth files")
-    p.add_argument("--method", type=_names, default=["ulr", "savsr", "bvs", "gradient"],
-                   help="comma-separated methods among ulr, savsr, bvs, gradient (default: all)")
-    p.add_argument("--gamma", type=_floats, default=[0, 1, 2, 3], help="gradient-term weights (default: 0,1,2,3)")
-    p.add_argument("--alpha", type=_floats, help="colour-term weights (default: the renderer's)")
-    p.add_argument("--lam", type=_floats, help="TV weights (default: the renderer's)")
+    add_source_options(p)
+    add_depth_options(p)
+    p.add_argument("--method", type=names, default=list(METHODS),
+                   help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
+    p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
+                   help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)})")
+    p.add_argument("--alpha", type=_floats, help=f"colour-term weights (default: {DEFAULTS['alpha']:g})")
+    p.add_argument("--lam", type=_floats, help=f"TV weights (default: {DEFAULTS['lam']:g})")
     p.add_argument("--scale", type=float, default=1.0,
                    help="IMAGE scale the scene is loaded at, e.g. 0.25 (default: 1)")
-    p.add_argument("--intensity-scale", type=float, default=None, metavar="S",
-                   help="INTENSITY scale the render parameters (lam, sigma_s, ...) refer to: 255 "
-                        "means grey levels of 8-bit images, 1 means [0, 1] intensities "
-                        "(default: the renderer's, 255)")
+    add_intensity_scale_option(p)
     p.add_argument("--step-px", type=float, default=None,
                    help="--depth estimated: parallax step between sweep planes, px (default: the estimator's)")
     p.add_argument("--max-planes", type=int, default=None,
@@ -79,10 +78,9 @@ def register(sub) -> None:
                         "(default: the estimator's coarse sweep)")
     p.add_argument("--mask", choices=["reconstructed", "all"], default="reconstructed",
                    help="pixels the metrics are taken over (default: reconstructed)")
-    p.add_argument("--border", type=int, default=0, help="pixels excluded at the image border (default: 0)")
-    p.add_argument("--psf", choices=["bilinear", "footprint"], default=None,
-                   help="image-formation model of the variational methods: bilinear (default) or "
-                        "footprint (the source pixel's parallelogram)")
+    p.add_argument("--border", type=int, default=METRIC_BORDER,
+                   help=f"pixels excluded at each image edge (default: {METRIC_BORDER}, as vibr render)")
+    add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
     add_executor_args(p)
@@ -96,6 +94,7 @@ def run(args) -> int:
 
     from ..errors import VibrInputError
 
+    check_depth_args(args)
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")

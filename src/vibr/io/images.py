@@ -9,6 +9,8 @@ and read back is bit-for-bit the array that was written whenever it lies on that
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 import struct
 import warnings
@@ -19,6 +21,9 @@ from numba import njit, prange
 
 from ..errors import VibrInputError, require_file
 from .atomic import atomic_path
+
+#: Set by :func:`headers_only`: :func:`build_views` then reads image headers, not pixels.
+_HEADERS_ONLY = contextvars.ContextVar("vibr_headers_only", default=False)
 
 #: Image file extensions recognised when scanning folders.
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
@@ -236,8 +241,11 @@ def write_image(path, img: np.ndarray, bits: int | None = None) -> None:
     """Write an H×W×3 (or H×W) float image in [0, 1] atomically.
 
     PNG files are 8-bit when the image is exactly representable in 8 bits, else 16-bit
-    (``bits`` forces one); JPEG is always 8-bit.
+    (``bits`` = 8 or 16 forces one: a rendered view is 8-bit unless asked); JPEG is always
+    8-bit.
     """
+    if bits not in (None, 8, 16):
+        raise VibrInputError(f"bit depth must be 8 or 16, got {bits}", path)
     import imageio.v3 as iio
 
     path = os.fspath(path)
@@ -275,14 +283,17 @@ def _block_mean(img, k):  # pragma: no cover - compiled
     return out
 
 
-def resize_image(img: np.ndarray, shape) -> np.ndarray:
-    """Resize an H×W×3 image to ``shape = (h, w)`` with anti-aliasing; result on the 16-bit
-    grid (:func:`quantise16`).
+def resize_image(img: np.ndarray, shape, *, box: bool = True, mode: str = "edge",
+                 quantise: bool = True) -> np.ndarray:
+    """Resize an H×W(×C) image to ``shape = (h, w)`` with anti-aliasing (the one image
+    resize of vibr: scene loading and depth estimation).
 
-    Large reductions first average k×k blocks (k the largest of 16, 8, 4, 2 with ``k ≤ 1/s``
-    that divides H and W: a box filter, fast), then skimage.transform.resize (bilinear,
-    Gaussian anti-aliasing) does the rest. Both map pixel centres as ``x' = s (x + ½) − ½``,
-    the mapping of :meth:`Camera.scaled`.
+    With ``box``, large reductions first average k×k blocks (k the largest of 16, 8, 4, 2
+    with ``k ≤ 1/s`` that divides H and W: a box filter, fast); skimage.transform.resize
+    (bilinear, Gaussian anti-aliasing when shrinking, border ``mode``) does the rest. Both
+    map pixel centres as ``x' = s (x + ½) − ½``, the mapping of :meth:`Camera.scaled`. With
+    ``quantise`` the result is on the 16-bit grid (:func:`quantise16`), as a loaded image
+    is; float32 in any case.
     """
     from skimage.transform import resize
 
@@ -291,7 +302,7 @@ def resize_image(img: np.ndarray, shape) -> np.ndarray:
     if (H, W) == shape:
         return img
     inv = min(H / shape[0], W / shape[1])
-    for k in (16, 8, 4, 2):
+    for k in (16, 8, 4, 2) if box else ():
         if k <= inv + 1e-9 and H % k == 0 and W % k == 0:
             grey = img.ndim == 2
             img = _block_mean(np.ascontiguousarray(img[..., None] if grey else img, dtype=np.float32), k)
@@ -300,8 +311,9 @@ def resize_image(img: np.ndarray, shape) -> np.ndarray:
     if img.shape[:2] != shape:
         img = resize(img.astype(np.float32), shape + img.shape[2:], order=1,
                      anti_aliasing=shape[0] < img.shape[0] or shape[1] < img.shape[1],
-                     preserve_range=True, mode="edge")
-    return quantise16(np.asarray(img, dtype=np.float32))
+                     preserve_range=True, mode=mode)
+    img = np.asarray(img, dtype=np.float32)
+    return quantise16(img) if quantise else img
 
 
 def resize_depth(depth: np.ndarray, shape) -> np.ndarray:
@@ -342,18 +354,25 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     if scale <= 0 or not np.isfinite(scale):
         raise VibrInputError(f"scale must be positive, got {scale}")
 
+    headers = _HEADERS_ONLY.get()
+
     def work(e):
-        img = read_image(e["path"])
+        if headers:
+            w, h = image_size(e["path"])
+            img, size = None, (h, w)
+        else:
+            img = read_image(e["path"])
+            size = img.shape[:2]
         cam = e["camera"]
-        if img.shape[:2] != cam.shape:
+        if size != cam.shape:
             if check_size:
                 raise VibrInputError(
-                    f"image is {img.shape[1]}x{img.shape[0]} but its camera says {cam.width}x{cam.height}",
+                    f"image is {size[1]}x{size[0]} but its camera says {cam.width}x{cam.height}",
                     e["path"])
         depth, sz = e.get("depth"), e.get("sigma_z")
         if scale != 1.0:
             cam = cam.scaled(scale)
-            img = resize_image(img, cam.shape)
+            img = None if img is None else resize_image(img, cam.shape)
             if depth is not None:
                 depth = resize_depth(depth, cam.shape)
             if sz is not None and np.ndim(sz) == 2:
@@ -365,3 +384,15 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     with ThreadPoolExecutor(max_workers=workers) as ex:
         views = list(progress(ex.map(work, entries), desc=desc, total=n, unit="img"))
     return views
+
+
+@contextlib.contextmanager
+def headers_only():
+    """Within this block, scenes load without their pixels: :func:`build_views` (every
+    loader's image reader) reads each image's size from its header and leaves
+    ``View.image`` None; cameras, depth and metadata load as usual (``vibr info``)."""
+    token = _HEADERS_ONLY.set(True)
+    try:
+        yield
+    finally:
+        _HEADERS_ONLY.reset(token)
