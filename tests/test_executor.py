@@ -62,30 +62,33 @@ def test_processes_round_trip(tmp_path):
     assert os.environ.get("NUMBA_NUM_THREADS") == before  # this process's environment restored
 
 
-def test_dask_local_cluster_round_trip(tmp_path):
-    res = run_tasks(T.square_probe, range(8), setup=T.setup_probe, setup_args=(str(tmp_path),),
-                    executor="local")
-    _check_workers(res, tmp_path, 2)
-
-
-def test_dask_client_given_and_transient_errors_retried(tmp_path):
-    """A Client passed in is used and left open; a task that raises once is retried."""
+@pytest.fixture(scope="module")
+def client():
+    """One real LocalCluster (2 worker processes x 1 thread, as --dask local) for the Dask tests."""
     from vibr.executor import start_local_cluster
 
-    with start_local_cluster(1) as cluster, distributed.Client(cluster) as client:
-        out = run_tasks(T.fail_once, ["a", "b"], setup=str, setup_args=(str(tmp_path),), executor=client)
-        assert out == ["a", "b"]
-        assert client.status == "running"
-        with pytest.raises(RuntimeError, match="transient"):
-            run_tasks(T.fail_once, ["c"], setup=str, setup_args=(str(tmp_path),), executor=client, retries=0)
+    with start_local_cluster(2) as cluster, distributed.Client(cluster) as c:
+        yield c
+
+
+def test_dask_round_trip_and_transient_errors_retried(tmp_path, client):
+    """setup once per worker, numba threads, task order; a Client passed in is used and left
+    open; a task that raises once is retried, one that keeps raising fails the run."""
+    res = run_tasks(T.square_probe, range(8), setup=T.setup_probe, setup_args=(str(tmp_path),), executor=client)
+    _check_workers(res, tmp_path, 2)
+    out = run_tasks(T.fail_once, ["a", "b"], setup=str, setup_args=(str(tmp_path),), executor=client)
+    assert out == ["a", "b"] and client.status == "running"
+    with pytest.raises(RuntimeError, match="transient"):
+        run_tasks(T.fail_once, ["c"], setup=str, setup_args=(str(tmp_path),), executor=client, retries=0)
     assert run_tasks(T.fail_once, ["d", "e"], setup=str, setup_args=(str(tmp_path),), executor=2) == ["d", "e"]
 
 
-@pytest.mark.parametrize("executor", [2, "local"], ids=["processes", "dask-local"])
-def test_a_killed_worker_loses_nothing(tmp_path, executor):
+@pytest.mark.parametrize("engine", ["processes", "dask"])
+def test_a_killed_worker_loses_nothing(tmp_path, engine, request):
     """A task kills its own worker process the first time: the run still completes with every
     result present and correct (the process pool is replaced; Dask's nanny restarts the
     worker and the scheduler reruns the task)."""
+    executor = 2 if engine == "processes" else request.getfixturevalue("client")
     tasks = ["t0", "t1", "victim", "t3", "t4", "t5"]
     res = run_tasks(T.write_or_die, tasks, setup=str, setup_args=(str(tmp_path),), executor=executor)
     assert [r["task"] for r in res] == tasks
@@ -128,7 +131,7 @@ def scene_dir(tmp_path_factory):
 def _eval_all(scene_dir, out, *extra):
     from vibr.cli import main
 
-    rc = main(["-q", "eval", str(scene_dir), "--target", "view_000,view_004,view_008", "--method",
+    rc = main(["-q", "eval", str(scene_dir), "--target", "view_000,view_008", "--method",
                "ulr,gradient", "--gamma", "1", "--json", str(out), *extra])
     assert rc == 0
     return json.loads(Path(out).read_text())
@@ -138,11 +141,11 @@ def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path):
     from vibr.evaluate_all import results_only
 
     serial = _eval_all(scene_dir, tmp_path / "serial.json")
-    assert list(serial["per_view"]) == ["view_000", "view_004", "view_008"]
+    assert list(serial["per_view"]) == ["view_000", "view_008"]
     for label, s in serial["summary"].items():
         ps = [r["psnr"] for v in serial["per_view"].values() for r in v["results"] if r["label"] == label]
-        assert s["n"] == 3 and s["psnr"]["mean"] == pytest.approx(sum(ps) / 3)
-        assert s["psnr"]["median"] == sorted(ps)[1]
+        assert s["n"] == 2 and s["psnr"]["mean"] == pytest.approx(sum(ps) / 2)
+        assert s["psnr"]["median"] == pytest.approx(sum(ps) / 2)
     procs = _eval_all(scene_dir, tmp_path / "procs.json", "--workers", "2")
     dask = _eval_all(scene_dir, tmp_path / "dask.json", "--dask", "local")
     assert {v["worker_pid"] for v in dask["per_view"].values()} != {os.getpid()}
