@@ -43,6 +43,10 @@ def run(args) -> int:
     from ..synthetic import make_scene
     from ..progress import log
 
+    from ..io.outputs import check_output
+
+    if args.output is not None:
+        check_output(args.output, "file", what="-o")
     t0 = time.perf_counter()
     n = 9 if args.layout == "grid" else 8
     scene = make_scene(layout=args.layout, n_views=n, width=args.size, height=args.size, seed=args.seed)

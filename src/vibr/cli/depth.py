@@ -74,7 +74,8 @@ def register(sub) -> None:
                    help="dense output (MVS): fill unknown pixels from the planes of their colour "
                    "segments, then re-run the weighted median (docs/DEPTH.md). Better depth "
                    "maps; the renderer does better with the unknown pixels left out")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    p.add_argument("--overwrite", "--force", dest="overwrite", action="store_true",
+                   help="replace OUT if vibr wrote it (never a folder holding other files)")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -86,6 +87,7 @@ def _split(s):
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, save_scene
+    from ..io.outputs import check_not_input, check_output, check_replaceable
     from ..stereo import estimate_depth
 
     src = Path(args.scene)
@@ -97,8 +99,16 @@ def run(args) -> int:
         if args.resize != 1.0:
             raise VibrInputError("--resize needs -o OUT (an in-place update keeps the scene's size)", src)
         out = tj.parent
+        check_output(out, "dir", overwrite=True, what="SCENE")
+        try:  # an in-place update replaces only a folder vibr wrote
+            check_replaceable(out)
+        except VibrInputError as exc:
+            raise VibrInputError(f"not updated in place ({exc.problem}); give -o OUT", out) from None
     else:
-        out = Path(args.out)
+        out = check_output(args.out, "dir", overwrite=args.overwrite, what="-o")
+        check_not_input(out, [args.scene])
+        if out.is_dir():
+            check_replaceable(out)
     scene = load_scene(args.scene, scale=args.resize)
     opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                              ("refine_iter", args.refine_iter),
@@ -110,7 +120,7 @@ def run(args) -> int:
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
                          consistency=not args.no_consistency, fill_segments=args.fill_segments, **opt)
     info = est.meta["depth_estimation"]
-    save_scene(est, out, overwrite=in_place or args.force)
+    save_scene(est, out, overwrite=in_place or args.overwrite, in_place=in_place)
     tv = [v for v in info["views"].values() if v.get("role") == "target"]
     kept = [v["kept"] for v in tv]
     filled = sum(v.get("filled", 0.0) for v in tv)

@@ -91,6 +91,11 @@ def run(args) -> int:
 
     from ..errors import VibrInputError
 
+    from ..io.outputs import check_output
+
+    check_output(args.json, "file", what="--json")
+    if args.figures is not None:
+        check_output(args.figures, "dir", what="--figures")
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")

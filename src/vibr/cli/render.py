@@ -70,8 +70,10 @@ def run(args) -> int:
     from ..io import load_scene, read_camera_json, write_image
     from ..pipeline import prepare
     from ..progress import is_quiet, log
+    from ..io.outputs import check_output
     from ..render import render
 
+    check_output(args.output, "file", what="-o")
     scene = load_scene(args.scene, scale=args.scale)
     tgt = args.target
     if tgt.lower().endswith(".json") or (os.path.isfile(tgt) and not tgt.isdigit()):

@@ -257,7 +257,7 @@ def _safe_name(name: str) -> str:
     return out or "view"
 
 
-def save_scene(scene: Scene, out_dir, *, overwrite: bool = False) -> Path:
+def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool = False) -> Path:
     """Write ``scene`` as a nerfstudio ``transforms.json`` folder (see the module docstring).
 
     Parameters
@@ -266,19 +266,35 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False) -> Path:
     out_dir : str or Path
         Created; if it exists, :class:`VibrInputError` unless ``overwrite``.
     overwrite : bool
-        Replace an existing ``out_dir`` (only after the new one is complete).
+        Replace an existing ``out_dir`` (only after the new one is complete), and only when
+        vibr wrote it: it has the marker :data:`vibr.io.outputs.MARKER` and holds nothing
+        but the files that marker lists (:func:`vibr.io.outputs.check_replaceable`).
+    in_place : bool
+        ``out_dir`` may be the scene's own folder (an in-place update; the scene's data is
+        in memory). Otherwise an ``out_dir`` that is or contains the scene's folder or one
+        of its files is refused.
 
-    Returns the output folder. Views without an image cannot be saved.
+    Returns the output folder. Views without an image cannot be saved. The folder gets a
+    marker file listing what vibr wrote, so that a later ``overwrite`` can replace it.
     """
     from concurrent.futures import ThreadPoolExecutor
 
     from ..progress import progress
 
+    from .outputs import check_not_input, check_replaceable, replace_folder, write_marker
+
     out = Path(out_dir).absolute()
+    if in_place:  # the scene is in memory; check_replaceable below guards its folder
+        if scene.root is None or Path(scene.root).resolve() != out.resolve():
+            raise VibrInputError("an in-place update must write to the scene's own folder", out)
+    else:
+        check_not_input(out, [scene.root] + [v.path for v in scene.views])
     if out.exists() and not overwrite:
-        raise VibrInputError("output folder already exists (use --force / overwrite=True to replace it)", out)
+        raise VibrInputError("output folder already exists (use --overwrite to replace it)", out)
     if out.exists() and not out.is_dir():
         raise VibrInputError("output path exists and is not a folder", out)
+    if out.exists():
+        check_replaceable(out)  # before the work, and again at the swap
     for v in scene.views:
         if v.image is None:
             raise VibrInputError(f"view {v.name} has no image to save", v.path)
@@ -350,13 +366,8 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False) -> Path:
             json.dump(doc, f, indent=2)
             f.write("\n")
 
-        if out.exists():
-            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-            os.replace(out, trash / "old")
-            os.replace(tmp, out)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
+        write_marker(tmp)
+        replace_folder(tmp, out, overwrite=overwrite)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
