@@ -214,6 +214,9 @@ def add_camera_path_seed() -> bool:
 
 def build_seed(seed: Seed, folder: Path) -> Path:
     """Write the seed's valid files into ``folder`` (made) and check that they load."""
+    from vibr.progress import set_quiet
+
+    set_quiet(True)
     folder.mkdir(parents=True, exist_ok=True)
     seed.build(folder)
     check_result(seed.load(folder))
@@ -446,7 +449,7 @@ class Outcome:
     status: str  # ok | vibr_error | unexpected | invalid | timeout | crashed
     message: str
     seconds: float
-    mem_bytes: int  # peak resident memory of the child above the parent's at the fork
+    mem_bytes: int  # the child's peak resident memory above its resident memory at the start
 
     @property
     def passed(self) -> bool:
@@ -468,6 +471,7 @@ def _child(fn, folder, mem_budget, w):
 
     set_quiet(True)
     status, msg = "ok", ""
+    rss0 = _rss_bytes()
     try:
         resource.setrlimit(resource.RLIMIT_AS, (_vm_bytes() + mem_budget, resource.RLIM_INFINITY))
         check_result(fn(folder))
@@ -479,7 +483,8 @@ def _child(fn, folder, mem_budget, w):
         status, msg = "invalid", f"invalid result: {exc}"
     except BaseException as exc:  # noqa: BLE001 - the property: nothing else escapes
         status, msg = "unexpected", "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))[-3000:]
-    os.write(w, pickle.dumps((status, msg)))
+    grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - rss0
+    os.write(w, pickle.dumps((status, msg, grown)))
 
 
 def run_case(fn, folder: Path, *, time_budget: float = 10.0, mem_budget: int = 2 << 30) -> Outcome:
@@ -516,10 +521,10 @@ def run_case(fn, folder: Path, *, time_budget: float = 10.0, mem_budget: int = 2
     if timed_out:
         return Outcome("timeout", f"over {time_budget:g} s", secs, mem)
     try:
-        st_, msg = pickle.loads(b"".join(chunks))
+        st_, msg, grown = pickle.loads(b"".join(chunks))
     except Exception:  # noqa: BLE001
         return Outcome("crashed", f"child died (status {status})", secs, mem)
-    return Outcome(st_, msg, secs, mem)
+    return Outcome(st_, msg, secs, max(0, grown))
 
 
 def fresh_copy(seed_dir: Path, work: Path) -> Path:

@@ -136,9 +136,9 @@ def select_entries(entries: list[dict], views, root=None) -> list[dict]:
     for k in views:
         if isinstance(k, int) or (isinstance(k, str) and k.strip().lstrip("-").isdigit() and k.strip() not in names):
             i = int(k)
-            if not -len(entries) <= i < len(entries):
-                raise VibrInputError(f"no view {i}: the scene has {len(entries)} views", root)
-            i %= len(entries)
+            if not 0 <= i < len(entries):  # -1 is an error, not the last view
+                raise VibrInputError(f"no view {i}: the scene has {len(entries)} views "
+                                     f"(indices 0 to {len(entries) - 1})", root)
         else:
             k = str(k).strip()
             stem = os.path.splitext(k)[0]

@@ -60,26 +60,43 @@ def is_hci_folder(path) -> bool:
 
 
 def _read_cfg(path: Path) -> dict:
-    cp = configparser.ConfigParser()
+    cp = configparser.ConfigParser(interpolation=None)
     try:
         cp.read(path, encoding="utf-8")
-        ins, ext = cp["intrinsics"], cp["extrinsics"]
-        out = {
-            "focal_mm": ins.getfloat("focal_length_mm"),
-            "res_x": ins.getint("image_resolution_x_px"),
-            "res_y": ins.getint("image_resolution_y_px"),
-            "sensor_mm": ins.getfloat("sensor_size_mm"),
-            "cols": ext.getint("num_cams_x"),
-            "rows": ext.getint("num_cams_y"),
-            "baseline_mm": ext.getfloat("baseline_mm"),
-            "focus_m": ext.getfloat("focus_distance_m"),
-        }
-        pose = {k: ext.getfloat(k) for k in ext if k.startswith("center_cam_")}
-    except (configparser.Error, KeyError, ValueError, TypeError) as exc:
-        raise VibrInputError(f"malformed parameters.cfg ({type(exc).__name__}: {exc})", path) from None
-    for k in ("focal_mm", "sensor_mm", "baseline_mm", "focus_m", "cols", "rows", "res_x", "res_y"):
-        if out[k] is None or not out[k] > 0:
-            raise VibrInputError(f"parameters.cfg: {k} must be positive", path)
+    except configparser.Error as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else "syntax error"
+        raise VibrInputError(f"malformed parameters.cfg: {msg[:120]}", path) from None
+    except UnicodeDecodeError:
+        raise VibrInputError("malformed parameters.cfg: not UTF-8 text", path) from None
+    keys = {"focal_mm": ("intrinsics", "focal_length_mm", float),
+            "res_x": ("intrinsics", "image_resolution_x_px", int),
+            "res_y": ("intrinsics", "image_resolution_y_px", int),
+            "sensor_mm": ("intrinsics", "sensor_size_mm", float),
+            "cols": ("extrinsics", "num_cams_x", int), "rows": ("extrinsics", "num_cams_y", int),
+            "baseline_mm": ("extrinsics", "baseline_mm", float),
+            "focus_m": ("extrinsics", "focus_distance_m", float)}
+    out = {}
+    for k, (sec, key, kind) in keys.items():
+        if not cp.has_section(sec):
+            raise VibrInputError(f"parameters.cfg has no [{sec}] section", path)
+        if not cp.has_option(sec, key):
+            raise VibrInputError(f"parameters.cfg: [{sec}] has no {key}", path)
+        raw = cp.get(sec, key)
+        try:
+            v = kind(raw)
+        except ValueError:
+            raise VibrInputError(f"parameters.cfg: {key} = {raw[:40]!r} is not "
+                                 f"{'an integer' if kind is int else 'a number'}", path) from None
+        if not (math.isfinite(v) and v > 0) or (kind is int and v > 100000):
+            raise VibrInputError(f"parameters.cfg: {key} must be positive and finite, got {raw[:40]}", path)
+        out[k] = v
+    pose = {}
+    for k in cp.options("extrinsics"):
+        if k.startswith("center_cam_"):
+            try:
+                pose[k] = float(cp.get("extrinsics", k))
+            except ValueError:
+                pose[k] = None  # informative only (meta), not used by the cameras
     out["pose"] = pose
     return out
 

@@ -416,6 +416,13 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     neighbours' depths from the consistency check.
     """
     t_all = time.perf_counter()
+    from ..validate import check_depth_params
+
+    check_depth_params(scale=scale, depth_range=depth_range, n_neighbours=n_neighbours, n_planes=n_planes,
+                       step_px=step_px, max_planes=max_planes, radius=radius, n_best=n_best, max_cost=max_cost,
+                       min_agree=min_agree, rel_tol=rel_tol, px_tol=px_tol, n_partners=n_partners, eps=eps,
+                       mem_bytes=mem_bytes, refine_iter=refine_iter, median_radius=median_radius,
+                       coverage_gain=coverage_gain, sweep_scale=sweep_scale, coarse_iter=coarse_iter)
     n = len(scene)
     excl = {scene.index(k) for k in exclude}
     if views is None:
