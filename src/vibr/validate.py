@@ -21,6 +21,8 @@ from __future__ import annotations
 import math
 import numbers
 
+import numpy as np
+
 from .errors import VibrInputError
 
 
@@ -100,3 +102,71 @@ def check_depth_params(**kw) -> None:
             raise VibrInputError(f"depth_range must be two numbers (near, far), got {dr!r}") from None
         if not (math.isfinite(near) and math.isfinite(far) and 0 < near < far):
             raise VibrInputError(f"depth_range must be finite with 0 < near < far, got ({near:g}, {far:g})")
+
+
+# ----------------------------------------------------------------------------- memory
+#: Estimated bytes per target pixel of a variational render besides its samples: the
+#: stencils (9 + 9 planes), right-hand sides (3 + 6), the image and the solver's buffers
+#: (≈ 18 planes), the TV duals (3 × 6 planes), float64 accumulations; float32 unless noted.
+RENDER_BYTES_PER_TARGET_PIXEL = 400
+#: Geometry buffers per target pixel and source view (z-buffer and visibility, float64).
+GEOMETRY_BYTES_PER_TARGET_PIXEL_VIEW = 16
+
+
+def available_memory() -> int | None:
+    """Bytes vibr may use: ``$VIBR_MEMORY_LIMIT_GB`` when set, else the system's
+    MemAvailable (Linux), else None (no check)."""
+    import os
+
+    env = os.environ.get("VIBR_MEMORY_LIMIT_GB")
+    if env:
+        try:
+            return int(float(env) * 2**30)
+        except ValueError:
+            raise VibrInputError(f"VIBR_MEMORY_LIMIT_GB must be a number of GB, got {env!r}") from None
+    try:
+        with open("/proc/meminfo") as f:
+            for ln in f:
+                if ln.startswith("MemAvailable:"):
+                    return int(ln.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(need: float, what: str, way_out: str, source=None) -> None:
+    """Refuse (one line) when ``need`` bytes exceed :func:`available_memory`."""
+    avail = available_memory()
+    if avail is not None and need > avail:
+        raise VibrInputError(f"{what} needs about {need / 2**30:.1f} GB of memory, "
+                             f"{avail / 2**30:.1f} GB available: {way_out}", source)
+
+
+def sample_bytes() -> int:
+    """Bytes of one :class:`vibr.geometry.Samples` entry, from its arrays' dtypes."""
+    from .geometry.samples import Samples
+
+    e = Samples.concatenate([], (1, 1))
+    return sum(int(a.dtype.itemsize * np.prod(a.shape[1:], dtype=np.int64))
+               for a in vars(e).values() if isinstance(a, np.ndarray))
+
+
+def render_memory(source_shapes, target_shape) -> int:
+    """Estimated peak bytes of a render of ``target_shape`` (H, W) from sources of the
+    given shapes: samples (at most one per source pixel landing in the target, ×1.5 for
+    the geometry's temporaries) plus the per-pixel buffers of the solve and the geometry
+    (docs/ERRORS.md)."""
+    th, tw = target_shape
+    tpx = float(th) * float(tw)
+    n_samples = sum(min(float(h) * float(w), 4.0 * tpx) for h, w in source_shapes)
+    return int(1.5 * n_samples * sample_bytes() + tpx * RENDER_BYTES_PER_TARGET_PIXEL
+               + tpx * len(source_shapes) * GEOMETRY_BYTES_PER_TARGET_PIXEL_VIEW)
+
+
+def check_render_memory(source_shapes, target_shape, source=None) -> None:
+    """Refuse a render whose :func:`render_memory` exceeds the available memory."""
+    th, tw = target_shape
+    check_memory(render_memory(source_shapes, target_shape),
+                 f"rendering {tw}x{th} from {len(source_shapes)} views",
+                 "render at a lower resolution (--scale 0.5, or a smaller camera) or from fewer "
+                 "views (--views K)", source)

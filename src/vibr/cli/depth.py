@@ -90,6 +90,13 @@ def run(args) -> int:
     from ..io.outputs import check_not_input, check_output, check_replaceable
     from ..stereo import estimate_depth
 
+    from ..validate import check_depth_params
+
+    check_depth_params(scale=args.scale, depth_range=args.depth_range, n_neighbours=args.neighbours,
+                       **{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                            ("refine_iter", args.refine_iter), ("median_radius", args.median_radius),
+                                            ("sweep_scale", args.sweep_scale), ("coarse_iter", args.coarse_iter))
+                          if v is not None})  # before loading the scene
     src = Path(args.scene)
     in_place = args.out is None
     if in_place:

@@ -74,6 +74,13 @@ def run(args) -> int:
     from ..render import render
 
     check_output(args.output, "file", what="-o")
+    from ..render.methods import method_params
+
+    method_params(args.method, alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
+                  sigma_z=args.sigma_z, scale=args.intensity_scale, n_outer=args.outer,
+                  max_iter=args.iterations)  # parameters checked before the work
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     scene = load_scene(args.scene, scale=args.scale)
     tgt = args.target
     if tgt.lower().endswith(".json") or (os.path.isfile(tgt) and not tgt.isdigit()):

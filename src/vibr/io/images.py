@@ -341,10 +341,18 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
 
     if scale <= 0 or not np.isfinite(scale):
         raise VibrInputError(f"scale must be positive, got {scale}")
+    from ..validate import check_memory
+
+    npx = sum(e["camera"].width * e["camera"].height for e in entries)  # float32 RGB + decoding
+    check_memory(16.0 * npx, f"loading {len(entries)} images ({npx / 1e6:.0f} Mpixels)",
+                 "load fewer views (--views) or resize the images first", entries[0]["path"] if entries else None)
 
     def work(e):
-        img = read_image(e["path"])
         cam = e["camera"]
+        if check_size and image_size(e["path"]) != (cam.width, cam.height):  # before decoding
+            w, h = image_size(e["path"])
+            raise VibrInputError(f"image is {w}x{h} but its camera says {cam.width}x{cam.height}", e["path"])
+        img = read_image(e["path"])
         if img.shape[:2] != cam.shape:
             if check_size:
                 raise VibrInputError(

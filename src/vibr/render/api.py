@@ -113,6 +113,9 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
         acc = sp.adjoint(np.ones(len(samples), np.float32))  # unweighted coverage Bᵀ1
     coverage = acc >= p["hole_threshold"]
     times["assembly"] += time.perf_counter() - t0
+    if not coverage.any():
+        raise VibrInputError("the target camera sees nothing of the scene (coverage 0 %): check its "
+                             "position, orientation and intrinsics")
 
     colour = samples.colour
     if method == "ulr":
@@ -304,7 +307,9 @@ def render(sources: Scene, target: View | Camera, method: str = "gradient", *,
     src = _prepare_sources(sources, target, depth)
     if samples is None:
         from ..geometry import compute_samples
+        from ..validate import check_render_memory
 
+        check_render_memory([v.camera.shape for v in src.views], cam.shape)  # before allocating
         samples = compute_samples(src, cam, **(geometry_kw or {}))
     t_geo = time.perf_counter() - t0
     res = render_samples(samples, method, source_centres=np.array([v.camera.centre for v in src.views]),
