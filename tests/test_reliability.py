@@ -188,6 +188,7 @@ def test_transforms_paths_stay_inside_the_scene(tmp_path, capsys, path):
 
     root = make_transforms(tmp_path / "s")
     _img(tmp_path / "outside.png")
+    (root / "images").mkdir()
     doc = json.loads((root / "transforms.json").read_text())
     doc["frames"][0]["file_path"] = path
     (root / "transforms.json").write_text(json.dumps(doc))
