@@ -17,8 +17,8 @@ killed at the time budget.
 
 from __future__ import annotations
 
-import io
 import json
+import logging
 import os
 import pickle
 import re
@@ -214,9 +214,7 @@ def add_camera_path_seed() -> bool:
 
 def build_seed(seed: Seed, folder: Path) -> Path:
     """Write the seed's valid files into ``folder`` (made) and check that they load."""
-    from vibr.progress import set_quiet
-
-    set_quiet(True)
+    logging.getLogger("vibr").setLevel(logging.WARNING)  # no status lines from the loaders
     folder.mkdir(parents=True, exist_ok=True)
     seed.build(folder)
     check_result(seed.load(folder))
@@ -467,9 +465,7 @@ def _vm_bytes() -> int:
 
 
 def _child(fn, folder, mem_budget, w):
-    from vibr.progress import set_quiet
-
-    set_quiet(True)
+    logging.getLogger("vibr").setLevel(logging.WARNING)  # no status lines from the loaders
     status, msg = "ok", ""
     rss0 = _rss_bytes()
     try:

@@ -50,7 +50,6 @@ def register(sub) -> None:
     p.add_argument("--work", metavar="DIR", default=None,
                    help="keep COLMAP's database, model and undistorted images here")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_SCENE if it exists")
-    p.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -58,7 +57,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..calibrate import calibrate
     from ..io.outputs import check_output
-    from ..progress import log
+    from . import verbosity
 
     check_output(args.out, "dir", overwrite=args.overwrite, what="OUT_SCENE")
     if args.work is not None:
@@ -77,7 +76,7 @@ def run(args) -> int:
         num_threads=args.threads,
         seed=args.seed,
         work_dir=args.work,
-        verbose=args.verbose,
+        verbose=verbosity(args) > 0,  # -v shows COLMAP's own log
     )
-    log(f"calibrate: wrote {len(scene)} views to {args.out}")
+    print(f"calibrate: wrote {len(scene)} views to {args.out}")
     return 0
