@@ -87,6 +87,9 @@ def _split(s):
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, save_scene
+    import shutil
+
+    from ..io.checkpoint import resume_folder
     from ..io.outputs import check_not_input, check_output, check_replaceable
     from ..stereo import estimate_depth
 
@@ -125,13 +128,17 @@ def run(args) -> int:
     est = estimate_depth(scene, views=_split(args.views), scale=args.scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
-                         consistency=not args.no_consistency, fill_segments=args.fill_segments, **opt)
+                         consistency=not args.no_consistency, fill_segments=args.fill_segments,
+                         checkpoint=resume_folder(out), **opt)  # a rerun after a kill resumes
     info = est.meta["depth_estimation"]
     save_scene(est, out, overwrite=in_place or args.overwrite, in_place=in_place)
+    resumed = sum(bool(v.get("resumed")) for v in info["views"].values())
+    shutil.rmtree(resume_folder(out), ignore_errors=True)  # the job is complete
     tv = [v for v in info["views"].values() if v.get("role") == "target"]
     kept = [v["kept"] for v in tv]
     filled = sum(v.get("filled", 0.0) for v in tv)
     print(f"wrote {out}/transforms.json: depth for {len(kept)} view(s) by {info['method']} "
           f"in {info['time_s']:.1f} s, {100 * sum(kept) / max(1, len(kept)):.1f} % of pixels kept"
-          + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else ""))
+          + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else "")
+          + (f" ({resumed} view(s) kept from an interrupted run)" if resumed else ""))
     return 0

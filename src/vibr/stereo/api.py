@@ -302,6 +302,12 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
 
 
 # --------------------------------------------------------------------------- main API
+#: estimate_depth arguments a checkpointed view result depends on
+_CK_PARAMS = ("scale", "depth_range", "n_planes", "step_px", "max_planes", "radius", "n_best", "max_cost",
+              "eps", "mem_bytes", "refine_iter", "median_radius", "coverage_gain", "sweep_scale", "coarse_iter",
+              "med_r", "n_neighbours")
+
+
 def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=None,
                    method: str = "auto", exclude=(), n_neighbours: int = 4,
                    n_planes: int | None = None, step_px: float = 3.0, max_planes: int = 128, radius: int | None = None,
@@ -310,7 +316,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                    n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
                    refine_iter: int = REFINE_ITER, median_radius: int | None = None,
                    coverage_gain: float | None = 0.02, sweep_scale: float = 0.5,
-                   coarse_iter: int = 1, fill_segments: bool = False,
+                   coarse_iter: int = 1, fill_segments: bool = False, checkpoint=None,
                    **lf_params) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
 
@@ -396,6 +402,10 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         on fountain renders view 5 0.5 dB better without the filled ones (docs/DEPTH.md,
         step 9). ``stats["kept"]`` stays the fraction kept by the check;
         ``stats["filled"]`` is the fraction filled.
+    checkpoint : folder, optional
+        Keep each view's plane-sweep result there as it finishes (MVS; atomic writes, keyed
+        by the view, its partners and these parameters: :class:`vibr.io.checkpoint.ViewCheckpoint`),
+        and read back the matching ones: a job killed midway and run again resumes.
     **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
         ``max_views``, ``refine``, ``tv_lambda``, ...). The light-field method uses
         ``depth_range``, ``radius``, ``max_cost``
@@ -501,11 +511,25 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         depths, sigmas, stats = {}, {}, {}
         raw = {}
         med_r = 9 if median_radius is None else int(median_radius)  # MVS default: 19×19 window
+        ck = None
+        if checkpoint is not None:  # resume an interrupted job: finished views are kept
+            from ..io.checkpoint import ViewCheckpoint
+
+            ck = ViewCheckpoint(checkpoint, {k: v for k, v in locals().items() if k in _CK_PARAMS})
         for i in est:
             t0 = time.perf_counter()
             nb = nbrs[i]
             if not nb:
                 continue
+            if ck is not None:
+                ck_key = ck.key(scene.views[i], cams[i], [scene.views[j] for j in nb])
+                hit = ck.load(scene.views[i].name, ck_key)
+                if hit is not None:
+                    a, info = hit
+                    raw[i] = (a["depth"], a["sigma_z"], a.get("grad"), tuple(info["dr"]))
+                    nbrs[i] = [scene.index(n) for n in info["nb"]]
+                    stats[scene.views[i].name] = dict(info["stats"], resumed=True)
+                    continue
             dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb,
                                                     cache=resized)
             # the views averaged per pixel stay those the nearest-first set implies; the
@@ -552,6 +576,11 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                 "confident": float(res.confident.mean()), "sweep_s": res.meta["time_s"],
                 "time_s": time.perf_counter() - t0,
                 "role": "target" if i in targets else "consistency partner"}
+            if ck is not None:
+                ck.save(scene.views[i].name, ck_key, {"depth": d, "sigma_z": res.sigma_z,
+                                                      "grad": res.meta.get("plane_gradient")},
+                        {"dr": list(dr), "nb": [scene.views[j].name for j in nb],
+                         "stats": stats[scene.views[i].name]})
         for i in targets:
             d, s, grad, dr = raw[i]
             st = stats[scene.views[i].name]
