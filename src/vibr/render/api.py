@@ -1,4 +1,4 @@
-"""``vibr.render.render``: a novel view from a scene (paper §4, METHOD §3-7)."""
+"""``vibr.render.render``: a novel view from a scene (paper §4, docs/METHOD.md §3-7)."""
 
 from __future__ import annotations
 
@@ -253,13 +253,13 @@ def render(sources: Scene, target: View | Camera, method: str = "gradient", *,
            **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
-    Minimises (METHOD §5, paper eq. energy_final)
+    Minimises (docs/METHOD.md §5, paper eq. energy_final)
 
         E(u) = alpha · ½ Σ_km W_km ((B_k u)(m) − v_k(m))²
              + gamma · ½ Σ_km C_km ‖(B_k D u)(m) − ∇v_k(m)‖²
              + lam · TV(u)
 
-    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (METHOD §3) by monotone FISTA, re-estimating
+    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (docs/METHOD.md §3) by monotone FISTA, re-estimating
     omega from u in ``n_outer`` passes; ulr blends directly.
 
     Parameters
