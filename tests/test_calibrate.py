@@ -224,6 +224,12 @@ def test_bad_options(synthetic_photos):
         calibrate_scene(photos, matcher="vocab")
     with pytest.raises(VibrInputError, match="scale"):
         calibrate_scene(photos, scale=0)
+    # a misspelt option is an error, not a silent default
+    with pytest.raises(TypeError, match="matchr"):
+        calibrate_scene(photos, matchr="sequential")
+    with pytest.raises(TypeError, match="matchr"):
+        calibrate(photos, photos.parent / "never_written", matchr="sequential")
+    assert not (photos.parent / "never_written").exists()
 
 
 def test_calibrated_scene_runs_through_depth_estimation(calibrated):

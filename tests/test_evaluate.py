@@ -195,3 +195,26 @@ def test_figures_downscale_and_crop_inside_mask(tmp_path):
     assert downscale_image(np.ones((5, 7, 3), np.float32), 2).shape == (2, 3, 3)
     info = write_figures(tmp_path, ref, {"a": a, "b": b}, mask, prefix="t", downscale=2)
     assert read_image(info["compare"]).shape == ((2 * 32 + 4) // 2, (3 * 48 + 2 * 4) // 2, 3)
+
+
+def test_view_counts_closed_form():
+    """view_counts: distinct source views per target pixel, a sample counted at the pixel
+    its landing point rounds to (clipped to the image)."""
+    from vibr.evaluate import view_counts
+
+    class _S:  # the three fields view_counts reads
+        def __init__(self, xy, view, shape):
+            self.xy, self.view, self.target_shape = np.asarray(xy, float), np.asarray(view), shape
+
+        def __len__(self):
+            return len(self.xy)
+
+    xy = [[1.4, 0.2], [1.2, -0.3],   # view 0 twice in pixel (row 0, col 1): counted once
+          [1.0, 0.0],                # view 1, same pixel
+          [1.6, 0.0],                # view 2, rounds to col 2
+          [-3.0, 9.0], [4.4, 2.6]]   # view 3 clipped to (2, 0); view 0 at (row 3, col 4)
+    c = view_counts(_S(xy, [0, 0, 1, 2, 3, 0], (4, 5)))
+    want = np.zeros((4, 5), int)
+    want[0, 1], want[0, 2], want[3, 0], want[3, 4] = 2, 1, 1, 1
+    np.testing.assert_array_equal(c, want)
+    assert view_counts(_S(np.zeros((0, 2)), np.zeros(0, int), (2, 3))).shape == (2, 3)

@@ -744,8 +744,8 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
     perturbation of w and the normal).
     ``memo``: a propagation candidate whose source pixel has not changed since this pixel
     last tried it, in the same direction, is skipped (:func:`_try_plane`; the same planes
-    and costs as without, a third fewer propagation evaluations in the second iteration
-    on fountain view 5). Returns the number of plane costs evaluated.
+    and costs as without, fewer propagation evaluations from the second iteration on;
+    docs/DEPTH.md gives the count on fountain). Returns the number of plane costs evaluated.
     """
     H, W = w.shape
     nv = srcs.shape[0]

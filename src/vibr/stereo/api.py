@@ -602,7 +602,7 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions):
         st["kept"] = float(np.isfinite(d).mean())
         if opt.fill_segments:
             t0 = time.perf_counter()
-            # segmented at half size: the segmentation costs 0.6 s a view at 768x512
+            # segmented at half size: the segmentation is the slow part at full size
             small_img = imgs.small(i, cams[i].scaled(0.5))
             d, s, n_filled = _segment_completion(imgs(i), small_img, cams[i], d, s, grad, dr,
                                                  opt.rel_tol, med_r)
