@@ -101,11 +101,16 @@ def test_cli_eval_json_on_an_unseen_scene_folder(scene_dir, tmp_path, capsys):
     assert rep["scale"] == 1.0 and rep["intensity_scale"] == 100.0
     assert [r["label"] for r in rep["results"]] == [
         "ulr", "savsr(lam=0.2)", "gradient(gamma=0,lam=0.2)", "gradient(gamma=1,lam=0.2)"]
+    # measured on this scene (PSNR dB, DSSIM): ulr 38.08 / 160, savsr 36.67 / 167,
+    # gamma 0 36.68 / 167, gamma 1 39.16 / 111; floors 1.5 dB below, DSSIM bounds 1.4x above
+    measured = {"ulr": (38.08, 160), "savsr(lam=0.2)": (36.67, 167), "gradient(gamma=0,lam=0.2)": (36.68, 167),
+                "gradient(gamma=1,lam=0.2)": (39.16, 111)}
     for r in rep["results"]:
         for k in ("method", "params", "depth", "psnr", "dssim", "seconds"):
             assert k in r
         assert r["params"]["scale"] == 100.0
-        assert r["psnr"] > 25 and 0 <= r["dssim"] < 1e4
+        p, d = measured[r["label"]]
+        assert r["psnr"] > p - 1.5 and 0 <= r["dssim"] < 1.4 * d, (r["label"], r["psnr"], r["dssim"])
     cols = rep["figures"]["columns"]
     assert cols[0] == "reference" and len(cols) == 5
     from vibr.io import read_image
@@ -170,7 +175,8 @@ def test_eval_on_a_middlebury_layout_folder(scene, tmp_path, capsys):
                  "--method", "ulr,bvs", "--json", str(out), "-q"]) == 0
     rep = json.loads(out.read_text())
     assert rep["target"] == "obj0005" and len(rep["sources"]) == 8
-    assert all(r["psnr"] > 25 for r in rep["results"])
+    # measured: ulr 36.42 dB / DSSIM 141, bvs 36.01 / 184 (the depth files are the exact depth)
+    assert all(r["psnr"] > 34.5 and r["dssim"] < 260 for r in rep["results"]), rep["results"]
     capsys.readouterr()
     assert main(["eval", str(d), "--target", "obj0005", "--depth", "planar", "--method", "ulr,bvs",
                  "--json", str(tmp_path / "m2.json"), "-q"]) == 2
