@@ -24,11 +24,10 @@ import numpy as np
 from .errors import VibrInputError
 from .metrics import dssim, psnr, ssim
 from .progress import progress
+from .render.methods import METHODS
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
-
-METHODS = ("ulr", "savsr", "bvs", "gradient")
 
 
 @dataclass
@@ -88,7 +87,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], **kw)
 
 
 def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting], *,
-                   sources: Sequence[int | str] | None = None, depth: str = "gt",
+                   sources: Sequence[int | str] | None = None, depth: str = "auto",
                    depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
                    border: int = 0, estimate_kw: dict | None = None,
                    render_kw: dict | None = None, intensity_scale: float | None = None,

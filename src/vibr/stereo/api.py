@@ -30,10 +30,10 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from scipy.ndimage import map_coordinates
-from skimage.transform import resize
 
 from ..camera import Camera, axes_meeting_point
 from ..errors import VibrInputError
+from ..io.images import resize_image
 from ..scene import Scene
 from .consistency import check_consistency
 from .planesweep import SweepResult, median_planes, plane_sweep, refine_planes
@@ -48,11 +48,10 @@ REFINE_ITER = 2
 
 
 # --------------------------------------------------------------------------- helpers
-def resize_image(img: np.ndarray, camera: Camera) -> np.ndarray:
-    """Resample an image to ``camera``'s size (anti-aliased when shrinking)."""
-    if img.shape[:2] == camera.shape:
-        return img
-    return resize(img, camera.shape, order=1, anti_aliasing=True, preserve_range=True).astype(np.float32)
+def _resized(img: np.ndarray, camera: Camera) -> np.ndarray:
+    """``img`` at ``camera``'s size (:func:`vibr.io.images.resize_image`: Gaussian
+    anti-aliasing only, reflected border, float32 not quantised)."""
+    return resize_image(img, camera.shape, box=False, mode="reflect", quantise=False)
 
 
 def _lo_coords(camera_lo: Camera, camera_hi: Camera) -> list[np.ndarray]:
@@ -255,7 +254,7 @@ def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: d
     def small(j, c):
         key = (j, c.shape)
         if key not in cache:
-            cache[key] = resize_image(images[j], c)
+            cache[key] = _resized(images[j], c)
         return cache[key]
 
     res = plane_sweep(small(ref, cref), cref, [small(j, c) for j, c in zip(neighbours, csrc)], csrc,
@@ -551,13 +550,13 @@ class _Images:
 
     def __call__(self, i: int) -> np.ndarray:
         if i not in self.full:
-            self.full[i] = resize_image(self.scene.views[i].image, self.cams[i])
+            self.full[i] = _resized(self.scene.views[i].image, self.cams[i])
         return self.full[i]
 
     def small(self, i: int, camera: Camera) -> np.ndarray:
         key = (i, camera.shape)
         if key not in self.resized:
-            self.resized[key] = resize_image(self(i), camera)
+            self.resized[key] = _resized(self(i), camera)
         return self.resized[key]
 
 
