@@ -19,7 +19,7 @@ unless ``--large-scale 0``, view 5 again at a larger image scale.
 All metrics: PSNR (dB) and DSSIM = 1e4·(1 − SSIM) (Gaussian window σ 1.5) over the pixels
 every setting reconstructed, 2-pixel border excluded. Depth is estimated once per
 (target, stride) and shared by all settings; the warped samples are computed once per
-geometry (``vibr.evaluate.evaluate``). Nothing is cached between runs.
+geometry (``vibr.evaluate.run_evaluation``). Nothing is cached between runs.
 
     python benchmarks/paper_tables.py --write-docs    # everything, writes docs/RESULTS.md
     python benchmarks/paper_tables.py --quick         # a small smoke run (writes no tracked file)

@@ -177,8 +177,9 @@ def test_eval_on_a_middlebury_layout_folder(scene, tmp_path, capsys):
                  "--method", "ulr,bvs", "--json", str(out), "-q"]) == 0
     rep = json.loads(out.read_text())
     assert rep["target"] == "obj0005" and len(rep["sources"]) == 8
-    # measured: ulr 36.42 dB / DSSIM 141, bvs 36.01 / 184 (the depth files are the exact depth)
-    assert all(r["psnr"] > 34.5 and r["dssim"] < 260 for r in rep["results"]), rep["results"]
+    # measured (2-px border, the metric rule): ulr 38.08 dB / DSSIM 160, bvs 36.36 / 202 (the
+    # depth files are the exact depth)
+    assert all(r["psnr"] > 34.8 and r["dssim"] < 280 for r in rep["results"]), rep["results"]
     capsys.readouterr()
     assert main(["eval", str(d), "--target", "obj0005", "--depth", "planar", "--method", "ulr,bvs",
                  "--json", str(tmp_path / "m2.json"), "-q"]) == 2

@@ -242,8 +242,8 @@ def test_cli_psf_option(tmp_path, capsys):
     assert main(["eval", str(tmp_path / "s"), "--target", "view_004", "--method", "bvs", "--psf", "footprint",
                  "--json", str(rep), "-q"]) == 0
     res = json.loads(rep.read_text())["results"]
-    # measured 37.86 dB, DSSIM 105.4
-    assert [r["params"]["psf"] for r in res] == ["footprint"] and res[0]["psnr"] > 36.3 and res[0]["dssim"] < 150
+    # measured 37.43 dB, DSSIM 109.1 (2-px border, the metric rule)
+    assert [r["params"]["psf"] for r in res] == ["footprint"] and res[0]["psnr"] > 36.0 and res[0]["dssim"] < 150
     capsys.readouterr()
     with pytest.raises(SystemExit):
         main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(out), "--psf", "box"])
