@@ -31,7 +31,7 @@ def _cases(s, o):
         ("--views", "0"), ("--step-px", "0"), ("--max-planes", "0"), ("--scale", "-1"), ("--target", "-1"),
         ("--lam", "1,x")]]
     cases += [(d + [flag, *v.split()], o / "d") for flag, v in [
-        ("--step-px", "0"), ("--max-planes", "0"), ("--median-radius", "-1"), ("--scale", "2"), ("--resize", "0"),
+        ("--step-px", "0"), ("--max-planes", "0"), ("--median-radius", "-1"), ("--depth-scale", "2"), ("--scale", "0"),
         ("--neighbours", "0"), ("--refine-iter", "-1"), ("--depth-range", "5 1"), ("--depth-range", "nan 1"),
         ("--sweep-scale", "0"), ("--views", "-1")]]
     cases += [(["convert", s, o / "c", "--scale", v], o / "c") for v in ("0", "nan", "-1", "1e9")]

@@ -13,7 +13,7 @@ from _fuzz import SEEDS, add_camera_path_seed, build_seed, fresh_copy, mutate, r
 
 add_camera_path_seed()
 #: examples per loader in the fast profile (derandomised: the same cases on every run)
-N_FAST = int(os.environ.get("VIBR_FUZZ_EXAMPLES", "25"))
+N_FAST = int(os.environ.get("VIBR_FUZZ_EXAMPLES", "20"))
 
 
 @pytest.mark.parametrize("name", sorted(SEEDS))

@@ -271,3 +271,14 @@ def test_depth_killed_midway_resumes(tmp_path, capsys, monkeypatch):
         assert (a.depth is None) == (b.depth is None)
         if a.depth is not None:
             np.testing.assert_array_equal(a.depth, b.depth)
+
+
+def test_strecha_infinite_image_size_is_refused(tmp_path):
+    """Found by the long fuzz profile: 'inf 8' as the size line raised OverflowError."""
+    from vibr.io.strecha import read_strecha_camera
+
+    p = tmp_path / "a.camera"
+    for wh in ("inf 8", "nan 8", "0 8", "1e300 8"):
+        p.write_text("10 0 6\n0 10 4\n0 0 1\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n0 0 0\n" + wh + "\n")
+        with pytest.raises(VibrInputError, match="image size"):
+            read_strecha_camera(p)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import add_quiet
+from ._options import add_overwrite_option
 
 _DESC = """\
 Load a scene in any supported format and write it as a nerfstudio / instant-NGP
@@ -30,11 +31,11 @@ def register(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
     p.add_argument("out", metavar="OUT", help="output folder (must not exist unless --overwrite)")
-    p.add_argument("--scale", type=float, default=1.0, help="resize factor (default: 1)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
     p.add_argument("--views", default=None,
                    help="comma-separated view names or indices to keep (default: all)")
-    p.add_argument("--overwrite", "--force", dest="overwrite", action="store_true",
-                   help="replace OUT if vibr wrote it (never a folder holding other files)")
+    add_overwrite_option(p, "OUT (only a folder vibr wrote)")
     add_quiet(p)
     p.set_defaults(func=run)
 

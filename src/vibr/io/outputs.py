@@ -23,7 +23,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from ..errors import VibrInputError
+from ..errors import OutputExists, VibrInputError
 
 #: Name of the marker file vibr writes into every output folder it creates.
 MARKER = ".vibr-output"
@@ -78,14 +78,14 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
         if p.is_dir():
             raise VibrInputError(f"{what} is a folder, a file name is expected", p)
         if p.exists() and not overwrite:
-            raise VibrInputError(f"{what} already exists (use --overwrite to replace it)", p)
+            raise OutputExists(f"{what} already exists", p)
         if str(os.fspath(path)).endswith(("/", os.sep)):
             raise VibrInputError(f"{what} ends with a path separator, a file name is expected", p)
     else:
         if p.exists() and not p.is_dir():
             raise VibrInputError(f"{what} exists and is not a folder", p)
         if p.is_dir() and not overwrite:
-            raise VibrInputError(f"{what} folder already exists (use --overwrite to replace it)", p)
+            raise OutputExists(f"{what} folder already exists", p)
     parent = p.absolute().parent
     if not parent.exists():
         raise VibrInputError(f"{what}: parent folder {parent} does not exist", p)
@@ -171,7 +171,7 @@ def replace_folder(tmp, out, *, overwrite: bool) -> None:
         write_marker(tmp)
     if out.exists() or out.is_symlink():
         if not overwrite:
-            raise VibrInputError("output folder already exists (use --overwrite to replace it)", out)
+            raise OutputExists("output folder already exists", out)
         if out.is_symlink() or not out.is_dir():
             raise VibrInputError("output path exists and is not a folder", out)
         check_replaceable(out)
