@@ -22,7 +22,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..render.methods import METHODS
-from ..scene import Scene
+from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
 from .geometry import point_cloud, scene_scale, thumbnail, world_up
 from .renderer import ViewRenderer, ViewSettings
@@ -293,32 +293,44 @@ class Viewer:
             h.color = _SOURCE_COLOUR if (on and name in used) else _FRUSTUM_COLOUR
 
     # ------------------------------------------------------------------ keyframes
-    def keyframe_camera(self, client) -> Camera:
-        """The client's current camera at the full render size."""
-        st = CameraState.of(client.camera)
-        return st.camera(self.settings.full_long_side)
-
-    def add_keyframe(self, client) -> Camera:
-        cam = self.keyframe_camera(client)
-        if self.keyframes and (self.keyframes[0].width, self.keyframes[0].height) != (cam.width, cam.height):
-            # a path has one image size: keep the first keyframe's, same field of view
+    def add_keyframe(self, client_or_state) -> Camera:
+        """Append the camera of a client (or of a :class:`CameraState`) at the full render
+        size; every keyframe keeps the first one's image size (its vertical fov kept)."""
+        st = client_or_state if isinstance(client_or_state, CameraState) else CameraState.of(client_or_state.camera)
+        if self.keyframes:
             w, h = self.keyframes[0].width, self.keyframes[0].height
-            f = cam.K[1, 1] * h / cam.height
-            cam = Camera(Camera.intrinsics(f, w, h), cam.R, cam.t, w, h)
+            cam = st.camera(max(w, h))
+            if (cam.width, cam.height) != (w, h):
+                f = cam.K[1, 1] * h / cam.height
+                cam = Camera(Camera.intrinsics(f, w, h), cam.R, cam.t, w, h)
+        else:
+            cam = st.camera(self.settings.full_long_side)
         self.keyframes.append(cam)
-        self.gui["keyframes"].content = f"{len(self.keyframes)} keyframes"
+        if "keyframes" in self.gui:
+            self.gui["keyframes"].content = f"{len(self.keyframes)} keyframes"
         return cam
 
-    def export_path(self, path=None) -> Path:
-        """Write the keyframes as nerfstudio's camera_path.json
-        (:func:`vibr.path.write_camera_path`); returns the path written."""
-        from ..path import write_camera_path
+    def export_path(self, path=None, seconds: float | None = None) -> Path:
+        """Write the keyframes as nerfstudio's camera_path.json: a C²-smooth path through
+        them (:func:`vibr.path.interpolate`, ``seconds`` × fps frames; default
+        ``seconds_per_keyframe`` per interval), written by
+        :func:`vibr.path.write_camera_path`. Returns the file written."""
+        from ..path import interpolate, write_camera_path
 
         if not self.keyframes:
             raise VibrInputError("no keyframes to export: add some first")
-        out = Path(path if path is not None else self.gui["path_out"].value)
-        seconds = max(len(self.keyframes) - 1, 1) * self.options.seconds_per_keyframe
-        write_camera_path(out, self.keyframes, fps=self.options.fps, seconds=seconds)
+        if path is None:
+            path = self.gui["path_out"].value if "path_out" in self.gui else self.options.path_out
+        out = Path(path)
+        fps = self.options.fps
+        if seconds is None:
+            seconds = max(len(self.keyframes) - 1, 1) * self.options.seconds_per_keyframe
+        if len(self.keyframes) == 1:
+            write_camera_path(out, self.keyframes, fps=fps, seconds=1.0 / fps)
+        else:
+            keys = Scene([View(f"key_{i:03d}", None, c) for i, c in enumerate(self.keyframes)], "keyframes")
+            cpath = interpolate(keys, n_frames=max(2, int(round(seconds * fps))), fps=fps)
+            write_camera_path(out, cpath.cameras, fps=fps, seconds=seconds)
         logger.info("wrote %s (%d keyframes)", out, len(self.keyframes))
         return out
 
