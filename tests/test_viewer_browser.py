@@ -16,17 +16,12 @@ The screenshot is kept as ``viewer.png`` in the test's tmp dir.
 from __future__ import annotations
 
 import io
-import os
-import shutil
 import socket
 import time
 
 import numpy as np
 import pytest
 
-CHROMIUM = os.environ.get("VIBR_CHROMIUM", "/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 
 def free_port() -> int:
@@ -38,8 +33,11 @@ def free_port() -> int:
 
 
 def _need_browser():
-    if not (os.path.isfile(CHROMIUM) or shutil.which(CHROMIUM)):
-        pytest.skip(f"chromium not found at {CHROMIUM} (Debian: apt-get install -y chromium; .ci/run does)")
+    from vibr.viewer.browser import chromium_path
+
+    if chromium_path() is None:
+        pytest.skip("chromium not found ($VIBR_CHROMIUM, /usr/bin/chromium or PATH; Debian: "
+                    "apt-get install -y chromium, which .ci/run does)")
     return pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
 
 
@@ -90,6 +88,7 @@ def test_viewer_in_chromium(small_scene, tmp_path):
 
     from vibr.metrics import psnr
     from vibr.viewer import Viewer, ViewerOptions, ViewRenderer, ViewSettings
+    from vibr.viewer.browser import launch_chromium
 
     t_start = time.perf_counter()
     settings = ViewSettings(method="gradient", n_views=4, preview_long_side=64, full_long_side=128)
@@ -98,7 +97,7 @@ def test_viewer_in_chromium(small_scene, tmp_path):
     frames = []
     try:
         with sync_api.sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, timeout=30_000)
+            browser = launch_chromium(pw)
             try:
                 page = browser.new_page(viewport={"width": 640, "height": 480})
                 page.set_default_timeout(30_000)
