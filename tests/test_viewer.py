@@ -228,3 +228,17 @@ def test_view_cli_serves_and_stops(tiny_scene, tmp_path):
     c = socket.socket()
     assert c.connect_ex(("127.0.0.1", port)) != 0
     c.close()
+
+
+def test_stale_render_is_abandoned(tiny_scene):
+    from vibr.viewer import ViewRenderer
+    from vibr.viewer.renderer import RenderAbandoned
+
+    r = ViewRenderer(tiny_scene)
+    cam = tiny_scene.views[0].camera
+    calls = []
+    with pytest.raises(RenderAbandoned):
+        r.render(cam, ViewSettings(n_views=3), should_stop=lambda: calls.append(1) or True)
+    assert len(calls) == 1  # stopped at the first solver iteration
+    out = r.render(cam, ViewSettings(n_views=3), should_stop=lambda: False)
+    assert out.image.shape == (48, 64, 3) and len(out.sources) == 3

@@ -25,7 +25,7 @@ from ..render.methods import METHODS
 from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
 from .geometry import point_cloud, scene_scale, thumbnail, world_up
-from .renderer import ViewRenderer, ViewSettings
+from .renderer import RenderAbandoned, ViewRenderer, ViewSettings
 from .worker import LatestRequestWorker, Request
 
 logger = logging.getLogger(__name__)
@@ -132,6 +132,7 @@ class Viewer:
         self._scale = 1.0
         self.gui: dict[str, object] = {}
         self._sent_event = threading.Condition()
+        self.abandoned = 0  # renders stopped early because a newer camera arrived
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> str:
@@ -385,10 +386,15 @@ class Viewer:
         if kind == "preview" and long_side >= settings.full_long_side:
             return  # the full render follows; a preview as large would only delay it
         cam = st.camera(long_side)
-        out = self.renderer.render(cam, settings)
         worker = self._workers.get(client.client_id)
-        if kind == "full" and worker is not None and worker.is_stale(req):
-            return  # the camera moved on: its preview is on the way
+        stale = (lambda: worker.is_stale(req)) if worker is not None else None
+        try:
+            out = self.renderer.render(cam, settings, should_stop=stale)
+        except RenderAbandoned:
+            self.abandoned += 1
+            return  # the camera moved on: the newer request is rendered next
+        if kind == "full" and stale is not None and stale():
+            return
         img = np.clip(out.image * 255.0 + 0.5, 0, 255).astype(np.uint8)
         if kind == "preview":
             client.scene.set_background_image(img, format="jpeg", jpeg_quality=90)

@@ -22,7 +22,11 @@ from .geometry import points_in_view
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "scene_with_depth"]
+__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scene_with_depth"]
+
+
+class RenderAbandoned(Exception):
+    """A render stopped early because its request became stale."""
 
 
 @dataclass(frozen=True)
@@ -98,13 +102,22 @@ class ViewRenderer:
         pts = points_in_view(self.rank_points, camera)
         return select_views(self.scene, camera, n_views, points=pts if len(pts) else None)
 
-    def render(self, camera: Camera, settings: ViewSettings) -> ViewImage:
-        """Render ``camera`` with ``settings`` (its size is the camera's)."""
+    def render(self, camera: Camera, settings: ViewSettings, should_stop=None) -> ViewImage:
+        """Render ``camera`` with ``settings`` (its size is the camera's).
+
+        ``should_stop()``, when given, is polled after every solver iteration; when it
+        returns True the render is abandoned by raising :class:`RenderAbandoned` (a newer
+        camera arrived: finishing would only delay its image)."""
         t0 = time.perf_counter()
         idx = self.sources_for(camera, settings.n_views)
         src = self.scene.subset(idx)
+        cb = None
+        if should_stop is not None:
+            def cb(*_):
+                if should_stop():
+                    raise RenderAbandoned()
         res = render(src, camera, settings.method, depth="given", gamma=settings.gamma,
-                     lam=settings.lam)
+                     lam=settings.lam, callback=cb)
         dt = time.perf_counter() - t0
         return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times))
 
