@@ -40,7 +40,7 @@ def main(argv=None) -> int:
     s.close()
     viewer = Viewer(scene, ViewerOptions(port=port, settings=ViewSettings(n_views=6, full_long_side=640)))
     c0 = scene.views[0].camera
-    back = Camera.from_centre(c0.K, c0.R, c0.centre - 0.9 * c0.optical_axis - 0.25 * c0.R[0], c0.width, c0.height)
+    back = Camera.from_centre(c0.K, c0.R, c0.centre - 1.6 * c0.optical_axis - 0.5 * c0.R[1], c0.width, c0.height)
     url = viewer.start()
     out = Path(a.output)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -58,6 +58,10 @@ def main(argv=None) -> int:
                 rec = viewer.wait_for_image(kind="full", after_seq=first.seq, timeout=120)
                 time.sleep(2.0)
                 rec = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=0.1) or rec
+                try:  # headless Chromium has no GPU: dismiss viser's software-rendering notice
+                    page.locator("button.mantine-Notification-closeButton").first.click(timeout=3000)
+                except Exception:
+                    pass
                 time.sleep(3.0)  # software GL repaints slowly
                 tmp = out.with_suffix(".tmp.png")
                 page.screenshot(path=str(tmp))

@@ -24,7 +24,7 @@ from ..errors import VibrInputError
 from ..render.methods import METHODS
 from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
-from .geometry import point_cloud, scene_scale, thumbnail, world_up
+from .geometry import frustum_size, point_cloud, scene_scale, thumbnail, world_up
 from .renderer import RenderAbandoned, ViewRenderer, ViewSettings
 from .worker import LatestRequestWorker, Request
 
@@ -130,6 +130,7 @@ class Viewer:
         self._frustums: dict[str, object] = {}
         self._hidden: set[str] = set()  # frustums hidden because the viewport is inside them
         self._scale = 1.0
+        self._frustum_size = 0.1
         self.gui: dict[str, object] = {}
         self._sent_event = threading.Condition()
         self.abandoned = 0  # renders stopped early because a newer camera arrived
@@ -199,9 +200,12 @@ class Viewer:
                                               point_shape="square", point_shading="flat")
         else:
             self._points = None
+        fsize = frustum_size(self.scene, size)
+        self._frustum_size = fsize
         for v in self.scene.views:
             wxyz, pos, fov, aspect = viser_pose_from_camera(v.camera)
-            h = sc.add_camera_frustum(f"/cameras/{v.name}", fov=fov, aspect=aspect, scale=0.06 * size,
+            h = sc.add_camera_frustum(f"/cameras/{v.name}", fov=fov, aspect=aspect, scale=fsize,
+                                      thickness=2.0, thickness_units="screen",
                                       image=thumbnail(v.image), format="jpeg", jpeg_quality=85,
                                       wxyz=wxyz, position=pos, color=_FRUSTUM_COLOUR)
             h.on_click(self._make_click(v.camera))
@@ -280,7 +284,7 @@ class Viewer:
         """Hide the frustums the viewport sits in (their thumbnail would fill the view)."""
         C = np.asarray(centre, dtype=np.float64)
         near = {v.name for v in self.scene.views
-                if np.linalg.norm(v.camera.centre - C) < 0.1 * self._scale}
+                if np.linalg.norm(v.camera.centre - C) < 1.5 * self._frustum_size}
         if near != self._hidden:
             self._hidden = near
             self._set_visible("cameras")

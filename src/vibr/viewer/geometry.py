@@ -9,7 +9,7 @@ import numpy as np
 
 from ..scene import Scene
 
-__all__ = ["point_cloud", "scene_scale", "world_up", "thumbnail", "points_in_view"]
+__all__ = ["point_cloud", "scene_scale", "frustum_size", "world_up", "thumbnail", "points_in_view"]
 
 
 def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -78,6 +78,21 @@ def scene_scale(scene: Scene, points: np.ndarray | None = None) -> float:
         if s > 0:
             return s
     return 1.0
+
+
+def frustum_size(scene: Scene, scale: float) -> float:
+    """Depth (scene units) at which to draw the input cameras' frustums: 6 % of the scene
+    ``scale``, at most half the median distance from a camera to its nearest neighbour (so
+    that neighbouring frustums do not overlap: a light-field grid has a small baseline)."""
+    C = np.array([v.camera.centre for v in scene.views])
+    size = 0.06 * scale
+    if len(C) > 1:
+        d = np.linalg.norm(C[:, None] - C[None], axis=2)
+        np.fill_diagonal(d, np.inf)
+        nn = float(np.median(d.min(axis=1)))
+        if nn > 0:
+            size = min(size, 0.5 * nn)
+    return size
 
 
 def world_up(scene: Scene) -> np.ndarray:
