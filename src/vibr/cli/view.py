@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import time
 
 from . import add_quiet
+
+logger = logging.getLogger(__name__)
 
 _DESC = """\
 Serve an interactive viewer of SCENE on http://HOST:PORT (viser): the input cameras as
@@ -43,7 +46,6 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene
-    from ..progress import log
     from ..viewer import Viewer, ViewerOptions, ViewSettings, check_port_free, scene_with_depth
 
     if not 0 <= args.port <= 65535:
@@ -54,10 +56,10 @@ def run(args) -> int:
     check_port_free(args.host, args.port)  # fail before the (slow) loading
     scene = load_scene(args.scene, scale=args.scale)
     if not scene.has_depth:
-        log(f"{scene.name}: giving every view depth (estimated once, then cached when possible) ...")
+        logger.info("%s has no depth maps: estimating them once (cached for the next start) ...", scene.name)
         t0 = time.perf_counter()
         scene = scene_with_depth(scene)
-        log(f"depth ready in {time.perf_counter() - t0:.1f} s")
+        logger.info("depth ready in %.1f s", time.perf_counter() - t0)
     viewer = Viewer(scene, ViewerOptions(host=args.host, port=args.port, max_points=args.max_points,
                                          path_out=args.path_out, settings=settings))
     url = viewer.start()

@@ -116,8 +116,7 @@ class ViewRenderer:
             def cb(*_):
                 if should_stop():
                     raise RenderAbandoned()
-        res = render(src, camera, settings.method, depth="given", gamma=settings.gamma,
-                     lam=settings.lam, callback=cb)
+        res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb)
         dt = time.perf_counter() - t0
         return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times))
 
