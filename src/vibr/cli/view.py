@@ -60,6 +60,8 @@ def run(args) -> int:
         t0 = time.perf_counter()
         scene = scene_with_depth(scene)
         logger.info("depth ready in %.1f s", time.perf_counter() - t0)
+    # a browser's aborted preconnect is logged with a traceback by websockets: not an error here
+    logging.getLogger("websockets.server").setLevel(logging.CRITICAL)
     viewer = Viewer(scene, ViewerOptions(host=args.host, port=args.port, max_points=args.max_points,
                                          path_out=args.path_out, settings=settings))
     url = viewer.start()
