@@ -238,7 +238,7 @@ def test_stale_render_is_abandoned(tiny_scene):
     cam = tiny_scene.views[0].camera
     calls = []
     with pytest.raises(RenderAbandoned):
-        r.render(cam, ViewSettings(n_views=3), should_stop=lambda: calls.append(1) or True)
-    assert len(calls) == 1  # stopped at the first solver iteration
+        r.render(cam, ViewSettings(n_views=3), should_stop=lambda: calls.append(1) or len(calls) > 1)
+    assert len(calls) == 2  # checked before starting, then stopped at the first solver iteration
     out = r.render(cam, ViewSettings(n_views=3), should_stop=lambda: False)
     assert out.image.shape == (48, 64, 3) and len(out.sources) == 3

@@ -8,6 +8,7 @@ so that ranking costs no depth-map pass per request); nothing here is viewer-spe
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from dataclasses import dataclass, field, replace
 
@@ -91,6 +92,9 @@ class ViewRenderer:
         from .geometry import point_cloud
 
         self.scene = scene
+        # one render at a time: numba's default (workqueue) threading layer must not be
+        # entered from two threads at once, and renders are CPU-bound anyway
+        self._lock = threading.Lock()
         if rank_points is None:
             rank_points, _ = point_cloud(scene, 4096, seed=1)
         self.rank_points = np.asarray(rank_points, dtype=np.float64)
@@ -108,7 +112,13 @@ class ViewRenderer:
         ``should_stop()``, when given, is polled after every solver iteration; when it
         returns True the render is abandoned by raising :class:`RenderAbandoned` (a newer
         camera arrived: finishing would only delay its image)."""
+        with self._lock:
+            return self._render(camera, settings, should_stop)
+
+    def _render(self, camera: Camera, settings: ViewSettings, should_stop) -> ViewImage:
         t0 = time.perf_counter()
+        if should_stop is not None and should_stop():
+            raise RenderAbandoned()
         idx = self.sources_for(camera, settings.n_views)
         src = self.scene.subset(idx)
         cb = None
