@@ -14,7 +14,7 @@ import logging
 import socket
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -115,11 +115,12 @@ class Viewer:
 
     def __init__(self, scene: Scene, options: ViewerOptions | None = None):
         self.scene = scene
-        self.options = options or ViewerOptions()
-        s = self.options.settings
+        options = options or ViewerOptions()
+        s = options.settings
         if s.full_long_side is None:  # the scene's own resolution
             s = s.replace(full_long_side=max(max(v.shape) for v in scene.views))
-        self.settings = self.options.settings = s
+        self.options = replace(options, settings=s)
+        self.settings = s
         self.renderer = ViewRenderer(scene)
         self.server = None
         self.sent: dict[int, list[SentImage]] = {}
@@ -128,6 +129,7 @@ class Viewer:
         self._states: dict[int, CameraState] = {}
         self._lock = threading.Lock()
         self._frustums: dict[str, object] = {}
+        self._points = None
         self._hidden: set[str] = set()  # frustums hidden because the viewport is inside them
         self._scale = 1.0
         self._frustum_size = 0.1
@@ -197,7 +199,8 @@ class Viewer:
         self._scale = size
         if len(P):
             self._points = sc.add_point_cloud("/points", P, C, point_size=size * 0.004,
-                                              point_shape="square", point_shading="flat")
+                                              point_shape="square", point_shading="flat",
+                                              precision="float32")
         else:
             self._points = None
         fsize = frustum_size(self.scene, size)

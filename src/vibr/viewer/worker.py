@@ -105,9 +105,10 @@ class LatestRequestWorker:
             return self._seq
 
     def is_stale(self, req: Request) -> bool:
-        """True when a newer request has arrived (the render function may stop early)."""
+        """True when a newer request has arrived or the worker is stopping (the render
+        function may stop early)."""
         with self._cv:
-            return self._seq != req.seq
+            return self._stop or self._seq != req.seq
 
     def stop(self, timeout: float = 5.0) -> None:
         """Stop the thread (after the render in progress, if any)."""
