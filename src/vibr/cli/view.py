@@ -7,6 +7,7 @@ import logging
 import time
 
 from . import add_quiet
+from ._options import add_method_option
 
 logger = logging.getLogger(__name__)
 
@@ -35,7 +36,7 @@ def register(sub) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default 127.0.0.1; 0.0.0.0 exposes the viewer to the network)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.5 (default 1)")
-    p.add_argument("--method", default="gradient", help="initial rendering method (default gradient)")
+    add_method_option(p)
     p.add_argument("--views", type=int, default=8, metavar="K", help="initial number of source views (default 8)")
     p.add_argument("--max-points", type=int, default=300_000, help="points in the point cloud (default 300000)")
     p.add_argument("--path-out", default="camera_path.json", help="file 'export path' writes (default camera_path.json)")
