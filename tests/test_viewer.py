@@ -242,3 +242,16 @@ def test_stale_render_is_abandoned(tiny_scene):
     assert len(calls) == 2  # checked before starting, then stopped at the first solver iteration
     out = r.render(cam, ViewSettings(n_views=3), should_stop=lambda: False)
     assert out.image.shape == (48, 64, 3) and len(out.sources) == 3
+
+
+def test_previews_render_from_views_at_their_scale(tiny_scene):
+    from vibr.viewer import ViewRenderer
+
+    r = ViewRenderer(tiny_scene)
+    small = tiny_scene.views[0].camera.scaled(0.5)
+    sc = r.scene_for(small)
+    assert [v.shape for v in sc.views] == [(24, 32)] * len(tiny_scene)
+    assert all(v.camera.allclose(w.camera.scaled(0.5)) for v, w in zip(sc.views, tiny_scene.views))
+    assert r.scene_for(tiny_scene.views[0].camera) is tiny_scene  # full size: the views as they are
+    out = r.render(small, ViewSettings(n_views=3))
+    assert out.image.shape == (24, 32, 3)

@@ -23,7 +23,7 @@ from .geometry import points_in_view
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scene_with_depth"]
+__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scaled_scene", "scene_with_depth"]
 
 
 class RenderAbandoned(Exception):
@@ -92,12 +92,27 @@ class ViewRenderer:
         from .geometry import point_cloud
 
         self.scene = scene
+        self._long_side = max(max(v.shape) for v in scene.views)
+        self._scaled: dict[float, Scene] = {1.0: scene}
         # one render at a time: numba's default (workqueue) threading layer must not be
         # entered from two threads at once, and renders are CPU-bound anyway
         self._lock = threading.Lock()
         if rank_points is None:
             rank_points, _ = point_cloud(scene, 4096, seed=1)
         self.rank_points = np.asarray(rank_points, dtype=np.float64)
+
+    def scene_for(self, camera: Camera) -> Scene:
+        """The scene at the resolution of ``camera``: for an image much smaller than the
+        views (a preview), views resized by ``s = long side of camera / of the views``
+        (:func:`scaled_scene`, cached per ``s``): warping every full-resolution source pixel
+        would cost as much as a full-size render."""
+        s = max(camera.width, camera.height) / self._long_side
+        if s > 0.75:
+            return self.scene
+        s = round(s, 3)
+        if s not in self._scaled:
+            self._scaled[s] = scaled_scene(self.scene, s)
+        return self._scaled[s]
 
     def sources_for(self, camera: Camera, n_views: int) -> list[int]:
         """Indices of the ``n_views`` best views for ``camera``."""
@@ -120,7 +135,7 @@ class ViewRenderer:
         if should_stop is not None and should_stop():
             raise RenderAbandoned()
         idx = self.sources_for(camera, settings.n_views)
-        src = self.scene.subset(idx)
+        src = self.scene_for(camera).subset(idx)
         cb = None
         if should_stop is not None:
             def cb(*_):
@@ -129,6 +144,24 @@ class ViewRenderer:
         res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb)
         dt = time.perf_counter() - t0
         return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times))
+
+
+def scaled_scene(scene: Scene, s: float) -> Scene:
+    """Every view resized by ``s`` as :func:`vibr.io.load_scene` does with ``scale``: images
+    by :func:`vibr.io.images.resize_image`, cameras by :meth:`Camera.scaled`, depth and
+    sigma_z maps by nearest neighbour (:func:`vibr.io.images.resize_depth`)."""
+    from ..io.images import resize_depth, resize_image
+
+    views = []
+    for v in scene.views:
+        cam = v.camera.scaled(s)
+        sz = v.sigma_z
+        if sz is not None and np.ndim(sz) > 0:
+            sz = resize_depth(np.asarray(sz, np.float32), cam.shape)
+        views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
+                               depth=None if v.depth is None else resize_depth(v.depth, cam.shape),
+                               sigma_z=sz))
+    return scene.replace(views=views, meta=dict(scene.meta, viewer_scale=s))
 
 
 def scene_with_depth(scene: Scene, *, cache_dir=None) -> Scene:
