@@ -18,7 +18,7 @@ from ..errors import VibrInputError
 from ..progress import set_quiet
 
 # Order shown in --help.
-_COMMANDS = ["demo", "info", "convert", "render", "eval", "depth", "calibrate"]
+_COMMANDS = ["demo", "info", "convert", "path", "render", "eval", "depth", "calibrate"]
 
 _EPILOG = """\
 examples:

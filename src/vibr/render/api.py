@@ -103,14 +103,17 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
     gamma = p["gamma"] if method == "gradient" else 0.0
     BtB = Btg = None
     cg_unit = 0.0
+    # per-sample blend weight in [0, 1] (vibr.flythrough fades a source leaving the set), else 1
+    sw = samples.meta.get("sample_weight")
+    unit = np.ones(len(samples), np.float32) if sw is None else np.asarray(sw, np.float32)
     if gamma > 0:
         # Bᵀ B and Bᵀ ∇v with unit weights: the gradient term's stencil up to its constant
         # weight (grad_weighting visibility/none), and Σ_s (BᵀB)[s] = Bᵀ 1 is the coverage
         grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
-        BtB, Btg, cg_unit = sp.normal(np.ones(len(samples), np.float32), grad_vals, dtype=np.float32)
+        BtB, Btg, cg_unit = sp.normal(unit, grad_vals, dtype=np.float32)
         acc = BtB.sum(0, dtype=np.float64)
     else:
-        acc = sp.adjoint(np.ones(len(samples), np.float32))  # unweighted coverage Bᵀ1
+        acc = sp.adjoint(unit)  # unweighted coverage Bᵀ1
     coverage = acc >= p["hole_threshold"]
     times["assembly"] += time.perf_counter() - t0
 
@@ -138,6 +141,8 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
         w = geometric_weights(samples, u, p["sigma_s"], sz, scale=s, grad_max=p["grad_max"], splat=sp,
                               dtype=np.float32)
         w *= np.float32(1.0 / rho)
+        if sw is not None:
+            w *= unit
         times["weights"] += time.perf_counter() - t0
         return w
 
