@@ -22,11 +22,11 @@ Per frame (:func:`render_frame`, a top-level function of ``(context, frame index
 3. the frame is written atomically as ``frame_NNNNN.png`` (8-bit) in the frames folder;
    a frame already there is skipped unless ``overwrite``.
 
-Work that does not depend on the frame is done once: the scene, the sources' depth, and the
-world points of every source used to rank views (a strided subsample of each depth map,
-backprojected). The rest of the per-source work in the geometry stage (depth slopes, warp
-constants) is the "depth" stage of :func:`compute_samples`, 1–2 % of a frame
-(docs/FLYTHROUGH.md), left there.
+Work that does not depend on the frame is done once (:func:`prepare_sources`): the scene,
+the sources' depth, the world points of every source used to rank views (a strided
+subsample of each depth map, backprojected) and each source's depth slopes
+(:func:`vibr.geometry.prepare_depth`, passed to :func:`compute_samples` as ``prepared``);
+measured in docs/FLYTHROUGH.md.
 """
 
 from __future__ import annotations
@@ -69,6 +69,7 @@ class FrameContext:
     overwrite: bool = False
     geometry_kw: dict = field(default_factory=dict)
     view_points: list = field(default_factory=list)  # per source: (N_k, 3) world points
+    prepared: dict = field(default_factory=dict)  # per source: prepare_depth's (z, z_x, z_y)
 
 
 def _source_points(sources: Scene, max_points: int = 1024) -> list:
@@ -105,6 +106,20 @@ def _points_in_target(view_points, target: Camera, max_points: int = 1024):
     if len(P) > max_points:
         P = P[np.random.default_rng(0).choice(len(P), max_points, replace=False)]
     return P
+
+
+def prepare_sources(ctx: FrameContext, cache_depth: bool = True) -> None:
+    """The per-source work that does not depend on the frame, done once: the points used to
+    rank views and (``cache_depth``) the depth and its slopes (:func:`prepare_depth`)."""
+    from .geometry import prepare_depth
+    from .geometry.depth import DEFAULT_EDGE_REL
+
+    ctx.view_points = _source_points(ctx.sources)
+    ctx.prepared = {}
+    if cache_depth:
+        fill = bool(ctx.geometry_kw.get("fill_holes", False))
+        edge = ctx.geometry_kw.get("edge_rel", DEFAULT_EDGE_REL)
+        ctx.prepared = {v.name: prepare_depth(v, fill_holes=fill, edge_rel=edge) for v in ctx.sources.views}
 
 
 def _smoothstep(x):
@@ -163,7 +178,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     views = [ctx.sources.views[k] for k in idx]
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     try:
-        samples = compute_samples(sub, cam, **ctx.geometry_kw)
+        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
     except VibrInputError as exc:
         raise VibrInputError(f"frame {i}: {exc.problem}") from None
     ws = w[idx]
@@ -208,7 +223,9 @@ def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
     exported by nerfstudio's viewer, which lives in nerfstudio's normalised frame."""
     from .path import scene_centre
 
-    X = scene_centre([v.camera for v in scene.views])
+    from .path import scene_points
+
+    X = scene_centre([v.camera for v in scene.views], scene_points(scene))
     seen = 0
     for c in cameras:
         xy, z = c.project(X)
@@ -283,7 +300,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     fdir.mkdir(parents=True, exist_ok=True)
     ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,
                        overwrite, dict(geometry_kw or {}))
-    ctx.view_points = _source_points(sources)
+    prepare_sources(ctx)
     t_first = time.perf_counter() - t_start
     t0 = time.perf_counter()
     frames = _run_frames(ctx, len(cams), executor, progress)

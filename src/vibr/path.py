@@ -39,7 +39,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
-           "scene_centre", "scene_up", "PATH_KINDS"]
+           "scene_centre", "scene_up", "scene_points", "scene_applied_transform", "PATH_KINDS"]
 
 PATH_KINDS = ("interpolate", "orbit", "spiral")
 
@@ -313,9 +313,29 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
 
 
 # ----------------------------------------------------------------------------- scene geometry
-def scene_up(cameras) -> np.ndarray:
-    """World "up": the mean of the cameras' −y axes (image up), normalised."""
-    u = -np.mean([c.R[1] for c in cameras], axis=0)
+def scene_up(cameras, centre=None) -> np.ndarray:
+    """World "up" of a set of cameras.
+
+    The mean of the cameras' −y axes (image up), normalised — unless the camera centres
+    spread in a plane in two directions (a ring or a wide arc: singular values of the
+    centres ``s₂ < 0.1 s₁`` and ``s₁ > 0.3 s₀``): then the plane's normal, which stays right
+    when the photographs are rolled (templeSparseRing's are, by ±90°); its sign agrees with
+    the mean −y when that is clear (|cos| > 0.3), else puts the cameras above ``centre``.
+    """
+    cams = list(cameras)
+    u = -np.mean([c.R[1] for c in cams], axis=0)
+    C = np.array([c.centre for c in cams])
+    if len(C) >= 3:
+        _, S, Vt = np.linalg.svd(C - C.mean(0), full_matrices=False)
+        if S[0] > 0 and S[1] > 0.3 * S[0] and S[2] < 0.1 * S[1]:
+            n = Vt[2]
+            nu = np.linalg.norm(u)
+            if nu > 1e-9 and abs(n @ u) / nu > 0.3:
+                return n if n @ u > 0 else -n
+            X = axes_meeting_point(cams) if centre is None else np.asarray(centre, np.float64)
+            if X is not None:
+                return n if np.mean((C - X) @ n) >= 0 else -n
+            return n
     n = np.linalg.norm(u)
     if n < 1e-9:
         raise VibrInputError("the cameras' up directions cancel out: no common up")
@@ -338,6 +358,27 @@ def scene_centre(cameras, points: np.ndarray | None = None) -> np.ndarray:
             return C.mean(0) + d * a
     spread = max(float(np.linalg.norm(C.max(0) - C.min(0))), 1e-6)
     return C.mean(0) + 4.0 * spread * a
+
+
+def scene_points(scene, max_points: int = 4096) -> np.ndarray | None:
+    """World points of the scene: a strided subsample of its views' depth maps, else its
+    sparse points, else None (used where the cameras' axes do not meet)."""
+    pts = []
+    per_view = max(64, max_points // max(1, len(scene)))
+    for v in scene.views:
+        if v.depth is None:
+            continue
+        h, w = v.shape
+        step = max(1, int(np.sqrt(h * w / per_view)))
+        z = v.depth[::step, ::step]
+        yy, xx = np.mgrid[0:h:step, 0:w:step]
+        ok = np.isfinite(z)
+        pts.append(v.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(float), z[ok]))
+    if pts:
+        return np.concatenate(pts)
+    if scene.points is not None and len(scene.points):
+        return np.asarray(scene.points, np.float64)
+    return None
 
 
 def _frame_count(n_frames, seconds, fps) -> int:
@@ -435,7 +476,7 @@ def interpolate(scene, views=None, *, order: str = "given", n_frames: int | None
     C = np.array([c.centre for c in cams])
     rots = Rotation.from_matrix(np.array([c.R.T for c in cams]))  # camera-to-world
     ang = (rots[:-1].inv() * rots[1:]).magnitude()
-    X = scene_centre(cams)
+    X = scene_centre(cams, scene_points(scene))
     r = float(np.mean(np.linalg.norm(C - X, axis=1)))
     step = np.linalg.norm(np.diff(C, axis=0), axis=1) + r * ang
     if np.any(step <= 1e-12 * max(r, 1.0)):
@@ -477,8 +518,8 @@ def orbit(scene, *, n_frames: int | None = None, seconds: float | None = None, f
     cams = [v.camera for v in scene.views]
     n = _frame_count(n_frames, seconds, fps)
     w, h = _output_size(cams, width, height, scale)
-    X = scene_centre(cams)
-    up = scene_up(cams)
+    X = scene_centre(cams, scene_points(scene))
+    up = scene_up(cams, X)
     C = np.array([c.centre for c in cams]) - X
     height_ = float(np.mean(C @ up))
     V = C - np.outer(C @ up, up)
@@ -523,7 +564,9 @@ def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, 
            width: int | None = None, height: int | None = None, scale: float = 1.0,
            rots: float = 2.0, zrate: float = 0.5, radius_scale: float = 1.0) -> CameraPath:
     """A forward-facing spiral around the mean camera, looking at :func:`scene_centre`
-    (LLFF, Mildenhall et al. 2019, ``render_path_spiral``).
+    (LLFF, Mildenhall et al. 2019, ``render_path_spiral``). When the cameras surround the
+    centre (their mean centre is nearer to it than half their distance: a ring), around the
+    first view, with radii a tenth of its distance to the centre.
 
     Mean camera: the mean centre and the mean rotation (``Rotation.mean``). In its axes
     the eye moves on ``(r_x cos θ, −r_y sin θ, −r_z sin(zrate θ))``, ``θ`` over ``rots``
@@ -535,13 +578,21 @@ def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, 
     cams = [v.camera for v in scene.views]
     n = _frame_count(n_frames, seconds, fps)
     w, h = _output_size(cams, width, height, scale)
-    X = scene_centre(cams)
-    up = scene_up(cams)
+    X = scene_centre(cams, scene_points(scene))
+    up = scene_up(cams, X)
     C = np.array([c.centre for c in cams])
     Cm = C.mean(0)
-    Rm = Rotation.from_matrix(np.array([c.R for c in cams])).mean().as_matrix()  # world-to-camera
-    off = (C - Cm) @ Rm.T
-    rad = np.percentile(np.abs(off), 90, axis=0) * radius_scale
+    dist = float(np.mean(np.linalg.norm(C - X, axis=1)))
+    if np.linalg.norm(Cm - X) < 0.5 * dist:
+        # the cameras surround the centre (a ring): their mean camera is inside the object;
+        # spiral around the first view instead, radii a tenth of its distance to the centre
+        Cm = C[0]
+        Rm = Camera.look_at(Cm, X, up, np.eye(3), 1, 1).R
+        rad = np.full(3, 0.1 * float(np.linalg.norm(Cm - X))) * radius_scale
+    else:
+        Rm = Rotation.from_matrix(np.array([c.R for c in cams])).mean().as_matrix()  # world-to-camera
+        off = (C - Cm) @ Rm.T
+        rad = np.percentile(np.abs(off), 90, axis=0) * radius_scale
     if not np.any(rad > 0):
         raise VibrInputError("the cameras share one centre: no spiral radius")
     f_rel = float(np.mean([_vertical_focal(c) for c in cams]))
