@@ -92,6 +92,9 @@ def main():
     ap.add_argument("--views", type=int, default=8)
     ap.add_argument("--out", default="/tmp/bench_path")
     ap.add_argument("--hard", action="store_true", help="also render with hard view selection (blend 0)")
+    ap.add_argument("--ttff-only", metavar="CACHE",
+                    help="only step 4, twice, with this cache folder (from an earlier run; the first "
+                         "repetition fills the cache of resized views if it is empty)")
     a = ap.parse_args()
     scene = str(Path(a.data) / "strecha_fountain-P11")
     out = Path(a.out)
@@ -100,6 +103,17 @@ def main():
     env = dict(os.environ, PYTHONPATH=str(REPO / "src"))
     py = sys.executable
     rows = []
+    if a.ttff_only:
+        short = out / "path_3.json"
+        for rep in (1, 2):
+            dt2, o2 = run([py, "-c", _DRIVER, "render", scene, "--path", str(short), "-o",
+                           str(out / "run2_frames"), "--overwrite", "--scale", str(a.scale), "--views",
+                           str(a.views), "--cache-dir", a.ttff_only, "-q"], env)
+            i2 = parse(o2)
+            print(f"| run 2.{rep} (cached depth): process start to first frame | "
+                  f"{i2.get('first_frame_s', float('nan')):.1f} s (depth: {i2.get('depth_source')}, "
+                  f"{i2.get('depth_s', float('nan')):.2f} s; whole run {dt2:.1f} s) |")
+        return
 
     path = out / "fountain_path.json"
     dt, _ = run([py, "-m", "vibr", "path", "interpolate", scene, "-o", str(path), "--frames", str(a.frames),
@@ -179,3 +193,33 @@ def main():
 
 if __name__ == "__main__":
     main()
+
+
+def ab_prepared(scene_dir, cache, scale=0.25, views=8, n=6, frames=60):
+    """Per-frame time with and without the per-source depth slopes prepared once
+    (alternating frames A/B, medians): `python3 -c 'import bench_path as b; b.ab_prepared(...)'`."""
+    import tempfile
+
+    from vibr.depthcache import scene_with_depth
+    from vibr.flythrough import FrameContext, prepare_sources, render_frame
+    from vibr.io import load_scene
+    from vibr.path import interpolate
+
+    sc = scene_with_depth(load_scene(scene_dir, scale=scale), cache_dir=cache)
+    p = interpolate(sc, n_frames=frames)
+    tmp = tempfile.mkdtemp()
+    ctx = FrameContext(sc, p.cameras, tmp, n_views=views, overwrite=True)
+    t_prep = time.perf_counter()
+    prepare_sources(ctx, cache_depth=True)
+    t_prep = time.perf_counter() - t_prep
+    with_cache = dict(ctx.prepared)
+    times = {"prepared once": [], "per frame": []}
+    render_frame(ctx, 0)  # warm up
+    for k in range(n):
+        for mode in (("prepared once", "per frame") if k % 2 == 0 else ("per frame", "prepared once")):
+            ctx.prepared = with_cache if mode == "prepared once" else {}
+            i = 1 + (k * 7) % (frames - 1)
+            times[mode].append(render_frame(ctx, i)["seconds"])
+    print(f"preparing all {len(sc)} sources once: {t_prep:.3f} s")
+    for mode, t in times.items():
+        print(f"{mode}: median {np.median(t):.3f} s per frame (min {min(t):.3f}, max {max(t):.3f}, n={len(t)})")

@@ -11,6 +11,11 @@ from vibr.camera import Camera
 from vibr.errors import VibrInputError
 
 
+@pytest.fixture(autouse=True)
+def _cache_in_tmp(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("VIBR_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "vibr-cache"))
+
+
 @pytest.fixture(scope="module")
 def grid_dir(tmp_path_factory):
     from vibr.io import save_scene

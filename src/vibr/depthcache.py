@@ -36,7 +36,7 @@ from .scene import Scene
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["scene_with_depth", "default_cache_dir", "depth_cache_key"]
+__all__ = ["scene_with_depth", "load_scene_cached", "default_cache_dir", "depth_cache_key"]
 
 _CACHE_VERSION = 1
 
@@ -180,3 +180,64 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
     if cpath is not None:
         out.meta["depth_cache"] = str(cpath)
     return out
+
+
+def _folder_fingerprint(root: Path, h, max_files: int = 20000) -> None:
+    """Feed the names, sizes and modification times of the files under ``root`` (hidden
+    ones and the cache's own files skipped) into hash ``h``."""
+    n = 0
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+        for f in sorted(filenames):
+            if f.startswith("."):
+                continue
+            st = os.stat(os.path.join(dirpath, f))
+            h.update(f"{os.path.relpath(os.path.join(dirpath, f), root)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
+            n += 1
+            if n > max_files:
+                raise OSError("too many files to fingerprint")
+
+
+def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
+    """:func:`vibr.io.load_scene` through an on-disk cache of the loaded (resized) scene.
+
+    Decoding and resizing full-size photographs (fountain: 11 JPEGs of 3072×2048) takes
+    seconds; a second fly-through of the same scene at the same scale loads the resized
+    views instead (``scene-KEY.pkl``, KEY a SHA-256 of the folder, the names, sizes and
+    modification times of its files, and the scale). The file is a pickle written by vibr
+    in the user's own cache folder (:func:`default_cache_dir`); ``cache_dir=False``
+    disables it.
+    """
+    import pickle
+
+    from .io import load_scene
+
+    root = Path(path)
+    if cache_dir is False:
+        return load_scene(path, scale=scale)
+    h = hashlib.sha256()
+    h.update(f"vibr-scene-cache v{_CACHE_VERSION}|{os.path.abspath(root)}|{float(scale)!r}|".encode())
+    try:
+        _folder_fingerprint(root if root.is_dir() else root.parent, h)
+    except OSError:
+        return load_scene(path, scale=scale)
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    cpath = folder / f"scene-{h.hexdigest()[:32]}.pkl"
+    if cpath.is_file():
+        try:
+            with open(cpath, "rb") as f:
+                scene = pickle.load(f)
+            if isinstance(scene, Scene):
+                logger.info("scene loaded from the cache %s", cpath)
+                return scene
+        except Exception as exc:  # noqa: BLE001 - a bad cache entry is only a slower load
+            logger.warning("ignoring unreadable scene cache %s (%s)", cpath, exc)
+    scene = load_scene(path, scale=scale)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with atomic_path(cpath) as tmp:
+            with open(tmp, "wb") as f:
+                pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
+    except OSError as exc:
+        logger.warning("could not write the scene cache %s (%s)", cpath, exc)
+    return scene

@@ -318,7 +318,8 @@ def scene_up(cameras, centre=None) -> np.ndarray:
 
     The mean of the cameras' −y axes (image up), normalised — unless the camera centres
     spread in a plane in two directions (a ring or a wide arc: singular values of the
-    centres ``s₂ < 0.1 s₁`` and ``s₁ > 0.3 s₀``): then the plane's normal, which stays right
+    centres ``s₂ < 0.1 s₁`` and ``s₁ > 0.3 s₀``) and the cameras look across that plane (mean
+    ``|n · axis| < 0.5``; a light-field grid looks along it): then the plane's normal, which stays right
     when the photographs are rolled (templeSparseRing's are, by ±90°); its sign agrees with
     the mean −y when that is clear (|cos| > 0.3), else puts the cameras above ``centre``.
     """
@@ -327,8 +328,11 @@ def scene_up(cameras, centre=None) -> np.ndarray:
     C = np.array([c.centre for c in cams])
     if len(C) >= 3:
         _, S, Vt = np.linalg.svd(C - C.mean(0), full_matrices=False)
-        if S[0] > 0 and S[1] > 0.3 * S[0] and S[2] < 0.1 * S[1]:
-            n = Vt[2]
+        n = Vt[2]
+        looks_along = float(np.mean([abs(n @ c.optical_axis) for c in cams]))
+        # a ring or arc looks across its plane; a planar grid of parallel cameras (a light
+        # field) looks along its normal, which is then no "up"
+        if S[0] > 0 and S[1] > 0.3 * S[0] and S[2] < 0.1 * S[1] and looks_along < 0.5:
             nu = np.linalg.norm(u)
             if nu > 1e-9 and abs(n @ u) / nu > 0.3:
                 return n if n @ u > 0 else -n

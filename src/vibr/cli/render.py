@@ -81,7 +81,8 @@ def _add_path_options(p) -> None:
     g.add_argument("--overwrite", action="store_true", help="render frames already written again (default: skip them)")
     g.add_argument("--exclude", type=_names, default=(),
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
-    g.add_argument("--cache-dir", metavar="DIR", help="depth cache folder (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
+    g.add_argument("--cache-dir", metavar="DIR",
+                   help="cache of estimated depth and resized views (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
 
 
 def run(args) -> int:
@@ -132,8 +133,8 @@ def run(args) -> int:
 def _run_path(args) -> int:
     """``--path``: a thin layer over :func:`vibr.flythrough.render_path`."""
     from ..errors import VibrInputError
+    from ..depthcache import load_scene_cached
     from ..flythrough import render_path
-    from ..io import load_scene
     from ..path import read_camera_path, scene_applied_transform
     from ..progress import is_quiet, log
 
@@ -148,7 +149,7 @@ def _run_path(args) -> int:
     applied = scene_applied_transform(args.scene) if args.dataparser_transforms else None
     cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
                              applied_transform=applied)
-    scene = load_scene(args.scene, scale=args.scale)
+    scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=args.cache_dir)
     params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
                   scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
                   precond=True if args.precond else None, psf=args.psf)
