@@ -162,7 +162,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
-        prepped = _prepare_views(sources, cam, fill_holes, edge_rel)
+        prepped = _prepare_views(sources, cam, fill_holes, edge_rel, prepared)
     with _Timer(times, cpu, "zbuffer"):
         zbuf = _target_zbuffer(prepped, cam.shape, max_quad_px, splat_mode)
     with _Timer(times, cpu, "visibility"):
@@ -195,9 +195,9 @@ class _Timer:
         return False
 
 
-def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel) -> list:
-    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes and the
-    constants of its warp into ``cam``."""
+def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel, prepared=None) -> list:
+    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes (from
+    ``prepared`` when given) and the constants of its warp into ``cam``."""
     prepped = []
     for v in sources.views:
         pre = prepared.get(v.name) if prepared else None
