@@ -60,7 +60,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from .. import path as P
     from ..errors import VibrInputError
-    from ..io import load_scene
+    from ..depthcache import load_scene_cached
 
     if not args.output.lower().endswith(".json"):
         raise VibrInputError("the camera path file must end in .json", args.output)
@@ -69,7 +69,7 @@ def run(args) -> int:
     if args.scale <= 0:
         raise VibrInputError(f"--scale must be positive, got {args.scale}")
     seconds = 4.0 if args.frames is None and args.seconds is None else args.seconds
-    scene = load_scene(args.scene, scale=args.scale)
+    scene = load_scene_cached(args.scene, scale=args.scale)  # the same cache as render --path
     w, h = args.size if args.size else (None, None)
     kw = dict(n_frames=args.frames, seconds=seconds, fps=args.fps, width=w, height=h)
     if args.kind == "interpolate":
