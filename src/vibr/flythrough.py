@@ -70,8 +70,6 @@ class FrameContext:
     geometry_kw: dict = field(default_factory=dict)
     view_points: list = field(default_factory=list)  # per source: (N_k, 3) world points
     prepared: dict = field(default_factory=dict)  # per source: prepare_depth's (z, z_x, z_y)
-    warm_start: bool = False  # start from the previous frame warped (serial only; measured, off)
-    previous: tuple | None = None  # (index, image, z-buffer) of the last frame rendered here
 
 
 def _source_points(sources: Scene, max_points: int = 1024) -> list:
@@ -122,22 +120,6 @@ def prepare_sources(ctx: FrameContext, cache_depth: bool = True) -> None:
         fill = bool(ctx.geometry_kw.get("fill_holes", False))
         edge = ctx.geometry_kw.get("edge_rel", DEFAULT_EDGE_REL)
         ctx.prepared = {v.name: prepare_depth(v, fill_holes=fill, edge_rel=edge) for v in ctx.sources.views}
-
-
-def warp_frame(image, zbuf, cam_from: Camera, cam_to: Camera) -> np.ndarray:
-    """Forward-warp a rendered frame with its depth (the target z-buffer) into another
-    camera: nearest pixel, nearest surface wins; (H, W, 3) float32, NaN where nothing lands."""
-    ok = np.isfinite(zbuf)
-    ys, xs = np.nonzero(ok)
-    X = cam_from.backproject(np.stack([xs, ys], -1).astype(np.float64), zbuf[ok])
-    xy, z = cam_to.project(X)
-    j, i = np.rint(xy[:, 0]), np.rint(xy[:, 1])
-    keep = (z > 0) & (j >= 0) & (j < cam_to.width) & (i >= 0) & (i < cam_to.height)
-    j, i, z, col = j[keep].astype(np.int64), i[keep].astype(np.int64), z[keep], image[ys[keep], xs[keep]]
-    order = np.argsort(-z, kind="stable")  # far first: nearer samples overwrite
-    out = np.full((cam_to.height, cam_to.width, 3), np.nan, np.float32)
-    out[i[order], j[order]] = col[order]
-    return out
 
 
 def _smoothstep(x):
@@ -196,20 +178,14 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     views = [ctx.sources.views[k] for k in idx]
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     try:
-        samples = compute_samples(sub, cam, prepared=ctx.prepared or None,
-                                  return_zbuffer=ctx.warm_start, **ctx.geometry_kw)
+        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
     except VibrInputError as exc:
         raise VibrInputError(f"frame {i}: {exc.problem}") from None
     ws = w[idx]
     if np.any(ws < 1.0):
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
-    if ctx.warm_start and ctx.previous is not None and ctx.previous[0] == i - 1:
-        _, img, zb = ctx.previous
-        samples.meta["warm_start"] = warp_frame(img, zb, ctx.cameras[i - 1], cam)
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
                          target_centre=cam.centre, **ctx.params)
-    if ctx.warm_start:
-        ctx.previous = (i, res.image, samples.meta["zbuffer"])
     write_image(out, res.image, bits=8)
     return {"index": i, "skipped": False, "seconds": time.perf_counter() - t0,
             "views": [v.name for v in views], "weights": ws.tolist(),

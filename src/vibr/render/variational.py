@@ -159,9 +159,6 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     Wk = weights(None)
     t0 = time.perf_counter()
     init = initial_image(sp, Wk, samples.colour, cov.acc)
-    warm = samples.meta.get("warm_start")
-    if warm is not None:  # vibr.flythrough: the previous frame warped here, NaN where unseen
-        init = np.where(np.isfinite(warm), warm, init).astype(np.float32)
     u = np.ascontiguousarray(init.transpose(2, 0, 1))  # planar (3, H, W) from here on
     times["init"] = time.perf_counter() - t0
 
