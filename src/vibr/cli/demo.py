@@ -8,7 +8,7 @@ import os
 import time
 
 from . import add_quiet
-from ._options import add_method_option
+from ._options import add_bit_depth_option, add_method_option
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +39,7 @@ def register(sub) -> None:
     p.add_argument("--video", default="vibr-demo.mp4",
                    help="fly-through (a ~2 s orbit of the scene) written to this MP4 (default: vibr-demo.mp4)")
     p.add_argument("--no-video", action="store_true", help="skip the fly-through video")
+    add_bit_depth_option(p)
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -68,7 +69,7 @@ def run(args) -> int:
     print(f"  DSSIM {dssim(res.image, tview.image, mask=mask):6.1f}      (1e4 * (1 - SSIM), lower is better)")
     print(f"  PSNR  {psnr(res.image, tview.image):6.2f} dB   (all pixels, holes filled by push-pull)")
     if args.output:
-        write_image(args.output, res.image)
+        write_image(args.output, res.image, bits=args.bit_depth)
         print(f"  wrote {args.output}")
     if not args.no_video:
         _demo_video(scene, args)

@@ -1,6 +1,6 @@
 """The geometry stage end to end: source views with depth + target camera → :class:`Samples`.
 
-Steps (paper §5, METHOD.md §2), per source view k:
+Steps (paper §5, docs/METHOD.md §2), per source view k:
 
 1. depth preparation: NaN = unknown; optionally fill holes (joint bilateral, Kopf 2007);
    slopes ``(z_x, z_y)`` (edge-aware, :func:`vibr.geometry.depth.depth_derivatives`);
@@ -30,7 +30,7 @@ __all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL"]
 
 #: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
 #: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
-#: estimates; the renderer's geometric weight, METHOD §3, scales with it).
+#: estimates; the renderer's geometric weight, docs/METHOD.md §3, scales with it).
 DEFAULT_SIGMA_Z_REL = 0.01
 
 
@@ -127,7 +127,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         Fill unknown depth with the joint bilateral filter before warping.
     max_inv_det : float
         Cap of the deformation weight ``1/|det ∂tau/∂x_m|`` (default 4, see
-        :data:`vibr.geometry.warp.DEFAULT_MAX_INV_DET`; the authors use 1, METHOD §10).
+        :data:`vibr.geometry.warp.DEFAULT_MAX_INV_DET`; the authors use 1, docs/METHOD.md §10).
     edge_rel : float
         Edge detection of the depth slopes (:func:`depth_derivatives`).
     max_quad_px : int

@@ -1,4 +1,4 @@
-"""The variational render from warped samples, in named steps (paper §4, METHOD §3-7).
+"""The variational render from warped samples, in named steps (paper §4, docs/METHOD.md §3-7).
 
     splat_coverage    the image-formation operator B (bilinear or footprint PSF), the
                       unweighted coverage Bᵀ1 and, with the gradient term, Bᵀ B and Bᵀ ∇v
@@ -92,7 +92,7 @@ def initial_image(sp: Splat, Wk, colour, acc) -> np.ndarray:
 
 
 class _Weights:
-    """``W_km`` (METHOD §3) divided by rho, timed into ``times["weights"]``."""
+    """``W_km`` (docs/METHOD.md §3) divided by rho, timed into ``times["weights"]``."""
 
     def __init__(self, samples, p, sp, rho, geometric: bool, times):
         self.samples, self.p, self.sp, self.rho, self.times = samples, p, sp, rho, times
