@@ -18,7 +18,7 @@ from ..errors import VibrInputError
 from ..progress import configure_logging
 
 # Order shown in --help.
-_COMMANDS = ["demo", "info", "convert", "render", "eval", "depth", "calibrate", "view"]
+_COMMANDS = ["demo", "info", "convert", "path", "render", "eval", "depth", "calibrate", "view"]
 
 _EPILOG = """\
 examples:
@@ -71,12 +71,13 @@ def verbosity(args) -> int:
 
 
 #: Flag hints the CLI adds to library errors (the library's messages name no flag).
-_HINTS = {"DepthUnavailable": "use --depth estimated or --depth planar"}
+_HINTS = {"DepthUnavailable": "use --depth estimated or --depth planar",
+          "OutputExists": "use --overwrite to replace it"}
 
 
 def _message(exc: VibrInputError) -> str:
     hint = _HINTS.get(type(exc).__name__)
-    return f"{exc}: {hint}" if hint else str(exc)
+    return f"{exc}; {hint}" if hint else str(exc)
 
 
 def main(argv=None) -> int:
