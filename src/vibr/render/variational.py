@@ -60,7 +60,9 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         sp = Splat(samples.xy, shape, jac=samples.jac, psf="footprint")
     else:
         sp = Splat(samples.xy, shape)
-    ones = np.ones(len(samples), np.float32)
+    # per-sample blend weight in [0, 1] (vibr.flythrough fades a source leaving the set), else 1
+    sw = samples.meta.get("sample_weight")
+    ones = np.ones(len(samples), np.float32) if sw is None else np.asarray(sw, np.float32)
     if gradient:
         grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
         BtB, Btg, cg_unit = sp.normal(ones, grad_vals, dtype=np.float32)
@@ -111,6 +113,9 @@ class _Weights:
         w = geometric_weights(self.samples, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
                               grad_max=p["grad_max"], splat=self.sp, dtype=np.float32)
         w *= np.float32(1.0 / self.rho)
+        sw = self.samples.meta.get("sample_weight")
+        if sw is not None:  # vibr.flythrough's blend weight of the sample's view
+            w *= np.asarray(sw, np.float32)
         self.times["weights"] += time.perf_counter() - t0
         return w
 
