@@ -1,6 +1,6 @@
 """Reproduce the paper's two evaluation protocols on the scenes at hand and write docs/RESULTS.md.
 
-Structured protocol (paper §6, METHOD §8), HCI 2016 *cotton* (512×512): the centre view
+Structured protocol (paper §6, docs/METHOD.md §8), HCI 2016 *cotton* (512×512): the centre view
 ``input_Cam040`` of a 3×3 block is held out and rendered from its 8 neighbours, at strides
 1, 2 and 4 (neighbours 4±s in row and column), with three geometries: depth **estimated**
 from the 8 neighbours only (vibr's light-field estimator), the **ground-truth** disparity of
@@ -19,12 +19,15 @@ unless ``--large-scale 0``, view 5 again at a larger image scale.
 All metrics: PSNR (dB) and DSSIM = 1e4·(1 − SSIM) (Gaussian window σ 1.5) over the pixels
 every setting reconstructed, 2-pixel border excluded. Depth is estimated once per
 (target, stride) and shared by all settings; the warped samples are computed once per
-geometry (``vibr.evaluate.evaluate``). Nothing is cached between runs.
+geometry (``vibr.evaluate.run_evaluation``). Nothing is cached between runs.
 
-    python benchmarks/paper_tables.py                 # everything, writes docs/RESULTS.md
-    python benchmarks/paper_tables.py --quick         # a small smoke run (not for the docs)
-    python benchmarks/paper_tables.py --dask local    # the cases (one per table column group) on a
-                                                      # Dask LocalCluster; --workers N: N processes
+    python benchmarks/paper_tables.py --write-docs    # everything, writes docs/RESULTS.md
+    python benchmarks/paper_tables.py --quick         # a small smoke run (writes no tracked file)
+    python benchmarks/paper_tables.py --quick --dask local   # the cases on a Dask LocalCluster;
+                                                             # --workers N: N local processes
+
+Without ``--write-docs`` (or an explicit ``--doc PATH``) no markdown is written: a run never
+overwrites a tracked file unless asked (``--quick`` refuses ``--write-docs``).
 
 Every case (cotton stride × depth, fountain target) is one task of
 ``vibr.executor.run_tasks``: serial by default, the same numbers on processes or Dask
@@ -121,15 +124,13 @@ def cotton_cases(args, out, figdir):
 
 
 def _cotton_case(scene, case):
-    from vibr.evaluate import evaluate
-
     s, depth = case["stride"], case["depth"]
     settings = cotton_settings()
     fig_labels = [settings[i].label for i in (0, 1, 2, 4, 6)]  # ulr, savsr, bvs, gamma 1, gamma 3
-    rep = evaluate(scene, "input_Cam040", settings, sources=cotton_neighbours(scene, s), depth=depth,
-                   border=2, mask="reconstructed", figures=case["figures"], figure_labels=fig_labels,
-                   figure_prefix=f"cotton_s{s}_{depth}", figure_downscale=2, view_split=4,
-                   use_lpips=False)
+    rep = evaluate_with_figures(scene, "input_Cam040", settings, case["figures"], fig_labels,
+                                f"cotton_s{s}_{depth}", 2, sources=cotton_neighbours(scene, s),
+                                depth=depth, border=2, mask="reconstructed", view_split=4,
+                                use_lpips=False)
     rep["stride"] = s
     return rep
 
@@ -160,6 +161,19 @@ def fountain_settings():
     return out
 
 
+def evaluate_with_figures(scene, target, settings, figdir, labels, prefix, downscale, **kw) -> dict:
+    """``vibr.evaluate.run_evaluation``'s report, with the comparison figures of the settings
+    ``labels`` written to ``figdir`` (None: no figures) by ``vibr.figures``."""
+    from vibr.evaluate import run_evaluation
+    from vibr.figures import write_evaluation_figures
+
+    ev = run_evaluation(scene, target, settings, **kw)
+    if figdir:
+        ev.report["figures"] = write_evaluation_figures(ev, figdir, labels=labels, prefix=prefix,
+                                                        downscale=downscale)
+    return ev.report
+
+
 def fountain_figure_labels(settings):
     want = {("ulr", None), ("gradient", "1,0,0.003"), ("gradient", "0.1,1,0.002")}
     out = []
@@ -178,14 +192,12 @@ def fountain_cases(out, figdir, scale, targets, settings=None, tag=""):
 
 
 def _fountain_case(scene, case):
-    from vibr.evaluate import evaluate
-
     settings = case["settings"] or fountain_settings()
     scale, t = case["scale"], case["target"]
-    return evaluate(scene, t, settings, depth="estimated", estimate_kw=dict(FOUNTAIN_ESTIMATE), border=2,
-                    mask="reconstructed", figures=case["figures"], figure_labels=fountain_figure_labels(settings),
-                    figure_prefix=f"fountain_{t}{case['tag']}", figure_downscale=max(1, round(12 * scale)),
-                    view_split=2, use_lpips=False)
+    return evaluate_with_figures(scene, t, settings, case["figures"], fountain_figure_labels(settings),
+                                 f"fountain_{t}{case['tag']}", max(1, round(12 * scale)), depth="estimated",
+                                 estimate_kw=dict(FOUNTAIN_ESTIMATE), border=2, mask="reconstructed",
+                                 view_split=2, use_lpips=False)
 
 
 def fountain_log(rep):
@@ -420,7 +432,7 @@ def fountain_section(reports, large, args):
 
     # intensity scale
     L.append("#### The intensity scale: the same parameters read on [0, 1]\n")
-    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to (METHOD §9). "
+    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to (METHOD.md §9). "
              "vibr reads them on **0..255** (`scale=255`, the renderer's default: lambda in grey levels, "
              "sensor sigma_s = 1 grey level). Two wrong readings: **[0, 1]** = `vibr eval --intensity-scale 1` "
              "as is (every parameter on [0, 1], sigma_s = 1 too: relative to the data term the TV weight is "
@@ -520,7 +532,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "Gaussian window σ = 1.5, scikit-image's `gaussian_weights=True`), both over the pixels that every "
          "setting of the table reconstructed (the paper's \"reconstructed pixels\"; fraction given per table) "
          "with a 2-pixel border excluded (as the authors' evaluator). The paper's DSSIM column was printed "
-         "by an evaluator with a non-standard SSIM, halved (METHOD §10): compare DSSIM with the paper's only "
+         "by an evaluator with a non-standard SSIM, halved (METHOD.md §10): compare DSSIM with the paper's only "
          "in direction, not in value.",
          f"* **Renderer settings**: vibr's defaults (`vibr.render.methods.DEFAULTS`, as recorded in the reports) "
          f"except the parameters named in each row: sigma_s = {rp.get('sigma_s', '?'):g} grey level, sigma_z from "
@@ -531,7 +543,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "in the geometry stage's defaults.",
          "* **Intensity scale**: **255** — all parameters (lambda, sigma_s, the gradient clamp) refer to "
          "intensities in grey levels of 8-bit images (the renderer's documented convention, chosen for the "
-         "authors' sensor sigma of 1 grey level, METHOD §9–10). The same scale is used for both protocols; "
+         "authors' sensor sigma of 1 grey level, docs/METHOD.md §9–10). The same scale is used for both protocols; "
          "the fountain section shows what reading the paper's unstructured settings on [0, 1] does.",
          f"* **Image scale**: cotton at its full 512×512; fountain at {fs:g} × 3072×2048 "
          f"= {fsize} so that the whole "
@@ -597,7 +609,9 @@ def main(argv=None):
     ap.add_argument("--out", default=str(ROOT / "out" / "paper_tables"), help="JSON reports")
     ap.add_argument("--figures", default=str(ROOT / "out" / "paper_tables" / "figures"),
                     help="comparison figures (not committed: they show the datasets' photographs)")
-    ap.add_argument("--doc", default=str(ROOT / "docs" / "RESULTS.md"), help="markdown to write ('' = none)")
+    ap.add_argument("--doc", default="", help="markdown to write (default: none)")
+    ap.add_argument("--write-docs", action="store_true",
+                    help="write the tracked docs/RESULTS.md (the full run only)")
     ap.add_argument("--strides", default="1,2,4")
     ap.add_argument("--cotton-depths", default="estimated,gt,planar")
     ap.add_argument("--figure-stride", type=int, default=2)
@@ -622,6 +636,12 @@ def main(argv=None):
             require_distributed()
         except Exception as exc:  # one line, no traceback
             sys.exit(f"paper_tables.py: {exc}")
+    if args.write_docs:
+        if args.quick:
+            ap.error("--quick is a smoke run: it does not write docs/RESULTS.md (drop --write-docs)")
+        args.doc = str(ROOT / "docs" / "RESULTS.md")
+    if args.report_only and not args.doc:
+        ap.error("--report-only rewrites a markdown file: give --write-docs or --doc PATH")
     if args.quick:
         args.strides, args.cotton_depths, args.targets = "2", "gt,planar", "0005"
         args.fountain_scale, args.large_scale = 0.0625, 0.0

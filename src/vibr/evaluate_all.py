@@ -74,7 +74,7 @@ def evaluate_target(scene, task: dict) -> dict:
     of the settings). Returns the target's report; when ``report`` already holds a report
     with the same ``config``, returns it without recomputing (``"skipped": true``).
     """
-    from .evaluate import evaluate
+    from .evaluate import run_evaluation
 
     path = Path(task["report"])
     if path.is_file():
@@ -85,7 +85,14 @@ def evaluate_target(scene, task: dict) -> dict:
         if isinstance(old, dict) and old.get("config") == task["config"]:
             return {**old, "skipped": True}
     t0 = time.perf_counter()
-    rep = evaluate(scene, task["target"], task["settings"], **task["eval_kw"])
+    kw = dict(task["eval_kw"])
+    figures = kw.pop("figures", None)
+    ev = run_evaluation(scene, task["target"], task["settings"], **kw)
+    rep = ev.report
+    if figures:
+        from .figures import write_evaluation_figures
+
+        rep["figures"] = write_evaluation_figures(ev, figures)
     rep["wall_seconds"] = round(time.perf_counter() - t0, 3)
     rep["config"] = task["config"]
     rep["worker_pid"] = os.getpid()

@@ -89,27 +89,47 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..evaluate import evaluate, format_table, settings_grid, write_report
+    from ..evaluate import format_table, run_evaluation, settings_grid, write_report
+    from ..figures import write_evaluation_figures
     from ..io import load_scene
 
     from ..errors import VibrInputError
 
+    from ..io.outputs import check_output
+
+    check_output(args.json, "file", what="--json")
+    if args.figures is not None:
+        check_output(args.figures, "dir", what="--figures")
     check_depth_args(args)
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
     executor = executor_from_args(args)
+    from ..render.methods import method_params
+    from ..validate import check_depth_params
+
+    for st in settings:  # every setting checked before the work
+        method_params(st.method, **dict(st.params, scale=args.intensity_scale, psf=args.psf))
+    check_depth_params(**{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                            ("depth_range", args.depth_range)) if v is not None})
+    if args.border < 0:
+        raise VibrInputError(f"--border must be >= 0, got {args.border}")
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     scene = load_scene(args.scene, scale=args.scale)
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                                      ("depth_range", args.depth_range)) if v is not None}
     if args.target.strip().lower() == "all" or "," in args.target:
         return _run_all(args, scene, settings, executor, estimate_kw)
-    report = evaluate(scene, args.target, settings, sources=args.sources, depth=args.depth,
-                      depth_files=args.depth_files, n_views=args.views, mask=args.mask,
-                      border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
-                      intensity_scale=args.intensity_scale,
-                      render_kw={"psf": args.psf} if args.psf else None)
+    ev = run_evaluation(scene, args.target, settings, sources=args.sources, depth=args.depth,
+                        depth_files=args.depth_files, n_views=args.views, mask=args.mask,
+                        border=args.border, estimate_kw=estimate_kw or None,
+                        intensity_scale=args.intensity_scale,
+                        render_kw={"psf": args.psf} if args.psf else None)
+    report = ev.report
+    if args.figures:
+        report["figures"] = write_evaluation_figures(ev, args.figures)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")
