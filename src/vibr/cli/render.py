@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 
+from ._executor import add_executor_args, executor_from_args
 from . import add_quiet
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
                        add_render_params, add_source_options, check_depth_args, names, render_params)
@@ -68,6 +69,7 @@ def _add_path_options(p) -> None:
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
     g.add_argument("--cache-dir", metavar="DIR",
                    help="cache of estimated depth and resized views (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
+    add_executor_args(g)  # frames on local processes or Dask (vibr.executor, docs/SCALE.md)
 
 
 def run(args) -> int:
@@ -142,7 +144,7 @@ def _run_path(args) -> int:
                       n_views=8 if args.views is None else args.views, params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=args.cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
-                      crf=args.crf, fps=args.fps)
+                      crf=args.crf, fps=args.fps, executor=executor_from_args(args))
     t = res.times
     what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
