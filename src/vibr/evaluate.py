@@ -71,7 +71,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
              render_kw: dict | None = None, intensity_scale: float | None = None,
              geometry_kw: dict | None = None, figure_labels: Sequence[str] | None = None,
              figure_prefix: str | None = None, figure_downscale: int = 1,
-             use_lpips: bool = True, view_split: int | None = None) -> dict:
+             use_lpips: bool = True, view_split: int | None = None, uncertainty: bool = False) -> dict:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
@@ -100,6 +100,10 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         Also measure each setting separately on the evaluated pixels seen by at most
         ``view_split`` source views and on those seen by more (:func:`view_counts`): entry
         ``regions`` = {"few": {...}, "many": {...}} with psnr, dssim and the pixel fraction.
+    uncertainty : bool
+        Render with ``uncertainty=True`` and add entry ``uncertainty`` = {ause, spearman,
+        fractions, curve, oracle, rmse} (:func:`vibr.metrics.uncertainty_metrics`, same
+        pixels as the other metrics); with ``figures``, a sparsification plot.
 
     Returns a JSON-serialisable report: ``scene``, ``target``, ``sources``, ``scale`` (the
     image scale the scene was loaded at), ``intensity_scale``, ``size``, ``depth``, ``mask``,
@@ -140,7 +144,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
         params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
         t = time.perf_counter()
-        res = render(src, tview.camera, method=s.method, samples=samples, **params)
+        res = render(src, tview.camera, method=s.method, samples=samples, uncertainty=uncertainty, **params)
         dt = time.perf_counter() - t
         images[s.label] = res
         rows.append((s, res, dt))
@@ -173,6 +177,10 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         }
         if lp is not None:
             entry["lpips"] = lp(res.image, ref)
+        if uncertainty:  # issue 28
+            from .metrics import uncertainty_metrics
+
+            entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, ref, mask=m, border=border)
         if view_split is not None:
             entry["regions"] = {}
             base = cover if mask == "reconstructed" else np.ones(tview.shape, bool)
@@ -220,6 +228,11 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         report["figures"] = write_figures(figures, ref, {k: images[k].image for k in shown},
                                           cover, prefix=figure_prefix or f"{tview.name}_{depth}",
                                           downscale=figure_downscale)
+        if uncertainty:
+            from .uncertainty_figures import write_sparsification_figure
+
+            report["figures"]["sparsification"] = write_sparsification_figure(
+                figures, results, prefix=figure_prefix or f"{tview.name}_{depth}")
     return report
 
 

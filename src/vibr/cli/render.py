@@ -61,6 +61,9 @@ def register(sub) -> None:
     p.add_argument("--views", type=int, metavar="K",
                    help="render from the K best source views for the target (ULR ranking; default: all)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene and of a camera-file target, e.g. 0.5 (default 1)")
+    p.add_argument("--uncertainty", metavar="OUT_STD.png|.npy",
+                   help="also write the per-pixel standard deviation (grey levels of 255): a colour-mapped "
+                        "PNG with a scale bar, or the raw float32 array (.npy)")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -72,6 +75,8 @@ def run(args) -> int:
     from ..progress import is_quiet, log
     from ..render import render
 
+    if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
+        raise VibrInputError("--uncertainty output must end in .png or .npy", args.uncertainty)
     scene = load_scene(args.scene, scale=args.scale)
     tgt = args.target
     if tgt.lower().endswith(".json") or (os.path.isfile(tgt) and not tgt.isdigit()):
@@ -93,8 +98,13 @@ def run(args) -> int:
     if args.sigma_z is not None:
         params["sigma_z"] = args.sigma_z
     res = render(sources, target, args.method, depth="given", progress_bar=not is_quiet(),
-                 verbose=not is_quiet(), **params)
+                 verbose=not is_quiet(), uncertainty=bool(args.uncertainty), **params)
     write_image(args.output, res.image)
+    if args.uncertainty:
+        from ..uncertainty_figures import write_sigma
+
+        write_sigma(args.uncertainty, res.uncertainty)
+        print(f"wrote {args.uncertainty}")
     t = res.times
     log(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
         f"{res.n_samples} samples, coverage {100 * res.coverage.mean():.1f} %, "

@@ -56,6 +56,9 @@ class RenderResult:
         The initial image (weighted blend + push–pull) the solver started from.
     iterations, power_iterations : int
         FISTA iterations and power iterations (step size) over all outer passes.
+    uncertainty : (H, W) float32 or None
+        Per-pixel standard deviation, grey levels of ``scale`` (``uncertainty=True``;
+        :mod:`vibr.render.uncertainty`, docs/RENDERER.md "Uncertainty").
     """
 
     image: np.ndarray
@@ -71,6 +74,7 @@ class RenderResult:
     init: np.ndarray | None = None
     iterations: int = 0
     power_iterations: int = 0
+    uncertainty: np.ndarray | None = None
 
 
 def _log(msg, verbose):
@@ -82,7 +86,7 @@ def _log(msg, verbose):
 
 def render_samples(samples: Samples, method: str = "gradient", *, source_centres=None,
                    target_centre=None, callback=None, progress_bar: bool = False,
-                   verbose: bool = False, **params) -> RenderResult:
+                   verbose: bool = False, uncertainty: bool = False, **params) -> RenderResult:
     """Render from precomputed :class:`~vibr.geometry.Samples` (see :func:`render` for the
     parameters). ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr."""
     p = method_params(method, **params)
@@ -119,12 +123,18 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
         t0 = time.perf_counter()
         if source_centres is None or target_centre is None:
             raise ValueError("ulr needs source_centres and target_centre")
-        img, _ = ulr_blend(samples, source_centres, target_centre, k=p["ulr_k"], beta_res=p["ulr_beta_res"])
+        img, _, *var = ulr_blend(samples, source_centres, target_centre, k=p["ulr_k"],
+                                 beta_res=p["ulr_beta_res"], spread=bool(uncertainty))
         img = push_pull(img * acc[..., None], acc)
         times["init"] = time.perf_counter() - t0
+        sig = None
+        if uncertainty:  # issue 28: ULR-weighted spread of the blended views
+            from .uncertainty import ulr_sigma
+
+            sig = ulr_sigma(var[0], coverage, scale=s)
         times["total"] = time.perf_counter() - t_all
         return RenderResult(np.clip(img, 0, 1), coverage, times=times, method=method, params=p,
-                            n_samples=len(samples))
+                            n_samples=len(samples), uncertainty=sig)
 
     # Sample density rho: mean accumulated bilinear weight over covered pixels (≈ number of
     # views seeing a pixel, at equal resolution). Data terms are divided by it so that
@@ -208,11 +218,18 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
             bar.update(1)
     if bar is not None:
         bar.close()
-    times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
+    sig = None
+    if uncertainty:  # issue 28: Jacobi diag(H⁻¹) of the last model + spread of the sources
+        from .uncertainty import variational_sigma
+
+        t0 = time.perf_counter()
+        sig = variational_sigma(model, sp, Wk, colour, img, coverage, scale=s, terms=uncertainty)
+        times["uncertainty"] = time.perf_counter() - t0
+    times["total"] = time.perf_counter() - t_all
     p = dict(p, density=rho, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
-    return RenderResult(img, coverage, energy, terms, outer, times,
-                        method, p, len(samples), init=init, iterations=n_iter, power_iterations=n_power)
+    return RenderResult(img, coverage, energy, terms, outer, times, method, p, len(samples), init=init,
+                        iterations=n_iter, power_iterations=n_power, uncertainty=sig)
 
 
 def _prepare_sources(sources: Scene, target, depth: str, sigma_z_proxy=None):
@@ -250,7 +267,7 @@ def _prepare_sources(sources: Scene, target, depth: str, sigma_z_proxy=None):
 def render(sources: Scene, target: View | Camera, method: str = "gradient", *,
            depth: str = "given", samples: Samples | None = None, callback=None,
            progress_bar: bool = False, verbose: bool = False, geometry_kw: dict | None = None,
-           **params) -> RenderResult:
+           uncertainty: bool = False, **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
     Minimises (METHOD §5, paper eq. energy_final)
@@ -278,6 +295,9 @@ def render(sources: Scene, target: View | Camera, method: str = "gradient", *,
         Skip the geometry stage.
     callback : callable, optional
         ``callback(outer, k, energy, (E_color, E_grad, TV))`` per FISTA iteration.
+    uncertainty : bool
+        Also compute ``RenderResult.uncertainty``, the per-pixel std. dev. in grey levels
+        (:mod:`vibr.render.uncertainty`).
     **params
         alpha (1.0), gamma (1.0; gradient only), lam (0.1), sigma_s (1.0, grey levels),
         sigma_z (None: the geometry's), scale (255: the intensity scale all these refer to;
@@ -309,7 +329,7 @@ def render(sources: Scene, target: View | Camera, method: str = "gradient", *,
     t_geo = time.perf_counter() - t0
     res = render_samples(samples, method, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
-                         verbose=verbose, **params)
+                         verbose=verbose, uncertainty=uncertainty, **params)
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:
