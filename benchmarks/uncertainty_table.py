@@ -19,6 +19,7 @@ alone (``sample_spread_sigma``) and 1 / number of views seeing the pixel
     python benchmarks/uncertainty_table.py                       # all cases, print the table
     python benchmarks/uncertainty_table.py --write-docs          # ... and write docs/RESULTS.md's section
     python benchmarks/uncertainty_table.py --cases cotton_s2_gt,fountain_0005
+    python benchmarks/uncertainty_table.py --overhead            # time with / without, 768², 8 sources
 
 JSON per case and the sparsification plots go to ``--out`` (default out/uncertainty, git-ignored).
 """
@@ -184,13 +185,59 @@ def write_docs(reports, cmd, seconds):
     path.write_text(text)
 
 
+def overhead(size=768, repeat=5):
+    """Render time with and without ``uncertainty=True`` on benchmarks/bench_render.py's scene
+    (synthetic 3×3 grid, centre target from 8 sources), alternating, same samples; medians
+    and (min, max) over ``repeat`` pairs after one warm-up pair."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_render import centre_index, grid_scene
+    from vibr.geometry import compute_samples
+    from vibr.render import render_samples
+
+    scene = grid_scene(3, 3, size)
+    sources, target = scene.split(centre_index(scene))
+    t0 = time.perf_counter()
+    S = compute_samples(sources, target.camera)
+    t_geo = time.perf_counter() - t0
+    ts = {False: [], True: []}
+    t_unc = []
+    for rep in range(repeat + 1):
+        for flag in ((False, True) if rep % 2 == 0 else (True, False)):
+            t = time.perf_counter()
+            r = render_samples(S, "gradient", uncertainty=flag)
+            dt = time.perf_counter() - t
+            if rep:
+                ts[flag].append(dt)
+                if flag:
+                    t_unc.append(r.times["uncertainty"])
+    med = {k: float(np.median(v)) for k, v in ts.items()}
+    ratios = [b / a for a, b in zip(ts[False], ts[True])]
+    print(f"# uncertainty overhead: {size}x{size}, {len(sources)} sources, {len(S)} samples, geometry "
+          f"{t_geo:.2f} s (once); {repeat} alternating pairs after a warm-up, shared machine")
+    print("| | median s | min | max |\n|---|---|---|---|")
+    for k, name in ((False, "render_samples, uncertainty=False"), (True, "render_samples, uncertainty=True")):
+        print(f"| {name} | {med[k]:.3f} | {min(ts[k]):.3f} | {max(ts[k]):.3f} |")
+    print(f"| the uncertainty step alone (times['uncertainty']) | {np.median(t_unc):.3f} | {min(t_unc):.3f} | "
+          f"{max(t_unc):.3f} |")
+    print(f"ratio with / without per pair: median {np.median(ratios):.3f} (min {min(ratios):.3f}, max "
+          f"{max(ratios):.3f}); uncertainty step / render without: {np.median(t_unc) / med[False]:.3f}; "
+          f"with geometry counted in the render time: {(med[True] + t_geo) / (med[False] + t_geo):.3f}")
+    return {"with": ts[True], "without": ts[False], "step": t_unc, "geometry": t_geo}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", default=",".join(all_cases()), help="comma-separated cases (default: all)")
     ap.add_argument("--data", help="data folder (default: ../shared/data or $VIBR_DATA)")
     ap.add_argument("--out", default=str(ROOT / "out" / "uncertainty"))
     ap.add_argument("--write-docs", action="store_true", help="write the table into docs/RESULTS.md")
+    ap.add_argument("--overhead", action="store_true",
+                    help="only measure the time overhead at 768², 8 sources (bench_render's scene)")
+    ap.add_argument("--repeat", type=int, default=5, help="--overhead: alternating pairs (default 5)")
     a = ap.parse_args(argv)
+    if a.overhead:
+        overhead(repeat=a.repeat)
+        return
     data = data_dir(a.data)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

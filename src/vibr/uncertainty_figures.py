@@ -53,19 +53,22 @@ def sigma_figure(sigma, vmax: float | None = None, units: str = "grey levels") -
     if vmax is None:
         vmax = _nice_ceiling(float(np.percentile(fin, 99)) if fin.size else 1.0)
     H, W = s.shape
-    bar_h = max(28, H // 12)
+    bar_h = max(40, H // 12)
     img = Image.new("RGB", (W, H + bar_h), (255, 255, 255))
     img.paste(Image.fromarray(colourise(np.where(np.isfinite(s), s, vmax), vmax)), (0, 0))
     x0, x1 = 8, max(W - 8, 9)
-    ramp = np.linspace(0, vmax, x1 - x0)[None].repeat(max(bar_h // 3, 4), 0)
+    ramp = np.linspace(0, vmax, x1 - x0)[None].repeat(max(bar_h // 4, 4), 0)
     img.paste(Image.fromarray(colourise(ramp, vmax)), (x0, H + 2))
     d = ImageDraw.Draw(img)
     ty = H + 2 + ramp.shape[0] + 1
-    for k in range(5):
-        x = x0 + round(k / 4 * (x1 - x0 - 1))
+    n_ticks = 5 if W >= 240 else 2  # labels ~6 px per character: fewer on small maps
+    for k in range(n_ticks):
+        x = x0 + round(k / (n_ticks - 1) * (x1 - x0 - 1))
         d.line([(x, H + 2), (x, ty)], fill=(0, 0, 0))
-        lab = f"{k / 4 * vmax:g}" + (f" {units}" if k == 4 else "")
+        lab = f"{k / (n_ticks - 1) * vmax:g}"
         d.text((min(max(x - 3 * len(lab), 0), max(W - 6 * len(lab), 0)), ty), lab, fill=(0, 0, 0))
+    lab = f"sigma, {units}"
+    d.text((max(W // 2 - 3 * len(lab), 0), ty + 12), lab, fill=(0, 0, 0))
     return np.asarray(img)
 
 
@@ -107,7 +110,7 @@ def sparsification_plot(path, fractions, curves: dict, title: str = "", size=(48
     d = ImageDraw.Draw(img)
     fr = np.asarray(fractions, np.float64)
     ymax = max(1e-9, max(float(np.nanmax(v)) for v in curves.values()))
-    ymax = _nice_ceiling(ymax * 1.02)
+    ymax = float(np.ceil(ymax * 1.05 * 10) / 10)
     px = lambda x: ml + x * (Wd - ml - mr)  # noqa: E731
     py = lambda y: Hd - mb - y / ymax * (Hd - mt - mb)  # noqa: E731
     d.rectangle([px(0), py(ymax), px(1), py(0)], outline=(0, 0, 0))

@@ -224,7 +224,8 @@ def render_samples(samples: Samples, method: str = "gradient", *, source_centres
         from .uncertainty import variational_sigma
 
         t0 = time.perf_counter()
-        sig = variational_sigma(model, sp, Wk, colour, img, coverage, scale=s, terms=uncertainty)
+        sig = variational_sigma(model, sp, Wk, colour, u, coverage, scale=s, density=rho,
+                                terms=uncertainty)
         times["uncertainty"] = time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_all
     p = dict(p, density=rho, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))

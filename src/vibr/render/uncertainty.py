@@ -35,11 +35,14 @@ import logging
 import math
 
 import numpy as np
+from numba import njit, prange
+
+from .operators import _row_coef
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["HOLE_SIGMA_FRACTION", "hole_sigma", "hessian_diagonal", "model_variance",
-           "sample_spread", "TERMS", "variational_sigma", "ulr_sigma", "sample_spread_sigma",
+           "sample_spread", "residual_spread", "TERMS", "variational_sigma", "ulr_sigma", "sample_spread_sigma",
            "view_count_sigma"]
 
 #: σ of a pixel filled by push–pull, as a fraction of the intensity scale: the standard
@@ -102,6 +105,53 @@ def sample_spread(splat, weight, colour, centre_values=None):
     return np.maximum(s2, 0.0), wsum
 
 
+@njit(parallel=True, cache=True)
+def _residual_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, out):
+    """``out = Σ_m w_m B_m· ‖colour_m − (B u)(m)‖² / C`` (H, W), one pass over the samples:
+    row ``i`` of B (2×2 block at (x0, y0), bilinear from (fx, fy) or ``coef``) both reads
+    ``u`` (planar (C, H, W)) and receives the splat. Buckets of even then odd top rows, so
+    that threads never write the same row (as :func:`vibr.render.operators._assemble_kernel`)."""
+    C, H, W = u.shape
+    n_rows = starts.shape[0] - 1
+    use_coef = coef.shape[0] == x0.shape[0] and x0.shape[0] > 0
+    for parity in range(2):
+        for r in prange(n_rows):
+            if r % 2 != parity or starts[r] == starts[r + 1]:
+                continue
+            for q in range(starts[r], starts[r + 1]):
+                i = order[q]
+                wi = np.float64(w[i])
+                if wi == 0.0:
+                    continue
+                b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
+                x = x0[i]
+                y = y0[i]
+                e = 0.0
+                for c in range(C):
+                    uc = u[c]
+                    bu = b0 * uc[y, x] + b1 * uc[y, x + 1] + b2 * uc[y + 1, x] + b3 * uc[y + 1, x + 1]
+                    d = np.float64(colour[i, c]) - bu
+                    e += d * d
+                e *= wi / C
+                out[y, x] += b0 * e
+                out[y, x + 1] += b1 * e
+                out[y + 1, x] += b2 * e
+                out[y + 1, x + 1] += b3 * e
+
+
+def residual_spread(splat, weight, colour, u, wsum) -> np.ndarray:
+    """``s²(p) = Σ_m w_m B_mp ‖colour_m − (B u)(m)‖² / (C · wsum(p))`` (H, W) float64, in the
+    units of ``colour`` and ``u`` squared; ``wsum = Σ_m w_m B_mp`` (the row sums of the stencil
+    ``Σ BᵀWB``, since rows of B sum to one). 0 where ``wsum = 0``."""
+    H, W = splat.shape
+    acc = np.zeros((H, W), np.float64)
+    up = np.ascontiguousarray(u, np.float32)
+    _residual_splat(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts,
+                    np.ascontiguousarray(weight), np.ascontiguousarray(colour), up, acc)
+    ws = np.asarray(wsum, np.float64)
+    return np.where(ws > 0, acc / np.where(ws > 0, ws, 1.0), 0.0)
+
+
 def _finish(var, coverage, scale):
     """σ = min(σ_hole, sqrt(var)) on covered pixels, σ_hole elsewhere; float32."""
     sh = hole_sigma(scale)
@@ -115,7 +165,7 @@ TERMS = ("model", "spread")
 
 
 def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float = 255.0,
-                      terms=TERMS) -> np.ndarray:
+                      density: float = 1.0, terms=TERMS) -> np.ndarray:
     """σ per pixel (H, W) float32, grey levels of ``scale``, of a variational render.
 
     Parameters
@@ -128,10 +178,14 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
         The last pass's data-term weights ``W_km`` (those ``A`` was assembled with).
     colour : (N, 3) array
         Sample colours ``v_k(m)`` in [0, 1].
-    u : (3, H, W) planar or (H, W, 3) array in [0, 1]
+    u : (3, H, W) planar (or (H, W, 3)) array in [0, 1]
         The rendered image.
     coverage : (H, W) bool
         Pixels reached by the samples; the rest get ``σ_hole`` (:func:`hole_sigma`).
+    density : float
+        The density normalisation rho the data terms were divided by
+        (``RenderResult.params["density"]``): the model's variance is that of the
+        unnormalised energy (the paper's), ``1 / (rho · diag(H))``.
     terms : sequence of {"model", "spread"} or a "+"-joined string
         The variances added: the model's ``1/diag(H)`` and the disagreement of the sources
         ``s²`` (module docstring); default both.
@@ -146,15 +200,12 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     var = np.zeros(np.shape(coverage))
     if "model" in terms:
         var = var + model_variance(model.A, model.Ag if model.use_grad else None, model.alpha,
-                                   model.gamma if model.use_grad else 0.0)
+                                   model.gamma if model.use_grad else 0.0) / float(density)
     if "spread" in terms:
-        img = np.asarray(u)
-        if img.ndim == 3 and img.shape[0] in (1, 3) and img.shape[-1] not in (1, 3):
-            img = img.transpose(1, 2, 0)
-        s = np.float64(scale)
-        s2, _ = sample_spread(splat, weight, np.asarray(colour) * s,
-                              splat.apply(np.ascontiguousarray(img, np.float32)) * s)
-        var = var + s2
+        up = np.asarray(u)
+        if not (up.ndim == 3 and up.shape[0] == np.shape(colour)[1]):
+            up = up.transpose(2, 0, 1)  # (H, W, C) → planar
+        var = var + residual_spread(splat, weight, colour, up, model.A.sum(0, dtype=np.float64)) * float(scale) ** 2
     return _finish(var, coverage, scale)
 
 
