@@ -185,6 +185,42 @@ def write_docs(reports, cmd, seconds):
     path.write_text(text)
 
 
+def planar_figure(path, size=256):
+    """docs figure: a synthetic 3×3 grid (exact depth), centre view rendered by ``gradient``
+    from its 8 neighbours through the planar proxy; panels: reference, render, per-pixel
+    error and σ (both in grey levels, the same colour scale)."""
+    from PIL import Image, ImageDraw
+
+    from vibr.io.atomic import atomic_path
+    from vibr.metrics import pixel_error, uncertainty_metrics
+    from vibr.render import render
+    from vibr.synthetic import make_scene
+    from vibr.uncertainty_figures import _nice_ceiling, sigma_figure
+
+    sc = make_scene("grid", width=size, height=size, seed=0)
+    src, tg = sc.split(4)
+    r = render(src, tg, "gradient", depth="planar", uncertainty=True)
+    err = pixel_error(r.image, tg.image)
+    m = uncertainty_metrics(r.uncertainty, r.image, tg.image, border=2)
+    vmax = _nice_ceiling(float(np.percentile(np.r_[err.ravel(), r.uncertainty.ravel()], 99)))
+    fe, fs = sigma_figure(err, vmax, "|error|, grey levels"), sigma_figure(r.uncertainty, vmax)
+    pad = np.full((fe.shape[0] - size, size, 3), 255, np.uint8)
+    to8 = lambda a: np.vstack([np.round(np.clip(a, 0, 1) * 255).astype(np.uint8), pad])  # noqa: E731
+    panels = [to8(tg.image), to8(r.image), fe, fs]
+    gap = np.full((fe.shape[0], 6, 3), 255, np.uint8)
+    row = np.hstack([x for p in panels for x in (p, gap)][:-1])
+    top = 16
+    img = Image.new("RGB", (row.shape[1], row.shape[0] + top), (255, 255, 255))
+    img.paste(Image.fromarray(row), (0, top))
+    d = ImageDraw.Draw(img)
+    for k, lab in enumerate(("reference (held out)", f"planar proxy render, {r.metrics['psnr']:.1f} dB",
+                             "|error| (RMS over RGB)", f"predicted sigma (rho {m['spearman']:.2f})")):
+        d.text((k * (size + 6) + 4, 2), lab, fill=(0, 0, 0))
+    with atomic_path(path) as tmp:
+        img.save(tmp, format="PNG")
+    print(f"wrote {path}: PSNR {r.metrics['psnr']:.2f} dB, AUSE {m['ause']:.3f}, Spearman {m['spearman']:.2f}")
+
+
 def overhead(size=768, repeat=5):
     """Render time with and without ``uncertainty=True`` on benchmarks/bench_render.py's scene
     (synthetic 3×3 grid, centre target from 8 sources), alternating, same samples; medians
@@ -234,7 +270,14 @@ def main(argv=None):
     ap.add_argument("--overhead", action="store_true",
                     help="only measure the time overhead at 768², 8 sources (bench_render's scene)")
     ap.add_argument("--repeat", type=int, default=5, help="--overhead: alternating pairs (default 5)")
+    ap.add_argument("--from-json", metavar="DIR",
+                    help="rebuild the tables (and with --write-docs the section) from the CASE.json reports "
+                         "a previous run wrote to DIR, without rendering")
+    ap.add_argument("--figure", metavar="PNG", help="only draw the synthetic planar-proxy figure (σ map) to PNG")
     a = ap.parse_args(argv)
+    if a.figure:
+        planar_figure(a.figure)
+        return
     if a.overhead:
         overhead(repeat=a.repeat)
         return
@@ -245,16 +288,24 @@ def main(argv=None):
     log = lambda msg: print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)  # noqa: E731
     reports, scenes = [], {}
     for case in [c.strip() for c in a.cases.split(",") if c.strip()]:
+        if a.from_json:
+            reports.append(json.loads((Path(a.from_json) / f"{case}.json").read_text()))
+            continue
         rep = run_case(case, data, scenes, log)
         (out / f"{case}.json").write_text(json.dumps(rep, indent=1))
         plot_curves(rep, out / f"{case}_sparsification.png")
         reports.append(rep)
+    if a.from_json:
+        t0 -= sum(r["seconds"] for r in reports)  # the run time of the renders it reports
     print(table(reports))
     print()
     print(variant_table(reports))
     if a.write_docs:
         cmd = "python benchmarks/uncertainty_table.py --write-docs" + (
             "" if a.cases == ",".join(all_cases()) else f" --cases {shlex.quote(a.cases)}")
+        if a.from_json:
+            cmd = (f"python benchmarks/uncertainty_table.py --out {a.from_json}`, then `"
+                   f"{cmd} --from-json {a.from_json}")
         write_docs(reports, cmd, time.perf_counter() - t0)
         print("wrote docs/RESULTS.md")
 

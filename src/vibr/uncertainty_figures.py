@@ -42,10 +42,10 @@ def _nice_ceiling(x: float) -> float:
     return float(10 * e)
 
 
-def sigma_figure(sigma, vmax: float | None = None, units: str = "grey levels") -> np.ndarray:
+def sigma_figure(sigma, vmax: float | None = None, label: str = "sigma, grey levels") -> np.ndarray:
     """σ map (H, W) → RGB uint8 image: the colour-mapped map above a horizontal scale bar
     (0 to ``vmax``; default the 99th percentile of the finite values rounded up to 1, 2, 2.5
-    or 5 × 10^k) labelled in ``units``."""
+    or 5 × 10^k) with the caption ``label``."""
     from PIL import Image, ImageDraw
 
     s = np.asarray(sigma, np.float64)
@@ -67,7 +67,7 @@ def sigma_figure(sigma, vmax: float | None = None, units: str = "grey levels") -
         d.line([(x, H + 2), (x, ty)], fill=(0, 0, 0))
         lab = f"{k / (n_ticks - 1) * vmax:g}"
         d.text((min(max(x - 3 * len(lab), 0), max(W - 6 * len(lab), 0)), ty), lab, fill=(0, 0, 0))
-    lab = f"sigma, {units}"
+    lab = label
     d.text((max(W // 2 - 3 * len(lab), 0), ty + 12), lab, fill=(0, 0, 0))
     return np.asarray(img)
 
