@@ -342,9 +342,6 @@ def main(argv=None) -> None:
                    "(estimate_depth(fill_segments=True))")
     p.add_argument("--no-render", action="store_true")
     args = p.parse_args(argv)
-    from vibr.progress import set_quiet
-
-    set_quiet(True)
     if "synthetic" in args.what:
         bench_synthetic(args)
     if "cotton" in args.what:

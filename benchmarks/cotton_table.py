@@ -5,7 +5,7 @@ Prints, per stride and geometry (ground-truth depth / planar proxy), PSNR (dB) a
 with a 2-pixel border excluded, plus the reference baseline: the plain average of the 8
 neighbours sampled (bilinear) through the centre's own ground-truth disparity.
 
-    python benchmarks/cotton_table.py [--strides 1,2,4] [--depth given,planar] [-- extra k=v]
+    python benchmarks/cotton_table.py [--strides 1,2,4] [--depth gt,planar] [-- extra k=v]
 """
 
 from __future__ import annotations
@@ -57,14 +57,15 @@ SETTINGS = [("ulr", {}), ("savsr", {}), ("bvs", {})] + [("gradient", {"gamma": f
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--strides", default="1,2,4")
-    ap.add_argument("--depth", default="given,planar")
+    ap.add_argument("--depth", default="gt,planar")
     ap.add_argument("extra", nargs="*", help="render parameters k=v (e.g. lam=0.3 precond=True)")
     a = ap.parse_args(argv)
     extra = {k: eval(v) for k, v in (e.split("=", 1) for e in a.extra)}  # noqa: S307 - a benchmark
     from vibr.geometry import compute_samples
     from vibr.io import load_scene
     from vibr.metrics import dssim, psnr
-    from vibr.render.api import _prepare_sources, render_samples
+    from vibr.pipeline import prepare
+    from vibr.render.api import render_samples
 
     scene = load_scene(DATA)
     tgt = scene["input_Cam040"]
@@ -75,7 +76,7 @@ def main(argv=None):
         bp, bd, bp0 = baseline(scene, s)
         print(f"| {s} | baseline (plain avg through centre GT disparity) | {bp:.2f} / {bd:.0f} (no border: {bp0:.2f}) |", flush=True)
         for depth in a.depth.split(","):
-            src = _prepare_sources(scene.subset(neighbours(scene, s) + ["input_Cam040"]), tgt, depth)
+            src, _ = prepare(scene.subset(neighbours(scene, s) + ["input_Cam040"]), tgt.name, depth=depth)
             S = compute_samples(src, tgt.camera)
             Cs = np.array([v.camera.centre for v in src.views])
             cells = []
@@ -88,7 +89,7 @@ def main(argv=None):
                 cells.append(f"{p:.2f} / {d:.0f}")
                 print(f"#   stride {s} {depth} {m} {kw}: {p:.3f} dB, DSSIM {d:.1f}, {dt:.1f} s, "
                       f"{len(r.energy)} iterations", file=sys.stderr, flush=True)
-            print(f"| {s} | {'GT' if depth == 'given' else 'planar'} | " + " | ".join(cells) + " |", flush=True)
+            print(f"| {s} | {'GT' if depth == 'gt' else 'planar'} | " + " | ".join(cells) + " |", flush=True)
 
 
 if __name__ == "__main__":

@@ -275,9 +275,6 @@ def main(argv=None) -> None:
     p.add_argument("--redecide", choices=["none", "shift"], default="none")
     p.add_argument("--quick", action="store_true", help="the headline figure only")
     args = p.parse_args(argv)
-    from vibr.progress import set_quiet
-
-    set_quiet(True)
     for seed in args.seeds:
         run(seed, args.size, args)
 

@@ -51,14 +51,14 @@ def synthetic_case():
 
 def cotton_case(stride=2):
     from vibr.io import load_scene
-    from vibr.render.api import _prepare_sources
+    from vibr.pipeline import prepare
 
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from cotton_table import neighbours
 
     scene = load_scene(COTTON)
     tgt = scene["input_Cam040"]
-    src = _prepare_sources(scene.subset(neighbours(scene, stride) + ["input_Cam040"]), tgt, "given")
+    src, _ = prepare(scene.subset(neighbours(scene, stride) + ["input_Cam040"]), tgt.name, depth="gt")
     return f"cotton stride {stride}, GT", src, tgt
 
 

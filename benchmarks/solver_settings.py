@@ -21,7 +21,8 @@ def main():
     from vibr.geometry import compute_samples
     from vibr.io import load_scene
     from vibr.metrics import dssim, psnr
-    from vibr.render.api import _prepare_sources, render_samples
+    from vibr.pipeline import prepare
+    from vibr.render.api import render_samples
 
     scene = load_scene(DATA)
     tgt = scene["input_Cam040"]
@@ -30,8 +31,8 @@ def main():
     print("| stride | geometry | method | " + " | ".join(f"n_outer={v['n_outer']}, tv_iter={v['tv_iter']}" for v in variants) + " |")
     print("|---|---|---|" + "---|" * len(variants))
     for s in (1, 2, 4):
-        for depth in ("given", "planar"):
-            src = _prepare_sources(scene.subset(neighbours(scene, s) + ["input_Cam040"]), tgt, depth)
+        for depth in ("gt", "planar"):
+            src, _ = prepare(scene.subset(neighbours(scene, s) + ["input_Cam040"]), tgt.name, depth=depth)
             S = compute_samples(src, tgt.camera)
             for m, kw in [("bvs", {}), ("gradient", {"gamma": 1.0}), ("gradient", {"gamma": 1.0, "lam": 2.0})]:
                 cells = []
@@ -41,7 +42,7 @@ def main():
                                  f"{dssim(r.image, tgt.image, mask=r.coverage, border=2):.1f} "
                                  f"({r.iterations}+{r.power_iterations} it, {r.times['solve']:.2f} s)")
                 label = m + "".join(f" {k}={x:g}" for k, x in kw.items())
-                print(f"| {s} | {'GT' if depth == 'given' else 'planar'} | {label} | " + " | ".join(cells) + " |",
+                print(f"| {s} | {'GT' if depth == 'gt' else 'planar'} | {label} | " + " | ".join(cells) + " |",
                       flush=True)
 
 

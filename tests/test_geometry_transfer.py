@@ -13,11 +13,9 @@ from vibr.scene import Scene, View
 @pytest.fixture(scope="module")
 def cotton_block(cotton_dir):
     io = pytest.importorskip("vibr.io")
-    from vibr.progress import set_quiet
 
     if not cotton_dir.is_dir():
         pytest.skip("cotton data missing")
-    set_quiet(True)
     scene = io.load_scene(cotton_dir)
     gp = scene.meta["grid_pos"]
     names = [n for n in scene.names if abs(gp[n][0] - 4) <= 1 and abs(gp[n][1] - 4) <= 1]

@@ -367,12 +367,12 @@ def test_half_size_sweep_then_refinement_within_1pct(coarse_iter):
     refinement iterations, at half size, upsampled, then refined at full size, recover a
     strongly slanted textured plane as well as from the full-size sweep: ≥ 95 % of the
     pixels within 1 %."""
-    from vibr.stereo.api import resize_image, upsample_sweep
+    from vibr.stereo.api import _resized, upsample_sweep
     from vibr.stereo.planesweep import refine_planes
 
     ref, cams, views, _, n, d = _slanted_setup(8)
     small = [c.scaled(0.5) for c in cams]
-    ims = [resize_image(v[0], c) for v, c in zip(views, small)]
+    ims = [_resized(v[0], c) for v, c in zip(views, small)]
     coarse = plane_sweep(ims[0], small[0], ims[1:], small[1:], (2.5, 8.0), n_planes=16, radius=3)
     if coarse_iter:
         coarse = refine_planes(ims[0], small[0], ims[1:], small[1:], coarse, n_iter=coarse_iter)

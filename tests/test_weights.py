@@ -3,7 +3,7 @@
 import numpy as np
 
 from vibr.geometry.samples import Samples
-from vibr.geometry.weights import geometric_weights, luminance_gradient
+from vibr.render.weights import geometric_weights, luminance_gradient
 
 
 def _samples(xy, dtau, sigma_z, inv_det, shape):

@@ -14,8 +14,8 @@ __version__ = "0.1.0"
 
 
 def __getattr__(name):
-    # vibr.render is a callable subpackage (vibr.render(scene, target, ...)); imported on
-    # first use so that ``import vibr`` stays light
+    # the vibr.render subpackage (its function: ``from vibr.render import render``),
+    # imported on first use so that ``import vibr`` stays light
     if name == "render":
         import importlib
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import shutil
 import tempfile
@@ -40,8 +41,10 @@ import numpy as np
 
 from .camera import Camera
 from .errors import VibrInputError
-from .progress import is_quiet, log, progress
+from .progress import progress
 from .scene import Scene, View
+
+logger = logging.getLogger(__name__)
 
 #: Photo file extensions read by calibrate (case-insensitive).
 IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
@@ -306,19 +309,19 @@ def calibrate_scene(
             shutil.rmtree(img_dir)
 
         t0 = time.perf_counter()
-        log(f"calibrate [1/5] resizing {len(files)} photos by {scale:g}")
+        logger.info(f"calibrate [1/5] resizing {len(files)} photos by {scale:g}")
         sizes = _downscale_photos(files, img_dir, scale)
         size = max(sizes, key=lambda wh: wh[0] * wh[1])
         if single_camera and len(set(sizes)) > 1:
             # One shared camera needs one image size: photos of several sizes get one each.
-            log(f"calibrate: photos have {len(set(sizes))} different sizes: one camera per photo")
+            logger.info(f"calibrate: photos have {len(set(sizes))} different sizes: one camera per photo")
             single_camera = False
         times["resize"] = time.perf_counter() - t0
         names = [f"{f.stem}.png" for f in files]
 
         with _colmap_log_level(verbose):
             t0 = time.perf_counter()
-            log(f"calibrate [2/5] SIFT features ({size[0]}x{size[1]}, {camera_model}, "
+            logger.info(f"calibrate [2/5] SIFT features ({size[0]}x{size[1]}, {camera_model}, "
                 f"{'one shared camera' if single_camera else 'one camera per photo'})")
             reader = pycolmap.ImageReaderOptions()
             reader.camera_model = camera_model
@@ -335,7 +338,7 @@ def calibrate_scene(
             times["features"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
-            log(f"calibrate [3/5] {matcher} matching")
+            logger.info(f"calibrate [3/5] {matcher} matching")
             mopt = pycolmap.FeatureMatchingOptions()
             mopt.num_threads = num_threads
             mopt.use_gpu = False
@@ -352,7 +355,7 @@ def calibrate_scene(
             times["matching"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
-            log("calibrate [4/5] incremental mapping (poses, intrinsics, sparse points)")
+            logger.info("calibrate [4/5] incremental mapping (poses, intrinsics, sparse points)")
             iopt = pycolmap.IncrementalPipelineOptions()
             iopt.num_threads = num_threads
             iopt.random_seed = seed
@@ -387,20 +390,20 @@ def calibrate_scene(
                     photos_dir,
                 )
             if unregistered:
-                log("calibrate: not registered (left out): " + ", ".join(stem[n] for n in unregistered))
+                logger.info("calibrate: not registered (left out): " + ", ".join(stem[n] for n in unregistered))
             pp_note = "refined in mapping" if refine_principal_point else "fixed at the image centre"
             if refine_principal_point is None:
                 t0 = time.perf_counter()
                 rec, pp_note = _refine_principal_point(rec, num_threads)
                 times["principal_point"] = time.perf_counter() - t0
-            log(f"calibrate: principal point {pp_note}")
+            logger.info(f"calibrate: principal point {pp_note}")
             pycolmap.logging.minloglevel = 0 if verbose else 2
             model_dir = sparse / str(best_key)
             model_dir.mkdir(parents=True, exist_ok=True)
             rec.write(model_dir)  # the kept model (incremental_mapping also wrote it)
 
             t0 = time.perf_counter()
-            log(f"calibrate [5/5] undistorting {len(registered)} images to PINHOLE")
+            logger.info(f"calibrate [5/5] undistorting {len(registered)} images to PINHOLE")
             pycolmap.undistort_images(
                 undist, model_dir, img_dir, output_type="COLMAP", num_threads=num_threads
             )
@@ -517,7 +520,7 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
     parent = out.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
     scene, report = calibrate_scene(photos_dir, **kwargs)
-    log("calibrate: " + report.summary().replace("\n", "\ncalibrate: "))
+    logger.info("calibrate: " + report.summary().replace("\n", "\ncalibrate: "))
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=parent))
     try:
         save_scene(scene, tmp / "scene", overwrite=False)

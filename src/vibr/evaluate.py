@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import logging
 import platform
 import time
 from dataclasses import dataclass, field
@@ -22,10 +23,11 @@ import numpy as np
 
 from .errors import VibrInputError
 from .metrics import dssim, psnr, ssim
-from .progress import log, progress
+from .progress import progress
+from .render.methods import METHODS
 from .scene import Scene
 
-METHODS = ("ulr", "savsr", "bvs", "gradient")
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -65,7 +67,7 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = (0
 
 
 def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
-             sources: Sequence[int | str] | None = None, depth: str = "gt",
+             sources: Sequence[int | str] | None = None, depth: str = "auto",
              depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
              border: int = 0, figures: str | Path | None = None, estimate_kw: dict | None = None,
              render_kw: dict | None = None, intensity_scale: float | None = None,
@@ -137,7 +139,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
     t0 = time.perf_counter()
     samples = compute_samples(src, tview.camera, **(geometry_kw or {}))
     t_samples = time.perf_counter() - t0
-    log(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
+    logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
         f"{len(samples)} samples ({t_samples:.1f} s)")
 
     images, rows = {}, []

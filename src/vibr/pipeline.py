@@ -1,6 +1,7 @@
 """From a loaded scene and a target to the sources the renderer needs.
 
-This is the glue shared by ``vibr render``, ``vibr eval`` and the Python API: pick the
+This is the one preparation step shared by ``vibr render``, ``vibr eval`` and the Python API
+(:func:`vibr.render.render` calls it for sources that are not ready): pick the
 target (a held-out view or a bare camera), pick the source views (all others, a given list,
 or the k best by :mod:`vibr.selection`), and give every source a depth map according to the
 chosen geometry:
@@ -20,8 +21,8 @@ chosen geometry:
     from the sources' depth or sparse points; when the sources have neither (a light field
     whose only depth is the held-out centre's), from the scene's views that have depth —
     two scalars (median and spread of that depth seen from the target), as
-    ``render(depth="planar")`` does; ``meta["proxy"]["from_views"]`` then names them.
-``auto``
+    ``meta["proxy"]["from_views"]`` then names them.
+``auto`` (the default of the API, ``vibr render`` and ``vibr eval``)
     ``gt`` when the scene carries depth (any view, or the held-out target of a light
     field), else ``estimated``: a scene with no geometry at all still renders.
 ``files``
@@ -31,6 +32,7 @@ chosen geometry:
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 from typing import Sequence
@@ -39,7 +41,16 @@ from .camera import Camera
 from .errors import VibrInputError
 from .scene import Scene, View
 
+__all__ = ["DEPTH_MODES", "prepare"]
+
+logger = logging.getLogger(__name__)
+
+#: The one depth vocabulary (module docstring); "auto" is the default everywhere.
 DEPTH_MODES = ("auto", "gt", "estimated", "planar", "files")
+
+
+class DepthUnavailable(VibrInputError):
+    """``depth="gt"`` asked of a scene that has no depth maps."""
 
 
 def _depth_file_for(folder: Path, name: str) -> Path:
@@ -51,7 +62,7 @@ def _depth_file_for(folder: Path, name: str) -> Path:
 
 
 def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int | str] | None = None,
-            depth: str = "gt", depth_files: str | os.PathLike | None = None, n_views: int | None = None,
+            depth: str = "auto", depth_files: str | os.PathLike | None = None, n_views: int | None = None,
             estimate_kw: dict | None = None) -> tuple[Scene, View | Camera]:
     """Choose the target and the sources, and give every source a depth map.
 
@@ -63,7 +74,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         estimation) or a bare camera.
     sources : sequence of int or str, optional
         Source views; default all views but the target (or the ``n_views`` best).
-    depth : {"gt", "auto", "estimated", "planar", "files"}
+    depth : {"auto", "gt", "estimated", "planar", "files"}
         Where the sources' depth comes from (module docstring).
     depth_files : path, optional
         Folder of depth files, for ``depth="files"``.
@@ -78,75 +89,94 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Every view has depth (NaN where unknown).
     target : View or Camera
     """
-    from .geometry import ensure_source_depth, planar_proxy
-    from .selection import select_views
-
     if depth not in DEPTH_MODES:
         raise VibrInputError(f"unknown depth mode {depth!r} (choose from {', '.join(DEPTH_MODES)})")
     if depth == "auto":
         depth = "gt" if any(v.depth is not None for v in scene.views) else "estimated"
         if depth == "estimated":
-            from .progress import log
+            logger.info("the scene has no depth maps: estimating them from the source views")
+    src, tview, ti = _hold_out(scene, target, sources, n_views)
+    tcam = tview if isinstance(tview, Camera) else tview.camera
+    if depth == "gt":
+        src = _gt_depth(scene, src, ti)
+    elif depth == "estimated":
+        from .stereo import estimate_depth
 
-            log("the scene has no depth maps: estimating them from the source views (--depth estimated)")
+        src = estimate_depth(src, **(estimate_kw or {}))
+    elif depth == "planar":
+        src = _planar_depth(scene, src, tcam)
+    else:
+        src = _files_depth(src, depth_files)
+    return src, tview
+
+
+def _hold_out(scene: Scene, target, sources, n_views):
+    """(sources, target View or Camera, target index or None): the target held out, the
+    sources listed or the ``n_views`` best (:func:`vibr.selection.select_views`)."""
+    from .selection import select_views
+
     if isinstance(target, Camera):
-        tview: View | Camera = target
-        tcam = target
         src = scene if sources is None else scene.subset(sources)
-        ti = None
+        tview, tcam, ti = target, target, None
     else:
         ti = scene.index(target)
         src, tview = scene.split(ti, sources)
         tcam = tview.camera
     if n_views is not None and sources is None and n_views < len(src):
         src = src.subset(select_views(src, tcam, n_views))
+    return src, tview, ti
 
-    if depth == "gt":
-        if all(v.depth is None for v in src.views):
-            if ti is not None and scene.views[ti].depth is not None:
-                # Ground truth given for the target only (HCI centre disparity): transfer it.
-                full = Scene(src.views + [scene.views[ti]], scene.name, scene.root, scene.grid,
-                             scene.points, scene.meta)
-                src = Scene(ensure_source_depth(full).views[:-1], scene.name, scene.root,
-                            scene.grid, scene.points, dict(src.meta))
-            else:
-                raise VibrInputError("the scene has no depth maps: use --depth estimated or --depth planar",
-                                     scene.root)
-        elif not src.has_depth:
-            src = ensure_source_depth(src)
-    elif depth == "estimated":
-        from .stereo import estimate_depth
 
-        src = estimate_depth(src, **(estimate_kw or {}))
-    elif depth == "planar":
-        plane = {}
-        if (all(v.depth is None for v in src.views)
-                and (src.points is None or not len(src.points))):
-            # Nothing among the sources to place the plane (a light field whose only depth is
-            # the held-out centre's ground truth): take its depth and uncertainty — two
-            # scalars, as render(depth="planar") does — from the scene's views with depth.
-            known = [v for v in scene.views if v.depth is not None]
-            if known:
-                ref = planar_proxy(Scene(known, scene.name, scene.root, None, None, {}), tcam).meta["proxy"]
-                plane = {"depth": ref["depth"], "sigma_z": ref["sigma_z"]}
-        src = planar_proxy(src, tcam, **plane)
-        if plane:
-            src.meta["proxy"] = dict(src.meta["proxy"], from_views=[v.name for v in known])
-    elif depth == "files":
-        if depth_files is None:
-            raise VibrInputError("--depth files needs --depth-files DIR")
-        from .io import read_depth
+def _gt_depth(scene: Scene, src: Scene, ti) -> Scene:
+    """The scene's depth; views without it get it by transfer (a light field whose ground
+    truth is the held-out centre's: from the target, which is never rendered from)."""
+    from .geometry import ensure_source_depth
 
-        folder = Path(depth_files)
-        if not folder.is_dir():
-            raise VibrInputError("depth folder not found", folder)
-        views = []
-        for v in src.views:
-            p = _depth_file_for(folder, v.name)
-            d = read_depth(p)
-            if d.shape != v.shape:
-                raise VibrInputError(f"depth is {d.shape[1]}x{d.shape[0]}, view {v.name} is "
-                                     f"{v.shape[1]}x{v.shape[0]}", p)
-            views.append(v.replace(depth=d))
-        src = Scene(views, src.name, src.root, src.grid, src.points, dict(src.meta))
-    return src, tview
+    if all(v.depth is None for v in src.views):
+        if ti is None or scene.views[ti].depth is None:
+            raise DepthUnavailable("the scene has no depth maps (estimate them, or use a planar proxy)",
+                                   scene.root)
+        full = scene.replace(views=src.views + [scene.views[ti]])
+        return src.replace(views=ensure_source_depth(full).views[:-1])
+    if not src.has_depth:
+        return ensure_source_depth(src)
+    return src
+
+
+def _planar_depth(scene: Scene, src: Scene, tcam) -> Scene:
+    """The fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`)."""
+    from .geometry import planar_proxy
+
+    plane, known = {}, []
+    if all(v.depth is None for v in src.views) and (src.points is None or not len(src.points)):
+        # Nothing among the sources to place the plane (a light field whose only depth is
+        # the held-out centre's ground truth): take its depth and uncertainty (two scalars)
+        # from the scene's views with depth.
+        known = [v for v in scene.views if v.depth is not None]
+        if known:
+            ref = planar_proxy(scene.replace(views=known, grid=None, points=None, meta={}), tcam)
+            plane = {"depth": ref.meta["proxy"]["depth"], "sigma_z": ref.meta["proxy"]["sigma_z"]}
+    src = planar_proxy(src, tcam, **plane)
+    if plane:
+        src.meta["proxy"] = dict(src.meta["proxy"], from_views=[v.name for v in known])
+    return src
+
+
+def _files_depth(src: Scene, depth_files) -> Scene:
+    """Depth read from ``NAME.npy/.pfm/.png/.bin`` files in the folder ``depth_files``."""
+    from .io import read_depth
+
+    if depth_files is None:
+        raise VibrInputError("depth 'files' needs a folder of depth files (depth_files)")
+    folder = Path(depth_files)
+    if not folder.is_dir():
+        raise VibrInputError("depth folder not found", folder)
+    views = []
+    for v in src.views:
+        p = _depth_file_for(folder, v.name)
+        d = read_depth(p)
+        if d.shape != v.shape:
+            raise VibrInputError(f"depth is {d.shape[1]}x{d.shape[0]}, view {v.name} is "
+                                 f"{v.shape[1]}x{v.shape[0]}", p)
+        views.append(v.replace(depth=d))
+    return src.replace(views=views)

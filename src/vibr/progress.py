@@ -1,30 +1,114 @@
-"""Progress bars (tqdm) that the CLI's ``--quiet`` switches off globally."""
+"""Progress of long stages: a tqdm bar on a terminal, one log line per stage otherwise.
+
+The library reports through the standard :mod:`logging` module: every module logs on its
+own ``logging.getLogger(__name__)``, children of the ``"vibr"`` logger, and never prints.
+An application chooses what to see by configuring that logger (the ``vibr`` command line
+installs a stderr handler at WARNING with ``-q``, INFO by default, DEBUG with ``-v``:
+:func:`configure_logging`).
+
+:func:`progress` draws a bar only when stderr is a terminal and the ``"vibr"`` logger shows
+INFO; otherwise (a log file, a pipe, a notebook capturing stderr, ``-q``) it draws nothing
+and logs one line when the stage ends, so a redirected stderr never fills with
+carriage-return frames.
+"""
 
 from __future__ import annotations
 
+import logging
 import sys
+import time
 
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
-_QUIET = False
+__all__ = ["progress", "configure_logging", "LOGGER_NAME"]
 
-
-def set_quiet(quiet: bool) -> None:
-    global _QUIET
-    _QUIET = bool(quiet)
+LOGGER_NAME = "vibr"
+logger = logging.getLogger(LOGGER_NAME)
 
 
-def is_quiet() -> bool:
-    return _QUIET
+def _bars_wanted() -> bool:
+    isatty = getattr(sys.stderr, "isatty", None)
+    return bool(isatty and isatty()) and logger.isEnabledFor(logging.INFO)
+
+
+class _StageLine:
+    """tqdm's interface without drawing: one INFO line when the stage closes."""
+
+    def __init__(self, iterable=None, desc=None, total=None):
+        self.iterable, self.desc, self.n = iterable, desc, 0
+        if total is None and iterable is not None and hasattr(iterable, "__len__"):
+            total = len(iterable)
+        self.total = total
+        self._t0 = time.perf_counter()
+        self._closed = False
+
+    def __iter__(self):
+        try:
+            for x in self.iterable:
+                yield x
+                self.n += 1
+        finally:
+            self.close()
+
+    def __len__(self):
+        return self.total if self.total is not None else len(self.iterable)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def update(self, n=1):
+        self.n += n
+
+    def set_postfix(self, *args, **kw):
+        pass
+
+    def set_postfix_str(self, *args, **kw):
+        pass
+
+    def set_description(self, desc=None, refresh=True):
+        self.desc = desc
+
+    def refresh(self, *args, **kw):
+        pass
+
+    def write(self, s, *args, **kw):
+        logger.info("%s", s)
+
+    def close(self):
+        if self._closed:
+            return
+        self._closed = True
+        of = f"/{self.total}" if self.total is not None else ""
+        logger.info("%s: %d%s in %.1f s", self.desc or "done", self.n, of, time.perf_counter() - self._t0)
 
 
 def progress(iterable=None, *, desc: str | None = None, total: int | None = None, **kw):
-    """A tqdm bar on stderr; disabled by ``--quiet`` (:func:`set_quiet`)."""
-    return tqdm(iterable, desc=desc, total=total, disable=_QUIET, file=sys.stderr,
-                leave=False, dynamic_ncols=True, **kw)
+    """A progress bar over ``iterable`` (or a manual one with ``total``, ``update()`` and
+    ``close()``): tqdm on stderr when it is a terminal and INFO is shown, else one log line
+    ``"desc: n/total in t s"`` when the stage ends."""
+    if _bars_wanted():
+        return tqdm(iterable, desc=desc, total=total, file=sys.stderr, leave=False,
+                    dynamic_ncols=True, **kw)
+    return _StageLine(iterable, desc, total)
 
 
-def log(msg: str) -> None:
-    """A status line on stderr unless quiet."""
-    if not _QUIET:
-        print(msg, file=sys.stderr, flush=True)
+def configure_logging(verbosity: int = 0, stream=None) -> logging.Handler:
+    """Show the ``"vibr"`` logger's records on ``stream`` (stderr): WARNING and above when
+    ``verbosity < 0`` (quiet), INFO when 0, DEBUG when > 0. Replaces a handler installed by
+    an earlier call; returns the handler. For applications (the CLI): the library itself
+    never configures logging."""
+    level = logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG
+    for h in list(logger.handlers):
+        if getattr(h, "_vibr_cli", False):
+            logger.removeHandler(h)
+    handler = logging.StreamHandler(stream if stream is not None else sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    handler._vibr_cli = True
+    logger.addHandler(handler)
+    logger.setLevel(level)
+    logger.propagate = False
+    return handler

@@ -175,6 +175,12 @@ class Scene:
     def __len__(self) -> int:
         return len(self.views)
 
+    def replace(self, **fields) -> "Scene":
+        """A copy with ``fields`` changed (:func:`dataclasses.replace`); ``meta`` is copied
+        unless given, so that the copy's metadata can change without touching this one."""
+        fields.setdefault("meta", dict(self.meta))
+        return replace(self, **fields)
+
     def __iter__(self):
         return iter(self.views)
 

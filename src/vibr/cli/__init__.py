@@ -15,7 +15,7 @@ import sys
 
 from .. import __version__
 from ..errors import VibrInputError
-from ..progress import set_quiet
+from ..progress import configure_logging
 
 # Order shown in --help.
 _COMMANDS = ["demo", "info", "convert", "render", "eval", "depth", "calibrate"]
@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"vibr {__version__}")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars or status lines")
+    _add_verbosity(parser, None)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in _COMMANDS:
         modname = f"{__name__}.{name}"
@@ -52,10 +52,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_verbosity(p: argparse.ArgumentParser, default) -> None:
+    kw = {} if default is None else {"default": default}
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or status lines "
+                   "(warnings and errors only)", **kw)
+    p.add_argument("-v", "--verbose", action="store_true", help="also debugging lines (each solver "
+                   "pass, each stage's details)", **kw)
+
+
 def add_quiet(p: argparse.ArgumentParser) -> None:
-    """Let ``--quiet`` also be given after the subcommand."""
-    p.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
-                   help="no progress bars or status lines")
+    """Let ``-q`` / ``-v`` also be given after the subcommand."""
+    _add_verbosity(p, argparse.SUPPRESS)
+
+
+def verbosity(args) -> int:
+    """-1 with ``-q``, 1 with ``-v``, else 0."""
+    return -1 if getattr(args, "quiet", False) else 1 if getattr(args, "verbose", False) else 0
+
+
+#: Flag hints the CLI adds to library errors (the library's messages name no flag).
+_HINTS = {"DepthUnavailable": "use --depth estimated or --depth planar"}
+
+
+def _message(exc: VibrInputError) -> str:
+    hint = _HINTS.get(type(exc).__name__)
+    return f"{exc}: {hint}" if hint else str(exc)
 
 
 def main(argv=None) -> int:
@@ -64,11 +85,11 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    set_quiet(getattr(args, "quiet", False))
+    configure_logging(verbosity(args))
     try:
         return int(args.func(args) or 0)
     except VibrInputError as exc:
-        print(f"vibr {args.command}: error: {exc}", file=sys.stderr)
+        print(f"vibr {args.command}: error: {_message(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"vibr {args.command}: interrupted", file=sys.stderr)

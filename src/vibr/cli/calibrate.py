@@ -50,14 +50,13 @@ def register(sub) -> None:
     p.add_argument("--work", metavar="DIR", default=None,
                    help="keep COLMAP's database, model and undistorted images here")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_SCENE if it exists")
-    p.add_argument("--verbose", action="store_true", help="show COLMAP's own log")
     add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..calibrate import calibrate
-    from ..progress import log
+    from . import verbosity
 
     scene = calibrate(
         args.photos,
@@ -73,7 +72,7 @@ def run(args) -> int:
         num_threads=args.threads,
         seed=args.seed,
         work_dir=args.work,
-        verbose=args.verbose,
+        verbose=verbosity(args) > 0,  # -v shows COLMAP's own log
     )
-    log(f"calibrate: wrote {len(scene)} views to {args.out}")
+    print(f"calibrate: wrote {len(scene)} views to {args.out}")
     return 0

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import time
 
 from . import add_quiet
+from ._options import add_method_option
+
+logger = logging.getLogger(__name__)
 
 _DESC = """\
 Build a synthetic scene (textured planes, a box and a sphere, ray-cast with exact depth),
@@ -28,8 +32,7 @@ def register(sub) -> None:
     p.add_argument("--layout", choices=["grid", "arc", "free"], default="grid",
                    help="camera layout of the synthetic scene (default: grid)")
     p.add_argument("--size", type=int, default=256, help="image width and height in pixels (default: 256)")
-    p.add_argument("--method", default="gradient", choices=["ulr", "savsr", "bvs", "gradient"],
-                   help="rendering method (default: gradient, the paper's)")
+    add_method_option(p)
     p.add_argument("--seed", type=int, default=0, help="random seed of the scene (default: 0)")
     p.add_argument("-o", "--output", help="also write the rendered view to this PNG")
     add_quiet(p)
@@ -41,7 +44,6 @@ def run(args) -> int:
     from ..metrics import dssim, psnr
     from ..render import render
     from ..synthetic import make_scene
-    from ..progress import log
 
     t0 = time.perf_counter()
     n = 9 if args.layout == "grid" else 8
@@ -49,10 +51,10 @@ def run(args) -> int:
     target = len(scene) // 2
     sources, tview = scene.split(target)
     t1 = time.perf_counter()
-    log(f"scene: {len(scene)} views ({args.layout}), {args.size}x{args.size}, made in {t1 - t0:.2f} s; "
+    logger.info(f"scene: {len(scene)} views ({args.layout}), {args.size}x{args.size}, made in {t1 - t0:.2f} s; "
         f"rendering {tview.name} from the other {len(sources)} (the first run on a machine also "
         f"compiles the kernels, under a minute)")
-    res = render(sources, tview.camera, method=args.method)
+    res = render(sources, tview.camera, method=args.method, progress_bar=True)
     t2 = time.perf_counter()
     mask = res.coverage
     print(f"vibr demo: {args.method} rendering of {tview.name} from {len(sources)} views "

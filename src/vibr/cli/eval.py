@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 from . import add_quiet
+from ._options import METHODS, add_depth_options, add_intensity_scale_option, add_psf_option, check_depth_args, method_help
+from ..render.methods import DEFAULTS
 
 _DESC = """\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
@@ -33,6 +35,10 @@ variational method, and default to the renderer's documented defaults.
 """
 
 
+#: The gamma values of the paper's tables (one row each for the gradient method).
+GAMMAS = (0, 1, 2, 3)
+
+
 def _floats(s):
     try:
         return [float(x) for x in s.split(",") if x.strip()]
@@ -51,21 +57,16 @@ def register(sub) -> None:
     p.add_argument("--target", required=True, help="view to hold out and render (name or index)")
     p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
     p.add_argument("--views", type=int, metavar="K", help="use only the K best source views for the target")
-    p.add_argument("--depth", default="gt", choices=["gt", "auto", "estimated", "planar", "files"],
-                   help="geometry of the sources (default: gt, the depth given with the scene; auto: "
-                        "gt when the scene has depth, else estimated)")
-    p.add_argument("--depth-files", metavar="DIR", help="folder of NAME.npy/.pfm/.png depth maps for --depth files")
-    p.add_argument("--method", type=_names, default=["ulr", "savsr", "bvs", "gradient"],
-                   help="comma-separated methods among ulr, savsr, bvs, gradient (default: all)")
-    p.add_argument("--gamma", type=_floats, default=[0, 1, 2, 3], help="gradient-term weights (default: 0,1,2,3)")
-    p.add_argument("--alpha", type=_floats, help="colour-term weights (default: the renderer's)")
-    p.add_argument("--lam", type=_floats, help="TV weights (default: the renderer's)")
+    add_depth_options(p)
+    p.add_argument("--method", type=_names, default=list(METHODS),
+                   help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
+    p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
+                   help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)})")
+    p.add_argument("--alpha", type=_floats, help=f"colour-term weights (default: {DEFAULTS['alpha']:g})")
+    p.add_argument("--lam", type=_floats, help=f"TV weights (default: {DEFAULTS['lam']:g})")
     p.add_argument("--scale", type=float, default=1.0,
                    help="IMAGE scale the scene is loaded at, e.g. 0.25 (default: 1)")
-    p.add_argument("--intensity-scale", type=float, default=None, metavar="S",
-                   help="INTENSITY scale the render parameters (lam, sigma_s, ...) refer to: 255 "
-                        "means grey levels of 8-bit images, 1 means [0, 1] intensities "
-                        "(default: the renderer's, 255)")
+    add_intensity_scale_option(p)
     p.add_argument("--step-px", type=float, default=None,
                    help="--depth estimated: parallax step between sweep planes, px (default: the estimator's)")
     p.add_argument("--max-planes", type=int, default=None,
@@ -76,9 +77,7 @@ def register(sub) -> None:
     p.add_argument("--mask", choices=["reconstructed", "all"], default="reconstructed",
                    help="pixels the metrics are taken over (default: reconstructed)")
     p.add_argument("--border", type=int, default=0, help="pixels excluded at the image border (default: 0)")
-    p.add_argument("--psf", choices=["bilinear", "footprint"], default=None,
-                   help="image-formation model of the variational methods: bilinear (default) or "
-                        "footprint (the source pixel's parallelogram)")
+    add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
     p.add_argument("--uncertainty", action="store_true",
@@ -94,6 +93,7 @@ def run(args) -> int:
 
     from ..errors import VibrInputError
 
+    check_depth_args(args)
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")

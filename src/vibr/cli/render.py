@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 
 from . import add_quiet
+from ._options import (METRIC_RULE, add_depth_options, add_method_option, add_render_params, check_depth_args,
+                       render_params)
+
+logger = logging.getLogger(__name__)
 
 _DESC = """\
 Render a novel view of SCENE with the variational method of Nieto, Devernay & Crowley (2016)
@@ -37,27 +42,10 @@ def register(sub) -> None:
                    help="view name / index to hold out and render, or a camera JSON file (K, R, t, "
                         "width, height at the scene's original resolution: --scale applies to it too)")
     p.add_argument("-o", "--output", required=True, help="output image (PNG)")
-    p.add_argument("--method", default="gradient", choices=["gradient", "bvs", "savsr", "ulr"],
-                   help="rendering method (default: gradient)")
-    p.add_argument("--alpha", type=float, help="colour-term weight (default 1.0)")
-    p.add_argument("--gamma", type=float, help="gradient-term weight, method gradient (default 1.0)")
-    p.add_argument("--lam", type=float, help="TV weight, for [0,255] intensities (default 0.1)")
-    p.add_argument("--sigma-s", type=float, help="sensor noise, grey levels of 255 (default 1.0)")
-    p.add_argument("--sigma-z", type=float, help="depth std. dev., scene units (default: the scene's / 1%% of depth)")
-    p.add_argument("--intensity-scale", type=float, help="intensity scale the parameters refer to (default 255)")
-    p.add_argument("--outer", type=int, help="weight re-estimation passes (default 2)")
-    p.add_argument("--iterations", type=int, help="FISTA iterations per pass at most (default 60)")
-    p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
-    p.add_argument("--psf", choices=["bilinear", "footprint"],
-                   help="image-formation model: bilinear (default) or the source pixel's footprint "
-                        "parallelogram (worth it when the sources are finer than the target)")
+    add_method_option(p)
+    add_render_params(p)
     p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
-    p.add_argument("--depth", default="auto", choices=["auto", "gt", "given", "estimated", "planar", "files"],
-                   help="source geometry: the scene's depth maps (gt, alias given), depth estimated "
-                        "from the sources (estimated; the target never takes part), a fronto-parallel "
-                        "plane (planar), NAME.npy/.pfm/.png files in --depth-files (files), or gt when "
-                        "the scene has depth and estimated when it has none (auto, the default)")
-    p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files")
+    add_depth_options(p)
     p.add_argument("--views", type=int, metavar="K",
                    help="render from the K best source views for the target (ULR ranking; default: all)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene and of a camera-file target, e.g. 0.5 (default 1)")
@@ -72,9 +60,9 @@ def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, read_camera_json, write_image
     from ..pipeline import prepare
-    from ..progress import is_quiet, log
     from ..render import render
 
+    check_depth_args(args)
     if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
         raise VibrInputError("--uncertainty output must end in .png or .npy", args.uncertainty)
     scene = load_scene(args.scene, scale=args.scale)
@@ -89,16 +77,10 @@ def run(args) -> int:
             raise VibrInputError(f"target view {target} is also listed as a source", args.scene)
     if args.views is not None and args.views < 1:
         raise VibrInputError(f"--views must be at least 1, got {args.views}")
-    depth = "gt" if args.depth == "given" else args.depth
-    sources, target = prepare(scene, target, sources=args.sources, depth=depth,
+    sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views)
-    params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
-                  scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
-                  precond=True if args.precond else None, psf=args.psf)
-    if args.sigma_z is not None:
-        params["sigma_z"] = args.sigma_z
-    res = render(sources, target, args.method, depth="given", progress_bar=not is_quiet(),
-                 verbose=not is_quiet(), uncertainty=bool(args.uncertainty), **params)
+    res = render(sources, target, args.method, progress_bar=True, verbose=True,
+                 uncertainty=bool(args.uncertainty), **render_params(args))
     write_image(args.output, res.image)
     if args.uncertainty:
         from ..uncertainty_figures import write_sigma
@@ -106,11 +88,11 @@ def run(args) -> int:
         write_sigma(args.uncertainty, res.uncertainty)
         print(f"wrote {args.uncertainty}")
     t = res.times
-    log(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
-        f"{res.n_samples} samples, coverage {100 * res.coverage.mean():.1f} %, "
-        f"{t.get('total', 0):.2f} s (geometry {t.get('geometry', 0):.2f}, solve {t.get('solve', 0):.2f})")
+    logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
+                f"{res.n_samples} samples, coverage {100 * res.coverage.mean():.1f} %, "
+                f"{t.get('total', 0):.2f} s (geometry {t.get('geometry', 0):.2f}, solve {t.get('solve', 0):.2f})")
     if res.metrics:
         print(f"PSNR {res.metrics['psnr']:.2f} dB  DSSIM {res.metrics['dssim']:.1f}  "
-              f"(SSIM {res.metrics['ssim']:.4f}; covered pixels, 2-px border excluded)")
+              f"(SSIM {res.metrics['ssim']:.4f}; {METRIC_RULE})")
     print(f"wrote {args.output}")
     return 0

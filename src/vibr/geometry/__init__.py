@@ -9,12 +9,12 @@ planar_proxy(sources, target_camera, depth=None, sigma_z=None) -> Scene
 
 Modules: ``depth`` (radial/disparity → orthogonal depth, slopes, bilateral hole filling),
 ``warp`` (tau_k and its Jacobians), ``visibility`` (z-buffer splatting, occlusion test),
-``transfer``, ``proxy``, ``pipeline``; ``weights`` belongs to the renderer.
+``transfer``, ``proxy``, ``sampling`` (the stage end to end) (the weights are the renderer's: :mod:`vibr.render.weights`).
 """
 
 from .depth import (depth_derivatives, disparity_to_depth, fill_depth_holes, radial_to_orthogonal,
                     radial_to_orthogonal_derivatives)
-from .pipeline import compute_samples, prepare_depth
+from .sampling import compute_samples, prepare_depth
 from .proxy import planar_proxy, plane_depth
 from .samples import Samples
 from .transfer import ensure_source_depth, transfer_depth

@@ -21,7 +21,7 @@ from ..scene import Scene, View
 __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL"]
 
 #: Default proxy uncertainty: ``sigma_z = PROXY_SIGMA_Z_REL · D`` (ten times the default
-#: of estimated depth, :data:`vibr.geometry.pipeline.DEFAULT_SIGMA_Z_REL`), or half the
+#: of estimated depth, :data:`vibr.geometry.sampling.DEFAULT_SIGMA_Z_REL`), or half the
 #: 5–95 % spread of the available depth seen from the target if that is larger.
 PROXY_SIGMA_Z_REL = 0.1
 
@@ -99,4 +99,4 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
     views = [v.replace(depth=plane_depth(v.camera, cam, depth), sigma_z=float(sigma_z))
              for v in sources.views]
     meta = dict(sources.meta, proxy={"depth": depth, "sigma_z": float(sigma_z)})
-    return Scene(views, sources.name, sources.root, sources.grid, sources.points, meta)
+    return sources.replace(views=views, meta=meta)

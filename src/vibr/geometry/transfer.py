@@ -93,4 +93,4 @@ def ensure_source_depth(scene: Scene, *, fill_holes: bool = True, mode: str = "m
         transferred.append(v.name)
         filled[v.name] = mask
     meta = dict(scene.meta, depth_transferred=transferred, depth_filled=filled)
-    return Scene(views, scene.name, scene.root, scene.grid, scene.points, meta)
+    return scene.replace(views=views, meta=meta)

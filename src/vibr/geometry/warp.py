@@ -41,7 +41,7 @@ __all__ = ["warp_constants", "warp_view", "warp_points", "DEFAULT_MAX_INV_DET"]
 #: pixel (a source at twice the target's resolution); beyond that, extra resolution is not
 #: rewarded. The authors' public code caps at 1 in unstructured scenes (METHOD §10): pass
 #: ``max_inv_det=1`` to ``compute_samples`` (or cap in the renderer's
-#: ``vibr.geometry.weights.deformation_weight``) to reproduce it.
+#: ``vibr.render.weights.deformation_weight``) to reproduce it.
 DEFAULT_MAX_INV_DET = 4.0
 
 

@@ -275,14 +275,17 @@ def _block_mean(img, k):  # pragma: no cover - compiled
     return out
 
 
-def resize_image(img: np.ndarray, shape) -> np.ndarray:
-    """Resize an H×W×3 image to ``shape = (h, w)`` with anti-aliasing; result on the 16-bit
-    grid (:func:`quantise16`).
+def resize_image(img: np.ndarray, shape, *, box: bool = True, mode: str = "edge",
+                 quantise: bool = True) -> np.ndarray:
+    """Resize an H×W(×C) image to ``shape = (h, w)`` with anti-aliasing (the one image
+    resize of vibr: scene loading and depth estimation).
 
-    Large reductions first average k×k blocks (k the largest of 16, 8, 4, 2 with ``k ≤ 1/s``
-    that divides H and W: a box filter, fast), then skimage.transform.resize (bilinear,
-    Gaussian anti-aliasing) does the rest. Both map pixel centres as ``x' = s (x + ½) − ½``,
-    the mapping of :meth:`Camera.scaled`.
+    With ``box``, large reductions first average k×k blocks (k the largest of 16, 8, 4, 2
+    with ``k ≤ 1/s`` that divides H and W: a box filter, fast); skimage.transform.resize
+    (bilinear, Gaussian anti-aliasing when shrinking, border ``mode``) does the rest. Both
+    map pixel centres as ``x' = s (x + ½) − ½``, the mapping of :meth:`Camera.scaled`. With
+    ``quantise`` the result is on the 16-bit grid (:func:`quantise16`), as a loaded image
+    is; float32 in any case.
     """
     from skimage.transform import resize
 
@@ -291,7 +294,7 @@ def resize_image(img: np.ndarray, shape) -> np.ndarray:
     if (H, W) == shape:
         return img
     inv = min(H / shape[0], W / shape[1])
-    for k in (16, 8, 4, 2):
+    for k in (16, 8, 4, 2) if box else ():
         if k <= inv + 1e-9 and H % k == 0 and W % k == 0:
             grey = img.ndim == 2
             img = _block_mean(np.ascontiguousarray(img[..., None] if grey else img, dtype=np.float32), k)
@@ -300,8 +303,9 @@ def resize_image(img: np.ndarray, shape) -> np.ndarray:
     if img.shape[:2] != shape:
         img = resize(img.astype(np.float32), shape + img.shape[2:], order=1,
                      anti_aliasing=shape[0] < img.shape[0] or shape[1] < img.shape[1],
-                     preserve_range=True, mode="edge")
-    return quantise16(np.asarray(img, dtype=np.float32))
+                     preserve_range=True, mode=mode)
+    img = np.asarray(img, dtype=np.float32)
+    return quantise16(img) if quantise else img
 
 
 def resize_depth(depth: np.ndarray, shape) -> np.ndarray:

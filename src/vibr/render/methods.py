@@ -31,7 +31,14 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, METHO
 
 from __future__ import annotations
 
-METHODS = ("ulr", "savsr", "bvs", "gradient")
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .operators import PSFS as _PSFS
+
+__all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "get_method",
+           "method_params", "register_method"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
@@ -41,35 +48,139 @@ DEFAULTS = dict(
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
 )
 
-#: Per-method overrides.
-METHOD_OVERRIDES = {
-    "ulr": dict(gamma=0.0, n_outer=0),
-    "savsr": dict(gamma=0.0, n_outer=1),
-    "bvs": dict(gamma=0.0),
-    "gradient": dict(),
-}
-
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
 
-#: Image-formation models (:class:`vibr.render.operators.Splat`).
-PSFS = ("bilinear", "footprint")
+#: Image-formation models, named once by :class:`vibr.render.operators.Splat`.
+PSFS = _PSFS
+
+
+@dataclass(frozen=True)
+class Method:
+    """A rendering method: what it uses, its parameter overrides, and how it renders.
+
+    Attributes
+    ----------
+    name : str
+    summary : str
+        One line for ``--help``.
+    solve : bool
+        Variational (minimise the energy by FISTA) or a direct blend (ulr).
+    gradient : bool
+        Uses the gradient term (``gamma``; forced to 0 otherwise).
+    reweight : bool
+        Re-estimates the weights omega from ``u`` before each outer pass.
+    geometric : bool
+        The weights carry the geometric (depth) uncertainty ``sigma_z`` (savsr: no).
+    overrides : dict
+        Parameter defaults that differ from :data:`DEFAULTS`.
+    """
+
+    name: str
+    summary: str
+    solve: bool = True
+    gradient: bool = False
+    reweight: bool = True
+    geometric: bool = True
+    overrides: dict = field(default_factory=dict)
+
+    def render(self, samples, p: dict, *, source_centres=None, target_centre=None, callback=None,
+               progress_bar: bool = False, verbose: bool = False, uncertainty=False):
+        """Render from :class:`~vibr.geometry.Samples` with filled parameters ``p``
+        (:func:`method_params`); returns a :class:`~vibr.render.RenderResult` (with its
+        ``uncertainty`` map when asked, :mod:`vibr.render.uncertainty`)."""
+        if self.solve:
+            from .variational import solve_variational
+
+            return solve_variational(samples, p, self, callback=callback, progress_bar=progress_bar,
+                                     verbose=verbose, uncertainty=uncertainty)
+        return _render_ulr(self, samples, p, source_centres, target_centre, uncertainty)
+
+
+def _render_ulr(method: Method, samples, p, source_centres, target_centre, uncertainty=False):
+    """Buehler et al.'s blend of the ``ulr_k`` best views per pixel, holes by push–pull."""
+    import time
+
+    from .pushpull import push_pull
+    from .result import RenderResult
+    from .ulr import ulr_blend
+    from .variational import splat_coverage
+
+    if source_centres is None or target_centre is None:
+        raise ValueError("ulr needs source_centres and target_centre")
+    t_all = time.perf_counter()
+    times = {"weights": 0.0, "init": 0.0, "assembly": 0.0, "solve": 0.0}
+    cov = splat_coverage(samples, p, footprint=False, gradient=False)  # only its coverage
+    times["assembly"] = time.perf_counter() - t_all
+    t0 = time.perf_counter()
+    img, _, *var = ulr_blend(samples, source_centres, target_centre, k=p["ulr_k"],
+                             beta_res=p["ulr_beta_res"], spread=bool(uncertainty))
+    img = push_pull(img * cov.acc[..., None], cov.acc)
+    times["init"] = time.perf_counter() - t0
+    sig = None
+    if uncertainty:  # issue 28: the ULR-weighted spread of the blended views
+        from .uncertainty import ulr_sigma
+
+        sig = ulr_sigma(var[0], cov.coverage, scale=float(p["scale"]))
+    times["total"] = time.perf_counter() - t_all
+    return RenderResult(np.clip(img, 0, 1), cov.coverage, times=times, method=method.name, params=p,
+                        n_samples=len(samples), uncertainty=sig)
+
+
+#: The methods by name, in the order shown to users.
+REGISTRY: dict[str, Method] = {}
+
+
+def register_method(method: Method) -> Method:
+    """Add ``method`` to :data:`REGISTRY` (and :data:`METHODS`)."""
+    global METHODS
+    REGISTRY[method.name] = method
+    METHODS = tuple(REGISTRY)
+    return method
+
+
+register_method(Method("ulr", "Unstructured Lumigraph Rendering (direct blend, no solve)",
+                       solve=False, reweight=False, overrides=dict(gamma=0.0, n_outer=0)))
+register_method(Method("savsr", "Wanner & Goldluecke 2012: deformation weights, one solve",
+                       reweight=False, geometric=False, overrides=dict(gamma=0.0, n_outer=1)))
+register_method(Method("bvs", "Pujades et al. 2014: Bayesian weights re-estimated from u",
+                       overrides=dict(gamma=0.0)))
+register_method(Method("gradient", "Nieto et al. 2016: bvs + the gradient term (the default)",
+                       gradient=True))
+
+#: Names of the registered methods (CLI choices).
+METHODS: tuple[str, ...] = tuple(REGISTRY)
+
+#: Per-method overrides (derived from the registry).
+METHOD_OVERRIDES = {name: m.overrides for name, m in REGISTRY.items()}
+
+
+def get_method(method: "str | Method") -> Method:
+    """The registered :class:`Method` named ``method`` (a Method passes through)."""
+    from ..errors import VibrInputError
+
+    if isinstance(method, Method):
+        return method
+    try:
+        return REGISTRY[method]
+    except (KeyError, TypeError):
+        raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(REGISTRY)})") from None
 
 
 def method_params(method: str, **params) -> dict:
     """Defaults for ``method`` updated with ``params`` (None values keep the default;
-    gamma is forced to 0 for ulr, savsr and bvs)."""
+    gamma is forced to 0 for the methods without the gradient term). Unknown keyword
+    arguments raise TypeError."""
     from ..errors import VibrInputError
 
-    if method not in METHODS:
-        raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(METHODS)})")
+    m = get_method(method)
     unknown = set(params) - set(DEFAULTS)
     if unknown:
         raise TypeError(f"unknown render parameter(s): {', '.join(sorted(unknown))}")
     p = dict(DEFAULTS)
-    p.update(METHOD_OVERRIDES[method])
+    p.update(m.overrides)
     for k, v in params.items():
         if v is not None or k == "sigma_z":
-            if k == "gamma" and method != "gradient":
+            if k == "gamma" and not m.gradient:
                 continue
             p[k] = v
     if p["psf"] not in PSFS:

@@ -9,7 +9,7 @@
 * The weighted normal operator ``A = Σ_k B_kᵀ W_k B_k``. Because each row of ``B`` touches
   a 2×2 block of target pixels, ``A`` only couples pixels at offsets in {-1,0,1}²:
   it is a **9-point stencil with spatially varying coefficients** whatever the warps.
-  :func:`assemble` builds it (plus ``Bᵀ W v`` and ``½ Σ W v²``) once per weight update and
+  :meth:`Splat.normal` builds it (plus ``Bᵀ W v`` and ``½ Σ W v²``) once per weight update and
   :func:`stencil_apply` applies it; ``½ uᵀAu − bᵀu + c = ½ Σ W (Bu − v)²`` (METHOD §5).
 * ``∇`` / ``div = -∇ᵀ``: forward differences with Neumann boundary (Chambolle 2004),
   used by TV.
@@ -29,8 +29,8 @@ import numpy as np
 from numba import njit, prange
 
 __all__ = [
-    "PSFS", "Splat", "assemble", "stencil_apply", "stencil_to_sparse", "explicit_B",
-    "grad_fwd", "div_bwd", "grad_central", "grad_central_adj", "dot", "norm_sq",
+    "PSFS", "Splat", "stencil_apply", "stencil_to_sparse", "explicit_B",
+    "grad_fwd", "div_bwd", "grad_central", "grad_central_adj", "dot",
 ]
 
 
@@ -380,11 +380,8 @@ def dot(a, b) -> float:
     return float(_dot(np.ascontiguousarray(a), np.ascontiguousarray(b)))
 
 
-def norm_sq(a) -> float:
-    return dot(a, a)
-
-
 # ----------------------------------------------------------------------------- B
+#: Image-formation models of :class:`Splat` (the one list of PSF names).
 PSFS = ("bilinear", "footprint")
 
 
@@ -519,11 +516,6 @@ class Splat:
         c = _assemble_kernel(self.bx0, self.by0, self.fx, self.fy, self.coef, self.order, self.starts,
                              w, vals, A, rhs, True)
         return A, rhs, c
-
-
-def assemble(splat: Splat, weight, vals):
-    """See :meth:`Splat.normal`."""
-    return splat.normal(weight, vals)
 
 
 def stencil_apply(A, u, out=None) -> np.ndarray:

@@ -140,7 +140,7 @@ class QuadraticModel:
             d = d + self.gamma * 2.0 * maximum_filter(rg, size=3, mode="nearest")
         return d.astype(np.float32)
 
-    def lipschitz(self, n_iter: int = 15, d=None, seed: int = 0, v0=None, state=None) -> float:
+    def lipschitz(self, n_iter: int = 15, d=None, v0=None, state=None) -> float:
         """Largest eigenvalue of ``H`` (or of ``d^{-½} H d^{-½}``) by power iteration, ×1.05
         (the iteration approaches it from below).
 
@@ -194,6 +194,27 @@ def _step_size(model, state, d):
     return model.lipschitz(n_iter=4, d=d, state=state), 4
 
 
+def _metric_and_step(model, precond: bool, d_floor: float, power_state):
+    """(d, d⁻¹, L, power iterations): the diagonal metric of the variable-metric variant
+    (``d ≥ row-sum|H|`` floored at ``d_floor · median(d)``; None without ``precond``) and the
+    step size in that metric."""
+    if not precond:
+        return (None, None) + _step_size(model, power_state, None)
+    d = model.gershgorin()
+    pos = d[d > 0]
+    floor = d_floor * (float(np.median(pos)) if pos.size else 1.0)
+    d = np.maximum(d, floor).astype(np.float32)
+    return (d, (1.0 / d)[None]) + _step_size(model, power_state, d)
+
+
+def _record(res: SolveResult, k: int, F: float, T, s2: float, scale: float, callback) -> None:
+    """Append iteration ``k``'s energy and terms (scale² units, TV in scale units)."""
+    res.energy.append(F * s2)
+    res.terms.append((T[0] * s2, T[1] * s2, T[2] * scale))
+    if callback:
+        callback(k, res.energy[-1], res.terms[-1])
+
+
 def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
           min_iter: int = 3, tv_iter: int = 5, precond: bool = False, d_floor: float = 0.05,
           prox: TVProx | None = None, callback=None, power_state: dict | None = None) -> SolveResult:
@@ -233,16 +254,7 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
     if prox is None:
         prox = TVProx(x.shape, model.coupled, tv_iter)
     prox.n_iter = tv_iter
-    d = dinv = None
-    if precond:
-        d = model.gershgorin()
-        pos = d[d > 0]
-        floor = d_floor * (float(np.median(pos)) if pos.size else 1.0)
-        d = np.maximum(d, floor).astype(np.float32)
-        dinv = (1.0 / d)[None]
-        L, n_power = _step_size(model, power_state, d)
-    else:
-        L, n_power = _step_size(model, power_state, None)
+    d, dinv, L, n_power = _metric_and_step(model, precond, d_floor, power_state)
     # three image buffers and three product buffers rotate (x, x_prev, candidate z): after
     # an accepted step the old x_prev is free for the next candidate; nothing is
     # allocated in the loop (fresh pages cost as much as the kernels at this size)
@@ -253,10 +265,7 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
     Tx = model.terms(x, Px)
     Fx = model.energy(Tx)
     res = SolveResult(u=x, L=L, n_power=n_power)
-    res.energy.append(Fx * s2)
-    res.terms.append((Tx[0] * s2, Tx[1] * s2, Tx[2] * model.scale))
-    if callback:
-        callback(0, res.energy[-1], res.terms[-1])
+    _record(res, 0, Fx, Tx, s2, model.scale, callback)
     x_prev, P_prev = xpbuf, Products(hxp, ())
     beta = 0.0  # momentum of the next step: y = x + beta (x − x_prev)
     t = 1.0
@@ -289,11 +298,8 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
             # MFISTA: x unchanged, restart the momentum
             beta, t = 0.0, 1.0
             stop = rejected >= 3
-        res.energy.append(Fx * s2)
-        res.terms.append((Tx[0] * s2, Tx[1] * s2, Tx[2] * model.scale))
         res.n_iter = k
-        if callback:
-            callback(k, res.energy[-1], res.terms[-1])
+        _record(res, k, Fx, Tx, s2, model.scale, callback)
         if stop:
             res.stopped = "tol" if rejected == 0 else "rejected"
             break

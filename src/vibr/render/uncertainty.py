@@ -222,7 +222,7 @@ def sample_spread_sigma(samples, *, scale: float = 255.0, coverage=None,
     splatted samples around their mean (weights: bilinear × deformation ``1/|det ∂tau/∂x|``,
     no model), ``σ_hole`` where the samples' bilinear coverage is below ``hole_threshold``
     (or outside ``coverage`` when given)."""
-    from ..geometry.weights import deformation_weight
+    from .weights import deformation_weight
     from .operators import Splat
 
     sp = Splat(samples.xy, samples.target_shape)

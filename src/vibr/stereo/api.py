@@ -23,20 +23,22 @@ scale=...)``) and call with ``scale=1``.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import replace
 
 import numpy as np
 from scipy.ndimage import map_coordinates
-from skimage.transform import resize
 
 from ..camera import Camera, axes_meeting_point
 from ..errors import VibrInputError
-from ..progress import log
+from ..io.images import resize_image
 from ..scene import Scene
 from .consistency import check_consistency
 from .planesweep import SweepResult, median_planes, plane_sweep, refine_planes
 from .segments import fill_segment_planes, segment_image
+
+logger = logging.getLogger(__name__)
 
 
 #: Default number of slanted-plane refinement iterations after the sweep (see
@@ -45,11 +47,10 @@ REFINE_ITER = 2
 
 
 # --------------------------------------------------------------------------- helpers
-def resize_image(img: np.ndarray, camera: Camera) -> np.ndarray:
-    """Resample an image to ``camera``'s size (anti-aliased when shrinking)."""
-    if img.shape[:2] == camera.shape:
-        return img
-    return resize(img, camera.shape, order=1, anti_aliasing=True, preserve_range=True).astype(np.float32)
+def _resized(img: np.ndarray, camera: Camera) -> np.ndarray:
+    """``img`` at ``camera``'s size (:func:`vibr.io.images.resize_image`: Gaussian
+    anti-aliasing only, reflected border, float32 not quantised)."""
+    return resize_image(img, camera.shape, box=False, mode="reflect", quantise=False)
 
 
 def _lo_coords(camera_lo: Camera, camera_hi: Camera) -> list[np.ndarray]:
@@ -252,7 +253,7 @@ def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: d
     def small(j, c):
         key = (j, c.shape)
         if key not in cache:
-            cache[key] = resize_image(images[j], c)
+            cache[key] = _resized(images[j], c)
         return cache[key]
 
     res = plane_sweep(small(ref, cref), cref, [small(j, c) for j, c in zip(neighbours, csrc)], csrc,
@@ -450,7 +451,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
 
     def img(i):
         if i not in images:
-            images[i] = resize_image(scene.views[i].image, cams[i])
+            images[i] = _resized(scene.views[i].image, cams[i])
         return images[i]
 
     # reduced-size images (coarse level, depth-range sweep), each resized once per size
@@ -459,7 +460,7 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     def small(i, camera):
         key = (i, camera.shape)
         if key not in resized:
-            resized[key] = resize_image(img(i), camera)
+            resized[key] = _resized(img(i), camera)
         return resized[key]
 
     if method == "lightfield":
@@ -584,5 +585,5 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
                                 "fill_segments": bool(fill_segments) and method == "mvs",
                                 "excluded": [scene.views[i].name for i in sorted(excl)],
                                 "time_s": time.perf_counter() - t_all}
-    log(f"depth: {len(targets)} view(s) by {method} in {time.perf_counter() - t_all:.1f} s")
+    logger.info(f"depth: {len(targets)} view(s) by {method} in {time.perf_counter() - t_all:.1f} s")
     return replace(scene, views=new_views, meta=meta)

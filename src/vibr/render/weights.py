@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .samples import Samples
+from ..geometry.samples import Samples
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights"]
 
@@ -37,7 +37,7 @@ def luminance(u) -> np.ndarray:
 def luminance_gradient(u) -> np.ndarray:
     """Central-difference gradient of the luminance: (H, W, 2) float32, (d/dx, d/dy) per
     target pixel (replicated border)."""
-    from ..render.operators import grad_central
+    from .operators import grad_central
 
     lum = np.ascontiguousarray(luminance(u))[None]  # planar (1, H, W)
     return np.ascontiguousarray(grad_central(lum)[0].transpose(1, 2, 0))
@@ -109,7 +109,7 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
     base = 1.0 / (sigma_s ** 2)
     if u is None or not np.any(np.nan_to_num(sz) > 0):
         return (deformation_weight(samples, inv_det_cap) * base).astype(dtype, copy=False)
-    from ..render.operators import Splat
+    from .operators import Splat
 
     g = luminance_gradient(u) * np.float32(scale)
     if grad_max is not None:

@@ -155,11 +155,45 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     if not isinstance(cam, Camera):
         raise VibrInputError("target must be a Camera or a View", None)
     tname = cam.source or (target.name if isinstance(target, View) else "target camera")
-    Hu, Wu = cam.shape
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
+    with _Timer(times, cpu, "depth"):
+        prepped = _prepare_views(sources, cam, fill_holes, edge_rel)
+    with _Timer(times, cpu, "zbuffer"):
+        zbuf = _target_zbuffer(prepped, cam.shape, max_quad_px, splat_mode)
+    with _Timer(times, cpu, "visibility"):
+        states, counts = _visibility(prepped, zbuf, vis_threshold)
+    with _Timer(times, cpu, "assembly"):
+        out = _gather_samples(prepped, states, cam.shape, max_inv_det, sigma_z_default)
+    if len(out) == 0:
+        raise VibrInputError("no source view sees the target", tname)
+    out.meta["counts"] = counts
+    out.meta["times"] = times
+    out.meta["cpu_times"] = cpu
+    out.meta["vis_threshold"] = float(vis_threshold)
+    if return_zbuffer:
+        out.meta["zbuffer"] = zbuf
+    return out
 
-    t0, c0 = time.perf_counter(), time.process_time()
+
+class _Timer:
+    """Adds the wall-clock and process CPU seconds of a block to ``times[key]``, ``cpu[key]``."""
+
+    def __init__(self, times, cpu, key):
+        self.times, self.cpu, self.key = times, cpu, key
+
+    def __enter__(self):
+        self.t0, self.c0 = time.perf_counter(), time.process_time()
+
+    def __exit__(self, *exc):
+        self.times[self.key] += time.perf_counter() - self.t0
+        self.cpu[self.key] += time.process_time() - self.c0
+        return False
+
+
+def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel) -> list:
+    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes and the
+    constants of its warp into ``cam``."""
     prepped = []
     for v in sources.views:
         z, zx, zy = prepare_depth(v, fill_holes=fill_holes, edge_rel=edge_rel)
@@ -167,31 +201,32 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
             raise VibrInputError(f"source view {v.name} has no image", v.path or v.name)
         M, c = warp_constants(v.camera, cam)
         prepped.append((v, z, zx, zy, M, c))
-    times["depth"], cpu["depth"] = time.perf_counter() - t0, time.process_time() - c0
+    return prepped
 
-    t0, c0 = time.perf_counter(), time.process_time()
-    bufs = new_zbuffers((Hu, Wu))
+
+def _target_zbuffer(prepped, shape, max_quad_px, splat_mode) -> np.ndarray:
+    """Every view's pixel quads splatted into one target z-buffer (+inf where empty)."""
+    bufs = new_zbuffers(tuple(shape))
     for v, z, zx, zy, M, c in prepped:
         splat_zbuffer(bufs, M, c, z, zx, zy, max_quad_px, splat_mode)
-    zbuf = reduce_zbuffers(bufs)
-    del bufs
-    times["zbuffer"], cpu["zbuffer"] = time.perf_counter() - t0, time.process_time() - c0
+    return reduce_zbuffers(bufs)
 
-    states = []
-    counts = {}
-    for k, (v, z, zx, zy, M, c) in enumerate(prepped):
-        t0, c0 = time.perf_counter(), time.process_time()
+
+def _visibility(prepped, zbuf, vis_threshold):
+    """Per view: ``(state, visible pixels per row)``, and the counts per state by view name."""
+    states, counts = [], {}
+    for v, z, zx, zy, M, c in prepped:
         state, row_counts = visibility_mask(M, c, z, zx, zy, zbuf, vis_threshold, return_counts=True)
-        vis_rows = row_counts[:, VISIBLE]
         hist = row_counts.sum(axis=0)
         counts[v.name] = {"unknown": int(hist[0]), "behind": int(hist[1]), "outside": int(hist[2]),
                           "occluded": int(hist[3]), "visible": int(hist[4])}
-        states.append((state, vis_rows))
-        times["visibility"] += time.perf_counter() - t0
-        cpu["visibility"] += time.process_time() - c0
+        states.append((state, row_counts[:, VISIBLE]))
+    return states, counts
 
-    # one allocation for all samples; each view's kernel writes its rows in place
-    t0, c0 = time.perf_counter(), time.process_time()
+
+def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default) -> Samples:
+    """The fields of every visible pixel: one allocation for all samples, each view's
+    kernel writing its rows in place."""
     N = int(sum(int(r.sum()) for _, r in states))
     xy = np.empty((N, 2))
     jac = np.empty((N, 2, 2))
@@ -219,14 +254,4 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
                        v.image, float(max_inv_det), sig_map, sig_scalar, np.int32(k),
                        xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
         o += n
-    out = Samples(xy, colour, grad, jac, inv_det, dtau, sig, view, src, X, (Hu, Wu))
-    times["assembly"], cpu["assembly"] = time.perf_counter() - t0, time.process_time() - c0
-    if len(out) == 0:
-        raise VibrInputError("no source view sees the target", tname)
-    out.meta["counts"] = counts
-    out.meta["times"] = times
-    out.meta["cpu_times"] = cpu
-    out.meta["vis_threshold"] = float(vis_threshold)
-    if return_zbuffer:
-        out.meta["zbuffer"] = zbuf
-    return out
+    return Samples(xy, colour, grad, jac, inv_det, dtau, sig, view, src, X, tuple(shape))

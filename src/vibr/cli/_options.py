@@ -1,0 +1,87 @@
+"""Options shared by subcommands, built from the library's registries so that choices and
+the defaults shown in ``--help`` are never written twice."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..pipeline import DEPTH_MODES
+from ..render.api import METRIC_BORDER
+from ..render.methods import DEFAULTS, METHODS, PSFS, REGISTRY
+
+#: How ``vibr render`` and ``vibr eval`` measure (one rule, vibr.render.api.render_metrics).
+METRIC_RULE = f"covered pixels, {METRIC_BORDER}-px border excluded"
+
+DEFAULT_METHOD = "gradient"
+
+
+def _d(key) -> str:
+    v = DEFAULTS[key]
+    return "the geometry's" if v is None else f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def method_help() -> str:
+    return "; ".join(f"{m.name}: {m.summary}" for m in REGISTRY.values())
+
+
+def add_method_option(p: argparse.ArgumentParser) -> None:
+    """``--method`` (one of the registered methods)."""
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
+                   help=f"rendering method (default: {DEFAULT_METHOD}). {method_help()}")
+
+
+def add_psf_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--psf", choices=PSFS, default=None,
+                   help=f"image-formation model of the variational methods (default: {DEFAULTS['psf']}): "
+                        "bilinear, or footprint (the source pixel's parallelogram; worth it when the "
+                        "sources are finer than the target)")
+
+
+def add_intensity_scale_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--intensity-scale", type=float, default=None, metavar="S",
+                   help="INTENSITY scale the render parameters (lam, sigma_s, ...) refer to: 255 "
+                        "means grey levels of 8-bit images, 1 means [0, 1] intensities "
+                        f"(default: {_d('scale')})")
+
+
+def add_render_params(p: argparse.ArgumentParser) -> None:
+    """The renderer's parameters for one render (defaults from ``DEFAULTS``)."""
+    p.add_argument("--alpha", type=float, help=f"colour-term weight (default {_d('alpha')})")
+    p.add_argument("--gamma", type=float, help=f"gradient-term weight, method gradient (default {_d('gamma')})")
+    p.add_argument("--lam", type=float, help=f"TV weight, on the --intensity-scale (default {_d('lam')})")
+    p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
+    p.add_argument("--sigma-z", type=float,
+                   help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")
+    add_intensity_scale_option(p)
+    p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {_d('n_outer')})")
+    p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")
+    p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
+    add_psf_option(p)
+
+
+def render_params(args) -> dict:
+    """The keyword arguments of :func:`vibr.render.render` given on the command line (None:
+    the method's default)."""
+    params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
+                  scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
+                  precond=True if args.precond else None, psf=args.psf)
+    if args.sigma_z is not None:
+        params["sigma_z"] = args.sigma_z
+    return params
+
+
+def add_depth_options(p: argparse.ArgumentParser) -> None:
+    """``--depth`` (vibr.pipeline.DEPTH_MODES) and ``--depth-files``."""
+    p.add_argument("--depth", default="auto", choices=DEPTH_MODES,
+                   help="source geometry: the scene's depth maps (gt), depth estimated from the "
+                        "sources (estimated; the target never takes part), a fronto-parallel plane "
+                        "(planar), NAME.npy/.pfm/.png files in --depth-files (files), or gt when the "
+                        "scene has depth and estimated when it has none (auto, the default)")
+    p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files")
+
+
+def check_depth_args(args) -> None:
+    from ..errors import VibrInputError
+
+    if args.depth == "files" and not args.depth_files:
+        raise VibrInputError("--depth files needs --depth-files DIR")

@@ -1,0 +1,59 @@
+"""The library logs (children of the "vibr" logger); the CLI sets the handler and level;
+progress bars only on a terminal, one line per stage otherwise."""
+
+import io
+import logging
+import subprocess
+import sys
+
+import pytest
+
+from vibr.progress import configure_logging, progress
+
+
+@pytest.fixture
+def restore_vibr_logger():
+    lg = logging.getLogger("vibr")
+    saved = (list(lg.handlers), lg.level, lg.propagate)
+    yield
+    lg.handlers[:], lg.level, lg.propagate = saved
+
+
+def test_progress_off_a_terminal_logs_one_line(restore_vibr_logger):
+    buf = io.StringIO()  # not a terminal
+    configure_logging(0, stream=buf)
+    assert list(progress(range(5), desc="stage A")) == list(range(5))
+    bar = progress(total=3, desc="stage B")
+    for _ in range(3):
+        bar.update(1)
+    bar.close()
+    out = buf.getvalue()
+    assert "\r" not in out
+    lines = out.splitlines()
+    assert len(lines) == 2 and lines[0].startswith("stage A: 5/5") and lines[1].startswith("stage B: 3/3")
+
+
+def test_verbosity_levels(restore_vibr_logger):
+    lg = logging.getLogger("vibr.somewhere")
+    for v, shown in ((-1, ["w"]), (0, ["i", "w"]), (1, ["d", "i", "w"])):
+        buf = io.StringIO()
+        configure_logging(v, stream=buf)
+        lg.debug("d")
+        lg.info("i")
+        lg.warning("w")
+        assert buf.getvalue().split() == shown
+    assert len([h for h in logging.getLogger("vibr").handlers if getattr(h, "_vibr_cli", False)]) == 1
+
+
+def test_cli_stderr_redirected_has_no_carriage_returns(tmp_path):
+    """``vibr demo ... 2>log``: status lines, one per stage, no progress-bar frames."""
+    log = tmp_path / "log"
+    with open(log, "w") as err:
+        r = subprocess.run([sys.executable, "-m", "vibr", "demo", "--size", "48", "--method", "bvs"],
+                           stdout=subprocess.PIPE, stderr=err, text=True, timeout=300)
+    assert r.returncode == 0, log.read_text()
+    text = log.read_text()
+    assert "\r" not in text and "render bvs: 2/2" in text and "scene: 9 views" in text
+    r = subprocess.run([sys.executable, "-m", "vibr", "-q", "demo", "--size", "48", "--method", "ulr"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and r.stderr == "" and "PSNR" in r.stdout

@@ -1,0 +1,117 @@
+"""The method registry, the one prepare step, Scene.replace and the CLI built from them."""
+
+import argparse
+
+import numpy as np
+import pytest
+
+from vibr.errors import VibrInputError
+from vibr.render.methods import DEFAULTS, METHODS, PSFS, REGISTRY, Method, get_method, method_params
+
+
+def test_registry_declares_each_method():
+    assert METHODS == tuple(REGISTRY) == ("ulr", "savsr", "bvs", "gradient")
+    ulr, savsr, bvs, grad = (REGISTRY[m] for m in METHODS)
+    assert not ulr.solve and savsr.solve and bvs.solve and grad.solve
+    assert grad.gradient and not (ulr.gradient or savsr.gradient or bvs.gradient)
+    assert bvs.reweight and grad.reweight and not savsr.reweight
+    assert not savsr.geometric and bvs.geometric
+    assert get_method("bvs") is bvs and get_method(bvs) is bvs
+    from vibr.render.operators import PSFS as splat_psfs
+
+    assert PSFS is splat_psfs
+
+
+def test_method_params_fills_and_checks():
+    p = method_params("gradient", gamma=2.0, lam=None)
+    assert p["gamma"] == 2.0 and p["lam"] == DEFAULTS["lam"]
+    assert method_params("bvs", gamma=3.0)["gamma"] == 0.0  # no gradient term
+    assert method_params("savsr")["n_outer"] == 1 and method_params("ulr")["n_outer"] == 0
+    with pytest.raises(TypeError, match="lamda"):
+        method_params("gradient", lamda=0.1)
+    with pytest.raises(VibrInputError, match="unknown method"):
+        method_params("nope")
+    with pytest.raises(VibrInputError, match="psf"):
+        method_params("gradient", psf="gauss")
+
+
+def _subparser(name):
+    from vibr.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices[name]
+
+
+@pytest.mark.parametrize("cmd", ["render", "demo"])
+def test_cli_method_choices_from_registry(cmd):
+    opt = {o: a for a in _subparser(cmd)._actions for o in a.option_strings}
+    assert tuple(opt["--method"].choices) == METHODS
+    assert opt["--method"].default == "gradient"
+
+
+def test_cli_help_defaults_from_defaults():
+    opt = {o: a for a in _subparser("render")._actions for o in a.option_strings}
+    assert f"default {DEFAULTS['lam']:g}" in opt["--lam"].help
+    assert f"default {DEFAULTS['n_outer']}" in opt["--outer"].help
+    assert tuple(opt["--psf"].choices) == PSFS
+    ev = {o: a for a in _subparser("eval")._actions for o in a.option_strings}
+    assert ev["--method"].default == list(METHODS)
+    assert ev["--depth"].default == opt["--depth"].default == "auto"
+
+
+def test_scene_replace_copies_meta():
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", n_views=4, width=24, height=24, seed=0)
+    sc2 = sc.replace(views=sc.views[:2])
+    assert len(sc2) == 2 and sc2.name == sc.name and sc2.grid == sc.grid
+    sc2.meta["x"] = 1
+    assert "x" not in sc.meta
+
+
+def test_prepare_is_the_one_depth_vocabulary():
+    from vibr.pipeline import DEPTH_MODES, DepthUnavailable, prepare
+    from vibr.synthetic import make_scene
+
+    assert DEPTH_MODES == ("auto", "gt", "estimated", "planar", "files")
+    sc = make_scene("grid", n_views=4, width=24, height=24, seed=0)
+    src, tgt = prepare(sc, 1)  # default auto: the scene's depth
+    assert tgt.name == sc.views[1].name and tgt.name not in src.names and src.has_depth
+    with pytest.raises(VibrInputError, match="unknown depth mode"):
+        prepare(sc, 1, depth="given")
+    bare = sc.replace(views=[v.replace(depth=None) for v in sc.views])
+    with pytest.raises(DepthUnavailable) as e:
+        prepare(bare, 1, depth="gt")
+    assert "--" not in str(e.value)  # library messages name no CLI flag
+
+
+def test_render_holds_out_a_target_among_its_sources():
+    """render() prepares sources that are not ready (target among them): the result equals
+    rendering from the prepared sources."""
+    from vibr.pipeline import prepare
+    from vibr.render import render
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", n_views=9, width=48, height=48, seed=1)
+    a = render(sc, sc.views[4], "bvs", n_outer=1, max_iter=5)
+    src, tgt = prepare(sc, 4)
+    b = render(src, tgt, "bvs", n_outer=1, max_iter=5)
+    np.testing.assert_array_equal(a.image, b.image)
+    assert a.metrics["psnr"] == b.metrics["psnr"]
+
+
+def test_a_registered_method_renders():
+    """Adding a method is one registration: a bvs variant without re-weighting."""
+    from vibr.render import methods, render
+    from vibr.synthetic import make_scene
+
+    m = Method("bvs1", "bvs without re-weighting", reweight=False, overrides=dict(gamma=0.0, n_outer=1))
+    methods.register_method(m)
+    try:
+        sc = make_scene("grid", n_views=9, width=48, height=48, seed=1)
+        r = render(sc, sc.views[4], "bvs1", max_iter=5)
+        assert r.method == "bvs1" and r.metrics["psnr"] > 30
+    finally:
+        del methods.REGISTRY["bvs1"]
+        methods.METHODS = tuple(methods.REGISTRY)
