@@ -197,9 +197,10 @@ def planar_figure(path, size=256):
     from vibr.synthetic import make_scene
     from vibr.uncertainty_figures import _nice_ceiling, sigma_figure
 
-    sc = make_scene("grid", width=size, height=size, seed=0)
-    src, tg = sc.split(4)
-    r = render(src, tg, "gradient", depth="planar", uncertainty=True)
+    from vibr.pipeline import prepare
+
+    src, tg = prepare(make_scene("grid", width=size, height=size, seed=0), 4, depth="planar")
+    r = render(src, tg, "gradient", uncertainty=True)
     err = pixel_error(r.image, tg.image)
     m = uncertainty_metrics(r.uncertainty, r.image, tg.image, border=2)
     vmax = _nice_ceiling(float(np.percentile(np.r_[err.ravel(), r.uncertainty.ravel()], 99)))
