@@ -166,16 +166,19 @@ def test_convert_leaves_no_partial_output(capsys, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
 
 
-def test_convert_refuses_existing_output_without_force(capsys, tmp_path):
+def test_convert_refuses_existing_output_without_overwrite(capsys, tmp_path):
     root = make_transforms(tmp_path / "s")
     out = tmp_path / "out"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
     code, err = run_cli(capsys, "convert", root, out)
-    assert_one_line_error(code, err, out, "--force")
+    assert_one_line_error(code, err, out, "--overwrite")
     assert (out / "keep.txt").read_text() == "mine"
-    assert run_cli(capsys, "convert", root, out, "--force")[0] == 0
-    assert (out / "transforms.json").is_file() and not (out / "keep.txt").exists()
+    # --overwrite (alias --force) never deletes a folder vibr did not write
+    for flag in ("--overwrite", "--force"):
+        code, err = run_cli(capsys, "convert", root, out, flag)
+        assert_one_line_error(code, err, out, "not written by vibr")
+        assert (out / "keep.txt").read_text() == "mine"
 
 
 def test_exit_status_of_the_real_command(tmp_path):

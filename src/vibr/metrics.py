@@ -1,7 +1,7 @@
 """Image quality metrics, optionally restricted to a mask: PSNR, SSIM and DSSIM; and the
 metrics of a predicted per-pixel uncertainty: sparsification curves, AUSE, Spearman's rho.
 
-METHOD §"Evaluation": PSNR over the three channels, SSIM of Wang et al. (2004) with a
+docs/METHOD.md §8: PSNR over the three channels, SSIM of Wang et al. (2004) with a
 Gaussian window of sigma 1.5, and the paper's DSSIM = 10⁴ · (1 − SSIM); all with an
 optional border excluded and, for rendered views, only over the reconstructed pixels.
 """
@@ -114,6 +114,20 @@ def ssim(img, ref, mask=None, border: int = 0) -> float:
 def dssim(img, ref, mask=None, border: int = 0) -> float:
     """DSSIM as the paper defines it: ``10⁴ · (1 − SSIM)`` (see :func:`ssim`)."""
     return 1e4 * (1.0 - ssim(img, ref, mask, border))
+
+
+#: Pixels at each image edge left out of the metrics of a rendered view, by ``vibr render``
+#: and ``vibr eval`` alike (as the authors' evaluator): edge pixels see the fewest samples.
+METRIC_BORDER = 2
+
+
+def view_metrics(img, ref, mask=None, border: int = METRIC_BORDER) -> dict:
+    """The metrics of a rendered view against the held-out photograph, by the one rule of
+    ``vibr render`` and ``vibr eval``: ``psnr``, ``ssim`` and ``dssim = 10⁴ · (1 − SSIM)``
+    over the pixels of ``mask`` (the reconstructed pixels) with ``border`` pixels at each
+    edge excluded."""
+    s = ssim(img, ref, mask, border)
+    return {"psnr": psnr(img, ref, mask, border), "ssim": s, "dssim": 1e4 * (1.0 - s)}
 
 
 # ----------------------------------------------------------------------------- uncertainty

@@ -6,11 +6,11 @@ from __future__ import annotations
 import argparse
 
 from ..pipeline import DEPTH_MODES
-from ..render.api import METRIC_BORDER
+from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS, PSFS, REGISTRY
 
-#: How ``vibr render`` and ``vibr eval`` measure (one rule, vibr.render.api.render_metrics).
-METRIC_RULE = f"covered pixels, {METRIC_BORDER}-px border excluded"
+#: How ``vibr render`` and ``vibr eval`` measure (one rule: vibr.metrics.view_metrics).
+METRIC_RULE = f"reconstructed pixels, {METRIC_BORDER}-px border excluded"
 
 DEFAULT_METHOD = "gradient"
 
@@ -18,6 +18,12 @@ DEFAULT_METHOD = "gradient"
 def _d(key) -> str:
     v = DEFAULTS[key]
     return "the geometry's" if v is None else f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _dm(key) -> str:
+    """The default of ``key`` and the methods that override it, e.g. "2; ulr: 0, savsr: 1"."""
+    over = [f"{m.name}: {m.overrides[key]:g}" for m in REGISTRY.values() if key in m.overrides]
+    return _d(key) + (f"; {', '.join(over)}" if over else "")
 
 
 def method_help() -> str:
@@ -47,13 +53,13 @@ def add_intensity_scale_option(p: argparse.ArgumentParser) -> None:
 def add_render_params(p: argparse.ArgumentParser) -> None:
     """The renderer's parameters for one render (defaults from ``DEFAULTS``)."""
     p.add_argument("--alpha", type=float, help=f"colour-term weight (default {_d('alpha')})")
-    p.add_argument("--gamma", type=float, help=f"gradient-term weight, method gradient (default {_d('gamma')})")
+    p.add_argument("--gamma", type=float, help=f"gradient-term weight, method gradient only (default {_d('gamma')})")
     p.add_argument("--lam", type=float, help=f"TV weight, on the --intensity-scale (default {_d('lam')})")
     p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
     p.add_argument("--sigma-z", type=float,
                    help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")
     add_intensity_scale_option(p)
-    p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {_d('n_outer')})")
+    p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {_dm('n_outer')})")
     p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")
     p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
     add_psf_option(p)
@@ -85,3 +91,29 @@ def check_depth_args(args) -> None:
 
     if args.depth == "files" and not args.depth_files:
         raise VibrInputError("--depth files needs --depth-files DIR")
+
+
+def add_overwrite_option(p: argparse.ArgumentParser, what: str) -> None:
+    """``--overwrite``: THE name for replacing existing outputs (``--force``: a hidden,
+    deprecated alias)."""
+    p.add_argument("--overwrite", action="store_true", help=f"replace {what} if it exists")
+    p.add_argument("--force", dest="overwrite", action="store_true", help=argparse.SUPPRESS)
+
+
+def add_bit_depth_option(p: argparse.ArgumentParser) -> None:
+    """``--bit-depth 8|16`` of the images a subcommand writes (8 by default)."""
+    p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
+                   help="bits per channel of the PNG written (default: 8; 16 keeps the solver's "
+                        "precision)")
+
+
+def names(text: str) -> list[str]:
+    """'a, b,3' → ['a', 'b', '3'] (an argparse type)."""
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def add_source_options(p: argparse.ArgumentParser) -> None:
+    """``--sources`` (a list) and ``--views K`` (the K best), as :func:`vibr.pipeline.prepare`."""
+    p.add_argument("--sources", type=names, help="comma-separated source views (default: all others)")
+    p.add_argument("--views", type=int, metavar="K",
+                   help="render from the K best source views for the target (ULR ranking; default: all)")

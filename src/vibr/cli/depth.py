@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from . import add_quiet
+from ._options import add_overwrite_option
 
 _DESC = """\
 Estimate orthogonal depth maps and their uncertainty sigma_z for the views of a scene, on
@@ -22,11 +23,11 @@ folder is updated in place (the new folder replaces it only once complete).
 
 _EPILOG = """\
 examples:
-  vibr depth ../shared/data/strecha_fountain-P11 -o fountain_depth/ --resize 0.25
-  vibr depth ../shared/data/strecha_fountain-P11 -o f/ --resize 0.25 --refine-iter 1   (faster)
+  vibr depth ../shared/data/strecha_fountain-P11 -o fountain_depth/ --scale 0.25
+  vibr depth ../shared/data/strecha_fountain-P11 -o f/ --scale 0.25 --refine-iter 1   (faster)
   vibr depth ../shared/data/hci2016_cotton -o cotton_depth/ --views input_Cam040
   vibr depth fountain_depth/ --views 5 --exclude 4          update in place, never using view 4
-  vibr depth SCENE -o out/ --scale 0.5 --depth-range 4 20   estimate at half resolution
+  vibr depth SCENE -o out/ --depth-scale 0.5 --depth-range 4 20   estimate at half resolution
 """
 
 
@@ -40,9 +41,11 @@ def register(sub) -> None:
     p.add_argument("--views", default=None, help="comma-separated views to estimate (default: all)")
     p.add_argument("--exclude", default=None, help="comma-separated views never used as inputs")
     p.add_argument("--scale", type=float, default=1.0,
-                   help="estimation scale; maps are upsampled back to the scene's size (default 1)")
-    p.add_argument("--resize", type=float, default=1.0,
-                   help="load the scene resized by this factor; the output has that size (default 1)")
+                   help="image scale the scene is loaded at, e.g. 0.25; the output has that size (default 1)")
+    p.add_argument("--resize", dest="scale", type=float, help=argparse.SUPPRESS)  # the old name
+    p.add_argument("--depth-scale", type=float, default=1.0,
+                   help="scale of the estimation relative to the loaded scene; the maps are "
+                        "upsampled back to its size (default 1)")
     p.add_argument("--method", choices=["auto", "mvs", "lightfield"], default="auto",
                    help="auto: lightfield when the scene is a grid, else mvs")
     p.add_argument("--neighbours", type=int, default=4,
@@ -74,7 +77,7 @@ def register(sub) -> None:
                    help="dense output (MVS): fill unknown pixels from the planes of their colour "
                    "segments, then re-run the weighted median (docs/DEPTH.md). Better depth "
                    "maps; the renderer does better with the unknown pixels left out")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    add_overwrite_option(p, "OUT (only a folder vibr wrote)")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -86,35 +89,58 @@ def _split(s):
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, save_scene
+    import shutil
+
+    from ..io.checkpoint import resume_folder
+    from ..io.outputs import check_not_input, check_output, check_replaceable
     from ..stereo import estimate_depth
 
+    from ..validate import check_depth_params
+
+    check_depth_params(scale=args.depth_scale, depth_range=args.depth_range, n_neighbours=args.neighbours,
+                       **{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                            ("refine_iter", args.refine_iter), ("median_radius", args.median_radius),
+                                            ("sweep_scale", args.sweep_scale), ("coarse_iter", args.coarse_iter))
+                          if v is not None})  # before loading the scene
     src = Path(args.scene)
     in_place = args.out is None
     if in_place:
         tj = src if src.name == "transforms.json" else src / "transforms.json"
         if not tj.is_file():
             raise VibrInputError("give -o OUT: only a transforms.json scene is updated in place", src)
-        if args.resize != 1.0:
-            raise VibrInputError("--resize needs -o OUT (an in-place update keeps the scene's size)", src)
+        if args.scale != 1.0:
+            raise VibrInputError("--scale needs -o OUT (an in-place update keeps the scene's size)", src)
         out = tj.parent
+        check_output(out, "dir", overwrite=True, what="SCENE")
+        try:  # an in-place update replaces only a folder vibr wrote
+            check_replaceable(out)
+        except VibrInputError as exc:
+            raise VibrInputError(f"not updated in place ({exc.problem}); give -o OUT", out) from None
     else:
-        out = Path(args.out)
-    scene = load_scene(args.scene, scale=args.resize)
+        out = check_output(args.out, "dir", overwrite=args.overwrite, what="-o")
+        check_not_input(out, [args.scene])
+        if out.is_dir():
+            check_replaceable(out)
+    scene = load_scene(args.scene, scale=args.scale)
     opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                              ("refine_iter", args.refine_iter),
                              ("median_radius", args.median_radius),
                              ("sweep_scale", args.sweep_scale),
                              ("coarse_iter", args.coarse_iter)) if v is not None}
-    est = estimate_depth(scene, views=_split(args.views), scale=args.scale,
+    est = estimate_depth(scene, views=_split(args.views), scale=args.depth_scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
-                         consistency=not args.no_consistency, fill_segments=args.fill_segments, **opt)
+                         consistency=not args.no_consistency, fill_segments=args.fill_segments,
+                         checkpoint=resume_folder(out), **opt)  # a rerun after a kill resumes
     info = est.meta["depth_estimation"]
-    save_scene(est, out, overwrite=in_place or args.force)
+    save_scene(est, out, overwrite=in_place or args.overwrite, in_place=in_place)
+    resumed = sum(bool(v.get("resumed")) for v in info["views"].values())
+    shutil.rmtree(resume_folder(out), ignore_errors=True)  # the job is complete
     tv = [v for v in info["views"].values() if v.get("role") == "target"]
     kept = [v["kept"] for v in tv]
     filled = sum(v.get("filled", 0.0) for v in tv)
     print(f"wrote {out}/transforms.json: depth for {len(kept)} view(s) by {info['method']} "
           f"in {info['time_s']:.1f} s, {100 * sum(kept) / max(1, len(kept)):.1f} % of pixels kept"
-          + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else ""))
+          + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else "")
+          + (f" ({resumed} view(s) kept from an interrupted run)" if resumed else ""))
     return 0

@@ -4,16 +4,19 @@ from __future__ import annotations
 
 import argparse
 
+from ..metrics import METRIC_BORDER
+from ..render.methods import DEFAULTS, METHODS
 from . import add_quiet
-from ._options import METHODS, add_depth_options, add_intensity_scale_option, add_psf_option, check_depth_args, method_help
-from ..render.methods import DEFAULTS
+from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
+                       check_depth_args, method_help, names)
 
-_DESC = """\
+_DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
 and setting, and compare with the real photograph: PSNR (dB, higher is better) and
 DSSIM = 1e4 * (1 - SSIM) (Wang et al. 2004, Gaussian window sigma 1.5; lower is better),
 over the pixels every method reconstructed (--mask reconstructed, as in the paper) or over
-the whole image. The target never takes part in depth estimation.
+the whole image, a {METRIC_BORDER}-px border excluded (--border): the rule of vibr render. The target
+never takes part in depth estimation.
 """
 
 _EPILOG = """\
@@ -46,19 +49,14 @@ def _floats(s):
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}") from None
 
 
-def _names(s):
-    return [x.strip() for x in s.split(",") if x.strip()]
-
-
 def register(sub) -> None:
     p = sub.add_parser("eval", help="render held-out views and measure PSNR / DSSIM (paper protocol)",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene folder or transforms.json")
     p.add_argument("--target", required=True, help="view to hold out and render (name or index)")
-    p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
-    p.add_argument("--views", type=int, metavar="K", help="use only the K best source views for the target")
+    add_source_options(p)
     add_depth_options(p)
-    p.add_argument("--method", type=_names, default=list(METHODS),
+    p.add_argument("--method", type=names, default=list(METHODS),
                    help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
     p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)})")
@@ -76,7 +74,8 @@ def register(sub) -> None:
                         "(default: the estimator's coarse sweep)")
     p.add_argument("--mask", choices=["reconstructed", "all"], default="reconstructed",
                    help="pixels the metrics are taken over (default: reconstructed)")
-    p.add_argument("--border", type=int, default=0, help="pixels excluded at the image border (default: 0)")
+    p.add_argument("--border", type=int, default=METRIC_BORDER,
+                   help=f"pixels excluded at each image edge (default: {METRIC_BORDER}, as vibr render)")
     add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
@@ -88,25 +87,49 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..evaluate import evaluate, format_table, settings_grid, write_report
+    from ..evaluate import format_table, run_evaluation, settings_grid, write_report
+    from ..figures import write_evaluation_figures
     from ..io import load_scene
 
     from ..errors import VibrInputError
 
+    from ..io.outputs import check_output
+
+    check_output(args.json, "file", what="--json")
+    if args.figures is not None:
+        check_output(args.figures, "dir", what="--figures")
     check_depth_args(args)
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
+    from ..render.methods import method_params
+    from ..validate import check_depth_params
+
+    for st in settings:  # every setting checked before the work
+        method_params(st.method, **dict(st.params, scale=args.intensity_scale, psf=args.psf))
+    check_depth_params(**{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                            ("depth_range", args.depth_range)) if v is not None})
+    if args.border < 0:
+        raise VibrInputError(f"--border must be >= 0, got {args.border}")
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     scene = load_scene(args.scene, scale=args.scale)
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                                      ("depth_range", args.depth_range)) if v is not None}
-    report = evaluate(scene, args.target, settings, sources=args.sources, depth=args.depth,
-                      depth_files=args.depth_files, n_views=args.views, mask=args.mask,
-                      border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
-                      intensity_scale=args.intensity_scale,
-                      render_kw={"psf": args.psf} if args.psf else None,
-                      uncertainty=args.uncertainty)
+    ev = run_evaluation(scene, args.target, settings, sources=args.sources, depth=args.depth,
+                        depth_files=args.depth_files, n_views=args.views, mask=args.mask,
+                        border=args.border, estimate_kw=estimate_kw or None,
+                        intensity_scale=args.intensity_scale,
+                        render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
+    report = ev.report
+    if args.figures:
+        report["figures"] = write_evaluation_figures(ev, args.figures)
+        if args.uncertainty:
+            from ..uncertainty_figures import write_sparsification_figure
+
+            report["figures"]["sparsification"] = write_sparsification_figure(args.figures, report["results"],
+                                                                              prefix=ev.prefix)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")

@@ -1,4 +1,4 @@
-"""``vibr.render.render``: a novel view from a scene (paper §4, METHOD §3-7)."""
+"""``vibr.render.render``: a novel view from a scene (paper §4, docs/METHOD.md §3-7)."""
 
 from __future__ import annotations
 
@@ -14,14 +14,9 @@ from ..scene import Scene, View
 from .methods import get_method, method_params
 from .result import RenderResult
 
-__all__ = ["RenderResult", "render", "render_samples", "render_metrics"]
+__all__ = ["RenderResult", "render", "render_samples"]
 
 logger = logging.getLogger(__name__)
-
-#: Pixels at the image border left out of the metrics of render and eval: the border pixels
-#: see the fewest samples and the 7×7 SSIM window runs past the image there.
-METRIC_BORDER = 2
-
 
 def render_samples(samples: Samples, method="gradient", *, source_centres=None,
                    target_centre=None, callback=None, progress_bar: bool = False,
@@ -37,34 +32,25 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
                     callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty)
 
 
-def render_metrics(image, reference, coverage, border: int = METRIC_BORDER) -> dict:
-    """PSNR, SSIM and DSSIM = 1e4·(1 − SSIM) of ``image`` against ``reference`` over the
-    covered pixels, ``border`` pixels at the image border excluded (the rule shared by
-    ``vibr render`` and ``vibr eval``)."""
-    from ..metrics import psnr, ssim
-
-    out = {"psnr": psnr(image, reference, mask=coverage, border=border),
-           "ssim": ssim(image, reference, mask=coverage, border=border)}
-    out["dssim"] = 1e4 * (1 - out["ssim"])
-    return out
-
-
 def _ready_sources(sources: Scene, target) -> Scene:
-    """``sources`` unchanged when ready to render from, else through
-    :func:`vibr.pipeline.prepare` (depth="auto"): the target held out, depth given to every
-    view."""
+    """``sources`` unchanged when ready to render from; else the target held out and depth
+    transferred to the views lacking it (:func:`vibr.geometry.ensure_source_depth`), which
+    is :func:`vibr.pipeline.prepare`'s ``depth="gt"``. Estimating depth is the pipeline's
+    job, not the renderer's (docs/ARCHITECTURE.md)."""
+    from ..geometry import ensure_source_depth
+
     tname = target.name if isinstance(target, View) else None
     names = sources.names
     if tname not in names and sources.has_depth:
         return sources
-    from ..pipeline import prepare
-
-    if tname is None:
-        return prepare(sources, target, depth="auto")[0]
-    # a target outside the sources still lends its depth to the transfer (a light field
-    # whose only depth is the held-out centre's); it is never rendered from
-    scene = sources if tname in names else sources.replace(views=list(sources.views) + [target])
-    return prepare(scene, tname, depth="auto")[0]
+    views = [v for v in sources.views if v.name != tname]
+    if not views:
+        raise VibrInputError("no source views left after holding out the target", sources.root)
+    # a held-out target with depth lends it to the transfer (a light field whose only depth
+    # is the centre's); it is never rendered from
+    pool = views + ([target] if isinstance(target, View) and target.depth is not None else [])
+    full = ensure_source_depth(sources.replace(views=pool))
+    return full.replace(views=[v for v in full.views if v.name != tname])
 
 
 def render(sources: Scene, target: View | Camera, method="gradient", *,
@@ -73,13 +59,13 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
            **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
-    Minimises (METHOD §5, paper eq. energy_final)
+    Minimises (docs/METHOD.md §5, paper eq. energy_final)
 
         E(u) = alpha · ½ Σ_km W_km ((B_k u)(m) − v_k(m))²
              + gamma · ½ Σ_km C_km ‖(B_k D u)(m) − ∇v_k(m)‖²
              + lam · TV(u)
 
-    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (METHOD §3) by monotone FISTA, re-estimating
+    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (docs/METHOD.md §3) by monotone FISTA, re-estimating
     omega from u in ``n_outer`` passes; ulr blends directly.
 
     Parameters
@@ -87,7 +73,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     sources : Scene
         Source views with images and depth, as :func:`vibr.pipeline.prepare` returns them.
         For convenience, sources that are not ready (a view named like the target among
-        them, or a view without depth) go through ``prepare(..., depth="auto")`` first:
+        them, or a view without depth) are made ready as ``prepare(..., depth="gt")`` would:
         the target is held out and depth transferred from the views that have it.
     target : View or Camera
         A held-out view (its image is the reference for ``metrics``) or a bare camera.
@@ -134,7 +120,10 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     if samples is None:
         from ..geometry import compute_samples
 
+        from ..validate import check_render_memory
+
         src = _ready_sources(sources, target)
+        check_render_memory([v.camera.shape for v in src.views], cam.shape)  # before allocating
         samples = compute_samples(src, cam, **(geometry_kw or {}))
     t_geo = time.perf_counter() - t0
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
@@ -143,5 +132,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:
-        res.metrics = render_metrics(res.image, target.image, res.coverage)
+        from ..metrics import view_metrics
+
+        res.metrics = view_metrics(res.image, target.image, res.coverage)
     return res

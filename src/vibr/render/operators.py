@@ -1,7 +1,7 @@
-"""Linear operators of the image-formation model (paper §4.1, METHOD §4-5), with adjoints.
+"""Linear operators of the image-formation model (paper §4.1, docs/METHOD.md §4-5), with adjoints.
 
 * ``B`` (:class:`Splat`): the PSF matrix, ``(B u)(m) = Σ_p B_mp u(p)`` (paper §4.1
-  eq. normal, METHOD §4). Row m holds 4 coefficients on a 2×2 block of target pixels:
+  eq. normal, docs/METHOD.md §4). Row m holds 4 coefficients on a 2×2 block of target pixels:
   the bilinear coefficients of ``tau_k(x_m)`` (``psf="bilinear"``, the default), or the
   overlap areas of the source pixel's footprint parallelogram with the block's pixels
   (``psf="footprint"``, the paper's figure fig:discretization, right). Its adjoint ``Bᵀ``
@@ -10,11 +10,11 @@
   a 2×2 block of target pixels, ``A`` only couples pixels at offsets in {-1,0,1}²:
   it is a **9-point stencil with spatially varying coefficients** whatever the warps.
   :meth:`Splat.normal` builds it (plus ``Bᵀ W v`` and ``½ Σ W v²``) once per weight update and
-  :func:`stencil_apply` applies it; ``½ uᵀAu − bᵀu + c = ½ Σ W (Bu − v)²`` (METHOD §5).
+  :func:`stencil_apply` applies it; ``½ uᵀAu − bᵀu + c = ½ Σ W (Bu − v)²`` (docs/METHOD.md §5).
 * ``∇`` / ``div = -∇ᵀ``: forward differences with Neumann boundary (Chambolle 2004),
   used by TV.
 * ``D`` / ``Dᵀ``: central differences with replicated border, used by the gradient term
-  (METHOD §5) because the source gradients ``∇v_k`` of :class:`~vibr.geometry.Samples` are
+  (docs/METHOD.md §5) because the source gradients ``∇v_k`` of :class:`~vibr.geometry.Samples` are
   central differences too (same half-pixel phase).
 
 Inside the solver images are **planar** (C, H, W) float32 (C = 3 for RGB; contiguous rows
@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .._jit import FASTMATH
 __all__ = [
     "PSFS", "Splat", "stencil_apply", "stencil_to_sparse", "explicit_B",
     "grad_fwd", "div_bwd", "grad_central", "grad_central_adj", "dot",
@@ -310,7 +311,7 @@ def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_
     return cpart.sum()
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _stencil_point(A, u, c, i, j, H, W):
     s = 0.0
     for dy in range(-1, 2):
@@ -325,7 +326,7 @@ def _stencil_point(A, u, c, i, j, H, W):
     return s
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _stencil_row(A, u, c, i, out):
     """Row i of the 9-point stencil ``A`` applied to channel c of ``u`` (C, H, W).
 
@@ -349,7 +350,7 @@ def _stencil_row(A, u, c, i, out):
             out[j] = _stencil_point(A, u, c, i, j, H, W)
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _stencil_apply(A, u, out):
     """out[c] = Σ_s A[s] · shift_s(u[c]); planar (C, H, W) images, (9, H, W) stencil."""
     C, H, W = u.shape
@@ -359,7 +360,7 @@ def _stencil_apply(A, u, out):
     return out
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _dot(a, b):
     a1 = a.ravel()
     b1 = b.ravel()
@@ -386,7 +387,7 @@ PSFS = ("bilinear", "footprint")
 
 
 class Splat:
-    """The PSF matrix ``B`` of a set of sample positions (paper §4.1, METHOD §4).
+    """The PSF matrix ``B`` of a set of sample positions (paper §4.1, docs/METHOD.md §4).
 
     Parameters
     ----------
@@ -420,7 +421,7 @@ class Splat:
     ----------
     x0, y0, fx, fy : (N,)
         The bilinear cell and fractions of ``xy`` (bilinear *interpolation* at ``tau``,
-        whatever the PSF: the weights of METHOD §3 sample ``∇u`` there).
+        whatever the PSF: the weights of docs/METHOD.md §3 sample ``∇u`` there).
     bx0, by0 : (N,) int32
         Top-left pixel of each row's 2×2 block (``x0``, ``y0`` for the bilinear PSF).
     coef : (N, 4) float64
@@ -561,7 +562,7 @@ def stencil_to_sparse(A):
 
 # ----------------------------------------------------------------------------- ∇ / div
 # Planar layout: images (C, H, W), gradients (C, 2, H, W) with [:, 0] = d/dx, [:, 1] = d/dy.
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_fwd(u, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -582,7 +583,7 @@ def _grad_fwd(u, g):
     return g
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _div_bwd(p, out):
     C, _, H, W = p.shape
     for i in prange(H):
@@ -623,7 +624,7 @@ def div_bwd(p, out=None) -> np.ndarray:
     return _div_bwd(p, out)
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_central(u, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -645,7 +646,7 @@ def _grad_central(u, g):
     return g
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _central_adj_row(gx, gym, gyi, gyp, i, H, o):
     """Row i of ``Dᵀ g`` into ``o`` (W,), from the row's x component ``gx`` and the y
     components of rows i−1, i, i+1 (``gym``, ``gyi``, ``gyp``; those outside are not read).
@@ -673,7 +674,7 @@ def _central_adj_row(gx, gym, gyi, gyp, i, H, o):
                 o[j] -= 0.5 * gyi[j]
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_central_adj(g, out):
     C, _, H, W = g.shape
     for i in prange(H):
