@@ -74,12 +74,22 @@ def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, read_camera_json, write_image
     from ..pipeline import prepare
+    from ..io.outputs import check_output
     from ..render import render
+    from ..render.methods import method_params
 
+    method_params(args.method, alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
+                  sigma_z=args.sigma_z, scale=args.intensity_scale, n_outer=args.outer,
+                  max_iter=args.iterations)  # parameters checked before the work
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     if (args.path is None) == (args.target is None):
         raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
     if args.path is not None:
+        check_output(args.output, "file" if args.output.lower().endswith(".mp4") else "dir",
+                     overwrite=True, what="-o")
         return _run_path(args)
+    check_output(args.output, "file", what="-o")
     check_depth_args(args)
     scene = load_scene(args.scene, scale=args.scale)
     tgt = args.target

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import VibrInputError
 from ..geometry.samples import Samples
 from .weights import geometric_weights
 from .operators import Splat
@@ -66,9 +67,17 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
         BtB, Btg, cg_unit = sp.normal(ones, grad_vals, dtype=np.float32)
         acc = BtB.sum(0, dtype=np.float64)
-        return SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg_unit, grad_vals)
+        return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg_unit, grad_vals))
     acc = sp.adjoint(ones)
-    return SplatCoverage(sp, acc, acc >= p["hole_threshold"])
+    return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"]))
+
+
+def _covering(cov: SplatCoverage) -> SplatCoverage:
+    """A target no sample covers is an error (not a grey image)."""
+    if not cov.coverage.any():
+        raise VibrInputError("the target camera sees nothing of the scene (coverage 0 %): check its "
+                             "position, orientation and intrinsics")
+    return cov
 
 
 def sample_density(acc, coverage, normalise: bool) -> float:
