@@ -227,3 +227,17 @@ def test_view_counts_closed_form():
     want[0, 1], want[0, 2], want[3, 0], want[3, 4] = 2, 1, 1, 1
     np.testing.assert_array_equal(c, want)
     assert view_counts(_S(np.zeros((0, 2)), np.zeros(0, int), (2, 3))).shape == (2, 3)
+
+
+def test_evaluation_writes_nothing_figures_are_separate(scene, tmp_path):
+    """run_evaluation measures and returns the images; only vibr.figures writes files."""
+    from vibr.evaluate import Setting, evaluate, run_evaluation
+    from vibr.figures import write_evaluation_figures
+
+    with pytest.raises(TypeError):
+        evaluate(scene, "view_004", [Setting("ulr")], figures=tmp_path)
+    ev = run_evaluation(scene, "view_004", [Setting("ulr")], depth="gt", use_lpips=False)
+    assert list(tmp_path.iterdir()) == [] and "figures" not in ev.report
+    assert ev.images["ulr"].shape == ev.reference.shape and ev.mask.shape == ev.reference.shape[:2]
+    info = write_evaluation_figures(ev, tmp_path / "figs")
+    assert info["columns"] == ["reference", "ulr"] and (tmp_path / "figs" / "view_004_gt_compare.png").is_file()

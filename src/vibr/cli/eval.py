@@ -90,10 +90,26 @@ def run(args) -> int:
 
     from ..errors import VibrInputError
 
+    from ..io.outputs import check_output
+
+    check_output(args.json, "file", what="--json")
+    if args.figures is not None:
+        check_output(args.figures, "dir", what="--figures")
     check_depth_args(args)
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
+    from ..render.methods import method_params
+    from ..validate import check_depth_params
+
+    for st in settings:  # every setting checked before the work
+        method_params(st.method, **dict(st.params, scale=args.intensity_scale, psf=args.psf))
+    check_depth_params(**{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                            ("depth_range", args.depth_range)) if v is not None})
+    if args.border < 0:
+        raise VibrInputError(f"--border must be >= 0, got {args.border}")
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     scene = load_scene(args.scene, scale=args.scale)
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),

@@ -109,7 +109,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
                     fill_holes: bool = False, max_inv_det: float = DEFAULT_MAX_INV_DET,
                     edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
                     sigma_z_default: float | None = None, splat_mode: str = "affine",
-                    return_zbuffer: bool = False) -> Samples:
+                    return_zbuffer: bool = False, prepared: dict | None = None) -> Samples:
     """Visible warped source samples for a target camera (paper §5).
 
     Parameters
@@ -138,6 +138,10 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         sigma_z (scene units) for views without one; default ``0.01 · median depth``.
     return_zbuffer : bool
         Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``.
+    prepared : dict, optional
+        ``view name → (z, z_x, z_y)`` from :func:`prepare_depth` with the same
+        ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
+        callers rendering many targets (:mod:`vibr.flythrough`).
 
     Returns
     -------
@@ -158,7 +162,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
-        prepped = _prepare_views(sources, cam, fill_holes, edge_rel)
+        prepped = _prepare_views(sources, cam, fill_holes, edge_rel, prepared)
     with _Timer(times, cpu, "zbuffer"):
         zbuf = _target_zbuffer(prepped, cam.shape, max_quad_px, splat_mode)
     with _Timer(times, cpu, "visibility"):
@@ -191,12 +195,13 @@ class _Timer:
         return False
 
 
-def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel) -> list:
-    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes and the
-    constants of its warp into ``cam``."""
+def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel, prepared=None) -> list:
+    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes (from
+    ``prepared`` when given) and the constants of its warp into ``cam``."""
     prepped = []
     for v in sources.views:
-        z, zx, zy = prepare_depth(v, fill_holes=fill_holes, edge_rel=edge_rel)
+        pre = prepared.get(v.name) if prepared else None
+        z, zx, zy = pre if pre is not None else prepare_depth(v, fill_holes=fill_holes, edge_rel=edge_rel)
         if v.image is None:
             raise VibrInputError(f"source view {v.name} has no image", v.path or v.name)
         M, c = warp_constants(v.camera, cam)

@@ -116,7 +116,10 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     if samples is None:
         from ..geometry import compute_samples
 
+        from ..validate import check_render_memory
+
         src = _ready_sources(sources, target)
+        check_render_memory([v.camera.shape for v in src.views], cam.shape)  # before allocating
         samples = compute_samples(src, cam, **(geometry_kw or {}))
     t_geo = time.perf_counter() - t0
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),

@@ -180,4 +180,6 @@ def method_params(method: str, **params) -> dict:
         raise VibrInputError(f"psf must be one of {PSFS}, got {p['psf']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
-    return p
+    from ..validate import check_render_params
+
+    return check_render_params(p)
