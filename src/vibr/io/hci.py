@@ -101,6 +101,23 @@ def _read_cfg(path: Path) -> dict:
     return out
 
 
+def _ground_truth(disp_path: Path, depth_path: Path, H: int, W: int):
+    """(disparity float64 or None, depth or None) of the centre view: the disparity is
+    preferred (it defines the grid relation)."""
+    disp = depth_gt = None
+    if disp_path.is_file():
+        disp = read_pfm(disp_path).astype(np.float64)
+        if disp.ndim != 2 or disp.shape != (H, W):
+            raise VibrInputError(f"disparity has shape {disp.shape}, views are {H}x{W}", disp_path)
+        if not np.all(np.isfinite(disp)):
+            raise VibrInputError(f"disparity has {int((~np.isfinite(disp)).sum())} NaN or infinite values", disp_path)
+    elif depth_path.is_file():
+        from ..scene import depth_from_file_values
+
+        depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
+    return disp, depth_gt
+
+
 def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | None = None) -> Scene:
     """Load an HCI light-field folder (see the module docstring for the camera model).
 
@@ -160,19 +177,8 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
         raise VibrInputError(
             f"parameters.cfg says {cfg['res_x']}x{cfg['res_y']} but the views are {W}x{H}", cfg_path)
 
-    # Ground truth of the centre view: disparity preferred (it defines the grid relation).
     disp_path, depth_path = root / "gt_disp_lowres.pfm", root / "gt_depth_lowres.pfm"
-    disp = depth_gt = None
-    if disp_path.is_file():
-        disp = read_pfm(disp_path).astype(np.float64)
-        if disp.ndim != 2 or disp.shape != (H, W):
-            raise VibrInputError(f"disparity has shape {disp.shape}, views are {H}x{W}", disp_path)
-        if not np.all(np.isfinite(disp)):
-            raise VibrInputError(f"disparity has {int((~np.isfinite(disp)).sum())} NaN or infinite values", disp_path)
-    elif depth_path.is_file():
-        from ..scene import depth_from_file_values
-
-        depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
+    disp, depth_gt = _ground_truth(disp_path, depth_path, H, W)
 
     if cfg is not None:
         f = cfg["focal_mm"] * max(W, H) / cfg["sensor_mm"]
