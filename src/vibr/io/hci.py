@@ -101,9 +101,9 @@ def _read_cfg(path: Path) -> dict:
     return out
 
 
-def _ground_truth(disp_path: Path, depth_path: Path, H: int, W: int):
-    """(disparity float64 or None, depth or None) of the centre view: the disparity is
-    preferred (it defines the grid relation)."""
+def _read_ground_truth(disp_path: Path, depth_path: Path, H: int, W: int):
+    """The centre view's ground truth: (disparity, depth), disparity preferred (it defines
+    the grid relation); None where absent."""
     disp = depth_gt = None
     if disp_path.is_file():
         disp = read_pfm(disp_path).astype(np.float64)
@@ -116,6 +116,34 @@ def _ground_truth(disp_path: Path, depth_path: Path, H: int, W: int):
 
         depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
     return disp, depth_gt
+
+
+def _grid_model(cfg, W: int, H: int, disp, depth_gt):
+    """Focal length (px), baseline and focus distance of the grid: parameters.cfg's, or the
+    equivalent pinhole model when there is none (module docstring)."""
+    if cfg is not None:
+        f = cfg["focal_mm"] * max(W, H) / cfg["sensor_mm"]
+        return f, cfg["baseline_mm"] / 1000.0, cfg["focus_m"], "parameters.cfg"
+    f, b = float(W), 1.0
+    if disp is not None:
+        Z0 = f * b / (np.abs(disp).max() + 1.0)
+    elif depth_gt is not None and np.any(np.isfinite(depth_gt)):
+        Z0 = float(np.nanmedian(depth_gt))
+    else:
+        Z0 = f * b
+    return f, b, Z0, "no parameters.cfg: f = width, b = 1, 1/Z0 = (max|d| + 1)/(f b)"
+
+
+def _centre_depth(disp, depth_gt, f, b, Z0, disp_path):
+    """Orthogonal depth of the centre view from its disparity: 1/Z = d/(f b) + 1/Z0."""
+    if disp is None:
+        return depth_gt
+    inv = disp / (f * b) + 1.0 / Z0
+    if np.any(inv <= 0):
+        raise VibrInputError(
+            f"disparity down to {disp.min():.4g} px lies beyond infinity for f·b = {f * b:.5g}, "
+            f"Z0 = {Z0:.5g}", disp_path)
+    return (1.0 / inv).astype(np.float32)
 
 
 def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | None = None) -> Scene:
@@ -178,33 +206,9 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
             f"parameters.cfg says {cfg['res_x']}x{cfg['res_y']} but the views are {W}x{H}", cfg_path)
 
     disp_path, depth_path = root / "gt_disp_lowres.pfm", root / "gt_depth_lowres.pfm"
-    disp, depth_gt = _ground_truth(disp_path, depth_path, H, W)
-
-    if cfg is not None:
-        f = cfg["focal_mm"] * max(W, H) / cfg["sensor_mm"]
-        b = cfg["baseline_mm"] / 1000.0
-        Z0 = cfg["focus_m"]
-        rule = "parameters.cfg"
-    else:
-        f, b = float(W), 1.0
-        if disp is not None:
-            Z0 = f * b / (np.abs(disp).max() + 1.0)
-        elif depth_gt is not None and np.any(np.isfinite(depth_gt)):
-            Z0 = float(np.nanmedian(depth_gt))
-        else:
-            Z0 = f * b
-        rule = "no parameters.cfg: f = width, b = 1, 1/Z0 = (max|d| + 1)/(f b)"
-
-    depth_c = None
-    if disp is not None:
-        inv = disp / (f * b) + 1.0 / Z0
-        if np.any(inv <= 0):
-            raise VibrInputError(
-                f"disparity down to {disp.min():.4g} px lies beyond infinity for f·b = {f * b:.5g}, "
-                f"Z0 = {Z0:.5g}", disp_path)
-        depth_c = (1.0 / inv).astype(np.float32)
-    elif depth_gt is not None:
-        depth_c = depth_gt
+    disp, depth_gt = _read_ground_truth(disp_path, depth_path, H, W)
+    f, b, Z0, rule = _grid_model(cfg, W, H, disp, depth_gt)
+    depth_c = _centre_depth(disp, depth_gt, f, b, Z0, disp_path)
 
     cx0, cy0 = (W - 1) / 2.0, (H - 1) / 2.0
     entries, grid_pos = [], {}
