@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .._jit import FASTMATH
 __all__ = [
     "PSFS", "Splat", "stencil_apply", "stencil_to_sparse", "explicit_B",
     "grad_fwd", "div_bwd", "grad_central", "grad_central_adj", "dot",
@@ -310,7 +311,7 @@ def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_
     return cpart.sum()
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _stencil_point(A, u, c, i, j, H, W):
     s = 0.0
     for dy in range(-1, 2):
@@ -325,7 +326,7 @@ def _stencil_point(A, u, c, i, j, H, W):
     return s
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _stencil_row(A, u, c, i, out):
     """Row i of the 9-point stencil ``A`` applied to channel c of ``u`` (C, H, W).
 
@@ -349,7 +350,7 @@ def _stencil_row(A, u, c, i, out):
             out[j] = _stencil_point(A, u, c, i, j, H, W)
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _stencil_apply(A, u, out):
     """out[c] = Σ_s A[s] · shift_s(u[c]); planar (C, H, W) images, (9, H, W) stencil."""
     C, H, W = u.shape
@@ -359,7 +360,7 @@ def _stencil_apply(A, u, out):
     return out
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _dot(a, b):
     a1 = a.ravel()
     b1 = b.ravel()
@@ -561,7 +562,7 @@ def stencil_to_sparse(A):
 
 # ----------------------------------------------------------------------------- ∇ / div
 # Planar layout: images (C, H, W), gradients (C, 2, H, W) with [:, 0] = d/dx, [:, 1] = d/dy.
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_fwd(u, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -582,7 +583,7 @@ def _grad_fwd(u, g):
     return g
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _div_bwd(p, out):
     C, _, H, W = p.shape
     for i in prange(H):
@@ -623,7 +624,7 @@ def div_bwd(p, out=None) -> np.ndarray:
     return _div_bwd(p, out)
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_central(u, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -645,7 +646,7 @@ def _grad_central(u, g):
     return g
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _central_adj_row(gx, gym, gyi, gyp, i, H, o):
     """Row i of ``Dᵀ g`` into ``o`` (W,), from the row's x component ``gx`` and the y
     components of rows i−1, i, i+1 (``gym``, ``gyi``, ``gyp``; those outside are not read).
@@ -673,7 +674,7 @@ def _central_adj_row(gx, gym, gyi, gyp, i, H, o):
                 o[j] -= 0.5 * gyi[j]
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_central_adj(g, out):
     C, _, H, W = g.shape
     for i in prange(H):
