@@ -129,7 +129,7 @@ def test_sigma_grows_with_injected_depth_noise(grid):
 def test_sigma_high_where_few_views_and_in_holes(grid):
     """Disoccluded pixels (seen by few of the 8 sources) and push–pull pixels get a larger
     σ than pixels every source sees."""
-    from vibr.evaluate import view_counts
+    from vibr.geometry.samples import view_counts
     from vibr.geometry import compute_samples
     from vibr.render import render_samples
     from vibr.render.uncertainty import hole_sigma

@@ -25,6 +25,7 @@ from .errors import VibrInputError
 from .metrics import METRIC_BORDER, dssim, psnr, view_metrics
 from .progress import progress
 from .render.methods import METHODS, get_method
+from .geometry.samples import view_counts
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -265,18 +266,6 @@ def _add_context(report: dict, src, depth: str, estimate_kw, view_split) -> None
         report["estimate_kw"] = _jsonable(estimate_kw)
     if depth == "estimated" and "depth_estimation" in src.meta:
         report["depth_estimation"] = _jsonable(_depth_summary(src.meta["depth_estimation"]))
-
-
-def view_counts(samples) -> np.ndarray:
-    """(H, W) int: how many distinct source views have a visible sample whose landing
-    point rounds to each target pixel."""
-    H, W = samples.target_shape
-    if len(samples) == 0:
-        return np.zeros((H, W), np.int64)
-    x = np.clip(np.rint(samples.xy[:, 0]).astype(np.int64), 0, W - 1)
-    y = np.clip(np.rint(samples.xy[:, 1]).astype(np.int64), 0, H - 1)
-    key = np.unique(np.asarray(samples.view, np.int64) * (H * W) + y * W + x)
-    return np.bincount(key % (H * W), minlength=H * W).reshape(H, W)
 
 
 def _depth_summary(meta: dict) -> dict:

@@ -2,7 +2,7 @@
 section "Uncertainty").
 
 The variational renderer computes the MAP estimate of a posterior whose smooth part is the
-quadratic ``f(u) = ½⟨u, H u⟩ − ⟨r, u⟩ + c`` with the Hessian (METHOD §5)
+quadratic ``f(u) = ½⟨u, H u⟩ − ⟨r, u⟩ + c`` with the Hessian (docs/METHOD.md §5)
 
     H = alpha · Σ_k B_kᵀ W_k B_k + gamma · Dᵀ (Σ_k B_kᵀ C_k B_k) D
 
@@ -235,7 +235,7 @@ def sample_spread_sigma(samples, *, scale: float = 255.0, coverage=None,
 def view_count_sigma(samples) -> np.ndarray:
     """Baseline: σ(p) = 1 / (number of source views with a sample landing on p, rounded to
     the nearest pixel); ``inf`` where none does. Unit-free (a ranking, not a std. dev.)."""
-    from ..evaluate import view_counts
+    from ..geometry.samples import view_counts
 
     n = view_counts(samples).astype(np.float64)
     with np.errstate(divide="ignore"):
