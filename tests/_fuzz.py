@@ -201,8 +201,8 @@ def add_camera_path_seed() -> bool:
     def build(d: Path):
         from vibr.camera import Camera
 
-        cams = [Camera(np.array([[10, 0, 6], [0, 10, 4], [0, 0, 1.0]]), np.eye(3), np.array([0.1 * i, 0, 0]),
-                       W, H) for i in range(3)]
+        K = np.array([[10, 0, (W - 1) / 2], [0, 10, (H - 1) / 2], [0, 0, 1.0]])  # a centred pinhole
+        cams = [Camera(K, np.eye(3), np.array([0.1 * i, 0, 0]), W, H) for i in range(3)]
         write_camera_path(d / "camera_path.json", cams, fps=24.0)
 
     def load(d: Path):

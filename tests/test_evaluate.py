@@ -209,7 +209,7 @@ def test_figures_downscale_and_crop_inside_mask(tmp_path):
 def test_view_counts_closed_form():
     """view_counts: distinct source views per target pixel, a sample counted at the pixel
     its landing point rounds to (clipped to the image)."""
-    from vibr.evaluate import view_counts
+    from vibr.geometry.samples import view_counts
 
     class _S:  # the three fields view_counts reads
         def __init__(self, xy, view, shape):

@@ -25,6 +25,7 @@ from .errors import VibrInputError
 from .metrics import METRIC_BORDER, dssim, psnr, view_metrics
 from .progress import progress
 from .render.methods import METHODS, get_method
+from .geometry.samples import view_counts
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -91,7 +92,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
                    border: int = METRIC_BORDER, estimate_kw: dict | None = None,
                    render_kw: dict | None = None, intensity_scale: float | None = None,
                    geometry_kw: dict | None = None, use_lpips: bool = True,
-                   view_split: int | None = None) -> Evaluation:
+                   view_split: int | None = None, uncertainty: bool = False) -> Evaluation:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
@@ -114,6 +115,10 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         Also measure each setting separately on the evaluated pixels seen by at most
         ``view_split`` source views and on those seen by more (:func:`view_counts`): entry
         ``regions`` = {"few": {...}, "many": {...}} with psnr, dssim and the pixel fraction.
+    uncertainty : bool
+        Render with ``uncertainty=True`` and add entry ``uncertainty`` = {ause, spearman,
+        fractions, curve, oracle, rmse} (:func:`vibr.metrics.uncertainty_metrics`, the same
+        pixels as the other metrics; plot: :func:`vibr.uncertainty_figures.write_sparsification_figure`).
 
     Returns an :class:`Evaluation` whose ``report`` is JSON-serialisable: ``scene``,
     ``target``, ``sources``, ``scale`` (the image scale the scene was loaded at),
@@ -137,7 +142,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
-    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth)
+    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty)
     cover = np.ones(tview.shape, bool)
     if mask == "reconstructed":
         for _, res, _ in rows:
@@ -150,6 +155,11 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         entry = _measure(s, res, dt, tview.image, m, border, depth, intensity_scale)
         if lp is not None:
             entry["lpips"] = lp(res.image, tview.image)
+        if uncertainty:  # issue 28
+            from .metrics import uncertainty_metrics
+
+            entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
+                                                       border=border)
         if view_split is not None:
             base = cover if mask == "reconstructed" else np.ones(tview.shape, bool)
             entry["regions"] = _region_metrics(res.image, tview.image, base, counts, view_split, border)
@@ -198,7 +208,7 @@ def _checked_settings(settings, mask: str, intensity_scale):
     return settings, intensity_scale
 
 
-def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth):
+def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False):
     """Render the target once per setting from the shared samples: ``[(setting, result,
     seconds)]``."""
     from .render import render
@@ -207,7 +217,7 @@ def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, 
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
         params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
         t = time.perf_counter()
-        res = render(src, tview.camera, method=s.method, samples=samples, **params)
+        res = render(src, tview.camera, method=s.method, samples=samples, uncertainty=uncertainty, **params)
         rows.append((s, res, time.perf_counter() - t))
     return rows
 
@@ -256,18 +266,6 @@ def _add_context(report: dict, src, depth: str, estimate_kw, view_split) -> None
         report["estimate_kw"] = _jsonable(estimate_kw)
     if depth == "estimated" and "depth_estimation" in src.meta:
         report["depth_estimation"] = _jsonable(_depth_summary(src.meta["depth_estimation"]))
-
-
-def view_counts(samples) -> np.ndarray:
-    """(H, W) int: how many distinct source views have a visible sample whose landing
-    point rounds to each target pixel."""
-    H, W = samples.target_shape
-    if len(samples) == 0:
-        return np.zeros((H, W), np.int64)
-    x = np.clip(np.rint(samples.xy[:, 0]).astype(np.int64), 0, W - 1)
-    y = np.clip(np.rint(samples.xy[:, 1]).astype(np.int64), 0, H - 1)
-    key = np.unique(np.asarray(samples.view, np.int64) * (H * W) + y * W + x)
-    return np.bincount(key % (H * W), minlength=H * W).reshape(H, W)
 
 
 def _depth_summary(meta: dict) -> dict:

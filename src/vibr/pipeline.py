@@ -1,7 +1,8 @@
 """From a loaded scene and a target to the sources the renderer needs.
 
 This is the one preparation step shared by ``vibr render``, ``vibr eval`` and the Python API
-(:func:`vibr.render.render` calls it for sources that are not ready): pick the
+(for convenience :func:`vibr.render.render` holds out the target and transfers depth itself,
+as ``depth="gt"`` does, when given sources that are not ready): pick the
 target (a held-out view or a bare camera), pick the source views (all others, a given list,
 or the k best by :mod:`vibr.selection`), and give every source a depth map according to the
 chosen geometry:

@@ -99,7 +99,7 @@ def _demo_video(scene, args) -> None:
     path = orbit(scene, n_frames=48, fps=24.0)
     tmp = tempfile.mkdtemp(prefix="vibr-demo-frames-")
     try:
-        res = render_path(scene, path, args.video, method=args.method, n_views=8, frames_dir=tmp,
+        res = render_path(scene, path, args.video, method=args.method, n_views=4, frames_dir=tmp,
                           cache_dir=False, progress=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

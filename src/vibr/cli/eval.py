@@ -83,6 +83,9 @@ def register(sub) -> None:
     add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
+    p.add_argument("--uncertainty", action="store_true",
+                   help="also score each render's per-pixel std. dev.: AUSE, Spearman rho and the "
+                        "sparsification curves in the report, the sparsification plot in --figures")
     add_executor_args(p)
     add_quiet(p)
     p.set_defaults(func=run)
@@ -126,10 +129,15 @@ def run(args) -> int:
                         depth_files=args.depth_files, n_views=args.views, mask=args.mask,
                         border=args.border, estimate_kw=estimate_kw or None,
                         intensity_scale=args.intensity_scale,
-                        render_kw={"psf": args.psf} if args.psf else None)
+                        render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
     report = ev.report
     if args.figures:
         report["figures"] = write_evaluation_figures(ev, args.figures)
+        if args.uncertainty:
+            from ..uncertainty_figures import write_sparsification_figure
+
+            report["figures"]["sparsification"] = write_sparsification_figure(args.figures, report["results"],
+                                                                              prefix=ev.prefix)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")

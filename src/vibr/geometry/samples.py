@@ -86,3 +86,15 @@ class Samples:
         return Samples(cat("xy"), cat("colour"), cat("grad"), cat("jac"), cat("inv_det"),
                        cat("dtau_dz"), cat("sigma_z"), cat("view"), cat("src_xy"),
                        cat("X"), tuple(target_shape), {})
+
+
+def view_counts(samples) -> np.ndarray:
+    """(H, W) int: how many distinct source views have a visible sample whose landing
+    point rounds to each target pixel."""
+    H, W = samples.target_shape
+    if len(samples) == 0:
+        return np.zeros((H, W), np.int64)
+    x = np.clip(np.rint(samples.xy[:, 0]).astype(np.int64), 0, W - 1)
+    y = np.clip(np.rint(samples.xy[:, 1]).astype(np.int64), 0, H - 1)
+    key = np.unique(np.asarray(samples.view, np.int64) * (H * W) + y * W + x)
+    return np.bincount(key % (H * W), minlength=H * W).reshape(H, W)

@@ -149,7 +149,7 @@ def _outer_line(name, o, n_outer, res) -> str:
 
 
 def solve_variational(samples: Samples, p: dict, method, *, callback=None, progress_bar: bool = False,
-                      verbose: bool = False) -> RenderResult:
+                      verbose: bool = False, uncertainty=False) -> RenderResult:
     """Render from ``samples`` with a variational ``method`` (a
     :class:`vibr.render.methods.Method` with ``solve``): weights, initial image, then
     ``n_outer`` passes of (re-weight, assemble, FISTA). See :func:`vibr.render.render`."""
@@ -212,8 +212,16 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
             bar.update(1)
     if bar is not None:
         bar.close()
+    sig = None
+    if uncertainty:  # issue 28: Jacobi diag(H⁻¹) of the last pass's model + spread of the sources
+        from .uncertainty import variational_sigma
+
+        t0 = time.perf_counter()
+        sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho,
+                                terms=uncertainty)
+        times["uncertainty"] = time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
     p = dict(p, density=rho, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
     return RenderResult(img, cov.coverage, energy, terms, outer, times, method.name, p, len(samples),
-                        init=init, iterations=n_iter, power_iterations=n_power)
+                        init=init, iterations=n_iter, power_iterations=n_power, uncertainty=sig)
