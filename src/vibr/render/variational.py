@@ -21,7 +21,7 @@ import numpy as np
 
 from ..geometry.samples import Samples
 from .weights import geometric_weights
-from .operators import Splat
+from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
 from .solver import QuadraticModel, fista
@@ -157,6 +157,8 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     u = np.ascontiguousarray(init.transpose(2, 0, 1))  # planar (3, H, W) from here on
     times["init"] = time.perf_counter() - t0
 
+    # D of the target side = the D the geometry stage applied to the sources
+    grad_scheme = samples.meta.get("grad_scheme", DEFAULT_GRAD_SCHEME)
     n_outer = max(1, int(p["n_outer"]))
     energy, terms, outer = [], [], []
     prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"])
@@ -175,7 +177,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         A, b, c = sp.normal(Wk, samples.colour, dtype=np.float32)
         Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
         model = QuadraticModel(A, b, float(c), Ag, bg, float(cg),
-                               p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"])
+                               p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"], grad_scheme)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         outer.append(len(energy))
