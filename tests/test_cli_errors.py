@@ -166,15 +166,15 @@ def test_convert_leaves_no_partial_output(capsys, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
 
 
-def test_convert_refuses_existing_output_without_force(capsys, tmp_path):
+def test_convert_refuses_existing_output_without_overwrite(capsys, tmp_path):
     root = make_transforms(tmp_path / "s")
     out = tmp_path / "out"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
     code, err = run_cli(capsys, "convert", root, out)
-    assert_one_line_error(code, err, out, "--force")
+    assert_one_line_error(code, err, out, "--overwrite")
     assert (out / "keep.txt").read_text() == "mine"
-    assert run_cli(capsys, "convert", root, out, "--force")[0] == 0
+    assert run_cli(capsys, "convert", root, out, "--overwrite")[0] == 0
     assert (out / "transforms.json").is_file() and not (out / "keep.txt").exists()
 
 

@@ -56,7 +56,9 @@ def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monke
     src, tview = prepare(scene, "view_004", depth="gt")
     for s, entry in zip(settings, rep["results"]):
         res = render(src, tview, method=s.method, **FAST, **s.params)
-        assert entry["psnr"] == pytest.approx(psnr(res.image, tview.image, mask=res.coverage), abs=1e-5)
+        # and by the same rule as render's own metrics (reconstructed pixels, 2-px border)
+        assert entry["psnr"] == pytest.approx(res.metrics["psnr"], abs=1e-5)
+        assert entry["psnr"] == pytest.approx(psnr(res.image, tview.image, mask=res.coverage, border=2), abs=1e-5)
         assert entry["params"]["scale"] == 255.0 and entry["intensity_scale"] == 255.0
     assert len(calls) == 1 + len(settings)
 

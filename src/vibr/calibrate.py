@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera import Camera
-from .errors import VibrInputError
+from .errors import OutputExists, VibrInputError
 from .progress import progress
 from .scene import Scene, View
 
@@ -516,7 +516,7 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
 
     out = Path(out_dir)
     if out.exists() and not overwrite:
-        raise VibrInputError("output folder already exists (use --overwrite)", out)
+        raise OutputExists("output folder already exists", out)
     parent = out.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
     scene, report = calibrate_scene(photos_dir, **kwargs)

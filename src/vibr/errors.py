@@ -19,6 +19,10 @@ class VibrInputError(ValueError):
         super().__init__(self.problem if self.path is None else f"{self.path}: {self.problem}")
 
 
+class OutputExists(VibrInputError):
+    """An output that exists and is not to be replaced (``overwrite=False``)."""
+
+
 def require_file(path: str | os.PathLike) -> str:
     """Return ``path`` as a string, or raise :class:`VibrInputError` if it is not a file."""
     p = os.fspath(path)

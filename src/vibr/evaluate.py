@@ -22,9 +22,9 @@ from typing import Sequence
 import numpy as np
 
 from .errors import VibrInputError
-from .metrics import dssim, psnr, ssim
+from .metrics import METRIC_BORDER, dssim, psnr, view_metrics
 from .progress import progress
-from .render.methods import METHODS
+from .render.methods import METHODS, get_method
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -49,11 +49,10 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = (0
     every variational method once per alpha and lambda given."""
     out = []
     for m in methods:
-        if m not in METHODS:
-            raise VibrInputError(f"unknown method {m!r} (choose from {', '.join(METHODS)})")
-        gs = list(gammas) if m == "gradient" else [None]
-        al = [None] if (m == "ulr" or not alphas) else list(alphas)
-        lm = [None] if (m == "ulr" or not lams) else list(lams)
+        spec = get_method(m)  # what the method uses decides which parameters vary
+        gs = list(gammas) if spec.gradient else [None]
+        al = [None] if (not spec.solve or not alphas) else list(alphas)
+        lm = [None] if (not spec.solve or not lams) else list(lams)
         for g, a, l in itertools.product(gs, al, lm):
             p = {}
             if a is not None:
@@ -69,7 +68,7 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = (0
 def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
              sources: Sequence[int | str] | None = None, depth: str = "auto",
              depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
-             border: int = 0, figures: str | Path | None = None, estimate_kw: dict | None = None,
+             border: int = METRIC_BORDER, figures: str | Path | None = None, estimate_kw: dict | None = None,
              render_kw: dict | None = None, intensity_scale: float | None = None,
              geometry_kw: dict | None = None, figure_labels: Sequence[str] | None = None,
              figure_prefix: str | None = None, figure_downscale: int = 1,
@@ -115,7 +114,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
     from .render import render
 
     if mask not in ("reconstructed", "all"):
-        raise VibrInputError(f"--mask must be 'reconstructed' or 'all', not {mask!r}")
+        raise VibrInputError(f"mask must be 'reconstructed' or 'all', not {mask!r}")
     settings = list(settings)
     if not settings:
         raise VibrInputError("no setting to evaluate")
@@ -165,9 +164,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
             "params": {**used, **s.params},
             "intensity_scale": float(used.get("scale", intensity_scale)),
             "depth": depth,
-            "psnr": float(psnr(res.image, ref, mask=m, border=border)),
-            "ssim": float(ssim(res.image, ref, mask=m, border=border)),
-            "dssim": float(dssim(res.image, ref, mask=m, border=border)),
+            **{k: float(v) for k, v in view_metrics(res.image, ref, m, border).items()},
             "seconds": round(dt, 3),
             "coverage": float(np.asarray(res.coverage, bool).mean()),
             "iterations": len(getattr(res, "energy", []) or []),

@@ -11,7 +11,7 @@ import numpy as np
 
 from .errors import VibrInputError
 
-__all__ = ["psnr", "ssim", "dssim", "mse", "checkerboard_energy", "speckle_density"]
+__all__ = ["psnr", "ssim", "dssim", "mse", "view_metrics", "METRIC_BORDER", "checkerboard_energy", "speckle_density"]
 
 
 def _prepare(img, ref, mask, border, what):
@@ -151,3 +151,17 @@ def speckle_density(img, mask=None, border: int = 0, threshold: float = 0.1) -> 
     g, m = _grey_mask(img, mask, border, 1)
     spk = np.abs(g - median_filter(g, size=3, mode="nearest")) > threshold
     return float(1e4 * spk[m].mean()) if m.any() else float("nan")
+
+
+#: Pixels at each image edge left out of the metrics of a rendered view, by ``vibr render``
+#: and ``vibr eval`` alike (as the authors' evaluator): edge pixels see the fewest samples.
+METRIC_BORDER = 2
+
+
+def view_metrics(img, ref, mask=None, border: int = METRIC_BORDER) -> dict:
+    """The metrics of a rendered view against the held-out photograph, by the one rule of
+    ``vibr render`` and ``vibr eval``: ``psnr``, ``ssim`` and ``dssim = 10⁴ · (1 − SSIM)``
+    over the pixels of ``mask`` (the reconstructed pixels) with ``border`` pixels at each
+    edge excluded."""
+    s = ssim(img, ref, mask, border)
+    return {"psnr": psnr(img, ref, mask, border), "ssim": s, "dssim": 1e4 * (1.0 - s)}

@@ -134,7 +134,7 @@ def _gt_depth(scene: Scene, src: Scene, ti) -> Scene:
 
     if all(v.depth is None for v in src.views):
         if ti is None or scene.views[ti].depth is None:
-            raise DepthUnavailable("the scene has no depth maps (estimate them, or use a planar proxy)",
+            raise DepthUnavailable("the scene has no depth maps (depth 'estimated' or 'planar' need none)",
                                    scene.root)
         full = scene.replace(views=src.views + [scene.views[ti]])
         return src.replace(views=ensure_source_depth(full).views[:-1])

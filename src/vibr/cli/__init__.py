@@ -71,12 +71,13 @@ def verbosity(args) -> int:
 
 
 #: Flag hints the CLI adds to library errors (the library's messages name no flag).
-_HINTS = {"DepthUnavailable": "use --depth estimated or --depth planar"}
+_HINTS = {"DepthUnavailable": "use --depth estimated or --depth planar",
+          "OutputExists": "use --overwrite to replace it"}
 
 
 def _message(exc: VibrInputError) -> str:
     hint = _HINTS.get(type(exc).__name__)
-    return f"{exc}: {hint}" if hint else str(exc)
+    return f"{exc}; {hint}" if hint else str(exc)
 
 
 def main(argv=None) -> int:

@@ -6,11 +6,11 @@ from __future__ import annotations
 import argparse
 
 from ..pipeline import DEPTH_MODES
-from ..render.api import METRIC_BORDER
+from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS, PSFS, REGISTRY
 
-#: How ``vibr render`` and ``vibr eval`` measure (one rule, vibr.render.api.render_metrics).
-METRIC_RULE = f"covered pixels, {METRIC_BORDER}-px border excluded"
+#: How ``vibr render`` and ``vibr eval`` measure (one rule: vibr.metrics.view_metrics).
+METRIC_RULE = f"reconstructed pixels, {METRIC_BORDER}-px border excluded"
 
 DEFAULT_METHOD = "gradient"
 
@@ -85,3 +85,29 @@ def check_depth_args(args) -> None:
 
     if args.depth == "files" and not args.depth_files:
         raise VibrInputError("--depth files needs --depth-files DIR")
+
+
+def add_overwrite_option(p: argparse.ArgumentParser, what: str) -> None:
+    """``--overwrite``: THE name for replacing existing outputs (``--force``: a hidden,
+    deprecated alias)."""
+    p.add_argument("--overwrite", action="store_true", help=f"replace {what} if it exists")
+    p.add_argument("--force", dest="overwrite", action="store_true", help=argparse.SUPPRESS)
+
+
+def add_bit_depth_option(p: argparse.ArgumentParser) -> None:
+    """``--bit-depth 8|16`` of the images a subcommand writes (8 by default)."""
+    p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
+                   help="bits per channel of the PNG written (default: 8; 16 keeps the solver's "
+                        "precision)")
+
+
+def names(text: str) -> list[str]:
+    """'a, b,3' → ['a', 'b', '3'] (an argparse type)."""
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def add_source_options(p: argparse.ArgumentParser) -> None:
+    """``--sources`` (a list) and ``--views K`` (the K best), as :func:`vibr.pipeline.prepare`."""
+    p.add_argument("--sources", type=names, help="comma-separated source views (default: all others)")
+    p.add_argument("--views", type=int, metavar="K",
+                   help="render from the K best source views for the target (ULR ranking; default: all)")

@@ -29,7 +29,8 @@ def register(sub) -> None:
     p.add_argument("photos", metavar="PHOTOS_DIR", help="folder of photos (jpg/png/tif), not recursive")
     p.add_argument("out", metavar="OUT_SCENE", help="output scene folder (must not exist unless --overwrite)")
     p.add_argument("--scale", type=float, default=1.0,
-                   help="resize the photos by this factor first (e.g. 0.5: 3072x2048 -> 1536x1024; default 1)")
+                   help="image scale the photos are calibrated at, e.g. 0.5: 3072x2048 -> 1536x1024 "
+                        "(default 1)")
     p.add_argument("--matcher", choices=["exhaustive", "sequential"], default="exhaustive",
                    help="exhaustive: all pairs (default, best up to ~100 photos); "
                    "sequential: neighbours in file-name order (video-like captures)")

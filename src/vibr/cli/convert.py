@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import add_quiet
+from ._options import add_overwrite_option
 
 _DESC = """\
 Load a scene in any supported format and write it as a nerfstudio / instant-NGP
@@ -20,7 +21,7 @@ examples:
   vibr convert ../shared/data/hci2016_cotton cotton_ns/
   vibr convert ../shared/data/strecha_fountain-P11 fountain_q/ --scale 0.25
   vibr convert ../shared/data/hci2016_cotton centre_cross/ --views input_Cam031,input_Cam039,input_Cam040,input_Cam041,input_Cam049
-  vibr convert SCENE out/ --force                   replace an existing out/
+  vibr convert SCENE out/ --overwrite               replace an existing out/
 """
 
 
@@ -29,11 +30,12 @@ def register(sub) -> None:
                        description=_DESC, epilog=_EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
-    p.add_argument("out", metavar="OUT", help="output folder (must not exist unless --force)")
-    p.add_argument("--scale", type=float, default=1.0, help="resize factor (default: 1)")
+    p.add_argument("out", metavar="OUT", help="output folder (must not exist unless --overwrite)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
     p.add_argument("--views", default=None,
                    help="comma-separated view names or indices to keep (default: all)")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    add_overwrite_option(p, "OUT")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -43,7 +45,7 @@ def run(args) -> int:
     from .info import parse_views
 
     scene = load_scene(args.scene, scale=args.scale, views=parse_views(args.views))
-    out = save_scene(scene, args.out, overwrite=args.force)
+    out = save_scene(scene, args.out, overwrite=args.overwrite)
     nd = sum(v.depth is not None for v in scene.views)
     print(f"wrote {out}/transforms.json: {len(scene)} views ({scene.meta.get('format', '?')}), "
           f"{nd} with depth" + (f", {len(scene.points)} sparse points" if scene.points is not None else ""))

@@ -7,7 +7,7 @@ import logging
 import time
 
 from . import add_quiet
-from ._options import add_method_option
+from ._options import add_bit_depth_option, add_method_option
 
 logger = logging.getLogger(__name__)
 
@@ -35,6 +35,7 @@ def register(sub) -> None:
     add_method_option(p)
     p.add_argument("--seed", type=int, default=0, help="random seed of the scene (default: 0)")
     p.add_argument("-o", "--output", help="also write the rendered view to this PNG")
+    add_bit_depth_option(p)
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -64,6 +65,6 @@ def run(args) -> int:
     print(f"  DSSIM {dssim(res.image, tview.image, mask=mask):6.1f}      (1e4 * (1 - SSIM), lower is better)")
     print(f"  PSNR  {psnr(res.image, tview.image):6.2f} dB   (all pixels, holes filled by push-pull)")
     if args.output:
-        write_image(args.output, res.image)
+        write_image(args.output, res.image, bits=args.bit_depth)
         print(f"  wrote {args.output}")
     return 0

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from . import add_quiet
+from ._options import add_overwrite_option
 
 _DESC = """\
 Estimate orthogonal depth maps and their uncertainty sigma_z for the views of a scene, on
@@ -22,11 +23,11 @@ folder is updated in place (the new folder replaces it only once complete).
 
 _EPILOG = """\
 examples:
-  vibr depth ../shared/data/strecha_fountain-P11 -o fountain_depth/ --resize 0.25
-  vibr depth ../shared/data/strecha_fountain-P11 -o f/ --resize 0.25 --refine-iter 1   (faster)
+  vibr depth ../shared/data/strecha_fountain-P11 -o fountain_depth/ --scale 0.25
+  vibr depth ../shared/data/strecha_fountain-P11 -o f/ --scale 0.25 --refine-iter 1   (faster)
   vibr depth ../shared/data/hci2016_cotton -o cotton_depth/ --views input_Cam040
   vibr depth fountain_depth/ --views 5 --exclude 4          update in place, never using view 4
-  vibr depth SCENE -o out/ --scale 0.5 --depth-range 4 20   estimate at half resolution
+  vibr depth SCENE -o out/ --depth-scale 0.5 --depth-range 4 20   estimate at half resolution
 """
 
 
@@ -40,9 +41,11 @@ def register(sub) -> None:
     p.add_argument("--views", default=None, help="comma-separated views to estimate (default: all)")
     p.add_argument("--exclude", default=None, help="comma-separated views never used as inputs")
     p.add_argument("--scale", type=float, default=1.0,
-                   help="estimation scale; maps are upsampled back to the scene's size (default 1)")
-    p.add_argument("--resize", type=float, default=1.0,
-                   help="load the scene resized by this factor; the output has that size (default 1)")
+                   help="image scale the scene is loaded at, e.g. 0.25; the output has that size (default 1)")
+    p.add_argument("--resize", dest="scale", type=float, help=argparse.SUPPRESS)  # the old name
+    p.add_argument("--depth-scale", type=float, default=1.0,
+                   help="scale of the estimation relative to the loaded scene; the maps are "
+                        "upsampled back to its size (default 1)")
     p.add_argument("--method", choices=["auto", "mvs", "lightfield"], default="auto",
                    help="auto: lightfield when the scene is a grid, else mvs")
     p.add_argument("--neighbours", type=int, default=4,
@@ -74,7 +77,7 @@ def register(sub) -> None:
                    help="dense output (MVS): fill unknown pixels from the planes of their colour "
                    "segments, then re-run the weighted median (docs/DEPTH.md). Better depth "
                    "maps; the renderer does better with the unknown pixels left out")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    add_overwrite_option(p, "OUT")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -94,23 +97,23 @@ def run(args) -> int:
         tj = src if src.name == "transforms.json" else src / "transforms.json"
         if not tj.is_file():
             raise VibrInputError("give -o OUT: only a transforms.json scene is updated in place", src)
-        if args.resize != 1.0:
-            raise VibrInputError("--resize needs -o OUT (an in-place update keeps the scene's size)", src)
+        if args.scale != 1.0:
+            raise VibrInputError("--scale needs -o OUT (an in-place update keeps the scene's size)", src)
         out = tj.parent
     else:
         out = Path(args.out)
-    scene = load_scene(args.scene, scale=args.resize)
+    scene = load_scene(args.scene, scale=args.scale)
     opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                              ("refine_iter", args.refine_iter),
                              ("median_radius", args.median_radius),
                              ("sweep_scale", args.sweep_scale),
                              ("coarse_iter", args.coarse_iter)) if v is not None}
-    est = estimate_depth(scene, views=_split(args.views), scale=args.scale,
+    est = estimate_depth(scene, views=_split(args.views), scale=args.depth_scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
                          consistency=not args.no_consistency, fill_segments=args.fill_segments, **opt)
     info = est.meta["depth_estimation"]
-    save_scene(est, out, overwrite=in_place or args.force)
+    save_scene(est, out, overwrite=in_place or args.overwrite)
     tv = [v for v in info["views"].values() if v.get("role") == "target"]
     kept = [v["kept"] for v in tv]
     filled = sum(v.get("filled", 0.0) for v in tv)

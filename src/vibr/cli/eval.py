@@ -4,16 +4,19 @@ from __future__ import annotations
 
 import argparse
 
+from ..metrics import METRIC_BORDER
+from ..render.methods import DEFAULTS, METHODS
 from . import add_quiet
-from ._options import METHODS, add_depth_options, add_intensity_scale_option, add_psf_option, check_depth_args, method_help
-from ..render.methods import DEFAULTS
+from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
+                       check_depth_args, method_help, names)
 
-_DESC = """\
+_DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
 and setting, and compare with the real photograph: PSNR (dB, higher is better) and
 DSSIM = 1e4 * (1 - SSIM) (Wang et al. 2004, Gaussian window sigma 1.5; lower is better),
 over the pixels every method reconstructed (--mask reconstructed, as in the paper) or over
-the whole image. The target never takes part in depth estimation.
+the whole image, a {METRIC_BORDER}-px border excluded (--border): the rule of vibr render. The target
+never takes part in depth estimation.
 """
 
 _EPILOG = """\
@@ -46,19 +49,14 @@ def _floats(s):
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}") from None
 
 
-def _names(s):
-    return [x.strip() for x in s.split(",") if x.strip()]
-
-
 def register(sub) -> None:
     p = sub.add_parser("eval", help="render held-out views and measure PSNR / DSSIM (paper protocol)",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene folder or transforms.json")
     p.add_argument("--target", required=True, help="view to hold out and render (name or index)")
-    p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
-    p.add_argument("--views", type=int, metavar="K", help="use only the K best source views for the target")
+    add_source_options(p)
     add_depth_options(p)
-    p.add_argument("--method", type=_names, default=list(METHODS),
+    p.add_argument("--method", type=names, default=list(METHODS),
                    help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
     p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)})")
@@ -76,7 +74,8 @@ def register(sub) -> None:
                         "(default: the estimator's coarse sweep)")
     p.add_argument("--mask", choices=["reconstructed", "all"], default="reconstructed",
                    help="pixels the metrics are taken over (default: reconstructed)")
-    p.add_argument("--border", type=int, default=0, help="pixels excluded at the image border (default: 0)")
+    p.add_argument("--border", type=int, default=METRIC_BORDER,
+                   help=f"pixels excluded at each image edge (default: {METRIC_BORDER}, as vibr render)")
     add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")

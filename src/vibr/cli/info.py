@@ -12,7 +12,7 @@ nerfstudio/instant-NGP transforms.json, COLMAP sparse model) and print a summary
 number and size of views, light-field grid, depth coverage and range, sparse points, and one
 line per camera (focal lengths and principal point in pixels with the centre of the top-left
 pixel at (0,0); camera centre in scene units). Use it to check that a dataset loads before
-rendering.
+rendering. Only the images' headers are read (their sizes), not their pixels.
 """
 
 _EPILOG = """\
@@ -30,7 +30,7 @@ def register(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
     p.add_argument("--scale", type=float, default=1.0,
-                   help="resize factor applied on loading (default: 1; e.g. 0.25 for a quick look)")
+                   help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
     p.add_argument("--views", default=None,
                    help="comma-separated view names or indices to load (default: all)")
     add_quiet(p)
@@ -79,8 +79,10 @@ def describe(scene) -> str:
 
 def run(args) -> int:
     from ..io import load_scene
+    from ..io.images import headers_only
 
-    scene = load_scene(args.scene, scale=args.scale, views=parse_views(args.views))
+    with headers_only():
+        scene = load_scene(args.scene, scale=args.scale, views=parse_views(args.views))
     try:
         print(describe(scene), flush=True)
     except BrokenPipeError:  # `vibr info ... | head`: the reader has gone, not an error

@@ -7,8 +7,8 @@ import logging
 import os
 
 from . import add_quiet
-from ._options import (METRIC_RULE, add_depth_options, add_method_option, add_render_params, check_depth_args,
-                       render_params)
+from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
+                       add_render_params, add_source_options, check_depth_args, render_params)
 
 logger = logging.getLogger(__name__)
 
@@ -30,10 +30,6 @@ examples:
 """
 
 
-def _names(s):
-    return [x.strip() for x in s.split(",") if x.strip()]
-
-
 def register(sub) -> None:
     p = sub.add_parser("render", help="render a view (held-out view or camera file) of a scene",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -42,13 +38,14 @@ def register(sub) -> None:
                    help="view name / index to hold out and render, or a camera JSON file (K, R, t, "
                         "width, height at the scene's original resolution: --scale applies to it too)")
     p.add_argument("-o", "--output", required=True, help="output image (PNG)")
+    add_bit_depth_option(p)
     add_method_option(p)
     add_render_params(p)
-    p.add_argument("--sources", type=_names, help="comma-separated source views (default: all others)")
+    add_source_options(p)
     add_depth_options(p)
-    p.add_argument("--views", type=int, metavar="K",
-                   help="render from the K best source views for the target (ULR ranking; default: all)")
-    p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene and of a camera-file target, e.g. 0.5 (default 1)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="image scale the scene is loaded at, e.g. 0.5; a camera-file target is scaled "
+                        "with it (default 1)")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -74,8 +71,8 @@ def run(args) -> int:
         raise VibrInputError(f"--views must be at least 1, got {args.views}")
     sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views)
-    res = render(sources, target, args.method, progress_bar=True, verbose=True, **render_params(args))
-    write_image(args.output, res.image)
+    res = render(sources, target, args.method, progress_bar=True, **render_params(args))  # -v: per pass
+    write_image(args.output, res.image, bits=args.bit_depth)
     t = res.times
     logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
                 f"{res.n_samples} samples, coverage {100 * res.coverage.mean():.1f} %, "

@@ -9,6 +9,8 @@ and read back is bit-for-bit the array that was written whenever it lies on that
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 import struct
 import warnings
@@ -19,6 +21,9 @@ from numba import njit, prange
 
 from ..errors import VibrInputError, require_file
 from .atomic import atomic_path
+
+#: Set by :func:`headers_only`: :func:`build_views` then reads image headers, not pixels.
+_HEADERS_ONLY = contextvars.ContextVar("vibr_headers_only", default=False)
 
 #: Image file extensions recognised when scanning folders.
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
@@ -236,8 +241,11 @@ def write_image(path, img: np.ndarray, bits: int | None = None) -> None:
     """Write an H×W×3 (or H×W) float image in [0, 1] atomically.
 
     PNG files are 8-bit when the image is exactly representable in 8 bits, else 16-bit
-    (``bits`` forces one); JPEG is always 8-bit.
+    (``bits`` = 8 or 16 forces one: a rendered view is 8-bit unless asked); JPEG is always
+    8-bit.
     """
+    if bits not in (None, 8, 16):
+        raise VibrInputError(f"bit depth must be 8 or 16, got {bits}", path)
     import imageio.v3 as iio
 
     path = os.fspath(path)
@@ -346,18 +354,25 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     if scale <= 0 or not np.isfinite(scale):
         raise VibrInputError(f"scale must be positive, got {scale}")
 
+    headers = _HEADERS_ONLY.get()
+
     def work(e):
-        img = read_image(e["path"])
+        if headers:
+            w, h = image_size(e["path"])
+            img, size = None, (h, w)
+        else:
+            img = read_image(e["path"])
+            size = img.shape[:2]
         cam = e["camera"]
-        if img.shape[:2] != cam.shape:
+        if size != cam.shape:
             if check_size:
                 raise VibrInputError(
-                    f"image is {img.shape[1]}x{img.shape[0]} but its camera says {cam.width}x{cam.height}",
+                    f"image is {size[1]}x{size[0]} but its camera says {cam.width}x{cam.height}",
                     e["path"])
         depth, sz = e.get("depth"), e.get("sigma_z")
         if scale != 1.0:
             cam = cam.scaled(scale)
-            img = resize_image(img, cam.shape)
+            img = None if img is None else resize_image(img, cam.shape)
             if depth is not None:
                 depth = resize_depth(depth, cam.shape)
             if sz is not None and np.ndim(sz) == 2:
@@ -369,3 +384,15 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     with ThreadPoolExecutor(max_workers=workers) as ex:
         views = list(progress(ex.map(work, entries), desc=desc, total=n, unit="img"))
     return views
+
+
+@contextlib.contextmanager
+def headers_only():
+    """Within this block, scenes load without their pixels: :func:`build_views` (every
+    loader's image reader) reads each image's size from its header and leaves
+    ``View.image`` None; cameras, depth and metadata load as usual (``vibr info``)."""
+    token = _HEADERS_ONLY.set(True)
+    try:
+        yield
+    finally:
+        _HEADERS_ONLY.reset(token)

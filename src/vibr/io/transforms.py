@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera
-from ..errors import VibrInputError
+from ..errors import OutputExists, VibrInputError
 from ..scene import Scene
 from .camera_json import as_rotation, parse_json
 from .depthfiles import read_depth, write_depth
@@ -276,7 +276,7 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False) -> Path:
 
     out = Path(out_dir).absolute()
     if out.exists() and not overwrite:
-        raise VibrInputError("output folder already exists (use --force / overwrite=True to replace it)", out)
+        raise OutputExists("output folder already exists", out)
     if out.exists() and not out.is_dir():
         raise VibrInputError("output path exists and is not a folder", out)
     for v in scene.views:

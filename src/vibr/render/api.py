@@ -14,14 +14,9 @@ from ..scene import Scene, View
 from .methods import get_method, method_params
 from .result import RenderResult
 
-__all__ = ["RenderResult", "render", "render_samples", "render_metrics"]
+__all__ = ["RenderResult", "render", "render_samples"]
 
 logger = logging.getLogger(__name__)
-
-#: Pixels at the image border left out of the metrics of render and eval: the border pixels
-#: see the fewest samples and the 7×7 SSIM window runs past the image there.
-METRIC_BORDER = 2
-
 
 def render_samples(samples: Samples, method="gradient", *, source_centres=None,
                    target_centre=None, callback=None, progress_bar: bool = False,
@@ -35,18 +30,6 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
         raise VibrInputError("no source sample lands in the target view")
     return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
                     callback=callback, progress_bar=progress_bar, verbose=verbose)
-
-
-def render_metrics(image, reference, coverage, border: int = METRIC_BORDER) -> dict:
-    """PSNR, SSIM and DSSIM = 1e4·(1 − SSIM) of ``image`` against ``reference`` over the
-    covered pixels, ``border`` pixels at the image border excluded (the rule shared by
-    ``vibr render`` and ``vibr eval``)."""
-    from ..metrics import psnr, ssim
-
-    out = {"psnr": psnr(image, reference, mask=coverage, border=border),
-           "ssim": ssim(image, reference, mask=coverage, border=border)}
-    out["dssim"] = 1e4 * (1 - out["ssim"])
-    return out
 
 
 def _ready_sources(sources: Scene, target) -> Scene:
@@ -139,5 +122,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:
-        res.metrics = render_metrics(res.image, target.image, res.coverage)
+        from ..metrics import view_metrics
+
+        res.metrics = view_metrics(res.image, target.image, res.coverage)
     return res
