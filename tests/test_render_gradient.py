@@ -65,3 +65,24 @@ def test_gradient_render_has_no_more_checkerboard_than_bvs():
     out = {m: render(sc, sc.views[4], m) for m in ("bvs", "gradient")}
     e = {m: checkerboard_energy(r.image, r.coverage, 2) for m, r in out.items()}
     assert e["gradient"] <= e["bvs"] * 1.0001, e
+
+
+def test_robust_loss_downweights_an_outlier_sample():
+    """The Cauchy IRLS factor: ~1 for samples that agree with u, small for an outlier."""
+    from vibr.geometry.samples import Samples
+    from vibr.render.operators import Splat
+    from vibr.render.weights import robust_factor
+
+    rng = np.random.default_rng(0)
+    H, W, n = 8, 8, 200
+    u = rng.random((H, W, 3)).astype(np.float32)
+    xy = rng.uniform(0, 7, (n, 2))
+    sp = Splat(xy, (H, W))
+    col = (sp.apply(u) + 0.01 * rng.standard_normal((n, 3))).astype(np.float32)
+    col[0] += 0.5
+    z = np.zeros
+    s = Samples(xy, col, z((n, 3, 2), np.float32), z((n, 2, 2)), np.ones(n), z((n, 2)), np.ones(n),
+                z(n, np.int32), z((n, 2), np.int32), z((n, 3)), (H, W))
+    f = robust_factor(s, u, sp, c=3.0)
+    assert f[0] < 0.01 and np.median(f[1:]) > 0.9
+    np.testing.assert_array_equal(robust_factor(s, u, sp, loss="none"), 1.0)

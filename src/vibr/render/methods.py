@@ -29,6 +29,13 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, METHO
   discretization right; footprints larger than a target pixel shrunk per axis to 1 px, see
   :class:`vibr.render.operators.Splat`). Worth it when the sources are finer than the
   target. ulr ignores it.
+* ``robust = "none"``, ``robust_c = 3`` the data term's loss (issue 22); ``"cauchy"``: the weights are
+  multiplied in each outer pass by the Cauchy IRLS factor ``1/(1 + (r/s)²)`` of each
+  sample's residual against the current estimate, ``s = robust_c · 1.4826 · median(r)``
+  (:func:`vibr.render.weights.robust_factor`): samples that disagree with the others
+  (occluded, mismatched: speckles) stop pulling the render; ``"none"`` is least squares.
+  Off by default: it wins on cotton and fountain but loses on the synthetic scenes
+  (docs/RENDERER.md "Robust data term").
 """
 
 from __future__ import annotations
@@ -48,6 +55,7 @@ DEFAULTS = dict(
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
+    robust="none", robust_c=3.0,
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
@@ -180,6 +188,10 @@ def method_params(method: str, **params) -> dict:
             p[k] = v
     if p["psf"] not in PSFS:
         raise VibrInputError(f"psf must be one of {PSFS}, got {p['psf']!r}")
+    from .weights import ROBUST_LOSSES
+
+    if p["robust"] not in ROBUST_LOSSES:
+        raise VibrInputError(f"robust must be one of {ROBUST_LOSSES}, got {p['robust']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
     return p

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.samples import Samples
-from .weights import geometric_weights
+from .weights import geometric_weights, robust_factor
 from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
@@ -102,6 +102,8 @@ class _Weights:
         w = geometric_weights(self.samples, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
                               grad_max=p["grad_max"], splat=self.sp, dtype=np.float32)
         w *= np.float32(1.0 / self.rho)
+        if u is not None and p["robust"] != "none":
+            w *= robust_factor(self.samples, u, self.sp, p["robust_c"], p["robust"])
         self.times["weights"] += time.perf_counter() - t0
         return w
 
@@ -171,7 +173,8 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
 
         bar = progress(total=n_outer, desc=f"render {method.name}")
     for o in range(n_outer):
-        if method.reweight:
+        if method.reweight or (o == 0 and p["robust"] != "none"):
+            # savsr keeps its weights, but a robust loss reweights them once from the blend
             Wk = weights(u.transpose(1, 2, 0))
         t0 = time.perf_counter()
         A, b, c = sp.normal(Wk, samples.colour, dtype=np.float32)
