@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row
-from .tv import _sqrt_sum, _tv_row
+from .tv import _sqrt_sum, _tv_row, _weight_arg
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start"]
 
@@ -57,7 +57,8 @@ def _stencil_row_padded(A, k, um, u0, up, out):
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, with_terms, band, h, parts):
+def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, wmap, use_w, with_terms, band,
+                   h, parts):
     C, H, W = x.shape
     n_bands = parts.shape[0]
     for t in prange(n_bands):
@@ -138,9 +139,9 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
                         hh += np.float64(hv) * hv
                 if not with_terms:
                     continue
-                tv += _tv_row(xr, x[c, nxt], coupled, tvacc)
+                tv += _tv_row(xr, x[c, nxt], coupled, tvacc, wmap[min(np.int64(i), wmap.shape[0] - 1)], use_w)
             if coupled and with_terms:
-                tv += _sqrt_sum(tvacc)
+                tv += _sqrt_sum(tvacc, wmap[min(np.int64(i), wmap.shape[0] - 1)], use_w)
         parts[t, 0] = xAx
         parts[t, 1] = bx
         parts[t, 2] = xGx
@@ -149,26 +150,27 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
         parts[t, 5] = hh
 
 
-def hessian_terms(A, Ag, x, b, bgt, alpha, gamma, coupled=True, out=None, scheme="forward"):
+def hessian_terms(A, Ag, x, b, bgt, alpha, gamma, coupled=True, out=None, scheme="forward", tv_weight=None):
     """``(h, (⟨x,Ax⟩, ⟨b,x⟩, ⟨x,DᵀA_gDx⟩, ⟨Dᵀb_g,x⟩, TV(x)))`` in one pass (module doc).
 
     ``A``, ``Ag`` (9, H, W) float32 stencils (``Ag`` None or gamma = 0: colour term only;
     the gradient entries are then 0); ``scheme`` the discretisation of D
-    (:data:`.operators.GRAD_SCHEMES`), ``x``, ``b``, ``bgt`` (C, H, W) float32 planar;
+    (:data:`.operators.GRAD_SCHEMES`); ``tv_weight`` (H, W) the spatially varying TV's
+    weight map (:func:`.tv.tv_value`), ``x``, ``b``, ``bgt`` (C, H, W) float32 planar;
     ``h`` = ``alpha·Ax + gamma·DᵀA_gDx`` is written to ``out`` (allocated when None).
     Inner products are accumulated in float64."""
-    h, s = _run(A, Ag, x, b, bgt, alpha, gamma, coupled, True, out, scheme)
+    h, s = _run(A, Ag, x, b, bgt, alpha, gamma, coupled, True, out, scheme, tv_weight)
     return h, (float(s[0]), float(s[1]), float(s[2]), float(s[3]), float(s[4]))
 
 
 def hessian_power(A, Ag, x, alpha, gamma, out=None, scheme="forward"):
     """One power-iteration pass: ``h = alpha·Ax + gamma·DᵀA_gDx`` into ``out``, with
     ``(⟨x,Ax⟩, ⟨x,DᵀA_gDx⟩, ‖h‖²)``; reads only the stencils and ``x`` (no energy terms)."""
-    h, s = _run(A, Ag, x, x, x, alpha, gamma, True, False, out, scheme)
+    h, s = _run(A, Ag, x, x, x, alpha, gamma, True, False, out, scheme, None)
     return h, (float(s[0]), float(s[2]), float(s[5]))
 
 
-def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out, scheme):
+def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out, scheme, tv_weight):
     C, H, W = x.shape
     use_grad = Ag is not None and gamma != 0
     if out is None:
@@ -178,7 +180,7 @@ def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out, scheme):
     if not use_grad:
         Ag, bgt = A, b  # unused placeholders of the right types
     _hessian_terms(A, Ag, x, b, bgt, np.float32(alpha), np.float32(gamma), use_grad,
-                   _is_forward(scheme), bool(coupled),
+                   _is_forward(scheme), bool(coupled), *_weight_arg(tv_weight),
                    bool(with_terms), BAND, out, parts)
     return out, parts.sum(0)
 

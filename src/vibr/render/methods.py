@@ -36,6 +36,9 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, METHO
   (occluded, mismatched: speckles) stop pulling the render; ``"none"`` is least squares.
   Off by default: it wins on cotton and fountain but loses on the synthetic scenes
   (docs/RENDERER.md "Robust data term").
+* ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
+  the authors' code (METHOD §10), lam raised up to 100× where few samples land
+  (:func:`vibr.render.variational.tv_weight_map`).
 """
 
 from __future__ import annotations
@@ -55,7 +58,7 @@ DEFAULTS = dict(
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0,
+    robust="none", robust_c=3.0, tv_weighting="uniform",
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
@@ -192,6 +195,10 @@ def method_params(method: str, **params) -> dict:
 
     if p["robust"] not in ROBUST_LOSSES:
         raise VibrInputError(f"robust must be one of {ROBUST_LOSSES}, got {p['robust']!r}")
+    from .variational import TV_WEIGHTINGS
+
+    if p["tv_weighting"] not in TV_WEIGHTINGS:
+        raise VibrInputError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {p['tv_weighting']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
     return p

@@ -66,6 +66,7 @@ class QuadraticModel:
     scale : float              intensity scale the parameters refer to (energies × scale²)
     coupled : bool             colour-coupled TV
     grad_scheme : str          discretisation of D (operators.GRAD_SCHEMES), as the samples' ∇v
+    tv_weight : (H, W) or None spatially varying TV: TV(u) = Σ_p tv_weight(p)|∇u(p)|
     """
 
     A: np.ndarray
@@ -80,6 +81,7 @@ class QuadraticModel:
     scale: float = 255.0
     coupled: bool = True
     grad_scheme: str = "forward"
+    tv_weight: np.ndarray | None = None
 
     @property
     def use_grad(self) -> bool:
@@ -99,7 +101,7 @@ class QuadraticModel:
         at ``x`` need. ``out`` receives ``H x``."""
         h, dots = hessian_terms(self.A, self.Ag if self.use_grad else None, x, self.b,
                                 self.bgt if self.use_grad else None, self.alpha, self.gamma,
-                                self.coupled, out=out, scheme=self.grad_scheme)
+                                self.coupled, out=out, scheme=self.grad_scheme, tv_weight=self.tv_weight)
         return Products(h, dots)
 
     def terms(self, x, P: Products):
@@ -256,7 +258,7 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
     s2 = model.scale ** 2
     x = np.ascontiguousarray(u0, dtype=np.float32).copy()
     if prox is None:
-        prox = TVProx(x.shape, model.coupled, tv_iter)
+        prox = TVProx(x.shape, model.coupled, tv_iter, weight=model.tv_weight)
     prox.n_iter = tv_iter
     d, dinv, L, n_power = _metric_and_step(model, precond, d_floor, power_state)
     # three image buffers and three product buffers rotate (x, x_prev, candidate z): after

@@ -27,7 +27,8 @@ from .result import RenderResult
 from .solver import QuadraticModel, fista
 from .tv import TVProx
 
-__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "initial_image", "solve_variational"]
+__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "initial_image", "solve_variational",
+           "TV_WEIGHTINGS", "tv_weight_map"]
 
 logger = logging.getLogger(__name__)
 
@@ -67,6 +68,32 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         return SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg_unit, grad_vals)
     acc = sp.adjoint(ones)
     return SplatCoverage(sp, acc, acc >= p["hole_threshold"])
+
+
+#: TV weightings (METHOD §10): ``"uniform"`` lam everywhere, ``"samples"`` lam raised where
+#: few samples land (:func:`tv_weight_map`).
+TV_WEIGHTINGS = ("uniform", "samples")
+
+
+def tv_weight_map(acc, weighting: str = "samples", k_max: float = 100.0, m_full: float = 0.792,
+                  blur: float = 1.0):
+    """The spatially varying TV's weight ``g(p)/lam`` (H, W) float32, or None for "uniform".
+
+    ``g = max(lam, k_max·lam − (k_max − 1)·lam·m/m_full)`` with ``m`` the samples landing
+    on the pixel (the accumulated splat weight ``Bᵀ1``) blurred by a Gaussian of ``blur``
+    px: ``k_max`` (100) times lam where no sample lands, falling linearly to lam at
+    ``m_full`` samples. The defaults are the authors' light-field rule
+    ``max(λ, 100λ − m/8)`` at λ = 0.001 (METHOD §10: 100λ − m/8 = λ at m = 99·8λ = 0.792),
+    made relative to lam so that it holds whatever lam's value and scale.
+    """
+    if weighting not in TV_WEIGHTINGS:
+        raise ValueError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {weighting!r}")
+    if weighting == "uniform":
+        return None
+    from scipy.ndimage import gaussian_filter
+
+    m = gaussian_filter(np.asarray(acc, np.float64), blur, mode="nearest") if blur > 0 else acc
+    return np.maximum(1.0, k_max - (k_max - 1.0) * m / m_full).astype(np.float32)
 
 
 def sample_density(acc, coverage, normalise: bool) -> float:
@@ -163,7 +190,8 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     grad_scheme = samples.meta.get("grad_scheme", DEFAULT_GRAD_SCHEME)
     n_outer = max(1, int(p["n_outer"]))
     energy, terms, outer = [], [], []
-    prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"])
+    tv_w = tv_weight_map(cov.acc, p["tv_weighting"])
+    prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=tv_w)
     grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
     power_state: dict = {}
     n_iter = n_power = 0
@@ -180,7 +208,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         A, b, c = sp.normal(Wk, samples.colour, dtype=np.float32)
         Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
         model = QuadraticModel(A, b, float(c), Ag, bg, float(cg),
-                               p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"], grad_scheme)
+                               p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"], grad_scheme, tv_w)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         outer.append(len(energy))
