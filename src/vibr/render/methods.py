@@ -50,7 +50,7 @@ import numpy as np
 from .operators import PSFS as _PSFS
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "get_method",
-           "method_params", "register_method"]
+           "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
@@ -172,13 +172,55 @@ def get_method(method: "str | Method") -> Method:
         raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(REGISTRY)})") from None
 
 
-def method_params(method: str, **params) -> dict:
+#: The paper's (alpha, gamma, lam) when ``preset="paper"`` is given without them: the
+#: light-field setting of the authors' experiments (METHOD §10: lambda = 0.001 on [0, 1]).
+PAPER_DEFAULTS = dict(alpha=1.0, gamma=1.0, lam=0.001)
+
+#: Paper gamma → vibr gamma: the authors apply ``dt_beta × gradient_step`` (0.1) to the
+#: compact Laplacian divided by 4, i.e. ``γ·0.1/4 · Dᵀ D`` with vibr's forward differences.
+PAPER_GAMMA_FACTOR = 0.1 / 4
+#: Paper lambda → vibr lam: the paper's lambda is on [0, 1] intensities against a data
+#: term normalised per pixel to unit weight; vibr's lam is on its ``scale`` (255) with a
+#: data term of unit weight per grey level² (sigma_s = 1): lam = 255 · lambda.
+PAPER_LAM_FACTOR = 255.0
+
+
+def paper_params(params: dict) -> dict:
+    """The paper's units → vibr's (docs/RENDERER.md, "The paper's units"): ``alpha`` kept,
+    ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
+    weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``) and the spatially
+    varying TV (``tv_weighting="samples"``) unless given. ``params`` holds the paper's
+    alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any other vibr parameter."""
+    out = dict(params)
+    paper = {k: PAPER_DEFAULTS[k] if params.get(k) is None else float(params[k]) for k in PAPER_DEFAULTS}
+    if params.get("scale") not in (None, 255.0):
+        from ..errors import VibrInputError
+
+        raise VibrInputError("preset 'paper' fixes the intensity scale to 255")
+    out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
+               lam=paper["lam"] * PAPER_LAM_FACTOR)
+    for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples")):
+        if out.get(k) is None:
+            out[k] = v
+    return out
+
+
+#: Parameter presets by name: a function of the given parameters returning vibr's.
+PRESETS = {"paper": paper_params}
+
+
+def method_params(method: str, preset: str | None = None, **params) -> dict:
     """Defaults for ``method`` updated with ``params`` (None values keep the default;
     gamma is forced to 0 for the methods without the gradient term). Unknown keyword
-    arguments raise TypeError."""
+    arguments raise TypeError. ``preset`` (a name of :data:`PRESETS`, e.g. ``"paper"``)
+    reads ``params`` in that preset's units first."""
     from ..errors import VibrInputError
 
     m = get_method(method)
+    if preset is not None:
+        if preset not in PRESETS:
+            raise VibrInputError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
+        params = PRESETS[preset](params)
     unknown = set(params) - set(DEFAULTS)
     if unknown:
         raise TypeError(f"unknown render parameter(s): {', '.join(sorted(unknown))}")
