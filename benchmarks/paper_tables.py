@@ -1,6 +1,6 @@
 """Reproduce the paper's two evaluation protocols on the scenes at hand and write docs/RESULTS.md.
 
-Structured protocol (paper §6, METHOD §8), HCI 2016 *cotton* (512×512): the centre view
+Structured protocol (paper §6, docs/METHOD.md §8), HCI 2016 *cotton* (512×512): the centre view
 ``input_Cam040`` of a 3×3 block is held out and rendered from its 8 neighbours, at strides
 1, 2 and 4 (neighbours 4±s in row and column), with three geometries: depth **estimated**
 from the 8 neighbours only (vibr's light-field estimator), the **ground-truth** disparity of
@@ -19,10 +19,13 @@ unless ``--large-scale 0``, view 5 again at a larger image scale.
 All metrics: PSNR (dB) and DSSIM = 1e4·(1 − SSIM) (Gaussian window σ 1.5) over the pixels
 every setting reconstructed, 2-pixel border excluded. Depth is estimated once per
 (target, stride) and shared by all settings; the warped samples are computed once per
-geometry (``vibr.evaluate.evaluate``). Nothing is cached between runs.
+geometry (``vibr.evaluate.run_evaluation``). Nothing is cached between runs.
 
-    python benchmarks/paper_tables.py                 # everything, writes docs/RESULTS.md
-    python benchmarks/paper_tables.py --quick         # a small smoke run (not for the docs)
+    python benchmarks/paper_tables.py --write-docs    # everything, writes docs/RESULTS.md
+    python benchmarks/paper_tables.py --quick         # a small smoke run (writes no tracked file)
+
+Without ``--write-docs`` (or an explicit ``--doc PATH``) no markdown is written: a run never
+overwrites a tracked file unless asked (``--quick`` refuses ``--write-docs``).
 
 JSON reports go to ``--out`` (default ``out/paper_tables``) and the figures to
 ``--figures`` (default ``out/paper_tables/figures``), both git-ignored: the figures show the
@@ -96,7 +99,7 @@ def cotton_neighbours(scene, s):
 
 # --------------------------------------------------------------------------------------------
 def run_cotton(args, data, out, figdir, log):
-    from vibr.evaluate import Setting, evaluate, write_report
+    from vibr.evaluate import Setting, write_report
     from vibr.io import load_scene
 
     scene = load_scene(data / "hci2016_cotton")
@@ -110,10 +113,10 @@ def run_cotton(args, data, out, figdir, log):
         for depth in args.cotton_depths:
             t0 = time.perf_counter()
             figs = figdir if (s == args.figure_stride and depth in ("estimated", "planar")) else None
-            rep = evaluate(scene, "input_Cam040", settings, sources=cotton_neighbours(scene, s), depth=depth,
-                           border=2, mask="reconstructed", figures=figs, figure_labels=fig_labels,
-                           figure_prefix=f"cotton_s{s}_{depth}", figure_downscale=2, view_split=4,
-                           use_lpips=False)
+            rep = evaluate_with_figures(scene, "input_Cam040", settings, figs, fig_labels,
+                                        f"cotton_s{s}_{depth}", 2, sources=cotton_neighbours(scene, s),
+                                        depth=depth, border=2, mask="reconstructed", view_split=4,
+                                        use_lpips=False)
             rep["stride"] = s
             rep["wall_seconds"] = round(time.perf_counter() - t0, 2)
             rep["report_file"] = str(out / f"cotton_s{s}_{depth}.json")
@@ -145,6 +148,19 @@ def fountain_settings():
     return out
 
 
+def evaluate_with_figures(scene, target, settings, figdir, labels, prefix, downscale, **kw) -> dict:
+    """``vibr.evaluate.run_evaluation``'s report, with the comparison figures of the settings
+    ``labels`` written to ``figdir`` (None: no figures) by ``vibr.figures``."""
+    from vibr.evaluate import run_evaluation
+    from vibr.figures import write_evaluation_figures
+
+    ev = run_evaluation(scene, target, settings, **kw)
+    if figdir:
+        ev.report["figures"] = write_evaluation_figures(ev, figdir, labels=labels, prefix=prefix,
+                                                        downscale=downscale)
+    return ev.report
+
+
 def fountain_figure_labels(settings):
     want = {("ulr", None), ("gradient", "1,0,0.003"), ("gradient", "0.1,1,0.002")}
     out = []
@@ -157,7 +173,7 @@ def fountain_figure_labels(settings):
 
 
 def run_fountain(args, data, out, figdir, log, scale, targets, settings=None, tag=""):
-    from vibr.evaluate import evaluate, write_report
+    from vibr.evaluate import write_report
     from vibr.io import load_scene
 
     t0 = time.perf_counter()
@@ -169,10 +185,10 @@ def run_fountain(args, data, out, figdir, log, scale, targets, settings=None, ta
     reports = []
     for t in targets:
         t0 = time.perf_counter()
-        rep = evaluate(scene, t, settings, depth="estimated", estimate_kw=dict(FOUNTAIN_ESTIMATE), border=2,
-                       mask="reconstructed", figures=figdir, figure_labels=fountain_figure_labels(settings),
-                       figure_prefix=f"fountain_{t}{tag}", figure_downscale=max(1, round(12 * scale)),
-                       view_split=2, use_lpips=False)
+        rep = evaluate_with_figures(scene, t, settings, figdir, fountain_figure_labels(settings),
+                                    f"fountain_{t}{tag}", max(1, round(12 * scale)), depth="estimated",
+                                    estimate_kw=dict(FOUNTAIN_ESTIMATE), border=2, mask="reconstructed",
+                                    view_split=2, use_lpips=False)
         rep["wall_seconds"] = round(time.perf_counter() - t0, 2)
         rep["report_file"] = str(out / f"fountain_{t}{tag}.json")
         write_report(rep, rep["report_file"])
@@ -364,7 +380,7 @@ def fountain_section(reports, large, args):
 
     # intensity scale
     L.append("#### The intensity scale: the same parameters read on [0, 1]\n")
-    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to (METHOD §9). "
+    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to (METHOD.md §9). "
              "vibr reads them on **0..255** (`scale=255`, the renderer's default: lambda in grey levels, "
              "sensor sigma_s = 1 grey level). Two wrong readings: **[0, 1]** = `vibr eval --intensity-scale 1` "
              "as is (every parameter on [0, 1], sigma_s = 1 too: relative to the data term the TV weight is "
@@ -464,7 +480,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "Gaussian window σ = 1.5, scikit-image's `gaussian_weights=True`), both over the pixels that every "
          "setting of the table reconstructed (the paper's \"reconstructed pixels\"; fraction given per table) "
          "with a 2-pixel border excluded (as the authors' evaluator). The paper's DSSIM column was printed "
-         "by an evaluator with a non-standard SSIM, halved (METHOD §10): compare DSSIM with the paper's only "
+         "by an evaluator with a non-standard SSIM, halved (METHOD.md §10): compare DSSIM with the paper's only "
          "in direction, not in value.",
          f"* **Renderer settings**: vibr's defaults (`vibr.render.methods.DEFAULTS`, as recorded in the reports) "
          f"except the parameters named in each row: sigma_s = {rp.get('sigma_s', '?'):g} grey level, sigma_z from "
@@ -475,7 +491,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "in the geometry stage's defaults.",
          "* **Intensity scale**: **255** — all parameters (lambda, sigma_s, the gradient clamp) refer to "
          "intensities in grey levels of 8-bit images (the renderer's documented convention, chosen for the "
-         "authors' sensor sigma of 1 grey level, METHOD §9–10). The same scale is used for both protocols; "
+         "authors' sensor sigma of 1 grey level, docs/METHOD.md §9–10). The same scale is used for both protocols; "
          "the fountain section shows what reading the paper's unstructured settings on [0, 1] does.",
          f"* **Image scale**: cotton at its full 512×512; fountain at {fs:g} × 3072×2048 "
          f"= {fsize} so that the whole "
@@ -541,7 +557,9 @@ def main(argv=None):
     ap.add_argument("--out", default=str(ROOT / "out" / "paper_tables"), help="JSON reports")
     ap.add_argument("--figures", default=str(ROOT / "out" / "paper_tables" / "figures"),
                     help="comparison figures (not committed: they show the datasets' photographs)")
-    ap.add_argument("--doc", default=str(ROOT / "docs" / "RESULTS.md"), help="markdown to write ('' = none)")
+    ap.add_argument("--doc", default="", help="markdown to write (default: none)")
+    ap.add_argument("--write-docs", action="store_true",
+                    help="write the tracked docs/RESULTS.md (the full run only)")
     ap.add_argument("--strides", default="1,2,4")
     ap.add_argument("--cotton-depths", default="estimated,gt,planar")
     ap.add_argument("--figure-stride", type=int, default=2)
@@ -554,6 +572,12 @@ def main(argv=None):
                     help="only rewrite --doc from the JSON reports of the last run in --out")
     ap.add_argument("--quick", action="store_true", help="smoke run: stride 2, gt+planar, view 5 at 0.0625, no large row")
     args = ap.parse_args(argv)
+    if args.write_docs:
+        if args.quick:
+            ap.error("--quick is a smoke run: it does not write docs/RESULTS.md (drop --write-docs)")
+        args.doc = str(ROOT / "docs" / "RESULTS.md")
+    if args.report_only and not args.doc:
+        ap.error("--report-only rewrites a markdown file: give --write-docs or --doc PATH")
     if args.quick:
         args.strides, args.cotton_depths, args.targets = "2", "gt,planar", "0005"
         args.fountain_scale, args.large_scale = 0.0625, 0.0

@@ -15,3 +15,41 @@ def assert_quadratic_form(s, w, rng):
     direct = 0.5 * np.sum(w[:, None] * (s.apply(u.transpose(1, 2, 0)) - v) ** 2)
     quad = 0.5 * np.sum(u * stencil_apply(A, u)) - np.sum(b * u) + c
     assert abs(direct - quad) < 1e-9 * direct
+
+
+def dottest(forward, adjoint, x_shape, y_shape, *, rng=None, tol: float = 1e-10,
+            complex_input: bool = False, raise_error: bool = True) -> bool:
+    """Dot test of a linear operator and its adjoint (after pylops.utils.dottest).
+
+    Draws random ``x`` (shape ``x_shape``) and ``y`` (shape ``y_shape``), standard normal
+    (complex with independent real and imaginary parts when ``complex_input``), and checks
+
+        |⟨A x, y⟩ − ⟨x, Aᴴ y⟩| ≤ tol · (‖A x‖ ‖y‖ + ‖x‖ ‖Aᴴ y‖),
+
+    with ``⟨a, b⟩ = Σ conj(b) a``. The scale on the right bounds both inner products
+    (Cauchy–Schwarz), so the test does not pass by accident when ⟨A x, y⟩ is near 0 and
+    does not fail on float round-off when it is large. ``forward(x)`` and ``adjoint(y)``
+    are callables; pass ``tol`` ≈ 1e-5 for float32 operators.
+
+    Returns True when the identity holds; otherwise raises AssertionError (with the two
+    inner products) when ``raise_error``, else returns False.
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+
+    def draw(shape):
+        a = rng.standard_normal(shape)
+        return a + 1j * rng.standard_normal(shape) if complex_input else a
+
+    x, y = draw(x_shape), draw(y_shape)
+    Ax, Aty = np.asarray(forward(x)), np.asarray(adjoint(y))
+    if Ax.shape != tuple(y_shape) or Aty.shape != tuple(x_shape):
+        raise AssertionError(f"dottest: A maps {x_shape} to {Ax.shape} (expected {tuple(y_shape)}), "
+                             f"Aᴴ maps {y_shape} to {Aty.shape} (expected {tuple(x_shape)})")
+    lhs = np.vdot(y, Ax)  # ⟨Ax, y⟩
+    rhs = np.vdot(Aty, x)  # ⟨x, Aᴴy⟩
+    scale = np.linalg.norm(Ax) * np.linalg.norm(y) + np.linalg.norm(x) * np.linalg.norm(Aty)
+    ok = bool(abs(lhs - rhs) <= tol * max(scale, np.finfo(float).tiny))
+    if not ok and raise_error:
+        raise AssertionError(f"dottest failed: <Ax, y> = {lhs}, <x, A^H y> = {rhs}, "
+                             f"|difference| = {abs(lhs - rhs):.3e} > {tol:g} * {scale:.3e}")
+    return ok

@@ -11,7 +11,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-pycolmap = pytest.importorskip("pycolmap")
+import pycolmap
 
 from vibr.calibrate import (  # noqa: E402
     align_cameras,
@@ -41,7 +41,7 @@ def _write_png(path, img):
 def synthetic_photos(tmp_path_factory):
     """8 textured 320×240 views on an arc of the default synthetic world, as PNG files, plus
     one noise image that cannot register."""
-    synthetic = pytest.importorskip("vibr.synthetic")
+    import vibr.synthetic as synthetic
     scene = synthetic.make_scene("arc", n_views=8, width=320, height=240, seed=0)
     d = tmp_path_factory.mktemp("photos")
     for v in scene.views:
@@ -224,12 +224,18 @@ def test_bad_options(synthetic_photos):
         calibrate_scene(photos, matcher="vocab")
     with pytest.raises(VibrInputError, match="scale"):
         calibrate_scene(photos, scale=0)
+    # a misspelt option is an error, not a silent default
+    with pytest.raises(TypeError, match="matchr"):
+        calibrate_scene(photos, matchr="sequential")
+    with pytest.raises(TypeError, match="matchr"):
+        calibrate(photos, photos.parent / "never_written", matchr="sequential")
+    assert not (photos.parent / "never_written").exists()
 
 
 def test_calibrated_scene_runs_through_depth_estimation(calibrated):
     """A calibrated scene goes through ``vibr.stereo.estimate_depth`` unchanged; its depth
     range comes from the sparse points and the depths match the truth up to the scale."""
-    stereo = pytest.importorskip("vibr.stereo")
+    import vibr.stereo as stereo
     from vibr.io import load_scene
 
     out, truth = calibrated

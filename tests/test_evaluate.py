@@ -103,11 +103,16 @@ def test_cli_eval_json_on_an_unseen_scene_folder(scene_dir, tmp_path, capsys):
     assert rep["scale"] == 1.0 and rep["intensity_scale"] == 100.0
     assert [r["label"] for r in rep["results"]] == [
         "ulr", "savsr(lam=0.2)", "gradient(gamma=0,lam=0.2)", "gradient(gamma=1,lam=0.2)"]
+    # measured on this scene (PSNR dB, DSSIM): ulr 38.08 / 160, savsr 36.67 / 167,
+    # gamma 0 36.68 / 167, gamma 1 39.16 / 111; floors 1.5 dB below, DSSIM bounds 1.4x above
+    measured = {"ulr": (38.08, 160), "savsr(lam=0.2)": (36.67, 167), "gradient(gamma=0,lam=0.2)": (36.68, 167),
+                "gradient(gamma=1,lam=0.2)": (39.16, 111)}
     for r in rep["results"]:
         for k in ("method", "params", "depth", "psnr", "dssim", "seconds"):
             assert k in r
         assert r["params"]["scale"] == 100.0
-        assert r["psnr"] > 25 and 0 <= r["dssim"] < 1e4
+        p, d = measured[r["label"]]
+        assert r["psnr"] > p - 1.5 and 0 <= r["dssim"] < 1.4 * d, (r["label"], r["psnr"], r["dssim"])
     cols = rep["figures"]["columns"]
     assert cols[0] == "reference" and len(cols) == 5
     from vibr.io import read_image
@@ -172,7 +177,9 @@ def test_eval_on_a_middlebury_layout_folder(scene, tmp_path, capsys):
                  "--method", "ulr,bvs", "--json", str(out), "-q"]) == 0
     rep = json.loads(out.read_text())
     assert rep["target"] == "obj0005" and len(rep["sources"]) == 8
-    assert all(r["psnr"] > 25 for r in rep["results"])
+    # measured (2-px border, the metric rule): ulr 38.08 dB / DSSIM 160, bvs 36.36 / 202 (the
+    # depth files are the exact depth)
+    assert all(r["psnr"] > 34.8 and r["dssim"] < 280 for r in rep["results"]), rep["results"]
     capsys.readouterr()
     assert main(["eval", str(d), "--target", "obj0005", "--depth", "planar", "--method", "ulr,bvs",
                  "--json", str(tmp_path / "m2.json"), "-q"]) == 2
@@ -197,3 +204,40 @@ def test_figures_downscale_and_crop_inside_mask(tmp_path):
     assert downscale_image(np.ones((5, 7, 3), np.float32), 2).shape == (2, 3, 3)
     info = write_figures(tmp_path, ref, {"a": a, "b": b}, mask, prefix="t", downscale=2)
     assert read_image(info["compare"]).shape == ((2 * 32 + 4) // 2, (3 * 48 + 2 * 4) // 2, 3)
+
+
+def test_view_counts_closed_form():
+    """view_counts: distinct source views per target pixel, a sample counted at the pixel
+    its landing point rounds to (clipped to the image)."""
+    from vibr.evaluate import view_counts
+
+    class _S:  # the three fields view_counts reads
+        def __init__(self, xy, view, shape):
+            self.xy, self.view, self.target_shape = np.asarray(xy, float), np.asarray(view), shape
+
+        def __len__(self):
+            return len(self.xy)
+
+    xy = [[1.4, 0.2], [1.2, -0.3],   # view 0 twice in pixel (row 0, col 1): counted once
+          [1.0, 0.0],                # view 1, same pixel
+          [1.6, 0.0],                # view 2, rounds to col 2
+          [-3.0, 9.0], [4.4, 2.6]]   # view 3 clipped to (2, 0); view 0 at (row 3, col 4)
+    c = view_counts(_S(xy, [0, 0, 1, 2, 3, 0], (4, 5)))
+    want = np.zeros((4, 5), int)
+    want[0, 1], want[0, 2], want[3, 0], want[3, 4] = 2, 1, 1, 1
+    np.testing.assert_array_equal(c, want)
+    assert view_counts(_S(np.zeros((0, 2)), np.zeros(0, int), (2, 3))).shape == (2, 3)
+
+
+def test_evaluation_writes_nothing_figures_are_separate(scene, tmp_path):
+    """run_evaluation measures and returns the images; only vibr.figures writes files."""
+    from vibr.evaluate import Setting, evaluate, run_evaluation
+    from vibr.figures import write_evaluation_figures
+
+    with pytest.raises(TypeError):
+        evaluate(scene, "view_004", [Setting("ulr")], figures=tmp_path)
+    ev = run_evaluation(scene, "view_004", [Setting("ulr")], depth="gt", use_lpips=False)
+    assert list(tmp_path.iterdir()) == [] and "figures" not in ev.report
+    assert ev.images["ulr"].shape == ev.reference.shape and ev.mask.shape == ev.reference.shape[:2]
+    info = write_evaluation_figures(ev, tmp_path / "figs")
+    assert info["columns"] == ["reference", "ulr"] and (tmp_path / "figs" / "view_004_gt_compare.png").is_file()

@@ -12,7 +12,7 @@ from vibr.scene import Scene, View
 
 @pytest.fixture(scope="module")
 def cotton_block(cotton_dir):
-    io = pytest.importorskip("vibr.io")
+    import vibr.io as io
 
     if not cotton_dir.is_dir():
         pytest.skip("cotton data missing")

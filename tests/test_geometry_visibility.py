@@ -1,14 +1,13 @@
 """Visibility: z-buffer splatting and the occlusion test, against exact ray casting."""
 
 import numpy as np
-import pytest
 
 from vibr.camera import Camera
 from vibr.geometry import (compute_samples, new_zbuffers, prepare_depth, reduce_zbuffers,
                            splat_zbuffer, visibility_mask, warp_constants)
 from vibr.geometry.visibility import BEHIND, OUTSIDE, VISIBLE
 
-synthetic = pytest.importorskip("vibr.synthetic")
+import vibr.synthetic as synthetic
 
 
 def _zbuffer(views, cam, mode="affine", nbuf=None):

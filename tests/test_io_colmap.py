@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pycolmap
 import pytest
 
 from vibr.errors import VibrInputError
 from vibr.io import load_scene
 from vibr.io.depthfiles import write_colmap_bin
 from vibr.io.images import write_image
-
-pycolmap = pytest.importorskip("pycolmap")
 
 
 def _rot(ax, ang):

@@ -49,11 +49,17 @@ def test_cli_stderr_redirected_has_no_carriage_returns(tmp_path):
     """``vibr demo ... 2>log``: status lines, one per stage, no progress-bar frames."""
     log = tmp_path / "log"
     with open(log, "w") as err:
-        r = subprocess.run([sys.executable, "-m", "vibr", "demo", "--size", "48", "--method", "bvs"],
+        r = subprocess.run([sys.executable, "-m", "vibr", "demo", "--size", "48", "--method", "bvs",
+                            "--no-video"],
                            stdout=subprocess.PIPE, stderr=err, text=True, timeout=300)
     assert r.returncode == 0, log.read_text()
     text = log.read_text()
     assert "\r" not in text and "render bvs: 2/2" in text and "scene: 9 views" in text
-    r = subprocess.run([sys.executable, "-m", "vibr", "-q", "demo", "--size", "48", "--method", "ulr"],
-                       capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0 and r.stderr == "" and "PSNR" in r.stdout
+
+
+def test_cli_quiet_leaves_stderr_empty(capsys, restore_vibr_logger):
+    from vibr.cli import main
+
+    assert main(["-q", "demo", "--size", "48", "--method", "ulr", "--no-video"]) == 0
+    out, err = capsys.readouterr()
+    assert err == "" and "PSNR" in out

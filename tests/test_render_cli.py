@@ -22,7 +22,8 @@ def test_render_held_out_view(scene_dir, tmp_path, capsys):
     txt = capsys.readouterr().out
     assert "PSNR" in txt and "DSSIM" in txt
     psnr = float(txt.split("PSNR")[1].split()[0])
-    assert psnr > 30
+    dssim = float(txt.split("DSSIM")[1].split()[0])
+    assert psnr > 36.0 and dssim < 150, txt  # measured 37.43 dB, DSSIM 109.0
     img = read_image(out)
     assert img.shape == (64, 64, 3)
 
@@ -61,7 +62,7 @@ def test_scene_without_any_geometry_renders_by_default(tmp_path, capsys):
     out = tmp_path / "v4.png"
     assert main(["render", str(tmp_path / "bare"), "--target", "view_004", "-o", str(out), "-q"]) == 0
     psnr = float(capsys.readouterr().out.split("PSNR")[1].split("dB")[0])
-    assert psnr > 30.0 and out.is_file()
+    assert psnr > 35.5 and out.is_file()  # measured 37.16 dB (DSSIM 205) with estimated depth
     assert main(["render", str(tmp_path / "bare"), "--target", "view_004", "-o", str(tmp_path / "x.png"),
                  "--depth", "gt", "-q"]) == 2
     assert "no depth" in capsys.readouterr().err and not (tmp_path / "x.png").exists()

@@ -83,3 +83,43 @@ def test_ring_without_geometry_picks_ring_neighbours():
     sources, target = ring.split("r00")
     chosen = {sources.views[i].name for i in select_views(sources, target.camera, 4)}
     assert chosen == {"r01", "r02", "r11", "r10"}
+
+
+def test_prepare_keeps_the_n_best_views():
+    """prepare(n_views=K) keeps the K best sources for the target (rank_views order); the
+    target stays out; n_views ≥ the number of sources keeps them all."""
+    from vibr.pipeline import prepare
+
+    scene = _grid_scene()
+    src, tview = prepare(scene, "v22", depth="gt", n_views=4)
+    assert tview.name == "v22"
+    assert set(src.names) == {"v12", "v21", "v23", "v32"}
+    src8, _ = prepare(scene, "v22", depth="gt", n_views=8)
+    assert set(src8.names) == {"v12", "v21", "v23", "v32", "v11", "v13", "v31", "v33"}
+    assert len(prepare(scene, "v22", depth="gt", n_views=100)[0]) == 24
+    assert len(prepare(scene, "v22", depth="gt")[0]) == 24
+
+
+def test_cli_views_option_selects_the_sources(tmp_path, monkeypatch, capsys):
+    """vibr render --views K renders from the K best views: the sources prepare() hands to
+    the renderer are those of prepare(n_views=K)."""
+    import vibr.pipeline as pipeline
+    from vibr.cli import main
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", n_views=9, width=32, height=32, seed=5)
+    save_scene(sc, tmp_path / "s")
+    seen = []
+    real = pipeline.prepare
+
+    def spy(*a, **kw):
+        out = real(*a, **kw)
+        seen.append((kw.get("n_views"), list(out[0].names)))
+        return out
+
+    monkeypatch.setattr(pipeline, "prepare", spy)
+    assert main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(tmp_path / "o.png"),
+                 "--views", "4", "--method", "ulr", "-q"]) == 0
+    assert seen and seen[-1][0] == 4
+    assert sorted(seen[-1][1]) == ["view_001", "view_003", "view_005", "view_007"]

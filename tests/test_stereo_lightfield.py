@@ -83,12 +83,14 @@ def test_cotton_centre_from_3x3_block(cotton_dir):
     block = [i for i, (r, c) in pos.items() if max(abs(r - 4), abs(c - 4)) <= 1]
     cams = [v.camera for v in s.views]
     z, sig, st, disp = lightfield_depth(s, ref, cams, lambda i: s.views[i].image, block,
-                                        step=0.1, return_disparity=True)
+                                        return_disparity=True)
     e = (disp - gt)[15:-15, 15:-15]
     badpix = 100 * np.mean(np.abs(e) > 0.07)
     mse100 = 100 * np.mean(e ** 2)
-    assert badpix < 12.0, badpix
-    assert mse100 < 5.0, mse100
+    # the defaults' documented 6.19 / 1.986 (docs/DEPTH.md; 6.16 / 1.988 measured on the
+    # arch-struct branch), with small slack
+    assert badpix < 6.5, badpix
+    assert mse100 < 2.1, mse100
     # depth and disparity agree through the cameras: d = f b (1/z - 1/z0)
     a, b = disparity_model(cams[ref], cams[s.index("input_Cam041")])
     np.testing.assert_allclose(-(a + b / z.astype(float)), disp, atol=2e-3)

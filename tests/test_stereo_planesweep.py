@@ -632,3 +632,32 @@ def test_median_planes_restores_a_plane_and_keeps_an_edge():
     assert np.allclose(out.inv_depth[unk], w[unk], rtol=0, atol=1e-12)  # from their neighbours
     # sigma_z keeps its inverse-depth width: sigma_z / z² unchanged
     assert np.allclose(out.sigma_z / out.depth.astype(np.float64) ** 2, 0.01, rtol=1e-5)
+
+
+def test_estimate_depth_options_and_unknown_keywords():
+    """Options by keyword or as a DepthOptions give the same result; a misspelt option, in
+    estimate_depth, its light-field dict or lightfield_depth, raises TypeError instead of
+    falling back to a default."""
+    from vibr.stereo import DepthOptions, depth_options
+    from vibr.stereo.lightfield import lightfield_depth
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=3, width=48, height=40, seed=1)
+    kw = dict(n_planes=24, method="mvs", consistency=False, refine_iter=0, median_radius=0)
+    a = estimate_depth(s, views=[0], **kw)
+    b = estimate_depth(s, views=[0], options=DepthOptions(**kw))
+    np.testing.assert_array_equal(a[0].depth, b[0].depth)
+    np.testing.assert_array_equal(a[0].sigma_z, b[0].sigma_z)
+    # keywords apply over the options; light-field keywords go to options.lightfield
+    o = depth_options(DepthOptions(n_planes=24), step=0.05, max_views=8, refine_iter=1)
+    assert o.n_planes == 24 and o.refine_iter == 1 and o.lightfield == {"step": 0.05, "max_views": 8}
+    with pytest.raises(TypeError, match="n_plane"):
+        estimate_depth(s, views=[0], n_plane=24)
+    with pytest.raises(TypeError, match="stepp"):
+        estimate_depth(s, views=[0], stepp=0.05)
+    with pytest.raises(TypeError, match="stepp"):
+        estimate_depth(s, views=[0], lightfield={"stepp": 0.05})
+    g = make_scene("grid", n_views=9, width=32, height=32, seed=0)
+    with pytest.raises(TypeError):
+        lightfield_depth(g, 4, [v.camera for v in g.views], lambda i: g.views[i].image, list(range(9)),
+                         stepp=0.05)

@@ -34,7 +34,7 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -215,31 +215,16 @@ def _has_pose(im) -> bool:
     return bool(hp() if callable(hp) else hp)
 
 
-# ---------------------------------------------------------------------------- main entry points
-def calibrate_scene(
-    photos_dir,
-    *,
-    scale: float = 1.0,
-    matcher: str = "exhaustive",
-    camera_model: str = "SIMPLE_RADIAL",
-    single_camera: bool = True,
-    refine_principal_point: bool | None = None,
-    min_registered: int = MIN_REGISTERED,
-    max_features: int = 8192,
-    num_threads: int = 2,
-    seed: int = 0,
-    work_dir=None,
-    verbose: bool = False,
-) -> tuple[Scene, CalibrationReport]:
-    """Calibrate a folder of photos with COLMAP; return the undistorted scene (in memory).
+# ---------------------------------------------------------------------------- options
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """How :func:`calibrate_scene` calibrates (every field has a default).
 
-    Parameters
+    Attributes
     ----------
-    photos_dir : path
-        Folder of photos of one static scene (jpg/png/tif...), not recursive.
     scale : float
-        Resize factor applied to the photos before everything else (0 < scale ≤ 1 typical;
-        0.5 of 3072×2048 gives 1536×1024). The scene's cameras are those of the resized images.
+        Resize factor applied to the photos before everything else (0 < scale ≤ 4; 0.5 of
+        3072×2048 gives 1536×1024). The scene's cameras are those of the resized images.
     matcher : {"exhaustive", "sequential"}
         Pair selection for feature matching.
     camera_model : str
@@ -247,13 +232,14 @@ def calibrate_scene(
         SIMPLE_PINHOLE, PINHOLE). Distorted models are undistorted to PINHOLE in step 5.
     single_camera : bool
         One shared intrinsic camera for all photos (same camera and zoom) or one per photo.
+        Photos of several sizes get one camera each whatever this says.
     refine_principal_point : bool, optional
         True: bundle adjustment refines the principal point throughout the mapping.
-        False: it stays at the image centre (COLMAP's default). None (default, "auto"): map
-        with it fixed, then refine it in one global bundle adjustment and keep the result
-        only if its covariance shows the photos determine it (:func:`_refine_principal_point`).
-        On fountain-P11 the principal point is ~11 px (at 1536×1024) off centre; held at the
-        centre, the poses absorb it as a ~0.5° rotation of every camera.
+        False: it stays at the image centre (COLMAP's default). None ("auto"): map with it
+        fixed, then refine it in one global bundle adjustment and keep the result only if
+        its covariance shows the photos determine it (:func:`_refine_principal_point`).
+        Held at the centre when it is off centre, the poses absorb the offset as a small
+        common rotation of every camera (docs/CALIBRATE.md).
     min_registered : int
         Fewer registered images raise :class:`VibrInputError` naming the unregistered ones.
     max_features : int
@@ -262,11 +248,37 @@ def calibrate_scene(
         Threads for COLMAP's stages (the machine is shared; default 2).
     seed : int
         Random seed for the mapper's RANSAC (reproducible runs).
+    verbose : bool
+        Let COLMAP print its log.
+    """
+
+    scale: float = 1.0
+    matcher: str = "exhaustive"
+    camera_model: str = "SIMPLE_RADIAL"
+    single_camera: bool = True
+    refine_principal_point: bool | None = None
+    min_registered: int = MIN_REGISTERED
+    max_features: int = 8192
+    num_threads: int = 2
+    seed: int = 0
+    verbose: bool = False
+
+
+# ---------------------------------------------------------------------------- main entry points
+def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work_dir=None,
+                    **kw) -> tuple[Scene, CalibrationReport]:
+    """Calibrate a folder of photos with COLMAP; return the undistorted scene (in memory).
+
+    Parameters
+    ----------
+    photos_dir : path
+        Folder of photos of one static scene (jpg/png/tif...), not recursive.
+    options : CalibrateOptions, optional
+        How to calibrate; ``kw`` (fields of :class:`CalibrateOptions`, e.g. ``scale=0.5``)
+        applies over it. Any other keyword raises ``TypeError``.
     work_dir : path, optional
         Where to keep COLMAP's database, model and undistorted images; a temporary folder
         (removed afterwards) by default.
-    verbose : bool
-        Let COLMAP print its log.
 
     Returns
     -------
@@ -277,164 +289,58 @@ def calibrate_scene(
     """
     import pycolmap
 
+    opt = replace(options or CalibrateOptions(), **kw)
     photos_dir = Path(photos_dir)
     files = list_photos(photos_dir)
-    if not (0 < scale <= 4):
-        raise VibrInputError(f"scale must be in (0, 4], got {scale}", photos_dir)
-    if matcher not in MATCHERS:
-        raise VibrInputError(f"matcher must be one of {', '.join(MATCHERS)}, got {matcher!r}", photos_dir)
-    if camera_model not in CAMERA_MODELS:
-        raise VibrInputError(
-            f"camera model must be one of {', '.join(CAMERA_MODELS)}, got {camera_model!r}", photos_dir
-        )
-    min_registered = max(2, int(min_registered))
-    if len(files) < min_registered:
-        raise VibrInputError(
-            f"{len(files)} photos found, calibrate needs at least {min_registered}", photos_dir
-        )
-
+    opt = _check_options(opt, len(files), photos_dir)
     own_work = work_dir is None
     work = Path(tempfile.mkdtemp(prefix="vibr-calibrate-")) if own_work else Path(work_dir)
     work.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}
     try:
-        img_dir, db, sparse, undist = work / "images", work / "database.db", work / "sparse", work / "undistorted"
-        stale = (db, Path(f"{db}-wal"), Path(f"{db}-shm"), sparse, undist)
-        for p in stale:  # a reused work folder starts clean
-            if p.is_dir():
-                shutil.rmtree(p)
-            elif p.exists():
-                p.unlink()
-        if img_dir.is_dir():
-            shutil.rmtree(img_dir)
-
+        img_dir, db, sparse, undist = _clean_work(work)
         t0 = time.perf_counter()
-        logger.info(f"calibrate [1/5] resizing {len(files)} photos by {scale:g}")
-        sizes = _downscale_photos(files, img_dir, scale)
-        size = max(sizes, key=lambda wh: wh[0] * wh[1])
-        if single_camera and len(set(sizes)) > 1:
+        logger.info(f"calibrate [1/5] resizing {len(files)} photos by {opt.scale:g}")
+        sizes = _downscale_photos(files, img_dir, opt.scale)
+        if opt.single_camera and len(set(sizes)) > 1:
             # One shared camera needs one image size: photos of several sizes get one each.
             logger.info(f"calibrate: photos have {len(set(sizes))} different sizes: one camera per photo")
-            single_camera = False
+            opt = replace(opt, single_camera=False)
         times["resize"] = time.perf_counter() - t0
         names = [f"{f.stem}.png" for f in files]
-
-        with _colmap_log_level(verbose):
+        stem = {f"{f.stem}.png": f.name for f in files}
+        with _colmap_log_level(opt.verbose):
+            times["features"] = _extract_features(db, img_dir, names, sizes, opt)
+            times["matching"] = _match_features(db, opt)
             t0 = time.perf_counter()
-            logger.info(f"calibrate [2/5] SIFT features ({size[0]}x{size[1]}, {camera_model}, "
-                f"{'one shared camera' if single_camera else 'one camera per photo'})")
-            reader = pycolmap.ImageReaderOptions()
-            reader.camera_model = camera_model
-            ext = pycolmap.FeatureExtractionOptions()
-            ext.num_threads = num_threads
-            ext.use_gpu = False
-            ext.max_image_size = max(max(wh) for wh in sizes)
-            ext.sift.max_num_features = int(max_features)
-            pycolmap.extract_features(
-                db, img_dir, image_names=names,
-                camera_mode=pycolmap.CameraMode.SINGLE if single_camera else pycolmap.CameraMode.PER_IMAGE,
-                reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu,
-            )
-            times["features"] = time.perf_counter() - t0
-
-            t0 = time.perf_counter()
-            logger.info(f"calibrate [3/5] {matcher} matching")
-            mopt = pycolmap.FeatureMatchingOptions()
-            mopt.num_threads = num_threads
-            mopt.use_gpu = False
-            vopt = pycolmap.TwoViewGeometryOptions()
-            vopt.ransac.random_seed = seed
-            if matcher == "exhaustive":
-                pycolmap.match_exhaustive(db, matching_options=mopt, verification_options=vopt,
-                                          device=pycolmap.Device.cpu)
-            else:
-                popt = pycolmap.SequentialPairingOptions()
-                popt.num_threads = num_threads
-                pycolmap.match_sequential(db, matching_options=mopt, pairing_options=popt,
-                                          verification_options=vopt, device=pycolmap.Device.cpu)
-            times["matching"] = time.perf_counter() - t0
-
-            t0 = time.perf_counter()
-            logger.info("calibrate [4/5] incremental mapping (poses, intrinsics, sparse points)")
-            iopt = pycolmap.IncrementalPipelineOptions()
-            iopt.num_threads = num_threads
-            iopt.random_seed = seed
-            iopt.mapper.random_seed = seed
-            iopt.triangulation.random_seed = seed
-            iopt.mapper.num_threads = num_threads
-            iopt.ba_refine_principal_point = bool(refine_principal_point)
-            sparse.mkdir()
-            bar = progress(total=len(files), desc="calibrate: registered")
-            try:
-                recs = pycolmap.incremental_mapping(
-                    db, img_dir, sparse, options=iopt,
-                    initial_image_pair_callback=lambda: bar.update(2),
-                    next_image_callback=lambda: bar.update(1),
-                )
-            finally:
-                bar.close()
+            recs = _incremental_mapping(db, img_dir, sparse, len(files), opt)
             times["mapping"] = time.perf_counter() - t0
-
-            best_key, rec = None, None
-            for k, r in (recs or {}).items():
-                if rec is None or r.num_reg_images() > rec.num_reg_images():
-                    best_key, rec = k, r
-            registered = sorted(im.name for im in rec.images.values() if _has_pose(im)) if rec else []
-            unregistered = [n for n in names if n not in set(registered)]
-            stem = {f"{f.stem}.png": f.name for f in files}
-            if len(registered) < min_registered:
-                raise VibrInputError(
-                    f"only {len(registered)} of {len(files)} photos registered (at least "
-                    f"{min_registered} needed); not registered: "
-                    + ", ".join(stem[n] for n in unregistered),
-                    photos_dir,
-                )
-            if unregistered:
-                logger.info("calibrate: not registered (left out): " + ", ".join(stem[n] for n in unregistered))
-            pp_note = "refined in mapping" if refine_principal_point else "fixed at the image centre"
-            if refine_principal_point is None:
+            best_key, rec, registered, unregistered = _kept_model(recs, names, stem, photos_dir, opt)
+            pp_note = "refined in mapping" if opt.refine_principal_point else "fixed at the image centre"
+            if opt.refine_principal_point is None:
                 t0 = time.perf_counter()
-                rec, pp_note = _refine_principal_point(rec, num_threads)
+                rec, pp_note = _refine_principal_point(rec, opt.num_threads)
                 times["principal_point"] = time.perf_counter() - t0
             logger.info(f"calibrate: principal point {pp_note}")
-            pycolmap.logging.minloglevel = 0 if verbose else 2
+            pycolmap.logging.minloglevel = 0 if opt.verbose else 2
             model_dir = sparse / str(best_key)
             model_dir.mkdir(parents=True, exist_ok=True)
             rec.write(model_dir)  # the kept model (incremental_mapping also wrote it)
-
             t0 = time.perf_counter()
             logger.info(f"calibrate [5/5] undistorting {len(registered)} images to PINHOLE")
-            pycolmap.undistort_images(
-                undist, model_dir, img_dir, output_type="COLMAP", num_threads=num_threads
-            )
+            pycolmap.undistort_images(undist, model_dir, img_dir, output_type="COLMAP",
+                                      num_threads=opt.num_threads)
             times["undistort"] = time.perf_counter() - t0
             urec = pycolmap.Reconstruction(undist / "sparse")
-
         report = CalibrationReport(
             registered=[stem[n] for n in registered],
             unregistered=[stem[n] for n in unregistered],
             num_points=int(rec.num_points3D()),
             mean_reprojection_error_px=float(rec.compute_mean_reprojection_error()),
-            image_size=tuple(size),
+            image_size=tuple(max(sizes, key=lambda wh: wh[0] * wh[1])),
             times_s=times,
         )
-        meta = {
-            "format": "calibrate",
-            "calibration": {
-                "tool": f"pycolmap {pycolmap.__version__}",
-                "photos": str(photos_dir),
-                "scale": scale,
-                "matcher": matcher,
-                "camera_model": camera_model,
-                "single_camera": single_camera,
-                "principal_point": pp_note,
-                "registered": report.registered,
-                "unregistered": report.unregistered,
-                "num_points": report.num_points,
-                "mean_reprojection_error_px": report.mean_reprojection_error_px,
-                "times_s": {k: round(v, 3) for k, v in times.items()},
-            },
-        }
+        meta = _calibration_meta(photos_dir, opt, pp_note, report, pycolmap.__version__)
         scene = scene_from_reconstruction(
             urec, undist / "images", name=photos_dir.resolve().name, root=None, meta=meta
         )
@@ -442,6 +348,152 @@ def calibrate_scene(
     finally:
         if own_work:
             shutil.rmtree(work, ignore_errors=True)
+
+
+def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> CalibrateOptions:
+    """``opt`` checked (:class:`VibrInputError` naming ``photos_dir``), ``min_registered``
+    at least 2."""
+    if not (0 < opt.scale <= 4):
+        raise VibrInputError(f"scale must be in (0, 4], got {opt.scale}", photos_dir)
+    if opt.matcher not in MATCHERS:
+        raise VibrInputError(f"matcher must be one of {', '.join(MATCHERS)}, got {opt.matcher!r}", photos_dir)
+    if opt.camera_model not in CAMERA_MODELS:
+        raise VibrInputError(
+            f"camera model must be one of {', '.join(CAMERA_MODELS)}, got {opt.camera_model!r}", photos_dir
+        )
+    opt = replace(opt, min_registered=max(2, int(opt.min_registered)))
+    if n_photos < opt.min_registered:
+        raise VibrInputError(
+            f"{n_photos} photos found, calibrate needs at least {opt.min_registered}", photos_dir
+        )
+    return opt
+
+
+def _clean_work(work: Path) -> tuple[Path, Path, Path, Path]:
+    """The work folder's image folder, database, sparse and undistorted model paths, with
+    whatever a previous run left there removed (a reused work folder starts clean)."""
+    img_dir, db, sparse, undist = work / "images", work / "database.db", work / "sparse", work / "undistorted"
+    for p in (db, Path(f"{db}-wal"), Path(f"{db}-shm"), sparse, undist, img_dir):
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
+    return img_dir, db, sparse, undist
+
+
+def _extract_features(db: Path, img_dir: Path, names: list[str], sizes, opt: CalibrateOptions) -> float:
+    """Step 2: SIFT features of every photo into the database (CPU). Returns seconds."""
+    import pycolmap
+
+    t0 = time.perf_counter()
+    size = max(sizes, key=lambda wh: wh[0] * wh[1])
+    logger.info(f"calibrate [2/5] SIFT features ({size[0]}x{size[1]}, {opt.camera_model}, "
+                f"{'one shared camera' if opt.single_camera else 'one camera per photo'})")
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = opt.camera_model
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.num_threads = opt.num_threads
+    ext.use_gpu = False
+    ext.max_image_size = max(max(wh) for wh in sizes)
+    ext.sift.max_num_features = int(opt.max_features)
+    pycolmap.extract_features(
+        db, img_dir, image_names=names,
+        camera_mode=pycolmap.CameraMode.SINGLE if opt.single_camera else pycolmap.CameraMode.PER_IMAGE,
+        reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu,
+    )
+    return time.perf_counter() - t0
+
+
+def _match_features(db: Path, opt: CalibrateOptions) -> float:
+    """Step 3: exhaustive or sequential matching with two-view geometric verification.
+    Returns seconds."""
+    import pycolmap
+
+    t0 = time.perf_counter()
+    logger.info(f"calibrate [3/5] {opt.matcher} matching")
+    mopt = pycolmap.FeatureMatchingOptions()
+    mopt.num_threads = opt.num_threads
+    mopt.use_gpu = False
+    vopt = pycolmap.TwoViewGeometryOptions()
+    vopt.ransac.random_seed = opt.seed
+    if opt.matcher == "exhaustive":
+        pycolmap.match_exhaustive(db, matching_options=mopt, verification_options=vopt,
+                                  device=pycolmap.Device.cpu)
+    else:
+        popt = pycolmap.SequentialPairingOptions()
+        popt.num_threads = opt.num_threads
+        pycolmap.match_sequential(db, matching_options=mopt, pairing_options=popt,
+                                  verification_options=vopt, device=pycolmap.Device.cpu)
+    return time.perf_counter() - t0
+
+
+def _incremental_mapping(db: Path, img_dir: Path, sparse: Path, n_photos: int, opt: CalibrateOptions):
+    """Step 4: COLMAP's incremental mapper (poses, intrinsics, sparse points), seeded,
+    with a progress bar of the registered photos. Returns its reconstructions (dict)."""
+    import pycolmap
+
+    logger.info("calibrate [4/5] incremental mapping (poses, intrinsics, sparse points)")
+    iopt = pycolmap.IncrementalPipelineOptions()
+    iopt.num_threads = opt.num_threads
+    iopt.random_seed = opt.seed
+    iopt.mapper.random_seed = opt.seed
+    iopt.triangulation.random_seed = opt.seed
+    iopt.mapper.num_threads = opt.num_threads
+    iopt.ba_refine_principal_point = bool(opt.refine_principal_point)
+    sparse.mkdir()
+    bar = progress(total=n_photos, desc="calibrate: registered")
+    try:
+        return pycolmap.incremental_mapping(
+            db, img_dir, sparse, options=iopt,
+            initial_image_pair_callback=lambda: bar.update(2),
+            next_image_callback=lambda: bar.update(1),
+        )
+    finally:
+        bar.close()
+
+
+def _kept_model(recs, names: list[str], stem: dict, photos_dir: Path, opt: CalibrateOptions):
+    """The reconstruction with the most registered images: ``(key, reconstruction,
+    registered names, unregistered names)``; too few registered photos raise
+    :class:`VibrInputError` naming the others."""
+    best_key, rec = None, None
+    for k, r in (recs or {}).items():
+        if rec is None or r.num_reg_images() > rec.num_reg_images():
+            best_key, rec = k, r
+    registered = sorted(im.name for im in rec.images.values() if _has_pose(im)) if rec else []
+    unregistered = [n for n in names if n not in set(registered)]
+    if len(registered) < opt.min_registered:
+        raise VibrInputError(
+            f"only {len(registered)} of {len(names)} photos registered (at least "
+            f"{opt.min_registered} needed); not registered: "
+            + ", ".join(stem[n] for n in unregistered),
+            photos_dir,
+        )
+    if unregistered:
+        logger.info("calibrate: not registered (left out): " + ", ".join(stem[n] for n in unregistered))
+    return best_key, rec, registered, unregistered
+
+
+def _calibration_meta(photos_dir: Path, opt: CalibrateOptions, pp_note: str,
+                      report: CalibrationReport, tool_version: str) -> dict:
+    """The scene's ``meta``: format "calibrate" and the calibration summary."""
+    return {
+        "format": "calibrate",
+        "calibration": {
+            "tool": f"pycolmap {tool_version}",
+            "photos": str(photos_dir),
+            "scale": opt.scale,
+            "matcher": opt.matcher,
+            "camera_model": opt.camera_model,
+            "single_camera": opt.single_camera,
+            "principal_point": pp_note,
+            "registered": report.registered,
+            "unregistered": report.unregistered,
+            "num_points": report.num_points,
+            "mean_reprojection_error_px": report.mean_reprojection_error_px,
+            "times_s": {k: round(v, 3) for k, v in report.times_s.items()},
+        },
+    }
 
 
 #: The "auto" principal-point refinement is kept only if the standard deviation of each
@@ -458,9 +510,9 @@ def _refine_principal_point(rec, num_threads: int):
     The covariance of the camera parameters at the optimum (``pycolmap.estimate_ba_covariance``,
     gauge fixed by three points) gives the standard deviation σ of each principal-point
     coordinate; the refinement is kept when every σ ≤ ``PP_MAX_STD`` · max(W, H) and the shift
-    ≤ ``PP_MAX_SHIFT`` · max(W, H). (On fountain-P11 at 1536×1024, σ ≈ 0.7 / 1.9 px; on a
-    level arc of views σ_y is tens of pixels: the principal point trades off against a
-    common pitch of the cameras.)
+    ≤ ``PP_MAX_SHIFT`` · max(W, H). On a level arc of views σ_y is large: the principal
+    point trades off against a common pitch of the cameras (docs/CALIBRATE.md gives the
+    values measured on fountain-P11 and on an arc).
 
     Returns ``(reconstruction, note)``: the refined copy or ``rec`` itself, and a note.
     """

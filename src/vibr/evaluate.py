@@ -65,21 +65,41 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = (0
     return out
 
 
-def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
-             sources: Sequence[int | str] | None = None, depth: str = "auto",
-             depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
-             border: int = METRIC_BORDER, figures: str | Path | None = None, estimate_kw: dict | None = None,
-             render_kw: dict | None = None, intensity_scale: float | None = None,
-             geometry_kw: dict | None = None, figure_labels: Sequence[str] | None = None,
-             figure_prefix: str | None = None, figure_downscale: int = 1,
-             use_lpips: bool = True, view_split: int | None = None) -> dict:
+@dataclass
+class Evaluation:
+    """What :func:`run_evaluation` measured: the JSON-serialisable ``report`` (see
+    :func:`evaluate`), and for figures (:func:`vibr.figures.write_evaluation_figures`) the
+    held-out ``reference`` image, the rendered ``images`` by setting label, the evaluated
+    pixels ``mask`` (H×W bool) and a default file-name ``prefix`` (``TARGET_DEPTH``)."""
+
+    report: dict
+    reference: np.ndarray
+    images: dict
+    mask: np.ndarray
+    prefix: str
+
+
+def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], **kw) -> dict:
+    """Render the held-out ``target`` with each setting and measure it; returns the report
+    of :func:`run_evaluation` (its keyword arguments)."""
+    return run_evaluation(scene, target, settings, **kw).report
+
+
+def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting], *,
+                   sources: Sequence[int | str] | None = None, depth: str = "auto",
+                   depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
+                   border: int = METRIC_BORDER, estimate_kw: dict | None = None,
+                   render_kw: dict | None = None, intensity_scale: float | None = None,
+                   geometry_kw: dict | None = None, use_lpips: bool = True,
+                   view_split: int | None = None) -> Evaluation:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
     ``depth="estimated"`` estimates it here, from the sources only), then the warped samples
     (:func:`vibr.geometry.compute_samples`) are computed once and every setting renders from
     them (``render(..., samples=...)``). Per-setting ``seconds`` are therefore render times
-    only; ``depth_seconds`` and ``samples_seconds`` are reported once.
+    only; ``depth_seconds`` and ``samples_seconds`` are reported once. Nothing is written:
+    figures are :func:`vibr.figures.write_evaluation_figures`'s job.
 
     Parameters
     ----------
@@ -90,41 +110,22 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         Extra render parameters for every setting (a setting's params win).
     geometry_kw : dict, optional
         Arguments of :func:`vibr.geometry.compute_samples`.
-    figure_labels : sequence of str, optional
-        Settings (by label) shown in the figures; default all.
-    figure_prefix : str, optional
-        File-name prefix of the figures; default ``TARGET_DEPTH``.
-    figure_downscale : int
-        Integer factor the side-by-side figure is reduced by (box average); crops stay at
-        full resolution.
     view_split : int, optional
         Also measure each setting separately on the evaluated pixels seen by at most
         ``view_split`` source views and on those seen by more (:func:`view_counts`): entry
         ``regions`` = {"few": {...}, "many": {...}} with psnr, dssim and the pixel fraction.
 
-    Returns a JSON-serialisable report: ``scene``, ``target``, ``sources``, ``scale`` (the
-    image scale the scene was loaded at), ``intensity_scale``, ``size``, ``depth``, ``mask``,
-    machine info, the geometry times, and ``results``: one entry per setting with
-    ``method``, ``label``, ``params`` (every parameter the renderer used), ``depth``,
-    ``psnr``, ``dssim``, ``ssim``, ``seconds``, ``coverage``, ``iterations`` (and ``lpips``
-    when the ``lpips`` package works here).
+    Returns an :class:`Evaluation` whose ``report`` is JSON-serialisable: ``scene``,
+    ``target``, ``sources``, ``scale`` (the image scale the scene was loaded at),
+    ``intensity_scale``, ``size``, ``depth``, ``mask``, machine info, the geometry times,
+    and ``results``: one entry per setting with ``method``, ``label``, ``params`` (every
+    parameter the renderer used), ``depth``, ``psnr``, ``dssim``, ``ssim``, ``seconds``,
+    ``coverage``, ``iterations`` (and ``lpips`` when the ``lpips`` package works here).
     """
     from .geometry import compute_samples
     from .pipeline import prepare
-    from .render import render
 
-    if mask not in ("reconstructed", "all"):
-        raise VibrInputError(f"mask must be 'reconstructed' or 'all', not {mask!r}")
-    settings = list(settings)
-    if not settings:
-        raise VibrInputError("no setting to evaluate")
-    if intensity_scale is None:
-        from .render.methods import DEFAULTS
-
-        intensity_scale = DEFAULTS["scale"]
-    intensity_scale = float(intensity_scale)
-    if not intensity_scale > 0:
-        raise VibrInputError(f"the intensity scale must be > 0, got {intensity_scale}")
+    settings, intensity_scale = _checked_settings(settings, mask, intensity_scale)
     t0 = time.perf_counter()
     src, tview = prepare(scene, target, sources=sources, depth=depth, depth_files=depth_files,
                          n_views=n_views, estimate_kw=estimate_kw)
@@ -135,56 +136,24 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
     samples = compute_samples(src, tview.camera, **(geometry_kw or {}))
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
-        f"{len(samples)} samples ({t_samples:.1f} s)")
-
-    images, rows = {}, []
-    for s in progress(settings, desc=f"render {tview.name} ({depth})"):
-        params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
-        t = time.perf_counter()
-        res = render(src, tview.camera, method=s.method, samples=samples, **params)
-        dt = time.perf_counter() - t
-        images[s.label] = res
-        rows.append((s, res, dt))
-
+                f"{len(samples)} samples ({t_samples:.1f} s)")
+    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth)
     cover = np.ones(tview.shape, bool)
     if mask == "reconstructed":
         for _, res, _ in rows:
             cover &= np.asarray(res.coverage, bool)
-    ref = tview.image
+    m = cover if mask == "reconstructed" else None
     lp = _lpips_fn() if use_lpips else None
     counts = view_counts(samples) if view_split is not None else None
     results = []
     for s, res, dt in rows:
-        m = cover if mask == "reconstructed" else None
-        used = {k: v for k, v in getattr(res, "params", {}).items()
-                if isinstance(v, (int, float, str, bool)) or v is None}
-        entry = {
-            "method": s.method,
-            "label": s.label,
-            "params": {**used, **s.params},
-            "intensity_scale": float(used.get("scale", intensity_scale)),
-            "depth": depth,
-            **{k: float(v) for k, v in view_metrics(res.image, ref, m, border).items()},
-            "seconds": round(dt, 3),
-            "coverage": float(np.asarray(res.coverage, bool).mean()),
-            "iterations": len(getattr(res, "energy", []) or []),
-            "energy": float(res.energy[-1]) if getattr(res, "energy", None) else None,
-        }
+        entry = _measure(s, res, dt, tview.image, m, border, depth, intensity_scale)
         if lp is not None:
-            entry["lpips"] = lp(res.image, ref)
+            entry["lpips"] = lp(res.image, tview.image)
         if view_split is not None:
-            entry["regions"] = {}
             base = cover if mask == "reconstructed" else np.ones(tview.shape, bool)
-            for name, sel in (("few", counts <= view_split), ("many", counts > view_split)):
-                mm = base & sel
-                inner = mm[border:mm.shape[0] - border, border:mm.shape[1] - border]
-                if inner.any():
-                    entry["regions"][name] = {
-                        "psnr": float(psnr(res.image, ref, mask=mm, border=border)),
-                        "dssim": float(dssim(res.image, ref, mask=mm, border=border)),
-                        "fraction": float(inner.mean())}
+            entry["regions"] = _region_metrics(res.image, tview.image, base, counts, view_split, border)
         results.append(entry)
-
     report = {
         "scene": scene.name,
         "scene_path": str(scene.root) if scene.root else None,
@@ -204,6 +173,81 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         "machine": machine_info(),
         "results": results,
     }
+    _add_context(report, src, depth, estimate_kw, view_split)
+    return Evaluation(report=report, reference=tview.image,
+                      images={s.label: res.image for s, res, _ in rows}, mask=cover,
+                      prefix=f"{tview.name}_{depth}")
+
+
+def _checked_settings(settings, mask: str, intensity_scale):
+    """The settings as a non-empty list and the intensity scale as a positive float
+    (default the renderer's); a bad mask, no setting or a bad scale raise
+    :class:`VibrInputError`."""
+    if mask not in ("reconstructed", "all"):
+        raise VibrInputError(f"mask must be 'reconstructed' or 'all', not {mask!r}")
+    settings = list(settings)
+    if not settings:
+        raise VibrInputError("no setting to evaluate")
+    if intensity_scale is None:
+        from .render.methods import DEFAULTS
+
+        intensity_scale = DEFAULTS["scale"]
+    intensity_scale = float(intensity_scale)
+    if not intensity_scale > 0:
+        raise VibrInputError(f"the intensity scale must be > 0, got {intensity_scale}")
+    return settings, intensity_scale
+
+
+def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth):
+    """Render the target once per setting from the shared samples: ``[(setting, result,
+    seconds)]``."""
+    from .render import render
+
+    rows = []
+    for s in progress(settings, desc=f"render {tview.name} ({depth})"):
+        params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
+        t = time.perf_counter()
+        res = render(src, tview.camera, method=s.method, samples=samples, **params)
+        rows.append((s, res, time.perf_counter() - t))
+    return rows
+
+
+def _measure(s: Setting, res, dt: float, ref, m, border: int, depth: str, intensity_scale: float) -> dict:
+    """One result entry: the setting, the parameters the renderer used, PSNR / SSIM /
+    DSSIM on the mask ``m`` (None: every pixel) inside ``border``, time and coverage."""
+    used = {k: v for k, v in getattr(res, "params", {}).items()
+            if isinstance(v, (int, float, str, bool)) or v is None}
+    return {
+        "method": s.method,
+        "label": s.label,
+        "params": {**used, **s.params},
+        "intensity_scale": float(used.get("scale", intensity_scale)),
+        "depth": depth,
+        **{k: float(v) for k, v in view_metrics(res.image, ref, m, border).items()},
+        "seconds": round(dt, 3),
+        "coverage": float(np.asarray(res.coverage, bool).mean()),
+        "iterations": len(getattr(res, "energy", []) or []),
+        "energy": float(res.energy[-1]) if getattr(res, "energy", None) else None,
+    }
+
+
+def _region_metrics(img, ref, base, counts, view_split: int, border: int) -> dict:
+    """PSNR, DSSIM and pixel fraction on the evaluated pixels seen by at most
+    ``view_split`` source views ("few") and by more ("many")."""
+    out = {}
+    for name, sel in (("few", counts <= view_split), ("many", counts > view_split)):
+        mm = base & sel
+        inner = mm[border:mm.shape[0] - border, border:mm.shape[1] - border]
+        if inner.any():
+            out[name] = {"psnr": float(psnr(img, ref, mask=mm, border=border)),
+                         "dssim": float(dssim(img, ref, mask=mm, border=border)),
+                         "fraction": float(inner.mean())}
+    return out
+
+
+def _add_context(report: dict, src, depth: str, estimate_kw, view_split) -> None:
+    """The report's optional entries: view split, planar proxy, depth-estimation options
+    and statistics."""
     if view_split is not None:
         report["view_split"] = int(view_split)
     if depth == "planar" and "proxy" in src.meta:
@@ -212,14 +256,6 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], *,
         report["estimate_kw"] = _jsonable(estimate_kw)
     if depth == "estimated" and "depth_estimation" in src.meta:
         report["depth_estimation"] = _jsonable(_depth_summary(src.meta["depth_estimation"]))
-    if figures:
-        from .figures import write_figures
-
-        shown = list(images) if figure_labels is None else [k for k in figure_labels if k in images]
-        report["figures"] = write_figures(figures, ref, {k: images[k].image for k in shown},
-                                          cover, prefix=figure_prefix or f"{tview.name}_{depth}",
-                                          downscale=figure_downscale)
-    return report
 
 
 def view_counts(samples) -> np.ndarray:

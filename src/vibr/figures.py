@@ -94,3 +94,15 @@ def write_figures(folder, ref: np.ndarray, images: dict[str, np.ndarray], mask=N
     return {"compare": str(compare), "crops": str(crops_path), "columns": ["reference"] + names,
             "crop_window": {"row": r, "col": c, "size": size}, "error_saturation": max_err,
             "downscale": int(max(1, downscale))}
+
+
+def write_evaluation_figures(evaluation, folder, *, labels=None, prefix: str | None = None,
+                             downscale: int = 1) -> dict:
+    """:func:`write_figures` of a :class:`vibr.evaluate.Evaluation`: the reference, the
+    renders of the settings ``labels`` (default all, in the evaluation's order) and the
+    evaluated pixels. ``prefix`` defaults to the evaluation's (``TARGET_DEPTH``). Returns
+    the figures' entry of a report (file names, columns, crop window)."""
+    images = evaluation.images
+    shown = list(images) if labels is None else [k for k in labels if k in images]
+    return write_figures(folder, evaluation.reference, {k: images[k] for k in shown}, evaluation.mask,
+                         prefix=prefix or evaluation.prefix, downscale=downscale)

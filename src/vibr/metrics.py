@@ -1,6 +1,6 @@
 """Image quality metrics, optionally restricted to a mask: PSNR, SSIM and DSSIM.
 
-METHOD §"Evaluation": PSNR over the three channels, SSIM of Wang et al. (2004) with a
+docs/METHOD.md §8: PSNR over the three channels, SSIM of Wang et al. (2004) with a
 Gaussian window of sigma 1.5, and the paper's DSSIM = 10⁴ · (1 − SSIM); all with an
 optional border excluded and, for rendered views, only over the reconstructed pixels.
 """

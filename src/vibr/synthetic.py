@@ -19,7 +19,7 @@ bounding box :data:`DEFAULT_BBOX` = x ∈ [-5, 5], y ∈ [-4, 1.5], z ∈ [-1, 6
 * a tilted card (a small textured rectangle) floating in front, for a thin occluder.
 
 Images are band-limited so that a source pixel is well modelled as a bilinear sample of
-another view (the renderer's assumption, METHOD §2): textures are pre-smoothed (Gaussian,
+another view (the renderer's assumption, docs/METHOD.md §4): textures are pre-smoothed (Gaussian,
 sigma 1 texel) and stored as a mip-map pyramid; each ray picks the pyramid level whose
 texel matches the pixel footprint ``z / f`` (divided by ``sqrt|cos θ|`` on slanted
 surfaces), trilinearly, so that a texel is never smaller than about one image pixel; and
@@ -700,6 +700,16 @@ def _aimed_rolled(eye, target, rng, aim_jitter, roll_deg, K, width, height) -> C
     return Camera.from_centre(K, Rz @ cam.R, eye, width, height)
 
 
+def _random_layout(name: str, n: int, seed: int, width: int, height: int, fov_deg: float, eye, target):
+    """The shared start of the random layouts: the seeded generator, the intrinsics, the
+    nominal eye and target as arrays (``n`` checked)."""
+    if n < 1:
+        raise ValueError(f"{name}: n must be >= 1")
+    rng = np.random.default_rng(seed)
+    K = Camera.intrinsics(_focal(width, fov_deg), width, height)
+    return rng, K, np.asarray(eye, np.float64), np.asarray(target, np.float64)
+
+
 def free_cameras(n: int = 5, seed: int = 0, *, width: int = 128, height: int = 128,
                  fov_deg: float = 55.0, eye=(0.0, -0.3, 0.0), target=SCENE_CENTRE,
                  pos_jitter: float = 0.25, aim_jitter: float = 0.2,
@@ -707,11 +717,7 @@ def free_cameras(n: int = 5, seed: int = 0, *, width: int = 128, height: int = 1
     """``n`` random poses around a nominal one (``eye`` looking at ``target``): centres
     jittered uniformly by ± ``pos_jitter`` per axis, aim point by ± ``aim_jitter``,
     roll about the optical axis by ± ``roll_deg``. Deterministic for a seed."""
-    if n < 1:
-        raise ValueError("free_cameras: n must be >= 1")
-    rng = np.random.default_rng(seed)
-    K = Camera.intrinsics(_focal(width, fov_deg), width, height)
-    e0, t0 = np.asarray(eye, np.float64), np.asarray(target, np.float64)
+    rng, K, e0, t0 = _random_layout("free_cameras", n, seed, width, height, fov_deg, eye, target)
     cams = []
     for _ in range(n):
         e = e0 + rng.uniform(-pos_jitter, pos_jitter, 3)
@@ -731,11 +737,7 @@ def handheld_cameras(n: int = 7, seed: int = 0, *, width: int = 128, height: int
     what the reference sees and the baselines are bounded below (depth precision grows with
     the baseline), so the layout is free (no grid, general rotations) yet triangulable.
     Deterministic for a seed."""
-    if n < 1:
-        raise ValueError("handheld_cameras: n must be >= 1")
-    rng = np.random.default_rng(seed)
-    K = Camera.intrinsics(_focal(width, fov_deg), width, height)
-    e0, t0 = np.asarray(eye, np.float64), np.asarray(target, np.float64)
+    rng, K, e0, t0 = _random_layout("handheld_cameras", n, seed, width, height, fov_deg, eye, target)
     cams = []
     for k in range(n):
         off = np.zeros(3)

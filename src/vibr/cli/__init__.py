@@ -18,7 +18,7 @@ from ..errors import VibrInputError
 from ..progress import configure_logging
 
 # Order shown in --help.
-_COMMANDS = ["demo", "info", "convert", "render", "eval", "depth", "calibrate"]
+_COMMANDS = ["demo", "info", "convert", "path", "render", "eval", "depth", "calibrate", "view"]
 
 _EPILOG = """\
 examples:

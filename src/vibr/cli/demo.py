@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 
 from . import add_quiet
@@ -19,7 +20,7 @@ DSSIM against the true image. This is the quickest check that vibr works on a ma
 
 _EPILOG = """\
 examples:
-  vibr demo                         3x3 light-field grid, 256x256, centre view held out
+  vibr demo                         3x3 light-field grid, 256x256, centre view held out; 2 s orbit to vibr-demo.mp4
   vibr demo --layout arc --size 384 -o demo.png
   vibr demo --method bvs            compare with the Bayesian baseline
 """
@@ -35,6 +36,9 @@ def register(sub) -> None:
     add_method_option(p)
     p.add_argument("--seed", type=int, default=0, help="random seed of the scene (default: 0)")
     p.add_argument("-o", "--output", help="also write the rendered view to this PNG")
+    p.add_argument("--video", default="vibr-demo.mp4",
+                   help="fly-through (a ~2 s orbit of the scene) written to this MP4 (default: vibr-demo.mp4)")
+    p.add_argument("--no-video", action="store_true", help="skip the fly-through video")
     add_bit_depth_option(p)
     add_quiet(p)
     p.set_defaults(func=run)
@@ -67,4 +71,30 @@ def run(args) -> int:
     if args.output:
         write_image(args.output, res.image, bits=args.bit_depth)
         print(f"  wrote {args.output}")
+    if not args.no_video:
+        _demo_video(scene, args)
     return 0
+
+
+def _demo_video(scene, args) -> None:
+    """A ~2 s orbit of the demo scene (the fly-through of docs/FLYTHROUGH.md) to args.video."""
+    import shutil
+    import tempfile
+
+    from ..errors import VibrInputError
+    from ..flythrough import render_path
+    from ..path import orbit
+
+    if not args.video.lower().endswith(".mp4"):
+        raise VibrInputError("the demo video must be a .mp4 file", args.video)
+    t0 = time.perf_counter()
+    path = orbit(scene, n_frames=48, fps=24.0)
+    tmp = tempfile.mkdtemp(prefix="vibr-demo-frames-")
+    try:
+        res = render_path(scene, path, args.video, method=args.method, n_views=8, frames_dir=tmp,
+                          cache_dir=False, progress=True)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print(f"vibr demo: fly-through ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]}, "
+          f"{path.seconds:.1f} s orbit) rendered in {time.perf_counter() - t0:.1f} s")
+    print(f"  wrote {os.path.abspath(res.video)}")

@@ -84,7 +84,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..evaluate import evaluate, format_table, settings_grid, write_report
+    from ..evaluate import format_table, run_evaluation, settings_grid, write_report
+    from ..figures import write_evaluation_figures
     from ..io import load_scene
 
     from ..errors import VibrInputError
@@ -97,11 +98,14 @@ def run(args) -> int:
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                                      ("depth_range", args.depth_range)) if v is not None}
-    report = evaluate(scene, args.target, settings, sources=args.sources, depth=args.depth,
-                      depth_files=args.depth_files, n_views=args.views, mask=args.mask,
-                      border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
-                      intensity_scale=args.intensity_scale,
-                      render_kw={"psf": args.psf} if args.psf else None)
+    ev = run_evaluation(scene, args.target, settings, sources=args.sources, depth=args.depth,
+                        depth_files=args.depth_files, n_views=args.views, mask=args.mask,
+                        border=args.border, estimate_kw=estimate_kw or None,
+                        intensity_scale=args.intensity_scale,
+                        render_kw={"psf": args.psf} if args.psf else None)
+    report = ev.report
+    if args.figures:
+        report["figures"] = write_evaluation_figures(ev, args.figures)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")

@@ -8,7 +8,7 @@ import os
 
 from . import add_quiet
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
-                       add_render_params, add_source_options, check_depth_args, render_params)
+                       add_render_params, add_source_options, check_depth_args, names, render_params)
 
 logger = logging.getLogger(__name__)
 
@@ -34,10 +34,11 @@ def register(sub) -> None:
     p = sub.add_parser("render", help="render a view (held-out view or camera file) of a scene",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", help="scene folder (any supported format)")
-    p.add_argument("--target", required=True, metavar="VIEW|CAMERA.json",
+    p.add_argument("--target", metavar="VIEW|CAMERA.json",
                    help="view name / index to hold out and render, or a camera JSON file (K, R, t, "
                         "width, height at the scene's original resolution: --scale applies to it too)")
-    p.add_argument("-o", "--output", required=True, help="output image (PNG)")
+    p.add_argument("-o", "--output", required=True,
+                   help="output image (PNG); with --path a video (.mp4) or a folder for the frames")
     add_bit_depth_option(p)
     add_method_option(p)
     add_render_params(p)
@@ -46,8 +47,27 @@ def register(sub) -> None:
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.5; a camera-file target is scaled "
                         "with it (default 1)")
+    _add_path_options(p)
     add_quiet(p)
     p.set_defaults(func=run)
+
+
+def _add_path_options(p) -> None:
+    """Fly-through options (``--path``; vibr.flythrough, docs/FLYTHROUGH.md)."""
+    g = p.add_argument_group("fly-through (--path)")
+    g.add_argument("--path", metavar="PATH.json",
+                   help="render every camera of a camera path (nerfstudio camera_path.json, as written by "
+                        "'vibr path' or nerfstudio's viewer) to -o OUT.mp4 or -o FRAMES_DIR/ instead of --target")
+    g.add_argument("--frames-dir", metavar="DIR", help="where the numbered PNG frames go (default: OUT_frames/ beside OUT.mp4)")
+    g.add_argument("--crf", type=int, default=18, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
+    g.add_argument("--fps", type=float, help="video frame rate (default: the path file's)")
+    g.add_argument("--dataparser-transforms", metavar="JSON",
+                   help="nerfstudio's dataparser_transforms.json: the path is in nerfstudio's normalised frame")
+    g.add_argument("--overwrite", action="store_true", help="render frames already written again (default: skip them)")
+    g.add_argument("--exclude", type=names, default=(),
+                   help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
+    g.add_argument("--cache-dir", metavar="DIR",
+                   help="cache of estimated depth and resized views (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
 
 
 def run(args) -> int:
@@ -56,6 +76,10 @@ def run(args) -> int:
     from ..pipeline import prepare
     from ..render import render
 
+    if (args.path is None) == (args.target is None):
+        raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
+    if args.path is not None:
+        return _run_path(args)
     check_depth_args(args)
     scene = load_scene(args.scene, scale=args.scale)
     tgt = args.target
@@ -81,4 +105,38 @@ def run(args) -> int:
         print(f"PSNR {res.metrics['psnr']:.2f} dB  DSSIM {res.metrics['dssim']:.1f}  "
               f"(SSIM {res.metrics['ssim']:.4f}; {METRIC_RULE})")
     print(f"wrote {args.output}")
+    return 0
+
+
+def _run_path(args) -> int:
+    """``--path``: a thin layer over :func:`vibr.flythrough.render_path`."""
+    from ..errors import VibrInputError
+    from ..depthcache import load_scene_cached
+    from ..flythrough import render_path
+    from ..path import read_camera_path, scene_applied_transform
+
+    out = args.output
+    if not (out.lower().endswith(".mp4") or not os.path.splitext(out)[1]):
+        raise VibrInputError("with --path, -o is a .mp4 video or a folder for the frames", out)
+    for flag in ("sources", "depth_files"):
+        if getattr(args, flag, None):
+            raise VibrInputError(f"--{flag.replace('_', '-')} does not apply to --path")
+    if args.depth not in ("auto", "gt", "given", "estimated"):
+        raise VibrInputError(f"--depth {args.depth} does not apply to --path (auto, gt or estimated)")
+    applied = scene_applied_transform(args.scene) if args.dataparser_transforms else None
+    cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
+                             applied_transform=applied)
+    scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=args.cache_dir)
+    params = {k: v for k, v in render_params(args).items() if v is not None}
+    res = render_path(scene, cpath, out, method=args.method,
+                      n_views=8 if args.views is None else args.views, params=params,
+                      overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
+                      cache_dir=args.cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
+                      crf=args.crf, fps=args.fps)
+    t = res.times
+    what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
+        else res.frames_dir
+    print(f"rendered {res.rendered} frames ({res.skipped} already there) in {t['frames']:.1f} s, "
+          f"{res.seconds_per_frame:.2f} s per frame; total {t['total']:.1f} s (depth: {res.depth_source} "
+          f"({t['depth']:.1f} s)); wrote {what}")
     return 0

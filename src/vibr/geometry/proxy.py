@@ -2,7 +2,7 @@
 
 The coarsest proxy: a fronto-parallel plane of the *target* camera at depth ``D``
 (target-frame orthogonal depth), with a large depth uncertainty sigma_z so that the
-geometric weights (METHOD §3) let the variational model, not the proxy, decide.
+geometric weights (docs/METHOD.md §3) let the variational model, not the proxy, decide.
 
 For a source pixel with ray ``r = R_kᵀ K_k⁻¹ x̄`` (world, scaled so that orthogonal source
 depth s gives the point ``C_k + s r``), the plane ``n·X + d_u = D`` with ``n = R_u[2]``,

@@ -1,7 +1,7 @@
 """The geometry stage's output: warped source samples, what the renderer consumes.
 
 Every visible source pixel (k, m) becomes one sample: where it lands in the target
-(``tau_k(x_m)``, METHOD §2 eq. projection), its colour and colour gradient in the source,
+(``tau_k(x_m)``, docs/METHOD.md §2 eq. projection), its colour and colour gradient in the source,
 the local Jacobian of the warp, the deformation factor ``1/|det ∂tau_k/∂x_m|``, the depth
 derivative ``∂tau_k/∂z`` and the depth uncertainty. Samples of all source views are
 concatenated; ``view`` tells which view each came from. The renderer knows nothing of
@@ -31,12 +31,12 @@ class Samples:
         Source colour gradient ``∇v_k(m)`` (per channel, d/dx then d/dy), in source
         pixels, central differences.
     jac : (N, 2, 2) float64
-        ``∂tau_k/∂x_m`` (METHOD eq. deformation); rows are target x, y; columns source
+        ``∂tau_k/∂x_m`` (docs/METHOD.md §2 eq. deformation); rows are target x, y; columns source
         x, y.
     inv_det : (N,) float64
         Deformation weight ``1 / |det ∂tau_k/∂x_m|``.
     dtau_dz : (N, 2) float64
-        ``∂tau_k/∂z`` (METHOD eq. geometrie), target pixels per scene unit of depth.
+        ``∂tau_k/∂z`` (docs/METHOD.md §2 eq. geometrie), target pixels per scene unit of depth.
     sigma_z : (N,) float64
         Depth standard deviation of the sample, scene units.
     view : (N,) int32

@@ -1,6 +1,6 @@
 """The geometry stage end to end: source views with depth + target camera → :class:`Samples`.
 
-Steps (paper §5, METHOD.md §2), per source view k:
+Steps (paper §5, docs/METHOD.md §2), per source view k:
 
 1. depth preparation: NaN = unknown; optionally fill holes (joint bilateral, Kopf 2007);
    slopes ``(z_x, z_y)`` (edge-aware, :func:`vibr.geometry.depth.depth_derivatives`);
@@ -32,7 +32,7 @@ __all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL"]
 
 #: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
 #: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
-#: estimates; the renderer's geometric weight, METHOD §3, scales with it).
+#: estimates; the renderer's geometric weight, docs/METHOD.md §3, scales with it).
 DEFAULT_SIGMA_Z_REL = 0.01
 
 
@@ -105,7 +105,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
                     fill_holes: bool = False, max_inv_det: float = DEFAULT_MAX_INV_DET,
                     edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
                     sigma_z_default: float | None = None, splat_mode: str = "affine",
-                    return_zbuffer: bool = False, grad_scheme: str | None = None) -> Samples:
+                    return_zbuffer: bool = False, prepared: dict | None = None,
+                    grad_scheme: str | None = None) -> Samples:
     """Visible warped source samples for a target camera (paper §5).
 
     Parameters
@@ -123,7 +124,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         Fill unknown depth with the joint bilateral filter before warping.
     max_inv_det : float
         Cap of the deformation weight ``1/|det ∂tau/∂x_m|`` (default 4, see
-        :data:`vibr.geometry.warp.DEFAULT_MAX_INV_DET`; the authors use 1, METHOD §10).
+        :data:`vibr.geometry.warp.DEFAULT_MAX_INV_DET`; the authors use 1, docs/METHOD.md §10).
     edge_rel : float
         Edge detection of the depth slopes (:func:`depth_derivatives`).
     max_quad_px : int
@@ -134,6 +135,10 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         sigma_z (scene units) for views without one; default ``0.01 · median depth``.
     return_zbuffer : bool
         Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``.
+    prepared : dict, optional
+        ``view name → (z, z_x, z_y)`` from :func:`prepare_depth` with the same
+        ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
+        callers rendering many targets (:mod:`vibr.flythrough`).
     grad_scheme : {"forward", "central"}, optional
         Discretisation of the sources' ``∇v`` (:data:`vibr.render.operators.GRAD_SCHEMES`;
         default :data:`vibr.render.operators.DEFAULT_GRAD_SCHEME`), recorded in
@@ -163,7 +168,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
-        prepped = _prepare_views(sources, cam, fill_holes, edge_rel)
+        prepped = _prepare_views(sources, cam, fill_holes, edge_rel, prepared)
     with _Timer(times, cpu, "zbuffer"):
         zbuf = _target_zbuffer(prepped, cam.shape, max_quad_px, splat_mode)
     with _Timer(times, cpu, "visibility"):
@@ -197,12 +202,13 @@ class _Timer:
         return False
 
 
-def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel) -> list:
-    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes and the
-    constants of its warp into ``cam``."""
+def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel, prepared=None) -> list:
+    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes (from
+    ``prepared`` when given) and the constants of its warp into ``cam``."""
     prepped = []
     for v in sources.views:
-        z, zx, zy = prepare_depth(v, fill_holes=fill_holes, edge_rel=edge_rel)
+        pre = prepared.get(v.name) if prepared else None
+        z, zx, zy = pre if pre is not None else prepare_depth(v, fill_holes=fill_holes, edge_rel=edge_rel)
         if v.image is None:
             raise VibrInputError(f"source view {v.name} has no image", v.path or v.name)
         M, c = warp_constants(v.camera, cam)

@@ -1,4 +1,4 @@
-"""Visibility (paper §5.5, METHOD.md §2): target z-buffer by quad splatting, and the
+"""Visibility (paper §5.5, docs/METHOD.md §2): target z-buffer by quad splatting, and the
 per-sample visibility test.
 
 1. **Z-buffer.** Every source pixel m of every source view is a small 3D surface element:

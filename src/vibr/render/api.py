@@ -1,4 +1,4 @@
-"""``vibr.render.render``: a novel view from a scene (paper §4, METHOD §3-7)."""
+"""``vibr.render.render``: a novel view from a scene (paper §4, docs/METHOD.md §3-7)."""
 
 from __future__ import annotations
 
@@ -33,21 +33,24 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
 
 
 def _ready_sources(sources: Scene, target) -> Scene:
-    """``sources`` unchanged when ready to render from, else through
-    :func:`vibr.pipeline.prepare` (depth="auto"): the target held out, depth given to every
-    view."""
+    """``sources`` unchanged when ready to render from; else the target held out and depth
+    transferred to the views lacking it (:func:`vibr.geometry.ensure_source_depth`), which
+    is :func:`vibr.pipeline.prepare`'s ``depth="gt"``. Estimating depth is the pipeline's
+    job, not the renderer's (docs/ARCHITECTURE.md)."""
+    from ..geometry import ensure_source_depth
+
     tname = target.name if isinstance(target, View) else None
     names = sources.names
     if tname not in names and sources.has_depth:
         return sources
-    from ..pipeline import prepare
-
-    if tname is None:
-        return prepare(sources, target, depth="auto")[0]
-    # a target outside the sources still lends its depth to the transfer (a light field
-    # whose only depth is the held-out centre's); it is never rendered from
-    scene = sources if tname in names else sources.replace(views=list(sources.views) + [target])
-    return prepare(scene, tname, depth="auto")[0]
+    views = [v for v in sources.views if v.name != tname]
+    if not views:
+        raise VibrInputError("no source views left after holding out the target", sources.root)
+    # a held-out target with depth lends it to the transfer (a light field whose only depth
+    # is the centre's); it is never rendered from
+    pool = views + ([target] if isinstance(target, View) and target.depth is not None else [])
+    full = ensure_source_depth(sources.replace(views=pool))
+    return full.replace(views=[v for v in full.views if v.name != tname])
 
 
 def render(sources: Scene, target: View | Camera, method="gradient", *,
@@ -55,13 +58,13 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
            verbose: bool = False, geometry_kw: dict | None = None, **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
-    Minimises (METHOD §5, paper eq. energy_final)
+    Minimises (docs/METHOD.md §5, paper eq. energy_final)
 
         E(u) = alpha · ½ Σ_km W_km ((B_k u)(m) − v_k(m))²
              + gamma · ½ Σ_km C_km ‖(B_k D u)(m) − ∇v_k(m)‖²
              + lam · TV(u)
 
-    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (METHOD §3) by monotone FISTA, re-estimating
+    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (docs/METHOD.md §3) by monotone FISTA, re-estimating
     omega from u in ``n_outer`` passes; ulr blends directly.
 
     Parameters
@@ -69,7 +72,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     sources : Scene
         Source views with images and depth, as :func:`vibr.pipeline.prepare` returns them.
         For convenience, sources that are not ready (a view named like the target among
-        them, or a view without depth) go through ``prepare(..., depth="auto")`` first:
+        them, or a view without depth) are made ready as ``prepare(..., depth="gt")`` would:
         the target is held out and depth transferred from the views that have it.
     target : View or Camera
         A held-out view (its image is the reference for ``metrics``) or a bare camera.

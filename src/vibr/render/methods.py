@@ -5,12 +5,12 @@ ulr        Unstructured Lumigraph Rendering (Buehler et al. 2001): direct blend 
            k best views per pixel with angle and resolution penalties; no solve.
 savsr      Wanner & Goldluecke 2012: variational, W = deformation weight only
            (omega = 1/sigma_s², no geometric uncertainty), gamma = 0, one solve.
-bvs        Pujades et al. 2014: variational with the Bayesian weights of METHOD §3
+bvs        Pujades et al. 2014: variational with the Bayesian weights of docs/METHOD.md §3
            (omega re-estimated from u in outer iterations), gamma = 0.
 gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term, gamma > 0.
 =========  ==========================================================================
 
-Parameter defaults (paper names; intensities on the scale ``scale`` = 255, METHOD §9):
+Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/METHOD.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
 * ``gamma = 0.25`` gradient-term weight for ``gradient`` (eq. energy_final; vibr's units:
@@ -19,11 +19,11 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, METHO
   through ``preset="paper"``); forced to 0 for savsr and bvs.
 * ``lam = 0.1`` TV weight (eq. energy_final; the paper's light-field value, for [0, 255]
   intensities: a 1-grey-level step costs 0.1 per pixel of edge).
-* ``sigma_s = 1.0`` sensor noise, grey levels of 255 (METHOD §3, the authors' value).
+* ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/METHOD.md §3, the authors' value).
 * ``sigma_z = None`` depth std. dev., scene units: the samples' own (the geometry stage's
   per-view value, default 1 % of the median depth).
 * ``psf = "bilinear"`` the image-formation model ``v_k = B_k u`` (paper §4.1 eq. normal,
-  METHOD §4): ``"bilinear"`` (unit-square transformed PSF: the bilinear coefficients of
+  docs/METHOD.md §4): ``"bilinear"`` (unit-square transformed PSF: the bilinear coefficients of
   ``tau_k(x_m)``) or ``"footprint"`` (``B_kmp = area(P_km ∩ p) / area(P_km)``, the source
   pixel's parallelogram ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²``, paper fig.
   discretization right; footprints larger than a target pixel shrunk per axis to 1 px, see

@@ -1,4 +1,4 @@
-"""The variational render from warped samples, in named steps (paper §4, METHOD §3-7).
+"""The variational render from warped samples, in named steps (paper §4, docs/METHOD.md §3-7).
 
     splat_coverage    the image-formation operator B (bilinear or footprint PSF), the
                       unweighted coverage Bᵀ1 and, with the gradient term, Bᵀ B and Bᵀ ∇v
@@ -60,7 +60,9 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         sp = Splat(samples.xy, shape, jac=samples.jac, psf="footprint")
     else:
         sp = Splat(samples.xy, shape)
-    ones = np.ones(len(samples), np.float32)
+    # per-sample blend weight in [0, 1] (vibr.flythrough fades a source leaving the set), else 1
+    sw = samples.meta.get("sample_weight")
+    ones = np.ones(len(samples), np.float32) if sw is None else np.asarray(sw, np.float32)
     if gradient:
         grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
         BtB, Btg, cg_unit = sp.normal(ones, grad_vals, dtype=np.float32)
@@ -117,7 +119,7 @@ def initial_image(sp: Splat, Wk, colour, acc) -> np.ndarray:
 
 
 class _Weights:
-    """``W_km`` (METHOD §3) divided by rho, timed into ``times["weights"]``."""
+    """``W_km`` (docs/METHOD.md §3) divided by rho, timed into ``times["weights"]``."""
 
     def __init__(self, samples, p, sp, rho, geometric: bool, times):
         self.samples, self.p, self.sp, self.rho, self.times = samples, p, sp, rho, times
@@ -129,6 +131,9 @@ class _Weights:
         w = geometric_weights(self.samples, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
                               grad_max=p["grad_max"], splat=self.sp, dtype=np.float32)
         w *= np.float32(1.0 / self.rho)
+        sw = self.samples.meta.get("sample_weight")
+        if sw is not None:  # vibr.flythrough's blend weight of the sample's view
+            w *= np.asarray(sw, np.float32)
         if u is not None and p["robust"] != "none":
             w *= robust_factor(self.samples, u, self.sp, p["robust_c"], p["robust"])
         self.times["weights"] += time.perf_counter() - t0

@@ -1,4 +1,4 @@
-"""Per-sample weights of the data term (paper §5.6, METHOD §3; after Pujades et al. 2014).
+"""Per-sample weights of the data term (paper §5.6, docs/METHOD.md §3; after Pujades et al. 2014).
 
 ``W_km = omega_km · |det ∂tau_k/∂x_m|⁻¹`` with the geometric weight
 
@@ -81,7 +81,7 @@ def _weights_kernel(x0, y0, fx, fy, g, dtau, sz, sz_scalar, inv_det, cap, sigma_
 def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *,
                       scale: float = 255.0, grad_max: float | None = 64.0,
                       inv_det_cap: float | None = None, splat=None, dtype=np.float64) -> np.ndarray:
-    """Data-term weights ``W_km`` (METHOD §3), (N,) ``dtype`` (float64 by default).
+    """Data-term weights ``W_km`` (docs/METHOD.md §3), (N,) ``dtype`` (float64 by default).
 
     Parameters
     ----------

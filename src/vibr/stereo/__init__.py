@@ -1,6 +1,7 @@
 """Depth estimation: per-view depth maps and sigma_z from calibrated photographs.
 
-* :func:`estimate_depth` — the entry point (light-field or plane-sweep MVS).
+* :func:`estimate_depth` — the entry point (light-field or plane-sweep MVS), its options
+  :class:`DepthOptions`.
 * :func:`plane_sweep` — plane-sweep stereo for one reference view.
 * :func:`refine_planes` — slanted-plane PatchMatch refinement of a sweep.
 * :func:`check_consistency` — forward-backward geometric consistency across views.
@@ -9,14 +10,14 @@
 * :func:`epi_disparity`, :func:`lightfield_depth` — light-field estimators.
 """
 
-from .api import (complete_coverage, default_depth_range, estimate_depth, frustum_coverage,
-                  select_neighbours, upsample_depth)
+from .api import (DepthOptions, complete_coverage, default_depth_range, depth_options, estimate_depth,
+                  frustum_coverage, select_neighbours, upsample_depth)
 from .consistency import ConsistencyResult, check_consistency
 from .lightfield import disparity_model, epi_disparity, lightfield_depth
 from .planesweep import SweepResult, median_planes, plane_homographies, plane_sweep, refine_planes
 from .segments import SegmentFill, fill_segment_planes, segment_image
 
-__all__ = ["estimate_depth", "default_depth_range", "select_neighbours", "complete_coverage",
+__all__ = ["estimate_depth", "DepthOptions", "depth_options", "default_depth_range", "select_neighbours", "complete_coverage",
            "frustum_coverage", "upsample_depth",
            "plane_sweep", "plane_homographies", "refine_planes", "median_planes", "SweepResult", "check_consistency",
            "ConsistencyResult", "epi_disparity", "disparity_model", "lightfield_depth",

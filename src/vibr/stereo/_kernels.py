@@ -125,6 +125,130 @@ def _mean_two_lowest(C, OK, r, j, nv, n_best):
     return (m1 + m2) / 2
 
 
+@njit(cache=True, inline="always")
+def _warp_band_hsums(I, srcs, A, b, v, w, hv, wv, h0, h1, ib0, ib1, radius, OK, Jrow, HJ, HJJ, HIJ):
+    """Step 1 of :func:`sweep_slab` for view ``v`` and plane ``w``: warp the rows
+    ``h0..h1`` (the band and its halo) by the plane homography, bilinearly (clamped), mark
+    the band's samples that land inside the source in ``OK``, and store the running
+    horizontal window sums of J, J² and I·J (window clipped at the border) in HJ, HJJ, HIJ."""
+    W = I.shape[1]
+    for ii in range(h0, h1):
+        inband = ii >= ib0 and ii < ib1
+        px = A[v, 0, 1] * ii + A[v, 0, 2] + w * b[v, 0]
+        py = A[v, 1, 1] * ii + A[v, 1, 2] + w * b[v, 1]
+        pz = A[v, 2, 1] * ii + A[v, 2, 2] + w * b[v, 2]
+        for j in range(W):
+            qx = px + A[v, 0, 0] * j
+            qy = py + A[v, 1, 0] * j
+            qz = pz + A[v, 2, 0] * j
+            if qz <= 1e-12:
+                if inband:
+                    OK[v, ii - ib0, j] = 0
+                Jrow[j] = 0.0
+                continue
+            iz = 1.0 / qz
+            x = qx * iz
+            y = qy * iz
+            if inband:
+                inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
+                OK[v, ii - ib0, j] = 1 if inside else 0
+            Jrow[j] = _bilinear_clamped(srcs, v, x, y, wv, hv)
+        # running horizontal window sums (window clipped at the border)
+        a = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        for jj in range(min(W, radius)):
+            q = Jrow[jj]
+            a += q
+            a2 += q * q
+            a3 += q * I[ii, jj]
+        r = ii - h0
+        for j in range(W):
+            jn = j + radius
+            if jn < W:
+                q = Jrow[jn]
+                a += q
+                a2 += q * q
+                a3 += q * I[ii, jn]
+            jo = j - radius - 1
+            if jo >= 0:
+                q = Jrow[jo]
+                a -= q
+                a2 -= q * q
+                a3 -= q * I[ii, jo]
+            HJ[r, j] = a
+            HJJ[r, j] = a2
+            HIJ[r, j] = a3
+
+
+@njit(cache=True, inline="always")
+def _band_zncc(mu, sd, v, h0, ib0, ib1, radius, eps2, inv_cols, HJ, HJJ, HIJ, VJ, VJJ, VIJ, C):
+    """Step 2 of :func:`sweep_slab`: running vertical sums of the horizontal sums and the
+    cost ``1 − ZNCC`` of view ``v`` on the band's rows ``ib0..ib1``, into ``C[v]``."""
+    H, W = mu.shape
+    VJ[:] = 0.0
+    VJJ[:] = 0.0
+    VIJ[:] = 0.0
+    for ii in range(max(0, ib0 - radius - 1), min(H, ib0 + radius)):
+        if ii < h0:
+            continue
+        for j in range(W):
+            VJ[j] += HJ[ii - h0, j]
+            VJJ[j] += HJJ[ii - h0, j]
+            VIJ[j] += HIJ[ii - h0, j]
+    for i in range(ib0, ib1):
+        i0 = max(0, i - radius)
+        i1 = min(H, i + radius + 1)
+        inew = i + radius
+        iold = i - radius - 1
+        if inew < H:
+            for j in range(W):
+                VJ[j] += HJ[inew - h0, j]
+                VJJ[j] += HJJ[inew - h0, j]
+                VIJ[j] += HIJ[inew - h0, j]
+        if iold >= h0:
+            for j in range(W):
+                VJ[j] -= HJ[iold - h0, j]
+                VJJ[j] -= HJJ[iold - h0, j]
+                VIJ[j] -= HIJ[iold - h0, j]
+        rn = 1.0 / (i1 - i0)
+        for j in range(W):
+            inv_n = rn * inv_cols[j]
+            mJ = VJ[j] * inv_n
+            vJ = VJJ[j] * inv_n - mJ * mJ
+            if vJ < 0.0:
+                vJ = 0.0
+            ncc = (VIJ[j] * inv_n - mu[i, j] * mJ) / (sd[i, j] * np.sqrt(vJ + eps2))
+            C[v, i - ib0, j] = 1.0 - ncc
+
+
+@njit(cache=True, inline="always")
+def _aggregate_band(C, OK, costs, nv, n_best, ib0, ib1, lab, best_c, best_l, c_minus, c_plus, prev):
+    """Step 3 of :func:`sweep_slab`: the robust aggregation over views (mean of the
+    ``n_best`` lowest costs) on the band and the running minimum over planes, with the
+    costs of the winner's two neighbouring labels."""
+    W = best_c.shape[1]
+    for i in range(ib0, ib1):
+        for j in range(W):
+            if n_best <= 2:
+                c = _mean_two_lowest(C, OK, i - ib0, j, nv, n_best)
+            else:
+                nval = 0
+                for v in range(nv):
+                    if OK[v, i - ib0, j] != 0:
+                        costs[nval] = C[v, i - ib0, j]
+                        nval += 1
+                c = _mean_lowest(costs, nval, n_best)
+            if c < best_c[i, j]:
+                best_c[i, j] = c
+                best_l[i, j] = lab
+                c_minus[i, j] = prev[i, j] if lab > 0 else np.inf
+                c_plus[i, j] = np.inf
+            elif best_l[i, j] == lab - 1:
+                c_plus[i, j] = c
+            prev[i, j] = c
+
+
 @njit(parallel=True, cache=True)
 def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, block,
                best_c, best_l, c_minus, c_plus, prev):
@@ -176,113 +300,13 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
         costs = np.empty(max(nv, 1))
         for di in range(winv.shape[0]):
             w = winv[di]
-            lab = l0 + di
             for v in range(nv):
-                hv = sizes[v, 0]
-                wv = sizes[v, 1]
-                # 1. warp the band's rows (and the halo) and take horizontal window sums
-                for ii in range(h0, h1):
-                    inband = ii >= ib0 and ii < ib1
-                    px = A[v, 0, 1] * ii + A[v, 0, 2] + w * b[v, 0]
-                    py = A[v, 1, 1] * ii + A[v, 1, 2] + w * b[v, 1]
-                    pz = A[v, 2, 1] * ii + A[v, 2, 2] + w * b[v, 2]
-                    for j in range(W):
-                        qx = px + A[v, 0, 0] * j
-                        qy = py + A[v, 1, 0] * j
-                        qz = pz + A[v, 2, 0] * j
-                        if qz <= 1e-12:
-                            if inband:
-                                OK[v, ii - ib0, j] = 0
-                            Jrow[j] = 0.0
-                            continue
-                        iz = 1.0 / qz
-                        x = qx * iz
-                        y = qy * iz
-                        if inband:
-                            inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
-                            OK[v, ii - ib0, j] = 1 if inside else 0
-                        Jrow[j] = _bilinear_clamped(srcs, v, x, y, wv, hv)
-                    # running horizontal window sums (window clipped at the border)
-                    a = 0.0
-                    a2 = 0.0
-                    a3 = 0.0
-                    for jj in range(min(W, radius)):
-                        q = Jrow[jj]
-                        a += q
-                        a2 += q * q
-                        a3 += q * I[ii, jj]
-                    r = ii - h0
-                    for j in range(W):
-                        jn = j + radius
-                        if jn < W:
-                            q = Jrow[jn]
-                            a += q
-                            a2 += q * q
-                            a3 += q * I[ii, jn]
-                        jo = j - radius - 1
-                        if jo >= 0:
-                            q = Jrow[jo]
-                            a -= q
-                            a2 -= q * q
-                            a3 -= q * I[ii, jo]
-                        HJ[r, j] = a
-                        HJJ[r, j] = a2
-                        HIJ[r, j] = a3
-                # 2. running vertical sums and the ZNCC of view v on the band
-                VJ[:] = 0.0
-                VJJ[:] = 0.0
-                VIJ[:] = 0.0
-                for ii in range(max(0, ib0 - radius - 1), min(H, ib0 + radius)):
-                    if ii < h0:
-                        continue
-                    for j in range(W):
-                        VJ[j] += HJ[ii - h0, j]
-                        VJJ[j] += HJJ[ii - h0, j]
-                        VIJ[j] += HIJ[ii - h0, j]
-                for i in range(ib0, ib1):
-                    i0 = max(0, i - radius)
-                    i1 = min(H, i + radius + 1)
-                    inew = i + radius
-                    iold = i - radius - 1
-                    if inew < H:
-                        for j in range(W):
-                            VJ[j] += HJ[inew - h0, j]
-                            VJJ[j] += HJJ[inew - h0, j]
-                            VIJ[j] += HIJ[inew - h0, j]
-                    if iold >= h0:
-                        for j in range(W):
-                            VJ[j] -= HJ[iold - h0, j]
-                            VJJ[j] -= HJJ[iold - h0, j]
-                            VIJ[j] -= HIJ[iold - h0, j]
-                    rn = 1.0 / (i1 - i0)
-                    for j in range(W):
-                        inv_n = rn * inv_cols[j]
-                        mJ = VJ[j] * inv_n
-                        vJ = VJJ[j] * inv_n - mJ * mJ
-                        if vJ < 0.0:
-                            vJ = 0.0
-                        ncc = (VIJ[j] * inv_n - mu[i, j] * mJ) / (sd[i, j] * np.sqrt(vJ + eps2))
-                        C[v, i - ib0, j] = 1.0 - ncc
-            # 3. robust aggregation over views, running minimum
-            for i in range(ib0, ib1):
-                for j in range(W):
-                    if n_best <= 2:
-                        c = _mean_two_lowest(C, OK, i - ib0, j, nv, n_best)
-                    else:
-                        nval = 0
-                        for v in range(nv):
-                            if OK[v, i - ib0, j] != 0:
-                                costs[nval] = C[v, i - ib0, j]
-                                nval += 1
-                        c = _mean_lowest(costs, nval, n_best)
-                    if c < best_c[i, j]:
-                        best_c[i, j] = c
-                        best_l[i, j] = lab
-                        c_minus[i, j] = prev[i, j] if lab > 0 else np.inf
-                        c_plus[i, j] = np.inf
-                    elif best_l[i, j] == lab - 1:
-                        c_plus[i, j] = c
-                    prev[i, j] = c
+                _warp_band_hsums(I, srcs, A, b, v, w, sizes[v, 0], sizes[v, 1], h0, h1, ib0, ib1,
+                                 radius, OK, Jrow, HJ, HJJ, HIJ)
+                _band_zncc(mu, sd, v, h0, ib0, ib1, radius, eps2, inv_cols, HJ, HJJ, HIJ,
+                           VJ, VJJ, VIJ, C)
+            _aggregate_band(C, OK, costs, nv, n_best, ib0, ib1, l0 + di, best_c, best_l, c_minus,
+                            c_plus, prev)
 
 
 @njit(parallel=True, cache=True)
@@ -720,8 +744,8 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
     perturbation of w and the normal).
     ``memo``: a propagation candidate whose source pixel has not changed since this pixel
     last tried it, in the same direction, is skipped (:func:`_try_plane`; the same planes
-    and costs as without, a third fewer propagation evaluations in the second iteration
-    on fountain view 5). Returns the number of plane costs evaluated.
+    and costs as without, fewer propagation evaluations from the second iteration on;
+    docs/DEPTH.md gives the count on fountain). Returns the number of plane costs evaluated.
     """
     H, W = w.shape
     nv = srcs.shape[0]

@@ -23,9 +23,10 @@ scale=...)``) and call with ``scale=1``.
 
 from __future__ import annotations
 
+import inspect
 import logging
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from scipy.ndimage import map_coordinates
@@ -301,17 +302,159 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
     return int(np.clip(np.ceil(span_px / step_px) + 1, lo, hi))
 
 
+# --------------------------------------------------------------------------- options
+@dataclass(frozen=True)
+class DepthOptions:
+    """How :func:`estimate_depth` estimates depth (every field has a default).
+
+    Where each default comes from (the measurements) is in docs/DEPTH.md, "Defaults of
+    estimate_depth".
+
+    Attributes
+    ----------
+    scale : float
+        Resolution factor of the estimation, in (0, 1]; the maps are upsampled back
+        (module docstring).
+    depth_range : (near, far), optional
+        Orthogonal depth range in scene units for every reference view; default
+        :func:`default_depth_range` per view.
+    method : "auto" | "mvs" | "lightfield"
+        "auto" is "lightfield" when ``scene.grid`` is set, else "mvs".
+    n_neighbours : int
+        Stereo partners per reference view (MVS), nearest first (:func:`select_neighbours`).
+    coverage_gain : float or None
+        When the nearest partners leave part of the reference's frustum seen by fewer than
+        ``n_best`` of them, add the candidate that sees most of that part while it adds at
+        least this fraction of the frustum (:func:`complete_coverage`, at most 4 extra
+        views; ``None``: never).
+    n_planes : int, optional
+        Planes of the sweep (default: from ``step_px``, 64 … ``max_planes``).
+    step_px : float
+        Parallax step between planes on the farthest partner, in pixels of the images
+        swept. The slanted-plane refinement then searches depth continuously, so the sweep
+        only has to put each pixel in the basin of its cost (3 px: under half the 7×7
+        window).
+    max_planes : int
+        Upper bound on the number of planes per view.
+    radius : int, optional
+        ZNCC window half-size (default 3 for MVS; light fields: see
+        :func:`~vibr.stereo.lightfield.lightfield_depth`).
+    n_best : int, optional
+        Views averaged per pixel and plane, the lowest costs (default half of the
+        partners; light fields: see :func:`~vibr.stereo.lightfield.lightfield_depth`).
+    max_cost : float
+        Aggregated ``1 − ZNCC`` above which a pixel is unknown.
+    eps : float
+        ZNCC regulariser (intensity std, images in [0, 1]) of the MVS sweep
+        (:func:`~vibr.stereo.planesweep.plane_sweep`); the light-field method has its own
+        (``lightfield={"eps": ...}``, default 0.001).
+    consistency : bool
+        Run the cross-view forward-backward check (MVS); views whose partners are not
+        requested get ``n_partners`` extra (non-excluded) views estimated for it.
+    min_agree, rel_tol, px_tol : consistency check parameters
+        (:func:`vibr.stereo.consistency.check_consistency`).
+    n_partners : int
+        Partners of each requested view estimated for the check.
+    mem_bytes : float
+        Memory bound of one plane sweep's working set.
+    refine_iter : int
+        Iterations of the slanted-plane PatchMatch refinement after the sweep
+        (:func:`~vibr.stereo.planesweep.refine_planes`; 0: the sweep's winner-take-all
+        depth). The light-field method takes it as its ``pm_iter``.
+    median_radius : int, optional
+        Half-size of the window of the joint weighted median of the planes after the
+        refinement (:func:`~vibr.stereo.planesweep.median_planes`, sampled every 3 px; 0:
+        none). Default: 9 for MVS (19×19, about three times the matching window), none for
+        light fields.
+    sweep_scale : float
+        Image scale of the coarse level (MVS, with ``refine_iter > 0``): the sweep and the
+        first ``coarse_iter`` refinement iterations run on images resized by it, their
+        planes are upsampled (:func:`upsample_sweep`), and the last ``refine_iter``
+        iterations, the median and the check run at full size (coarse to fine). After the
+        coarse iterations the full-size ones start from the upsampled slopes alone and
+        leave out the joint random perturbation. 1: the sweep at full size.
+    coarse_iter : int
+        Slanted-plane refinement iterations at ``sweep_scale`` before the upsampling
+        (ignored when ``sweep_scale`` is 1): a plane refined at the coarse level lands more
+        full-size pixels in the right basin than the sweep's winner.
+    fill_segments : bool
+        Dense output (MVS). After the consistency check, fill the unknown pixels of each
+        colour segment whose known depths mostly lie on one plane with that plane, then run
+        the weighted median of the planes again (:mod:`vibr.stereo.segments`; skipped with
+        ``median_radius=0``). Off by default: the renderer leaves unknown source pixels out.
+        ``stats["kept"]`` stays the fraction kept by the check; ``stats["filled"]`` is the
+        fraction filled.
+    lightfield : dict
+        Further keyword arguments of :func:`~vibr.stereo.lightfield.lightfield_depth`
+        (``step``, ``max_views``, ``refine``, ``tv_lambda``, ...); checked by
+        :func:`depth_options`. The light-field method also uses ``depth_range``,
+        ``radius``, ``n_best``, ``max_cost``, ``mem_bytes``, ``refine_iter`` and
+        ``median_radius``; it ignores the MVS-only fields.
+    """
+
+    scale: float = 1.0
+    depth_range: tuple[float, float] | None = None
+    method: str = "auto"
+    n_neighbours: int = 4
+    coverage_gain: float | None = 0.02
+    n_planes: int | None = None
+    step_px: float = 3.0
+    max_planes: int = 128
+    radius: int | None = None
+    n_best: int | None = None
+    max_cost: float = 0.6
+    eps: float = 0.002
+    consistency: bool = True
+    min_agree: int = 1
+    rel_tol: float = 0.01
+    px_tol: float = 1.0
+    n_partners: int = 2
+    mem_bytes: float = 2e9
+    refine_iter: int = REFINE_ITER
+    median_radius: int | None = None
+    sweep_scale: float = 0.5
+    coarse_iter: int = 1
+    fill_segments: bool = False
+    lightfield: dict = field(default_factory=dict)
+
+
+def _lightfield_keywords() -> frozenset[str]:
+    """Keyword arguments of ``lightfield_depth`` a caller may set through
+    ``DepthOptions.lightfield`` (the others come from the DepthOptions fields)."""
+    from .lightfield import lightfield_depth
+
+    own = {"depth_range", "radius", "max_cost", "mem_bytes", "n_best", "return_disparity"}
+    params = inspect.signature(lightfield_depth).parameters.values()
+    return frozenset(p.name for p in params if p.kind is p.KEYWORD_ONLY and p.name not in own)
+
+
+def depth_options(options: DepthOptions | None = None, /, **kw) -> DepthOptions:
+    """``options`` (default :class:`DepthOptions`) with ``kw`` applied: a field of
+    DepthOptions by name, or a keyword of
+    :func:`~vibr.stereo.lightfield.lightfield_depth` (added to ``lightfield``). Any other
+    name raises ``TypeError`` (a misspelt option is an error, not a default)."""
+    opt = DepthOptions() if options is None else options
+    names = {f.name for f in fields(DepthOptions)}
+    lf_names = _lightfield_keywords()
+    own = {k: v for k, v in kw.items() if k in names}
+    lf = {k: v for k, v in kw.items() if k not in names and k in lf_names}
+    unknown = sorted(set(kw) - set(own) - set(lf))
+    if unknown:
+        raise TypeError(f"estimate_depth() got unexpected keyword argument(s) {', '.join(unknown)} "
+                        f"(depth options: {', '.join(sorted(names))}; light-field options: "
+                        f"{', '.join(sorted(lf_names))})")
+    bad = sorted(set(own.get("lightfield", {})) - lf_names)
+    if bad:
+        raise TypeError(f"unknown light-field option(s) {', '.join(bad)} "
+                        f"(choose from {', '.join(sorted(lf_names))})")
+    if lf:
+        own["lightfield"] = {**opt.lightfield, **own.get("lightfield", {}), **lf}
+    return replace(opt, **own) if own else opt
+
+
 # --------------------------------------------------------------------------- main API
-def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=None,
-                   method: str = "auto", exclude=(), n_neighbours: int = 4,
-                   n_planes: int | None = None, step_px: float = 3.0, max_planes: int = 128, radius: int | None = None,
-                   n_best: int | None = None, max_cost: float = 0.6, consistency: bool = True,
-                   min_agree: int = 1, rel_tol: float = 0.01, px_tol: float = 1.0,
-                   n_partners: int = 2, eps: float = 0.002, mem_bytes: float = 2e9,
-                   refine_iter: int = REFINE_ITER, median_radius: int | None = None,
-                   coverage_gain: float | None = 0.02, sweep_scale: float = 0.5,
-                   coarse_iter: int = 1, fill_segments: bool = False,
-                   **lf_params) -> Scene:
+def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOptions | None = None,
+                   **kw) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
 
     Parameters
@@ -321,86 +464,12 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         requested views).
     views : list of int or str, optional
         Views to estimate (default: every view not in ``exclude``).
-    scale : float
-        Resolution factor of the estimation; the maps are upsampled back (module docstring).
-    depth_range : (near, far), optional
-        Orthogonal depth range in scene units for every reference view; default
-        :func:`default_depth_range` per view.
-    method : "auto" | "mvs" | "lightfield"
-        "auto" is "lightfield" when ``scene.grid`` is set, else "mvs".
     exclude : views never used as inputs (e.g. an evaluation's held-out target).
-    n_neighbours : stereo partners per reference view (MVS), nearest first
-        (:func:`select_neighbours`).
-    coverage_gain : when the nearest partners leave part of the reference's frustum seen by
-        fewer than ``n_best`` of them, add the candidate that sees most of that part, while
-        it adds at least this fraction of the frustum (:func:`complete_coverage`, at most 4
-        extra views; ``None``: never). In a hand-held layout the nearest views can all miss
-        the near ground at the bottom of the image; in a sequence (fountain) only its end
-        views get a fifth partner.
-    n_planes : planes of the sweep (default: from ``step_px``, 64 … ``max_planes``).
-    step_px : parallax step between planes on the farthest partner, in pixels. The
-        slanted-plane refinement then searches depth continuously, so the sweep only has
-        to put each pixel in the right basin of its cost; 3 px (under half the 7×7 window)
-        does (docs/DEPTH.md: fountain kept 86.1 % vs 86.2 % at 2 px, 7 s faster).
-    max_planes : upper bound on the number of planes per view.
-    radius : ZNCC window half-size (default 3 for MVS; light fields: see
-        :func:`~vibr.stereo.lightfield.lightfield_depth`).
-    n_best : views averaged per pixel and plane (default half of the partners; for light
-        fields see :func:`~vibr.stereo.lightfield.lightfield_depth`).
-    max_cost : aggregated ``1 − ZNCC`` above which a pixel is unknown.
-    eps : ZNCC regulariser (intensity std, images in [0, 1]); see
-        :func:`~vibr.stereo.planesweep.plane_sweep`.
-    consistency : run the cross-view forward-backward check (MVS); views whose partners
-        are not requested get ``n_partners`` extra (non-excluded) views estimated for it.
-    min_agree, rel_tol, px_tol : consistency check parameters
-        (:func:`vibr.stereo.consistency.check_consistency`).
-    mem_bytes : memory bound of one plane sweep's working set.
-    refine_iter : iterations of the slanted-plane PatchMatch refinement after the sweep
-        (:func:`~vibr.stereo.planesweep.refine_planes`; 0: the sweep's winner-take-all
-        depth). The light-field method takes it too (its ``pm_iter``).
-    median_radius : half-size of the window of the joint weighted median of the planes
-        after the refinement (:func:`~vibr.stereo.planesweep.median_planes`, sampled
-        every 3 px; 0: none). Default: 9 for MVS (19×19, about three times the matching
-        window), none for light fields. On cotton the median lowers the centre view's
-        BadPix and MSE but costs 0.5–1.25 dB when the held-out view is rendered from the
-        estimated source depths (docs/DEPTH.md); on fountain the render gains.
-    sweep_scale : image scale of the coarse level (MVS, with ``refine_iter > 0``): the
-        plane sweep and the first ``coarse_iter`` refinement iterations run on the images
-        resized by it, their planes are upsampled (:func:`upsample_sweep`), and the last
-        ``refine_iter`` iterations, the median and the check run at full size
-        (coarse to fine). The sweep only has to put each pixel in the basin of its cost,
-        and at half size it costs a quarter as much; its planes are ``step_px`` apart in
-        the resized images' pixels. After the coarse iterations, the full-size ones start
-        from the upsampled slopes alone and leave out the joint random perturbation
-        (``refine_planes(fronto_init=False, joint_perturbation=False)``). 1: the sweep at
-        full size, no coarse level. Default 0.5, measured against the full-size sweep
-        (docs/DEPTH.md, sixth session): fountain kept 88.7 % instead of 88.2 %,
-        reprojection error 0.224 px instead of 0.230 px, in 45.2 and 49.4 s against 56.8
-        and 62.6 s in alternating runs; on the hand-held synthetic scenes at 512 px, % within
-        1 % within 0.03 points of the full-size sweep or above it on all seven seeds. The
-        leaner full-size level (seventh session): fountain 88.6 %, 0.223 px, 56.1 and
-        59.0 s against 75.9 and 68.8 s on a slow machine state; hand-held +0.45 points
-        summed over the seven seeds.
-    coarse_iter : slanted-plane refinement iterations at ``sweep_scale`` before the
-        upsampling (ignored when ``sweep_scale`` is 1). Without it the half-size sweep
-        lost up to 0.6 points on the hand-held scenes: a plane refined at the coarse level
-        lands more full-size pixels in the right basin than the sweep's winner.
-    fill_segments : dense output (MVS). After the consistency check, fill the unknown
-        pixels of each colour segment whose known depths mostly lie on one plane with that
-        plane, then run the weighted median of the planes again
-        (:mod:`vibr.stereo.segments`; the median is skipped with ``median_radius=0``):
-        the prior that reaches past the matching window, for a flat surface beside a
-        textured one and for points that too few partners see. Hand-held synthetic
-        scenes at 512 px: 97.1–98.6 % of textured pixels within 1 % instead of
-        92.65–97.1 %. Off by default: the renderer leaves unknown source pixels out, and
-        on fountain renders view 5 0.5 dB better without the filled ones (docs/DEPTH.md,
-        step 9). ``stats["kept"]`` stays the fraction kept by the check;
-        ``stats["filled"]`` is the fraction filled.
-    **lf_params : passed to :func:`vibr.stereo.lightfield.lightfield_depth` (``step``,
-        ``max_views``, ``refine``, ``tv_lambda``, ...). The light-field method uses
-        ``depth_range``, ``radius``, ``max_cost``
-        and ``mem_bytes``; it ignores ``n_neighbours``, ``step_px`` and the consistency
-        options (its sweep already uses the grid views; its eps defaults to 0.001).
+    options : DepthOptions, optional
+        How to estimate (:class:`DepthOptions`).
+    **kw : fields of :class:`DepthOptions` (``scale=0.5``, ``fill_segments=True``, ...) or
+        keywords of :func:`~vibr.stereo.lightfield.lightfield_depth` (``step=0.05``), applied
+        over ``options`` (:func:`depth_options`); any other name raises ``TypeError``.
 
     Returns
     -------
@@ -417,12 +486,32 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     neighbours' depths from the consistency check.
     """
     t_all = time.perf_counter()
+    opt = depth_options(options, **kw)
+    targets, inputs, excl, method, opt = _check_request(scene, views, exclude, opt)
+    cams = [v.camera.scaled(opt.scale) if opt.scale != 1.0 else v.camera for v in scene.views]
+    imgs = _Images(scene, cams)
+    if method == "lightfield":
+        depths, sigmas, stats = _estimate_lightfield(scene, targets, inputs, cams, imgs, opt)
+    else:
+        depths, sigmas, stats = _estimate_mvs(scene, targets, inputs, cams, imgs, opt)
+    new_views = _at_scene_resolution(scene, targets, cams, depths, sigmas)
+    meta = dict(scene.meta)
+    meta["depth_estimation"] = {"method": method, "scale": opt.scale, "views": stats,
+                                "sweep_scale": opt.sweep_scale, "coarse_iter": int(opt.coarse_iter),
+                                "fill_segments": bool(opt.fill_segments) and method == "mvs",
+                                "excluded": [scene.views[i].name for i in sorted(excl)],
+                                "time_s": time.perf_counter() - t_all}
+    logger.info(f"depth: {len(targets)} view(s) by {method} in {time.perf_counter() - t_all:.1f} s")
+    return replace(scene, views=new_views, meta=meta)
+
+
+def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
+    """The requested views (``targets``), the usable inputs, the excluded set, the
+    resolved method, and ``opt`` with its depth range as floats; bad requests raise
+    :class:`VibrInputError`."""
     n = len(scene)
     excl = {scene.index(k) for k in exclude}
-    if views is None:
-        targets = [i for i in range(n) if i not in excl]
-    else:
-        targets = [scene.index(k) for k in views]
+    targets = [i for i in range(n) if i not in excl] if views is None else [scene.index(k) for k in views]
     for i in targets:
         if i in excl:
             raise VibrInputError(f"view {scene.views[i].name} is both requested and excluded", scene.root)
@@ -431,145 +520,183 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
     inputs = [i for i in range(n) if i not in excl and scene.views[i].image is not None]
     if len(inputs) < 2:
         raise VibrInputError("depth estimation needs at least two input views", scene.root)
-    if not (0 < scale <= 1.0 + 1e-9):
-        raise VibrInputError(f"scale must be in (0, 1], got {scale}", scene.root)
-    if not (0 < sweep_scale <= 1.0 + 1e-9):
-        raise VibrInputError(f"sweep_scale must be in (0, 1], got {sweep_scale}", scene.root)
-    if int(coarse_iter) != coarse_iter or coarse_iter < 0:
-        raise VibrInputError(f"coarse_iter must be an integer >= 0, got {coarse_iter}", scene.root)
+    if not (0 < opt.scale <= 1.0 + 1e-9):
+        raise VibrInputError(f"scale must be in (0, 1], got {opt.scale}", scene.root)
+    if not (0 < opt.sweep_scale <= 1.0 + 1e-9):
+        raise VibrInputError(f"sweep_scale must be in (0, 1], got {opt.sweep_scale}", scene.root)
+    if int(opt.coarse_iter) != opt.coarse_iter or opt.coarse_iter < 0:
+        raise VibrInputError(f"coarse_iter must be an integer >= 0, got {opt.coarse_iter}", scene.root)
+    method = opt.method
     if method == "auto":
         method = "lightfield" if scene.grid is not None else "mvs"
     if method not in ("mvs", "lightfield"):
         raise VibrInputError(f"unknown depth method {method!r} (auto, mvs, lightfield)", scene.root)
-    if depth_range is not None:
-        depth_range = (float(depth_range[0]), float(depth_range[1]))
-        if not 0 < depth_range[0] < depth_range[1]:
-            raise VibrInputError(f"bad depth range {depth_range}", scene.root)
+    if opt.depth_range is not None:
+        dr = (float(opt.depth_range[0]), float(opt.depth_range[1]))
+        if not 0 < dr[0] < dr[1]:
+            raise VibrInputError(f"bad depth range {dr}", scene.root)
+        opt = replace(opt, depth_range=dr)
+    return targets, inputs, excl, method, opt
 
-    cams = [v.camera.scaled(scale) if scale != 1.0 else v.camera for v in scene.views]
-    images: dict[int, np.ndarray] = {}
 
-    def img(i):
-        if i not in images:
-            images[i] = _resized(scene.views[i].image, cams[i])
-        return images[i]
+class _Images:
+    """The views' images at the working scale (``imgs(i)``) and reduced copies of them
+    (``imgs.small(i, camera)``: coarse level, depth-range sweep), each resized once."""
 
-    # reduced-size images (coarse level, depth-range sweep), each resized once per size
-    resized: dict[tuple, np.ndarray] = {}
+    def __init__(self, scene: Scene, cams: list[Camera]):
+        self.scene, self.cams = scene, cams
+        self.full: dict[int, np.ndarray] = {}
+        self.resized: dict[tuple, np.ndarray] = {}  # keyed (view, shape), shared with default_depth_range
 
-    def small(i, camera):
+    def __call__(self, i: int) -> np.ndarray:
+        if i not in self.full:
+            self.full[i] = _resized(self.scene.views[i].image, self.cams[i])
+        return self.full[i]
+
+    def small(self, i: int, camera: Camera) -> np.ndarray:
         key = (i, camera.shape)
-        if key not in resized:
-            resized[key] = _resized(img(i), camera)
-        return resized[key]
+        if key not in self.resized:
+            self.resized[key] = _resized(self(i), camera)
+        return self.resized[key]
 
-    if method == "lightfield":
-        from .lightfield import lightfield_depth
 
-        results = {}
-        for i in targets:
-            lf = dict(lf_params)
-            lf.setdefault("pm_iter", refine_iter)
-            if median_radius is not None:
-                lf.setdefault("median_radius", median_radius)
-            results[i] = lightfield_depth(scene, i, cams, img, inputs, depth_range=depth_range,
-                                          radius=radius, max_cost=max_cost, mem_bytes=mem_bytes,
-                                          n_best=n_best, **lf)
-        stats = {scene.views[i].name: dict(results[i][2], role="target") for i in targets}
-        depths = {i: results[i][0] for i in targets}
-        sigmas = {i: results[i][1] for i in targets}
-    else:
-        # views to estimate: the targets plus consistency partners
-        nbrs = {i: select_neighbours(cams, i, inputs, n_neighbours) for i in targets}
-        for i in targets:
-            if not nbrs[i]:
-                raise VibrInputError(f"view {scene.views[i].name} has no usable stereo partner", scene.root)
-        est = list(targets)
-        if consistency:
-            for i in targets:
-                for j in nbrs[i][:n_partners]:
-                    if j not in est:
-                        est.append(j)
-                        nbrs[j] = select_neighbours(cams, j, inputs, n_neighbours)
-        depths, sigmas, stats = {}, {}, {}
-        raw = {}
-        med_r = 9 if median_radius is None else int(median_radius)  # MVS default: 19×19 window
-        for i in est:
+def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
+    """Light-field depth of each requested view (:func:`lightfield_depth`)."""
+    from .lightfield import lightfield_depth
+
+    depths, sigmas, stats = {}, {}, {}
+    for i in targets:
+        lf = dict(opt.lightfield)
+        lf.setdefault("pm_iter", opt.refine_iter)
+        if opt.median_radius is not None:
+            lf.setdefault("median_radius", opt.median_radius)
+        z, s, st = lightfield_depth(scene, i, cams, imgs, inputs, depth_range=opt.depth_range,
+                                    radius=opt.radius, max_cost=opt.max_cost, mem_bytes=opt.mem_bytes,
+                                    n_best=opt.n_best, **lf)[:3]
+        depths[i], sigmas[i] = z, s
+        stats[scene.views[i].name] = dict(st, role="target")
+    return depths, sigmas, stats
+
+
+def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions):
+    """Plane-sweep MVS of each requested view (and of its consistency partners), then the
+    consistency check and the optional segment completion of the requested views."""
+    est, nbrs = _mvs_views(scene, cams, targets, inputs, opt)
+    med_r = 9 if opt.median_radius is None else int(opt.median_radius)  # MVS default: 19×19 window
+    raw, stats = {}, {}
+    for i in est:
+        if not nbrs[i]:
+            continue
+        t0 = time.perf_counter()
+        raw[i], st, nbrs[i] = _sweep_view(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
+        st["time_s"] = time.perf_counter() - t0
+        st["role"] = "target" if i in targets else "consistency partner"
+        stats[scene.views[i].name] = st
+    depths, sigmas = {}, {}
+    for i in targets:
+        d, s, grad, dr = raw[i]
+        st = stats[scene.views[i].name]
+        if opt.consistency:
+            d, s = _check_view(scene, i, d, s, raw, est, nbrs, cams, opt, st)
+        st["kept"] = float(np.isfinite(d).mean())
+        if opt.fill_segments:
             t0 = time.perf_counter()
-            nb = nbrs[i]
-            if not nb:
-                continue
-            dr = depth_range or default_depth_range(scene, i, cams, {j: img(j) for j in [i] + nb}, nb,
-                                                    cache=resized)
-            # the views averaged per pixel stay those the nearest-first set implies; the
-            # coverage partners only stand in where that set does not see
-            nbest_i = n_best or max(1, len(nb) // 2)
-            if coverage_gain is not None:
-                nb = complete_coverage(cams, i, nb, inputs, dr, nbest_i, min_gain=coverage_gain)
-                nbrs[i] = nb
-            D = n_planes or _planes_for(cams[i], [cams[j] for j in nb], dr, step_px, min(64, max_planes), max_planes)
-            coarse_done = False
-            if refine_iter > 0 and sweep_scale < 1.0:
-                # coarse level: the sweep only has to put each pixel in the basin of its
-                # cost, and at a reduced size it costs sweep_scale² as much
-                cs = [cams[j].scaled(sweep_scale) for j in [i] + nb]
-                ims = [small(j, c) for j, c in zip([i] + nb, cs)]
-                if not n_planes:  # step_px is in pixels of the images swept
-                    D = _planes_for(cs[0], cs[1:], dr, step_px, min(64, max_planes), max_planes)
-                res = plane_sweep(ims[0], cs[0], ims[1:], cs[1:], dr, n_planes=D,
-                                  radius=radius or 3, n_best=nbest_i, max_cost=max_cost, eps=eps,
-                                  mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
-                if coarse_iter > 0:
-                    res = refine_planes(ims[0], cs[0], ims[1:], cs[1:], res, n_iter=int(coarse_iter),
-                                        n_best=nbest_i, eps=eps, max_cost=max_cost, radius=radius or 3)
-                    coarse_done = True
-                res = upsample_sweep(res, cs[0], cams[i])
-            else:
-                res = plane_sweep(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], dr,
-                                  n_planes=D, radius=radius or 3, n_best=nbest_i, max_cost=max_cost,
-                                  eps=eps, mem_bytes=mem_bytes, desc=f"depth {scene.views[i].name}")
-            if refine_iter > 0:
-                # after a refined coarse level the upsampled inverse depth carries its
-                # slopes and the joint random moves have been made at the coarse size: the
-                # fronto-parallel start and the joint perturbation are not worth their costs
-                res = refine_planes(img(i), cams[i], [img(j) for j in nb], [cams[j] for j in nb], res,
-                                    n_iter=refine_iter, n_best=nbest_i, eps=eps, max_cost=max_cost,
-                                    radius=radius or 3, fronto_init=not coarse_done,
-                                    joint_perturbation=not coarse_done)
-            if med_r > 0:
-                res = median_planes(img(i), res, radius=med_r)
-            d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
-            raw[i] = (d, res.sigma_z, res.meta.get("plane_gradient"), dr)
-            stats[scene.views[i].name] = {
-                "depth_range": dr, "n_planes": D, "neighbours": [scene.views[j].name for j in nb],
-                "confident": float(res.confident.mean()), "sweep_s": res.meta["time_s"],
-                "time_s": time.perf_counter() - t0,
-                "role": "target" if i in targets else "consistency partner"}
-        for i in targets:
-            d, s, grad, dr = raw[i]
-            st = stats[scene.views[i].name]
-            if consistency:
-                t0 = time.perf_counter()
-                partners = [j for j in est if j != i and j in raw and (j in nbrs[i] or i in nbrs.get(j, []))]
-                cr = check_consistency(d, cams[i], [raw[j][0] for j in partners],
-                                       [cams[j] for j in partners], rel_tol=rel_tol,
-                                       px_tol=px_tol, min_agree=min_agree)
-                d = np.where(cr.keep, d, np.nan).astype(np.float32)
-                spread = np.where(np.isfinite(cr.spread), cr.spread, 0.0)
-                s = np.sqrt(s.astype(np.float64) ** 2 + spread ** 2).astype(np.float32)
-                st["consistency_partners"] = [scene.views[j].name for j in partners]
-                st["reproj_px"] = float(np.nanmean(cr.reproj[cr.keep])) if cr.keep.any() else float("nan")
-                st["consistency_s"] = time.perf_counter() - t0
-            st["kept"] = float(np.isfinite(d).mean())
-            if fill_segments:
-                t0 = time.perf_counter()
-                # segmented at half size: the segmentation costs 0.6 s a view at 768x512
-                small_img = small(i, cams[i].scaled(0.5))
-                d, s, n_filled = _segment_completion(img(i), small_img, cams[i], d, s, grad, dr, rel_tol, med_r)
-                st["filled"] = n_filled / d.size
-                st["segments_s"] = time.perf_counter() - t0
-            depths[i], sigmas[i] = d, s
+            # segmented at half size: the segmentation is the slow part at full size
+            small_img = imgs.small(i, cams[i].scaled(0.5))
+            d, s, n_filled = _segment_completion(imgs(i), small_img, cams[i], d, s, grad, dr,
+                                                 opt.rel_tol, med_r)
+            st["filled"] = n_filled / d.size
+            st["segments_s"] = time.perf_counter() - t0
+        depths[i], sigmas[i] = d, s
+    return depths, sigmas, stats
 
+
+def _mvs_views(scene, cams, targets, inputs, opt: DepthOptions):
+    """The views to estimate (the targets, then their consistency partners) and the
+    nearest-first stereo partners of each."""
+    nbrs = {i: select_neighbours(cams, i, inputs, opt.n_neighbours) for i in targets}
+    for i in targets:
+        if not nbrs[i]:
+            raise VibrInputError(f"view {scene.views[i].name} has no usable stereo partner", scene.root)
+    est = list(targets)
+    if opt.consistency:
+        for i in targets:
+            for j in nbrs[i][:opt.n_partners]:
+                if j not in est:
+                    est.append(j)
+                    nbrs[j] = select_neighbours(cams, j, inputs, opt.n_neighbours)
+    return est, nbrs
+
+
+def _sweep_view(scene, i, nb, cams, imgs, inputs, opt: DepthOptions, med_r: int):
+    """Sweep (coarse to fine), slanted-plane refinement and weighted median of view ``i``
+    against partners ``nb``. Returns ``((depth NaN unknown, sigma_z, plane gradient, depth
+    range), stats, partners)``; the partners gain coverage views (:func:`complete_coverage`)."""
+    dr = opt.depth_range or default_depth_range(scene, i, cams, {j: imgs(j) for j in [i] + nb}, nb,
+                                                cache=imgs.resized)
+    # the views averaged per pixel stay those the nearest-first set implies; the
+    # coverage partners only stand in where that set does not see
+    nbest_i = opt.n_best or max(1, len(nb) // 2)
+    if opt.coverage_gain is not None:
+        nb = complete_coverage(cams, i, nb, inputs, dr, nbest_i, min_gain=opt.coverage_gain)
+    lo_planes = min(64, opt.max_planes)
+    D = opt.n_planes or _planes_for(cams[i], [cams[j] for j in nb], dr, opt.step_px, lo_planes, opt.max_planes)
+    radius = opt.radius or 3
+    common = dict(n_best=nbest_i, eps=opt.eps, max_cost=opt.max_cost, radius=radius)
+    desc = f"depth {scene.views[i].name}"
+    coarse_done = False
+    if opt.refine_iter > 0 and opt.sweep_scale < 1.0:
+        # coarse level: the sweep only has to put each pixel in the basin of its
+        # cost, and at a reduced size it costs sweep_scale² as much
+        cs = [cams[j].scaled(opt.sweep_scale) for j in [i] + nb]
+        ims = [imgs.small(j, c) for j, c in zip([i] + nb, cs)]
+        if not opt.n_planes:  # step_px is in pixels of the images swept
+            D = _planes_for(cs[0], cs[1:], dr, opt.step_px, lo_planes, opt.max_planes)
+        res = plane_sweep(ims[0], cs[0], ims[1:], cs[1:], dr, n_planes=D, mem_bytes=opt.mem_bytes,
+                          desc=desc, **common)
+        if opt.coarse_iter > 0:
+            res = refine_planes(ims[0], cs[0], ims[1:], cs[1:], res, n_iter=int(opt.coarse_iter), **common)
+            coarse_done = True
+        res = upsample_sweep(res, cs[0], cams[i])
+    else:
+        res = plane_sweep(imgs(i), cams[i], [imgs(j) for j in nb], [cams[j] for j in nb], dr,
+                          n_planes=D, mem_bytes=opt.mem_bytes, desc=desc, **common)
+    if opt.refine_iter > 0:
+        # after a refined coarse level the upsampled inverse depth carries its
+        # slopes and the joint random moves have been made at the coarse size: the
+        # fronto-parallel start and the joint perturbation are not worth their costs
+        res = refine_planes(imgs(i), cams[i], [imgs(j) for j in nb], [cams[j] for j in nb], res,
+                            n_iter=opt.refine_iter, fronto_init=not coarse_done,
+                            joint_perturbation=not coarse_done, **common)
+    if med_r > 0:
+        res = median_planes(imgs(i), res, radius=med_r)
+    d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
+    stats = {"depth_range": dr, "n_planes": D, "neighbours": [scene.views[j].name for j in nb],
+             "confident": float(res.confident.mean()), "sweep_s": res.meta["time_s"]}
+    return (d, res.sigma_z, res.meta.get("plane_gradient"), dr), stats, nb
+
+
+def _check_view(scene, i, d, s, raw, est, nbrs, cams, opt: DepthOptions, st: dict):
+    """Forward-backward consistency of view ``i`` against the estimated views it is a
+    partner of or that are its partners: inconsistent pixels become NaN and sigma_z
+    gains the agreeing views' spread. Records partners, reprojection error and time in
+    ``st``."""
+    t0 = time.perf_counter()
+    partners = [j for j in est if j != i and j in raw and (j in nbrs[i] or i in nbrs.get(j, []))]
+    cr = check_consistency(d, cams[i], [raw[j][0] for j in partners], [cams[j] for j in partners],
+                           rel_tol=opt.rel_tol, px_tol=opt.px_tol, min_agree=opt.min_agree)
+    d = np.where(cr.keep, d, np.nan).astype(np.float32)
+    spread = np.where(np.isfinite(cr.spread), cr.spread, 0.0)
+    s = np.sqrt(s.astype(np.float64) ** 2 + spread ** 2).astype(np.float32)
+    st["consistency_partners"] = [scene.views[j].name for j in partners]
+    st["reproj_px"] = float(np.nanmean(cr.reproj[cr.keep])) if cr.keep.any() else float("nan")
+    st["consistency_s"] = time.perf_counter() - t0
+    return d, s
+
+
+def _at_scene_resolution(scene, targets, cams, depths, sigmas) -> list:
+    """The scene's views with the estimated depth and sigma_z upsampled to each view's own
+    size; unknown pixels get the largest known sigma_z."""
     new_views = list(scene.views)
     for i in targets:
         v = scene.views[i]
@@ -579,11 +706,4 @@ def estimate_depth(scene: Scene, *, views=None, scale: float = 1.0, depth_range=
         fill = float(np.nanmax(s[known])) if known.any() else 1.0
         s = np.where(known & np.isfinite(s), s, fill).astype(np.float32)
         new_views[i] = v.replace(depth=d, sigma_z=s)
-    meta = dict(scene.meta)
-    meta["depth_estimation"] = {"method": method, "scale": scale, "views": stats,
-                                "sweep_scale": sweep_scale, "coarse_iter": int(coarse_iter),
-                                "fill_segments": bool(fill_segments) and method == "mvs",
-                                "excluded": [scene.views[i].name for i in sorted(excl)],
-                                "time_s": time.perf_counter() - t_all}
-    logger.info(f"depth: {len(targets)} view(s) by {method} in {time.perf_counter() - t_all:.1f} s")
-    return replace(scene, views=new_views, meta=meta)
+    return new_views

@@ -112,7 +112,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                      return_disparity: bool = False, eps: float = 0.001,
                      st_max_disp: float = 2.5, pm_iter: int = 2, pm_views: int | None = None,
                      pm_stride: int = 1, n_best: int | None = None, pm_sigma_c: float = 0.03,
-                     pm_sigma_s: float = 2.0, median_radius: int = 0, **_ignored):
+                     pm_sigma_s: float = 2.0, median_radius: int = 0):
     """Depth and sigma_z for grid view ``ref`` from the other (non-excluded) grid views.
 
     Parameters
@@ -123,8 +123,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         preferring the reference's row, column and diagonals (the star of the grid).
     radius : ZNCC window half-size of the sweep and the refinement. Default 3 (7×7) with up
         to 8 views, 2 (5×5) with more: the matching noise falls with window area × views,
-        and a smaller window fattens depth edges less (cotton 9×9: BadPix 2.30 at 5×5,
-        2.65 at 7×7; 3×3 block: 6.19 at 7×7, docs/DEPTH.md).
+        and a smaller window fattens depth edges less.
     step : disparity step between planes (pixels per grid step).
     refine : "st" (local estimate only), "sweep" or "sweep+tv".
     tv_lambda, tv_iter : data weight and iterations of the TV-L1 refinement.
@@ -135,22 +134,22 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     pm_iter, pm_views, pm_stride : iterations of the slanted-plane refinement of the sweep
         (:func:`vibr.stereo.planesweep.refine_planes`, 0: none), the number of grid
         neighbours it uses (default: the sweep's; else the first of them, the nearest star
-        views) and the sampling step of its window (the sweep's ``radius``). A dense window
-        (stride 1) and all the sweep's views: the grid's small baselines need them (on
-        cotton 9×9, 8 views and a 2-px stride made BadPix 3× worse than the sweep's).
+        views) and the sampling step of its window (default 1, dense: the grid's small
+        baselines need a dense window and all the sweep's views).
     pm_sigma_c, pm_sigma_s : grey-level and spatial scales of the refinement's
-        adaptive-support weights on the colour image. Tighter than the MVS defaults
-        (0.05, the radius): the dense window has samples next to the centre to weigh, and
-        on the grids measured it moved the pixels next to depth edges most (docs/DEPTH.md).
+        adaptive-support weights on the colour image; tighter than the MVS defaults
+        (0.05, the radius), since the dense window has samples next to the centre to weigh.
     median_radius : window half-size of the joint weighted median of the refined planes
-        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none). On cotton it
-        removes the outliers the TV-L1 otherwise spreads (BadPix 6.19 → 5.49 on the 3×3
-        block, MSE×100 1.986 → 0.635), yet rendering the centre from the estimated source
-        depths loses 0.5–1.25 dB with it (docs/DEPTH.md), so it is not the default.
+        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none). It removes the
+        outliers the TV-L1 otherwise spreads, yet renders from the estimated depths lose
+        with it, so it is not the default.
     n_best : views whose costs are averaged per pixel and plane (the lowest ones), in the
         sweep and the refinement. Default: a quarter of the views, at least 2: next to an
         occlusion edge only the views whose baseline runs along the edge (one of the
         star's four directions) match the background cleanly.
+
+    The measurements behind these defaults are in docs/DEPTH.md ("Defaults of
+    estimate_depth").
 
     Returns
     -------
@@ -163,51 +162,16 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         raise VibrInputError(f"view {scene.views[ref].name} is not on the light-field grid", scene.root)
     r0, c0 = pos[ref]
     cam = cams[ref]
-    grey = {ref: to_grey(img(ref))}
-    # disparity model from any horizontal or vertical neighbour geometry
     others = [j for j in inputs if j != ref and j in pos]
     if not others:
         raise VibrInputError("light-field depth needs at least one other grid view", scene.root)
-    # the affine model d = -(a + b w): derive from a virtual neighbour one column right,
-    # using the camera of the nearest same-row view (scaled by its column offset).
-    row_nb = [j for j in others if pos[j][0] == r0]
-    col_nb = [j for j in others if pos[j][1] == c0]
-    # any view in another column gives the x model (parallel grid: the x shift depends on
-    # the column offset only), the same row preferred; a grid with missing views may leave
-    # a view with diagonal neighbours only
-    x_nb = [j for j in others if pos[j][1] != c0]
-    if x_nb:
-        j = min(x_nb, key=lambda k: (abs(pos[k][0] - r0), abs(pos[k][1] - c0)))
-        a, b = disparity_model(cam, cams[j])
-        ds = pos[j][1] - c0
-    else:
-        j = min(col_nb, key=lambda k: abs(pos[k][0] - r0))
-        cj = cams[j]
-        # same model along y: swap axes by measuring the y shift
-        x = np.array([(cam.width - 1) / 2, (cam.height - 1) / 2])
-        ray = cam.pixel_rays(x)
-        p_inf = cj.project(cam.camera_to_world(ray * 1e9))[0][1]
-        p_1 = cj.project(cam.camera_to_world(ray * 1.0))[0][1]
-        a, b, ds = float(p_inf - x[1]), float(p_1 - p_inf), pos[j][0] - r0
-    a /= ds
-    b /= ds
+    a, b = _grid_disparity_model(cams, ref, others, pos)
 
     def d_to_w(d):
         return (-np.asarray(d, np.float64) - a) / b
 
-    # ---- local estimate: EPI structure tensor on the row and the column
-    best_d = np.zeros(cam.shape)
-    best_c = np.full(cam.shape, -1.0)
-    for axis, group in (("x", row_nb), ("y", col_nb)):
-        if not group:
-            continue
-        idx = [ref] + sorted(group, key=lambda k: pos[k][1] if axis == "x" else pos[k][0])
-        offs = np.array([(pos[k][1] - c0) if axis == "x" else (pos[k][0] - r0) for k in idx], float)
-        stack = np.stack([grey.setdefault(k, to_grey(img(k))) for k in idx])
-        d, coh = epi_disparity(stack, offs, axis)
-        better = coh > best_c
-        best_d[better] = d[better]
-        best_c[better] = coh[better]
+    grey = {ref: to_grey(img(ref))}
+    best_d, best_c = _local_estimate(ref, others, pos, img, grey)
     st_conf = best_c >= st_min_coherence
     stats = {"method": "lightfield", "refine": refine, "st_coherent": float(st_conf.mean())}
     # sigma of the local estimate: 0.05 px at full coherence, growing as coherence drops
@@ -219,35 +183,11 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         z = np.where(ok, 1.0 / np.where(w > 0, w, 1.0), np.nan)
         sigma = z * z * sig_d_st / abs(b)
     else:
-        # ---- fine plane sweep over the grid neighbours
-        dsel = best_d[st_conf] if st_conf.sum() > 100 else best_d.ravel()
-        dlo, dhi = np.percentile(dsel, [1, 99])
-        if depth_range is None and (st_conf.sum() <= 100 or max(abs(dlo), abs(dhi)) > st_max_disp):
-            # large disparities (the 3-tap derivative along s aliases), or no local estimate
-            # (no same-row or same-column neighbour): the generic coarse-sweep range
-            from .api import default_depth_range
-
-            nb0 = sorted(others, key=lambda k: abs(pos[k][0] - r0) + abs(pos[k][1] - c0))[:4]
-            depth_range = default_depth_range(scene, ref, cams, {k: img(k) for k in [ref] + nb0}, nb0,
-                                              use_points=False)
-            stats["range_from"] = "coarse sweep"
-        if depth_range is None:
-            stats["range_from"] = "structure tensor"
-            dlo -= margin_px
-            dhi += margin_px
-            w_a, w_b = sorted((float(d_to_w(dlo)), float(d_to_w(dhi))))
-            w_a = max(w_a, 1e-6 * max(w_b, 1e-6))
-            dr = (1.0 / w_b, 1.0 / w_a)
-        else:
-            dr = depth_range
+        dr = _sweep_range(scene, ref, cams, img, others, pos, best_d, st_conf, d_to_w, depth_range,
+                          st_max_disp, margin_px, stats)
         dspan = abs(b) * (1.0 / dr[0] - 1.0 / dr[1])
         D = int(np.clip(np.ceil(dspan / step) + 1, 16, 512))
-        # neighbours: star directions first, then by grid distance
-        def key(k):
-            dr_, dc_ = pos[k][0] - r0, pos[k][1] - c0
-            star = dr_ == 0 or dc_ == 0 or abs(dr_) == abs(dc_)
-            return (0 if star else 1, max(abs(dr_), abs(dc_)), abs(dr_) + abs(dc_))
-        nb = sorted(others, key=key)[:max_views]
+        nb = _star_neighbours(others, pos, r0, c0)[:max_views]
         if n_best is None:
             # Occlusions: next to a depth edge only the views whose baseline runs along the
             # edge match cleanly, one of the star's 4 directions, a quarter of its views
@@ -257,18 +197,11 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
             # than one ring of views a 5×5 window suffices and fattens depth edges less
             radius = 3 if len(nb) <= 8 else 2
         n_best = max(1, min(int(n_best), len(nb)))
-        res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
-                          n_planes=D, radius=radius, n_best=n_best,
-                          max_cost=max_cost, mem_bytes=mem_bytes, eps=eps,
-                          desc=f"light-field sweep {scene.views[ref].name}")
-        if pm_iter > 0:
-            nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
-            res = refine_planes(img(ref), cam, [img(k) for k in nbr], [cams[k] for k in nbr], res,
-                                n_iter=pm_iter, n_best=min(n_best, len(nbr)), eps=eps,
-                                max_cost=max_cost, radius=radius, stride=pm_stride,
-                                sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
-        if median_radius:
-            res = median_planes(img(ref), res, radius=median_radius)
+        res = _sweep_planes(img, cams, ref, nb, dr, desc=f"light-field sweep {scene.views[ref].name}",
+                            n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
+                            mem_bytes=mem_bytes, eps=eps, pm_iter=pm_iter, pm_views=pm_views,
+                            pm_stride=pm_stride, pm_sigma_c=pm_sigma_c, pm_sigma_s=pm_sigma_s,
+                            median_radius=median_radius)
         disp = -(a + b * res.inv_depth)
         conf = res.confident
         stats.update({"depth_range": dr, "n_planes": D, "n_views": len(nb), "n_best": n_best,
@@ -276,11 +209,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                       "confident": float(conf.mean()), "sweep_s": res.meta["time_s"]})
         sigma_d = res.sigma_z / np.maximum(res.depth, 1e-12) ** 2 * abs(b)
         if refine == "sweep+tv":
-            I = grey[ref].astype(np.float64)
-            gm = np.hypot(sobel(I, 0), sobel(I, 1)) / 8.0
-            g = np.maximum(np.exp(-gm / 0.02), 0.05)
-            cw = np.where(conf, 1.0, 0.1) / np.maximum(sigma_d / 0.05, 1.0)
-            disp = kern.tv_l1(disp.astype(np.float64), cw, g, float(tv_lambda), int(tv_iter))
+            disp = _tv_refine(grey[ref], disp, conf, sigma_d, tv_lambda, tv_iter)
         w = d_to_w(disp)
         z = np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0), np.nan)
         sigma = z * z * sigma_d / abs(b)
@@ -292,3 +221,118 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     if return_disparity:
         out = out + (np.asarray(disp, np.float64),)
     return out
+
+
+def _grid_disparity_model(cams: list[Camera], ref: int, others: list[int], pos: dict) -> tuple[float, float]:
+    """``(a, b)`` of the affine model ``d = −(a + b w)``, per grid step, for view ``ref``.
+
+    Any view in another column gives the x model (parallel grid: the x shift depends on
+    the column offset only), the same row preferred; a grid with missing views may leave a
+    view with same-column (or diagonal) neighbours only, which give the same model along y.
+    """
+    r0, c0 = pos[ref]
+    cam = cams[ref]
+    x_nb = [j for j in others if pos[j][1] != c0]
+    if x_nb:
+        j = min(x_nb, key=lambda k: (abs(pos[k][0] - r0), abs(pos[k][1] - c0)))
+        a, b = disparity_model(cam, cams[j])
+        ds = pos[j][1] - c0
+    else:
+        col_nb = [j for j in others if pos[j][1] == c0]
+        j = min(col_nb, key=lambda k: abs(pos[k][0] - r0))
+        cj = cams[j]
+        # same model along y: swap axes by measuring the y shift
+        x = np.array([(cam.width - 1) / 2, (cam.height - 1) / 2])
+        ray = cam.pixel_rays(x)
+        p_inf = cj.project(cam.camera_to_world(ray * 1e9))[0][1]
+        p_1 = cj.project(cam.camera_to_world(ray * 1.0))[0][1]
+        a, b, ds = float(p_inf - x[1]), float(p_1 - p_inf), pos[j][0] - r0
+    return a / ds, b / ds
+
+
+def _local_estimate(ref: int, others: list[int], pos: dict, img, grey: dict):
+    """EPI structure-tensor disparity of the reference row and column (:func:`epi_disparity`),
+    each pixel keeping the more coherent one. Returns ``(disparity, coherence)``, coherence
+    −1 where neither EPI exists. ``grey`` caches grey images by view."""
+    r0, c0 = pos[ref]
+    shape = grey[ref].shape
+    best_d = np.zeros(shape)
+    best_c = np.full(shape, -1.0)
+    row_nb = [j for j in others if pos[j][0] == r0]
+    col_nb = [j for j in others if pos[j][1] == c0]
+    for axis, group in (("x", row_nb), ("y", col_nb)):
+        if not group:
+            continue
+        idx = [ref] + sorted(group, key=lambda k: pos[k][1] if axis == "x" else pos[k][0])
+        offs = np.array([(pos[k][1] - c0) if axis == "x" else (pos[k][0] - r0) for k in idx], float)
+        stack = np.stack([grey.setdefault(k, to_grey(img(k))) for k in idx])
+        d, coh = epi_disparity(stack, offs, axis)
+        better = coh > best_c
+        best_d[better] = d[better]
+        best_c[better] = coh[better]
+    return best_d, best_c
+
+
+def _sweep_range(scene: Scene, ref: int, cams, img, others, pos, best_d, st_conf, d_to_w,
+                 depth_range, st_max_disp: float, margin_px: float, stats: dict):
+    """Depth range of the fine sweep: the given one; else the coherent local disparities'
+    1st–99th percentiles widened by ``margin_px``; else (large disparities, where the
+    3-tap derivative along s aliases, or no local estimate) the generic coarse-sweep range
+    of :func:`vibr.stereo.api.default_depth_range`. Records ``range_from`` in ``stats``."""
+    r0, c0 = pos[ref]
+    dsel = best_d[st_conf] if st_conf.sum() > 100 else best_d.ravel()
+    dlo, dhi = np.percentile(dsel, [1, 99])
+    if depth_range is None and (st_conf.sum() <= 100 or max(abs(dlo), abs(dhi)) > st_max_disp):
+        from .api import default_depth_range
+
+        nb0 = sorted(others, key=lambda k: abs(pos[k][0] - r0) + abs(pos[k][1] - c0))[:4]
+        depth_range = default_depth_range(scene, ref, cams, {k: img(k) for k in [ref] + nb0}, nb0,
+                                          use_points=False)
+        stats["range_from"] = "coarse sweep"
+    if depth_range is not None:
+        return depth_range
+    stats["range_from"] = "structure tensor"
+    dlo -= margin_px
+    dhi += margin_px
+    w_a, w_b = sorted((float(d_to_w(dlo)), float(d_to_w(dhi))))
+    w_a = max(w_a, 1e-6 * max(w_b, 1e-6))
+    return (1.0 / w_b, 1.0 / w_a)
+
+
+def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max_cost, mem_bytes,
+                  eps, pm_iter, pm_views, pm_stride, pm_sigma_c, pm_sigma_s, median_radius):
+    """The fine plane sweep of ``ref`` over the grid views ``nb``, its slanted-plane
+    refinement over the first ``pm_views`` of them and the optional weighted median."""
+    cam = cams[ref]
+    res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
+                      n_planes=n_planes, radius=radius, n_best=n_best,
+                      max_cost=max_cost, mem_bytes=mem_bytes, eps=eps, desc=desc)
+    if pm_iter > 0:
+        nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
+        res = refine_planes(img(ref), cam, [img(k) for k in nbr], [cams[k] for k in nbr], res,
+                            n_iter=pm_iter, n_best=min(n_best, len(nbr)), eps=eps,
+                            max_cost=max_cost, radius=radius, stride=pm_stride,
+                            sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
+    if median_radius:
+        res = median_planes(img(ref), res, radius=median_radius)
+    return res
+
+
+def _star_neighbours(others: list[int], pos: dict, r0: int, c0: int) -> list[int]:
+    """The grid views ordered for the sweep: the reference's row, column and diagonals (the
+    star) first, then by grid distance."""
+    def key(k):
+        dr_, dc_ = pos[k][0] - r0, pos[k][1] - c0
+        star = dr_ == 0 or dc_ == 0 or abs(dr_) == abs(dc_)
+        return (0 if star else 1, max(abs(dr_), abs(dc_)), abs(dr_) + abs(dc_))
+    return sorted(others, key=key)
+
+
+def _tv_refine(grey_ref, disp, conf, sigma_d, tv_lambda: float, tv_iter: int):
+    """Confidence-weighted TV-L1 of the disparity (:func:`vibr.stereo._kernels.tv_l1`), with
+    edge-aware weights from the reference's grey image."""
+    I = grey_ref.astype(np.float64)
+    gm = np.hypot(sobel(I, 0), sobel(I, 1)) / 8.0
+    g = np.maximum(np.exp(-gm / 0.02), 0.05)
+    cw = np.where(conf, 1.0, 0.1) / np.maximum(sigma_d / 0.05, 1.0)
+    return kern.tv_l1(disp.astype(np.float64), cw, g, float(tv_lambda), int(tv_iter))

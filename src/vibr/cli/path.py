@@ -1,0 +1,87 @@
+"""``vibr path``: make a camera path (nerfstudio camera_path.json) through or around a scene."""
+
+from __future__ import annotations
+
+import argparse
+
+from . import add_quiet
+
+_DESC = """\
+Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json schema
+(camera_to_world 4x4 row-major in OpenGL camera axes, vertical fov in degrees; docs/FLYTHROUGH.md),
+to render with 'vibr render SCENE --path PATH.json -o video.mp4' (or nerfstudio's ns-render).
+Kinds: interpolate (a C2-smooth spline through the scene's cameras, all or --views in that
+order), orbit (an ellipse around the point the cameras look at, at their mean height and
+distance; an arc swept back and forth when the cameras do not surround it), spiral (an
+LLFF-style forward-facing spiral around the mean camera).
+"""
+
+_EPILOG = """\
+examples:
+  vibr path interpolate ../shared/data/strecha_fountain-P11 -o fountain.json --frames 60 --scale 0.25
+  vibr path orbit ../shared/data/middlebury_templeSparseRing -o orbit.json --seconds 4 --fps 24
+  vibr path spiral SCENE -o spiral.json --frames 90 --size 640x480
+  vibr path interpolate SCENE -o p.json --views 0003,0005,0004 --order proximity
+"""
+
+
+def _size(s):
+    try:
+        w, h = s.lower().split("x")
+        w, h = int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must be WxH, e.g. 768x512, got {s!r}") from None
+    if w <= 0 or h <= 0:
+        raise argparse.ArgumentTypeError(f"size must be positive, got {s!r}")
+    return w, h
+
+
+def register(sub) -> None:
+    from ..path import PATH_KINDS
+
+    p = sub.add_parser("path", help="make a camera path (nerfstudio camera_path.json) for a fly-through",
+                       description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("kind", choices=PATH_KINDS, help="kind of path")
+    p.add_argument("scene", help="scene folder (any supported format)")
+    p.add_argument("-o", "--output", required=True, help="camera path file to write (.json)")
+    p.add_argument("--frames", type=int, help="number of frames (default: --seconds x --fps)")
+    p.add_argument("--seconds", type=float, default=None, help="duration in seconds (default 4 without --frames)")
+    p.add_argument("--fps", type=float, default=24.0, help="frames per second (default 24)")
+    p.add_argument("--size", type=_size, metavar="WxH", help="frame size (default: the first view's, after --scale)")
+    p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.25 (default 1)")
+    p.add_argument("--views", help="interpolate: comma-separated views to pass through, in order (default: all)")
+    p.add_argument("--order", choices=["given", "proximity"], default="given",
+                   help="interpolate: keep the given order or reorder the views by proximity (default: given)")
+    p.add_argument("--full", action="store_true", help="orbit: a full turn even when the cameras cover an arc")
+    add_quiet(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from .. import path as P
+    from ..errors import VibrInputError
+    from ..depthcache import load_scene_cached
+
+    if not args.output.lower().endswith(".json"):
+        raise VibrInputError("the camera path file must end in .json", args.output)
+    if args.frames is not None and args.seconds is not None:
+        raise VibrInputError("give --frames or --seconds, not both")
+    if args.scale <= 0:
+        raise VibrInputError(f"--scale must be positive, got {args.scale}")
+    seconds = 4.0 if args.frames is None and args.seconds is None else args.seconds
+    scene = load_scene_cached(args.scene, scale=args.scale)  # the same cache as render --path
+    w, h = args.size if args.size else (None, None)
+    kw = dict(n_frames=args.frames, seconds=seconds, fps=args.fps, width=w, height=h)
+    if args.kind == "interpolate":
+        views = [v.strip() for v in args.views.split(",") if v.strip()] if args.views else None
+        path = P.interpolate(scene, views, order=args.order, **kw)
+    elif args.kind == "orbit":
+        path = P.orbit(scene, full=True if args.full else None, **kw)
+    else:
+        path = P.spiral(scene, **kw)
+    path.meta["scene"] = str(args.scene)
+    path.meta["scale"] = args.scale
+    P.write_camera_path(args.output, path)
+    print(f"wrote {args.output}: {args.kind} path, {len(path)} frames of {path.width}x{path.height} "
+          f"at {path.fps:g} fps ({path.seconds:.2f} s)")
+    return 0

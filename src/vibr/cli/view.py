@@ -1,0 +1,76 @@
+"""``vibr view``: an interactive viewer of a scene in the web browser (viser)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+
+from . import add_quiet
+from ._options import add_method_option
+
+logger = logging.getLogger(__name__)
+
+_DESC = """\
+Serve an interactive viewer of SCENE on http://HOST:PORT (viser): the input cameras as
+frustums with thumbnails (click one to move there), a point cloud from the depth maps, and
+vibr's render of the browser's view (a small preview while the camera moves, full size once
+it is still). Controls: method, gamma, lambda, number of source views, preview size; "add
+keyframe" and "export path" write a camera_path.json (nerfstudio's schema) that
+'vibr render --path' renders. A scene without depth maps gets them estimated once at start.
+The server listens on 127.0.0.1 only unless --host says otherwise. Stop with Ctrl-C.
+"""
+
+_EPILOG = """\
+examples:
+  vibr view ../shared/data/strecha_fountain-P11 --scale 0.25
+  vibr view scene/ --port 8090 --path-out my_path.json
+"""
+
+
+def register(sub) -> None:
+    p = sub.add_parser("view", help="interactive viewer in the web browser",
+                       description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scene", help="scene folder (any supported format)")
+    p.add_argument("--port", type=int, default=8080, help="port to listen on (default 8080)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1; 0.0.0.0 exposes the viewer to the network)")
+    p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.5 (default 1)")
+    add_method_option(p)
+    p.add_argument("--views", type=int, default=8, metavar="K", help="initial number of source views (default 8)")
+    p.add_argument("--max-points", type=int, default=300_000, help="points in the point cloud (default 300000)")
+    p.add_argument("--path-out", default="camera_path.json", help="file 'export path' writes (default camera_path.json)")
+    add_quiet(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..errors import VibrInputError
+    from ..io import load_scene
+    from ..viewer import Viewer, ViewerOptions, ViewSettings, check_port_free, scene_with_depth
+
+    if not 0 <= args.port <= 65535:
+        raise VibrInputError(f"--port must be in 0..65535, got {args.port}")
+    if args.views < 1 or args.max_points < 0:
+        raise VibrInputError("--views must be >= 1 and --max-points >= 0")
+    settings = ViewSettings(method=args.method, n_views=args.views)
+    check_port_free(args.host, args.port)  # fail before the (slow) loading
+    scene = load_scene(args.scene, scale=args.scale)
+    if not scene.has_depth:
+        logger.info("%s has no depth maps: estimating them once (cached for the next start) ...", scene.name)
+        t0 = time.perf_counter()
+        scene = scene_with_depth(scene)
+        logger.info("depth ready in %.1f s", time.perf_counter() - t0)
+    # a browser's aborted preconnect is logged with a traceback by websockets: not an error here
+    logging.getLogger("websockets.server").setLevel(logging.CRITICAL)
+    viewer = Viewer(scene, ViewerOptions(host=args.host, port=args.port, max_points=args.max_points,
+                                         path_out=args.path_out, settings=settings))
+    url = viewer.start()
+    try:
+        print(f"vibr view: {scene.name} ({len(scene)} views) at {url}  (Ctrl-C to stop)", flush=True)
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        viewer.stop()

@@ -1,0 +1,340 @@
+"""Fly-throughs: render every camera of a path, write the frames, encode a video.
+
+:func:`render_path` loads nothing itself: it takes a loaded scene and a
+:class:`vibr.path.CameraPath`, gets the sources' depth once
+(:func:`vibr.depthcache.scene_with_depth`, cached on disk), then renders frame by frame.
+
+Per frame (:func:`render_frame`, a top-level function of ``(context, frame index)`` so that
+:func:`vibr.executor.run_tasks` can run frames on processes or Dask):
+
+1. **Sources with soft weights** (:func:`view_weights`): views are ranked for the frame's
+   camera as :func:`vibr.selection.rank_views` does (penalty ``p_k``); with ``n_views = K``
+   the threshold is the midpoint ``m`` of the K-th and (K+1)-th smallest penalties and a
+   view's blend weight is ``s_k = smoothstep(½ + (m − p_k) / (blend · m))``. Far from a
+   change of the selected set the K best have weight 1 and the others 0 (the frame is what
+   ``vibr render --views K`` gives); when two views swap ranks both are in the set with
+   weights crossing smoothly through ½, so a view leaves the set with weight 0 and the
+   image does not jump ("popping"). The weight multiplies every sample of the view in
+   both data terms (``samples.meta["sample_weight"]``, read by
+   :func:`vibr.render.render_samples`).
+2. geometry (:func:`vibr.geometry.compute_samples`) and render
+   (:func:`vibr.render.render_samples`) with the method's parameters;
+3. the frame is written atomically as ``frame_NNNNN.png`` (8-bit) in the frames folder;
+   a frame already there is skipped unless ``overwrite``.
+
+Work that does not depend on the frame is done once (:func:`prepare_sources`): the scene,
+the sources' depth, the world points of every source used to rank views (a strided
+subsample of each depth map, backprojected) and each source's depth slopes
+(:func:`vibr.geometry.prepare_depth`, passed to :func:`compute_samples` as ``prepared``);
+measured in docs/FLYTHROUGH.md.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+from .errors import VibrInputError
+from .scene import Scene
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["FrameContext", "FlyResult", "render_path", "render_frame", "view_weights",
+           "frame_name", "check_path_sees_scene"]
+
+FRAME_PATTERN = "frame_{:05d}.png"
+
+
+def frame_name(i: int) -> str:
+    return FRAME_PATTERN.format(i)
+
+
+@dataclass
+class FrameContext:
+    """Everything a frame task needs (picklable: sent once per worker)."""
+
+    sources: Scene
+    cameras: list
+    frames_dir: str
+    method: str = "gradient"
+    params: dict = field(default_factory=dict)
+    n_views: int | None = 8
+    blend: float = 0.25
+    overwrite: bool = False
+    geometry_kw: dict = field(default_factory=dict)
+    view_points: list = field(default_factory=list)  # per source: (N_k, 3) world points
+    prepared: dict = field(default_factory=dict)  # per source: prepare_depth's (z, z_x, z_y)
+
+
+def _source_points(sources: Scene, max_points: int = 1024) -> list:
+    """Per source, the strided subsample of its depth map backprojected to the world
+    (exactly :func:`vibr.selection.target_points`' sampling, done once per source)."""
+    out = []
+    per_view = max(64, max_points // max(1, len(sources)))
+    for v in sources.views:
+        if v.depth is None:
+            out.append(np.zeros((0, 3)))
+            continue
+        h, w = v.shape
+        step = max(1, int(np.sqrt(h * w / per_view)))
+        z = v.depth[::step, ::step]
+        yy, xx = np.mgrid[0:h:step, 0:w:step]
+        ok = np.isfinite(z)
+        out.append(v.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(float), z[ok]))
+    return out
+
+
+def _points_in_target(view_points, target: Camera, max_points: int = 1024):
+    """The sources' points the target sees: the same filtering and random subsample (seed
+    0) as :func:`vibr.selection.target_points`, so the ranking is the same."""
+    pts = [p for p in view_points if len(p)]
+    if not pts:
+        return None
+    P = np.concatenate(pts)
+    xy, z = target.project(P)
+    inside = (z > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= target.width - 0.5) & \
+             (xy[:, 1] >= -0.5) & (xy[:, 1] <= target.height - 0.5)
+    P = P[inside]
+    if not len(P):
+        return None
+    if len(P) > max_points:
+        P = P[np.random.default_rng(0).choice(len(P), max_points, replace=False)]
+    return P
+
+
+def prepare_sources(ctx: FrameContext, cache_depth: bool = True) -> None:
+    """The per-source work that does not depend on the frame, done once: the points used to
+    rank views and (``cache_depth``) the depth and its slopes (:func:`prepare_depth`)."""
+    from .geometry import prepare_depth
+    from .geometry.depth import DEFAULT_EDGE_REL
+
+    ctx.view_points = _source_points(ctx.sources)
+    ctx.prepared = {}
+    if cache_depth:
+        fill = bool(ctx.geometry_kw.get("fill_holes", False))
+        edge = ctx.geometry_kw.get("edge_rel", DEFAULT_EDGE_REL)
+        ctx.prepared = {v.name: prepare_depth(v, fill_holes=fill, edge_rel=edge) for v in ctx.sources.views}
+
+
+def _smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def view_weights(sources: Scene, camera: Camera, n_views: int | None, *, blend: float = 0.25,
+                 view_points=None, min_overlap: float = 0.05) -> np.ndarray:
+    """Blend weight in [0, 1] of every source for ``camera`` (module docstring, step 1).
+
+    ``p_k`` is :func:`vibr.selection.rank_views`' penalty (``inf`` below ``min_overlap``);
+    ``m = (p_(K) + p_(K+1)) / 2``; ``s_k = smoothstep(½ + (m − p_k) / (blend · m))``.
+    ``blend = 0`` is the hard selection of :func:`vibr.selection.select_views`.
+    """
+    from .selection import rank_views
+
+    n = len(sources)
+    if n_views is None or n_views >= n:
+        return np.ones(n)
+    pts = None
+    if view_points is not None:
+        pts = _points_in_target(view_points, camera)
+    order, penalty, overlap = rank_views(sources, camera, points=pts, min_overlap=min_overlap)
+    w = np.zeros(n)
+    key = np.where(overlap >= min_overlap, penalty, np.inf)
+    ks = np.sort(key)
+    a, b = ks[n_views - 1], ks[n_views]
+    if blend <= 0 or not np.isfinite(a) or not np.isfinite(b):
+        w[order[:n_views]] = 1.0
+        return w
+    m = 0.5 * (a + b)
+    width = blend * max(m, 1e-12)
+    w = _smoothstep(0.5 + (m - key) / width)
+    w[~np.isfinite(key)] = 0.0
+    return w
+
+
+def render_frame(ctx: FrameContext, i: int) -> dict:
+    """Render frame ``i`` of the path and write it (the per-frame task, see the module
+    docstring). Returns a small dict: index, skipped, seconds, views and weights."""
+    from .geometry import compute_samples
+    from .io import write_image
+    from .render import render_samples
+
+    out = os.path.join(ctx.frames_dir, frame_name(i))
+    if not ctx.overwrite and os.path.isfile(out):
+        return {"index": i, "skipped": True, "seconds": 0.0}
+    t0 = time.perf_counter()
+    cam = ctx.cameras[i]
+    w = view_weights(ctx.sources, cam, ctx.n_views, blend=ctx.blend,
+                     view_points=ctx.view_points or None)
+    idx = np.flatnonzero(w > 0)
+    if not len(idx):
+        raise VibrInputError(f"frame {i}: no source view sees it (camera {cam})")
+    views = [ctx.sources.views[k] for k in idx]
+    sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
+    try:
+        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
+    except VibrInputError as exc:
+        raise VibrInputError(f"frame {i}: {exc.problem}") from None
+    ws = w[idx]
+    if np.any(ws < 1.0):
+        samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
+    res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
+                         target_centre=cam.centre, **ctx.params)
+    write_image(out, res.image, bits=8)
+    return {"index": i, "skipped": False, "seconds": time.perf_counter() - t0,
+            "views": [v.name for v in views], "weights": ws.tolist(),
+            "coverage": float(res.coverage.mean()), "iterations": res.iterations}
+
+
+def _same(x):
+    return x
+
+
+@dataclass
+class FlyResult:
+    """What :func:`render_path` did."""
+
+    n_frames: int
+    rendered: int
+    skipped: int
+    frames_dir: str
+    video: str | None
+    video_frames: int | None = None
+    video_size: tuple | None = None
+    depth_source: str = ""
+    times: dict = field(default_factory=dict)
+    frames: list = field(default_factory=list)
+
+    @property
+    def seconds_per_frame(self) -> float:
+        return self.times.get("frames", 0.0) / max(1, self.rendered)
+
+
+def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
+    """Raise :class:`VibrInputError` when most of the path's cameras see nothing of the
+    scene: the centre of the scene (:func:`vibr.path.scene_centre`) lies behind or outside
+    the frame (with a one-frame margin) for more than half of them — typically a path
+    exported by nerfstudio's viewer, which lives in nerfstudio's normalised frame."""
+    from .path import scene_centre
+
+    from .path import scene_points
+
+    X = scene_centre([v.camera for v in scene.views], scene_points(scene))
+    seen = 0
+    for c in cameras:
+        xy, z = c.project(X)
+        if z > 0 and -c.width <= xy[0] <= 2 * c.width and -c.height <= xy[1] <= 2 * c.height:
+            seen += 1
+    if seen <= len(cameras) / 2:
+        C = np.array([v.camera.centre for v in scene.views])
+        P = np.array([c.centre for c in cameras])
+        raise VibrInputError(
+            f"the path's cameras are nowhere near the scene's: the scene's centre is in view in "
+            f"{seen} of {len(cameras)} frames (path centred at {np.round(P.mean(0), 3).tolist()}, "
+            f"scene cameras at {np.round(C.mean(0), 3).tolist()}); a path exported by nerfstudio "
+            f"lives in its normalised frame: give --dataparser-transforms dataparser_transforms.json",
+            source)
+
+
+def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
+    if out.suffix.lower() == ".mp4":
+        return (Path(frames_dir) if frames_dir else out.with_name(out.stem + "_frames")), out
+    if out.suffix:
+        raise VibrInputError("output must be a .mp4 file or a folder for the frames", out)
+    if frames_dir and Path(frames_dir) != out:
+        raise VibrInputError("--frames-dir is for a video output; the frames go to OUT", out)
+    return out, None
+
+
+def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_views: int | None = 8,
+                params: dict | None = None, overwrite: bool = False, executor=None,
+                depth: str = "auto", estimate_kw: dict | None = None, cache_dir=None,
+                exclude=(), frames_dir=None, crf: int = 18, fps: float | None = None,
+                blend: float = 0.25, geometry_kw: dict | None = None, progress: bool = True,
+                check_scene: bool = True) -> FlyResult:
+    """Render every camera of ``camera_path`` from ``scene`` to numbered PNGs and a video.
+
+    Parameters
+    ----------
+    scene : Scene
+    camera_path : vibr.path.CameraPath
+    out : path
+        ``*.mp4`` (frames in ``frames_dir``, default ``OUT_frames/`` beside it) or a folder
+        (the frames only).
+    method, params : the render method and its parameters (:func:`vibr.render.render`).
+    n_views : int or None
+        K best sources per frame (soft weights, module docstring); None: all.
+    overwrite : bool
+        Render frames already written again (default: skip them: resumable).
+    executor : None, "processes:N", int or a Dask address
+        Passed to :func:`vibr.executor.run_tasks` when that module exists; None: serial.
+    depth, estimate_kw, cache_dir, exclude : see :func:`vibr.depthcache.scene_with_depth`.
+    crf, fps : video quality and frame rate (default the path's).
+    blend : width of the weight transition (relative to the penalty threshold).
+    progress : a bar per frame (on a terminal, :func:`vibr.progress.progress`).
+    """
+    from .depthcache import scene_with_depth
+    from .io.video import write_video
+    from .render.methods import METHODS
+
+    t_start = time.perf_counter()
+    if method not in METHODS:
+        raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(METHODS)})")
+    if n_views is not None and n_views < 1:
+        raise VibrInputError(f"n_views must be at least 1, got {n_views}")
+    out = Path(out)
+    fdir, video = _frames_dir_for(out, frames_dir)
+    cams = list(camera_path.cameras)
+    if check_scene:
+        check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
+    t0 = time.perf_counter()
+    sources = scene_with_depth(scene, depth=depth, estimate_kw=estimate_kw, cache_dir=cache_dir,
+                               exclude=exclude)
+    t_depth = time.perf_counter() - t0
+    fdir.mkdir(parents=True, exist_ok=True)
+    ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,
+                       overwrite, dict(geometry_kw or {}))
+    prepare_sources(ctx)
+    t_first = time.perf_counter() - t_start
+    t0 = time.perf_counter()
+    frames = _run_frames(ctx, len(cams), executor, progress)
+    t_frames = time.perf_counter() - t0
+    rendered = sum(not f["skipped"] for f in frames)
+    res = FlyResult(len(cams), rendered, len(cams) - rendered, str(fdir), None,
+                    depth_source=sources.meta.get("depth_source", ""), frames=frames)
+    t_video = 0.0
+    if video is not None:
+        from .io import read_image
+
+        t0 = time.perf_counter()
+        paths = [fdir / frame_name(i) for i in range(len(cams))]
+        n, w, h = write_video(video, (read_image(p) for p in paths), fps=fps or camera_path.fps, crf=crf)
+        t_video = time.perf_counter() - t0
+        res.video, res.video_frames, res.video_size = str(video), n, (w, h)
+    res.times = {"depth": t_depth, "to_first_frame": t_first, "frames": t_frames, "video": t_video,
+                 "total": time.perf_counter() - t_start,
+                 "depth_source_time": sources.meta.get("depth_time_s", t_depth)}
+    return res
+
+
+def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> list:
+    if executor is not None:
+        try:
+            from .executor import run_tasks
+        except ImportError:
+            raise VibrInputError("parallel frames need vibr.executor, which this install lacks") from None
+        return run_tasks(render_frame, list(range(n)), setup=_same, setup_args=(ctx,),
+                         executor=executor, desc="frames")
+    from .progress import progress as bar
+
+    out = []
+    it = bar(range(n), desc="frames", total=n) if progress else range(n)
+    for i in it:
+        out.append(render_frame(ctx, i))
+    return out

@@ -1,0 +1,633 @@
+"""Camera paths: nerfstudio's ``camera_path.json`` in and out, and path generators.
+
+A fly-through is a list of cameras rendered one after another into a video. vibr reads and
+writes paths in the schema of nerfstudio (``nerfstudio/cameras/camera_paths.py``,
+``get_path_from_json``; written by the viewer's render panel), so that a path drawn in
+nerfstudio's viewer renders in vibr and a vibr path renders in ``ns-render camera-path``::
+
+    {"camera_type": "perspective", "render_width": W, "render_height": H,
+     "seconds": S, "fps": F,
+     "camera_path": [{"camera_to_world": [16 numbers, 4x4 row-major],
+                      "fov": vertical field of view in degrees, "aspect": W / H}, ...]}
+
+``camera_to_world`` uses **OpenGL camera axes** (x right, y up, looking down −z), vibr uses
+OpenCV axes (x right, y down, looking down +z): the flip ``diag(1, −1, −1)`` of the camera
+axes lives in :func:`camera_from_c2w_opengl` / :func:`c2w_opengl_from_camera` and nowhere
+else. The focal length is nerfstudio's ``f = (H / 2) / tan(fov / 2)`` (fx = fy), the
+principal point the image centre (``W/2, H/2`` with nerfstudio's pixel centres at half
+integers, ``(W − 1)/2, (H − 1)/2`` in vibr's). docs/FLYTHROUGH.md has the details, the
+``dataparser_transforms.json`` mapping and the sources.
+
+Generators (:func:`interpolate`, :func:`orbit`, :func:`spiral`) return a :class:`CameraPath`.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import Camera, axes_meeting_point
+from .errors import VibrInputError
+from .io.atomic import atomic_path
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
+           "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
+           "scene_centre", "scene_up", "scene_points", "scene_applied_transform", "PATH_KINDS"]
+
+PATH_KINDS = ("interpolate", "orbit", "spiral")
+
+#: OpenGL camera axes (x right, y up, z backward) <-> OpenCV (x right, y down, z forward).
+_GL_CV = np.diag([1.0, -1.0, -1.0])
+#: Largest |R Rᵀ − I| accepted for a camera_to_world rotation read from a file (floats
+#: written as text keep ~7 digits in nerfstudio's viewer: float32 poses).
+_RIGID_TOL = 1e-4
+
+
+@dataclass
+class CameraPath:
+    """A camera path: the cameras of the frames, in order, and the video timing.
+
+    Attributes
+    ----------
+    cameras : list of Camera
+    fps : float
+        Frames per second of the video.
+    seconds : float
+        Duration (nerfstudio's ``seconds``); ``len(cameras) / fps`` for vibr's paths.
+    width, height : int
+        Frame size (every camera has it).
+    meta : dict
+        What made the path (kind, key views); written under ``"vibr"`` in the JSON file.
+    """
+
+    cameras: list
+    fps: float = 24.0
+    seconds: float | None = None
+    width: int | None = None
+    height: int | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not self.cameras:
+            raise VibrInputError("a camera path needs at least one frame")
+        c0 = self.cameras[0]
+        self.width = int(self.width or c0.width)
+        self.height = int(self.height or c0.height)
+        if not (self.fps > 0 and math.isfinite(self.fps)):
+            raise VibrInputError(f"fps must be positive, got {self.fps}")
+        if self.seconds is None:
+            self.seconds = len(self.cameras) / float(self.fps)
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+
+# ----------------------------------------------------------------------------- conversions
+def focal_from_fov(fov_deg: float, height: int) -> float:
+    """nerfstudio's ``three_js_perspective_camera_focal_length``: ``(H/2) / tan(fov/2)``."""
+    return (height / 2.0) / math.tan(math.radians(fov_deg) / 2.0)
+
+
+def fov_from_focal(f: float, height: int) -> float:
+    """Vertical field of view (degrees) of focal length ``f`` px for an image ``height`` px high."""
+    return math.degrees(2.0 * math.atan((height / 2.0) / f))
+
+
+def camera_from_c2w_opengl(c2w_4x4, fov_deg_vertical: float, width: int, height: int,
+                           source=None) -> Camera:
+    """A vibr camera from a camera-to-world matrix in OpenGL axes and a vertical fov.
+
+    ``R_c2w(OpenCV) = R_c2w(OpenGL) · diag(1, −1, −1)``, ``R = R_c2wᵀ``, ``C = c2w[:3, 3]``;
+    ``K`` has ``fx = fy = (H/2) / tan(fov/2)`` and the principal point at the image centre.
+    The rotation block must be a rotation (within 1e-4; it is snapped to the nearest one)
+    and the last row ``[0, 0, 0, 1]``: anything else raises :class:`VibrInputError`.
+    """
+    try:
+        M = np.asarray(c2w_4x4, dtype=np.float64).reshape(4, 4)
+    except (TypeError, ValueError):
+        raise VibrInputError("camera_to_world must hold 16 numbers", source) from None
+    if not np.all(np.isfinite(M)):
+        raise VibrInputError("camera_to_world has non-finite entries", source)
+    if np.abs(M[3] - [0, 0, 0, 1]).max() > 1e-6:
+        raise VibrInputError(f"camera_to_world's last row is {M[3].tolist()}, not [0, 0, 0, 1]", source)
+    Rgl = M[:3, :3]
+    err = float(np.abs(Rgl @ Rgl.T - np.eye(3)).max())
+    det = float(np.linalg.det(Rgl))
+    if err > _RIGID_TOL or det < 0:
+        raise VibrInputError(f"camera_to_world is not rigid (|R Rᵀ - I| = {err:.2g}, det = {det:.3g})", source)
+    if err > 0:
+        U, _, Vt = np.linalg.svd(Rgl)
+        Rgl = U @ Vt
+    try:
+        fov = float(fov_deg_vertical)
+    except (TypeError, ValueError):
+        raise VibrInputError(f"fov must be a number, got {fov_deg_vertical!r}", source) from None
+    if not (0.0 < fov < 180.0):
+        raise VibrInputError(f"fov must be in (0, 180) degrees, got {fov:g}", source)
+    w, h = int(width), int(height)
+    K = Camera.intrinsics(focal_from_fov(fov, h), w, h)
+    R = (Rgl @ _GL_CV).T
+    return Camera.from_centre(K, R, M[:3, 3], w, h, source)
+
+
+def c2w_opengl_from_camera(camera: Camera) -> np.ndarray:
+    """The (4, 4) camera-to-world matrix of ``camera`` in OpenGL axes (x right, y up,
+    looking down −z): ``[[Rᵀ · diag(1, −1, −1), C], [0, 0, 0, 1]]``."""
+    M = np.eye(4)
+    M[:3, :3] = camera.R.T @ _GL_CV
+    M[:3, 3] = camera.centre
+    return M
+
+
+def _check_pinhole(cam: Camera, tol: float = 1e-6) -> None:
+    """nerfstudio's schema has one focal length and a centred principal point: say when a
+    camera is not exactly that (the written path then differs from it)."""
+    K = cam.K
+    cx, cy = (cam.width - 1) / 2, (cam.height - 1) / 2
+    off = max(abs(K[0, 2] - cx), abs(K[1, 2] - cy), abs(K[0, 0] - K[1, 1]), abs(K[0, 1]))
+    if off > tol * max(K[0, 0], 1.0):
+        logger.warning("camera %r is not a centred square-pixel pinhole (K = %s): nerfstudio's "
+                       "camera_path schema keeps only its vertical field of view", cam,
+                       np.array2string(K, precision=2))
+
+
+# ----------------------------------------------------------------------------- files
+def write_camera_path(path, cameras, *, fps: float = 24.0, seconds: float | None = None,
+                      meta: dict | None = None) -> None:
+    """Write cameras (a list or a :class:`CameraPath`) as nerfstudio's ``camera_path.json``,
+    atomically. Every camera must have the same size; ``seconds`` defaults to
+    ``len(cameras) / fps``. Floats are written by ``repr`` (exact round trip)."""
+    if isinstance(cameras, CameraPath):
+        fps = cameras.fps
+        seconds = cameras.seconds if seconds is None else seconds
+        meta = dict(cameras.meta, **(meta or {}))
+        cameras = cameras.cameras
+    cams = list(cameras)
+    if not cams:
+        raise VibrInputError("no cameras to write", path)
+    w, h = cams[0].width, cams[0].height
+    if any((c.width, c.height) != (w, h) for c in cams):
+        raise VibrInputError("every camera of a path must have the same size", path)
+    seconds = len(cams) / float(fps) if seconds is None else float(seconds)
+    frames = []
+    for c in cams:
+        _check_pinhole(c)
+        frames.append({"camera_to_world": c2w_opengl_from_camera(c).ravel().tolist(),
+                       "fov": fov_from_focal(float(c.K[1, 1]), h), "aspect": w / h})
+    data = {"camera_type": "perspective", "render_width": int(w), "render_height": int(h),
+            "seconds": seconds, "fps": float(fps), "camera_path": frames}
+    if meta:
+        data["vibr"] = meta
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(data, f, indent=1)
+            f.write("\n")
+
+
+def read_dataparser_transforms(path) -> tuple[np.ndarray, float]:
+    """nerfstudio's ``dataparser_transforms.json``: ``(T, scale)`` with ``T`` the 3×4
+    ``transform`` and ``scale`` such that a world point of the data maps to the
+    normalised frame as ``x_n = scale · (T[:, :3] x + T[:, 3])``."""
+    from .io.camera_json import parse_json
+
+    p = os.fspath(path)
+    d = parse_json(p)
+    if not isinstance(d, dict) or "transform" not in d or "scale" not in d:
+        raise VibrInputError("a dataparser_transforms.json holds 'transform' (3x4) and 'scale'", p)
+    try:
+        T = np.asarray(d["transform"], dtype=np.float64).reshape(3, 4)
+        s = float(d["scale"])
+    except (TypeError, ValueError):
+        raise VibrInputError("'transform' must be 3x4 numbers and 'scale' a number", p) from None
+    if not (np.all(np.isfinite(T)) and math.isfinite(s) and s > 0):
+        raise VibrInputError("'transform' must be finite and 'scale' positive", p)
+    err = float(np.abs(T[:, :3] @ T[:, :3].T - np.eye(3)).max())
+    if err > _RIGID_TOL or np.linalg.det(T[:, :3]) < 0:
+        raise VibrInputError(f"'transform' is not rigid (|R Rᵀ - I| = {err:.2g})", p)
+    return T, s
+
+
+def _unnormalise(M: np.ndarray, T: np.ndarray, s: float, applied: np.ndarray | None) -> np.ndarray:
+    """Map a camera-to-world from nerfstudio's normalised frame back to the data's frame:
+    ``x = T_R⁻¹ (x_n / s − T_t)`` (then ``applied`` when the scene's transforms.json
+    records one: nerfstudio's dataparser transform includes it)."""
+    A = np.eye(4)
+    A[:3, :3] = T[:, :3].T
+    A[:3, 3] = -T[:, :3].T @ T[:, 3]
+    out = M.copy()
+    out[:3, 3] = out[:3, 3] / s
+    out = A @ out
+    if applied is not None:
+        B = np.eye(4)
+        B[:3, :] = applied
+        out = B @ out
+    return out
+
+
+def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None) -> CameraPath:
+    """Read nerfstudio's ``camera_path.json`` (written by its viewer or by vibr).
+
+    Parameters
+    ----------
+    path : path-like
+    dataparser_transforms : path-like, optional
+        nerfstudio's ``dataparser_transforms.json``: the path lives in nerfstudio's
+        normalised world frame and is mapped back to the data's frame.
+    applied_transform : (3, 4) array, optional
+        The ``applied_transform`` of the scene's transforms.json, if any (nerfstudio folds
+        it into the dataparser transform); only used with ``dataparser_transforms``.
+
+    Returns
+    -------
+    CameraPath
+        ``fps`` is the file's ``fps`` when present, else ``frames / seconds`` (what
+        ``ns-render`` uses).
+
+    Raises
+    ------
+    VibrInputError
+        Not JSON, no ``camera_path`` or an empty one, a size that is not positive, a
+        camera type other than perspective, a non-rigid matrix, a fov outside (0, 180).
+    """
+    from .io.camera_json import parse_json
+
+    p = os.fspath(path)
+    d = parse_json(p)
+    if not isinstance(d, dict):
+        raise VibrInputError("a camera path file holds a JSON object (nerfstudio camera_path.json)", p)
+    if "camera_path" not in d:
+        raise VibrInputError("no 'camera_path' list (not a nerfstudio camera_path.json?)", p)
+    frames = d["camera_path"]
+    if not isinstance(frames, list) or not frames:
+        raise VibrInputError("'camera_path' has no frames", p)
+    ctype = str(d.get("camera_type", "perspective")).lower()
+    if ctype != "perspective":
+        raise VibrInputError(f"camera_type {ctype!r} is not supported (only 'perspective')", p)
+    try:
+        w, h = int(d["render_width"]), int(d["render_height"])
+    except KeyError as exc:
+        raise VibrInputError(f"missing {exc.args[0]!r}", p) from None
+    except (TypeError, ValueError):
+        raise VibrInputError("render_width and render_height must be integers", p) from None
+    if w <= 0 or h <= 0:
+        raise VibrInputError(f"render size must be positive, got {w}x{h}", p)
+    T = s = None
+    if dataparser_transforms is not None:
+        T, s = read_dataparser_transforms(dataparser_transforms)
+    applied = None if applied_transform is None else np.asarray(applied_transform, np.float64).reshape(3, 4)
+    cams = []
+    for i, fr in enumerate(frames):
+        where = f"{p}: camera_path[{i}]"
+        if not isinstance(fr, dict) or "camera_to_world" not in fr or "fov" not in fr:
+            raise VibrInputError("each frame needs 'camera_to_world' and 'fov'", where)
+        try:
+            M = np.asarray(fr["camera_to_world"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise VibrInputError("camera_to_world must hold 16 numbers", where) from None
+        if M.size != 16:
+            raise VibrInputError(f"camera_to_world must hold 16 numbers, got {M.size}", where)
+        M = M.reshape(4, 4)
+        if T is not None and np.all(np.isfinite(M)):
+            M = _unnormalise(M, T, s, applied)
+        cams.append(camera_from_c2w_opengl(M, fr["fov"], w, h, source=where))
+    seconds = d.get("seconds")
+    fps = d.get("fps")
+    try:
+        seconds = None if seconds is None else float(seconds)
+        fps = None if fps is None else float(fps)
+    except (TypeError, ValueError):
+        raise VibrInputError("'seconds' and 'fps' must be numbers", p) from None
+    if fps is None or not (fps > 0 and math.isfinite(fps)):
+        if seconds is None or not (seconds > 0 and math.isfinite(seconds)):
+            raise VibrInputError("needs a positive 'fps' or 'seconds'", p)
+        fps = len(cams) / seconds
+    meta = d.get("vibr") if isinstance(d.get("vibr"), dict) else {}
+    return CameraPath(cams, fps, seconds, w, h, dict(meta, file=p))
+
+
+# ----------------------------------------------------------------------------- scene geometry
+def scene_up(cameras, centre=None) -> np.ndarray:
+    """World "up" of a set of cameras.
+
+    The mean of the cameras' −y axes (image up), normalised — unless the camera centres
+    spread in a plane in two directions (a ring or a wide arc: singular values of the
+    centres ``s₂ < 0.1 s₁`` and ``s₁ > 0.3 s₀``) and the cameras look across that plane (mean
+    ``|n · axis| < 0.5``; a light-field grid looks along it): then the plane's normal, which stays right
+    when the photographs are rolled (templeSparseRing's are, by ±90°); its sign agrees with
+    the mean −y when that is clear (|cos| > 0.3), else puts the cameras above ``centre``.
+    """
+    cams = list(cameras)
+    u = -np.mean([c.R[1] for c in cams], axis=0)
+    C = np.array([c.centre for c in cams])
+    if len(C) >= 3:
+        _, S, Vt = np.linalg.svd(C - C.mean(0), full_matrices=False)
+        n = Vt[2]
+        looks_along = float(np.mean([abs(n @ c.optical_axis) for c in cams]))
+        # a ring or arc looks across its plane; a planar grid of parallel cameras (a light
+        # field) looks along its normal, which is then no "up"
+        if S[0] > 0 and S[1] > 0.3 * S[0] and S[2] < 0.1 * S[1] and looks_along < 0.5:
+            nu = np.linalg.norm(u)
+            if nu > 1e-9 and abs(n @ u) / nu > 0.3:
+                return n if n @ u > 0 else -n
+            X = axes_meeting_point(cams) if centre is None else np.asarray(centre, np.float64)
+            if X is not None:
+                return n if np.mean((C - X) @ n) >= 0 else -n
+            return n
+    n = np.linalg.norm(u)
+    if n < 1e-9:
+        raise VibrInputError("the cameras' up directions cancel out: no common up")
+    return u / n
+
+
+def scene_centre(cameras, points: np.ndarray | None = None) -> np.ndarray:
+    """What the cameras look at: the point nearest to all optical axes (least squares,
+    :func:`vibr.camera.axes_meeting_point`); for parallel rigs, the median of ``points``
+    (e.g. from depth maps) if given, else a point on the mean axis at 4× the cameras' spread."""
+    X = axes_meeting_point(cameras)
+    if X is not None:
+        return X
+    C = np.array([c.centre for c in cameras])
+    a = np.mean([c.optical_axis for c in cameras], axis=0)
+    a /= np.linalg.norm(a)
+    if points is not None and len(points):
+        d = np.median((np.asarray(points) - C.mean(0)) @ a)
+        if d > 0:
+            return C.mean(0) + d * a
+    spread = max(float(np.linalg.norm(C.max(0) - C.min(0))), 1e-6)
+    return C.mean(0) + 4.0 * spread * a
+
+
+def scene_points(scene, max_points: int = 4096) -> np.ndarray | None:
+    """World points of the scene: a strided subsample of its views' depth maps, else its
+    sparse points, else None (used where the cameras' axes do not meet)."""
+    pts = []
+    per_view = max(64, max_points // max(1, len(scene)))
+    for v in scene.views:
+        if v.depth is None:
+            continue
+        h, w = v.shape
+        step = max(1, int(np.sqrt(h * w / per_view)))
+        z = v.depth[::step, ::step]
+        yy, xx = np.mgrid[0:h:step, 0:w:step]
+        ok = np.isfinite(z)
+        pts.append(v.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(float), z[ok]))
+    if pts:
+        return np.concatenate(pts)
+    if scene.points is not None and len(scene.points):
+        return np.asarray(scene.points, np.float64)
+    return None
+
+
+def _frame_count(n_frames, seconds, fps) -> int:
+    if n_frames is None:
+        if seconds is None:
+            raise VibrInputError("give the number of frames or the duration in seconds")
+        n_frames = int(round(float(seconds) * float(fps)))
+    n = int(n_frames)
+    if n < 1:
+        raise VibrInputError(f"a path needs at least one frame, got {n}")
+    return n
+
+
+def _output_size(cameras, width, height, scale):
+    w = cameras[0].width if width is None else int(width)
+    h = cameras[0].height if height is None else int(height)
+    if width is None and height is None and scale != 1.0:
+        w, h = max(1, round(w * scale)), max(1, round(h * scale))
+    if w <= 0 or h <= 0:
+        raise VibrInputError(f"frame size must be positive, got {w}x{h}")
+    return w, h
+
+
+def _cameras_of(scene, views=None):
+    if views is None:
+        return [v.camera for v in scene.views], scene.names
+    idx = [scene.index(k) for k in views]
+    return [scene.views[i].camera for i in idx], [scene.views[i].name for i in idx]
+
+
+def _look_at(eye, target, up, f_rel, w, h) -> Camera:
+    K = Camera.intrinsics(f_rel * h, w, h)
+    return Camera.look_at(eye, target, up, K, w, h)
+
+
+def _vertical_focal(cam: Camera) -> float:
+    """Focal length relative to the image height (fy / H): what a resize keeps."""
+    return float(cam.K[1, 1]) / cam.height
+
+
+# ----------------------------------------------------------------------------- generators
+def order_by_proximity(cameras) -> list[int]:
+    """A visiting order of cameras: start at the camera farthest from the centroid of the
+    centres (an end of the sequence), then always the nearest camera not yet visited."""
+    C = np.array([c.centre for c in cameras])
+    left = list(range(len(C)))
+    cur = int(np.argmax(np.linalg.norm(C - C.mean(0), axis=1)))
+    order = [cur]
+    left.remove(cur)
+    while left:
+        d = np.linalg.norm(C[left] - C[cur], axis=1)
+        cur = left[int(np.argmin(d))]
+        order.append(cur)
+        left.remove(cur)
+    return order
+
+
+def interpolate(scene, views=None, *, order: str = "given", n_frames: int | None = None,
+                seconds: float | None = None, fps: float = 24.0, width: int | None = None,
+                height: int | None = None, scale: float = 1.0) -> CameraPath:
+    """A C²-smooth path through the scene's cameras (all, or ``views`` in that order).
+
+    Knots ``t_i`` are the cumulative length ``Σ ‖C_i − C_{i−1}‖ + r · angle(R_{i−1}, R_i)``
+    (``r``: the cameras' mean distance to :func:`scene_centre`, so turning on the spot
+    counts as the motion of what is looked at). Positions: a natural cubic spline
+    (``scipy.interpolate.CubicSpline``, C² with zero end curvature); orientations:
+    ``scipy.spatial.transform.RotationSpline`` (rotation vectors between consecutive keys
+    cubic in t, angular rate and acceleration continuous: C²); the vertical focal length
+    (relative to the image height): a natural cubic spline. Frames are ``n_frames`` equal
+    steps of t from the first key to the last, so a key camera is never repeated.
+
+    Parameters
+    ----------
+    scene : Scene
+    views : sequence of view names / indices, optional
+    order : {"given", "proximity"}
+        Keep the given (or the scene's) order, or reorder by :func:`order_by_proximity`.
+    n_frames : int, or ``seconds`` × ``fps``
+    width, height : int, optional
+        Frame size (default: the first view's, times ``scale``).
+    """
+    from scipy.interpolate import CubicSpline
+    from scipy.spatial.transform import Rotation, RotationSpline
+
+    cams, names = _cameras_of(scene, views)
+    if order not in ("given", "proximity"):
+        raise VibrInputError(f"order must be 'given' or 'proximity', got {order!r}")
+    if order == "proximity":
+        idx = order_by_proximity(cams)
+        cams, names = [cams[i] for i in idx], [names[i] for i in idx]
+    if len(cams) < 2:
+        raise VibrInputError("interpolate needs at least two cameras")
+    n = _frame_count(n_frames, seconds, fps)
+    w, h = _output_size(cams, width, height, scale)
+    C = np.array([c.centre for c in cams])
+    rots = Rotation.from_matrix(np.array([c.R.T for c in cams]))  # camera-to-world
+    ang = (rots[:-1].inv() * rots[1:]).magnitude()
+    X = scene_centre(cams, scene_points(scene))
+    r = float(np.mean(np.linalg.norm(C - X, axis=1)))
+    step = np.linalg.norm(np.diff(C, axis=0), axis=1) + r * ang
+    if np.any(step <= 1e-12 * max(r, 1.0)):
+        k = int(np.argmin(step))
+        raise VibrInputError(f"views {names[k]} and {names[k + 1]} have the same pose: nothing to interpolate")
+    t = np.concatenate([[0.0], np.cumsum(step)])
+    pos = CubicSpline(t, C, bc_type="natural")
+    rot = RotationSpline(t, rots)
+    foc = CubicSpline(t, [_vertical_focal(c) for c in cams], bc_type="natural")
+    ts = np.linspace(t[0], t[-1], n) if n > 1 else t[:1]
+    Rc2w = rot(ts).as_matrix()
+    P, F = pos(ts), foc(ts)
+    out = []
+    for Ri, Ci, fi in zip(Rc2w, P, F):
+        K = Camera.intrinsics(float(fi) * h, w, h)
+        out.append(Camera.from_centre(K, Ri.T, Ci, w, h))
+    return CameraPath(out, float(fps), None, w, h,
+                      {"kind": "interpolate", "views": names, "knots": t.tolist()})
+
+
+def _angles_in_plane(V, e1, e2):
+    return np.arctan2(V @ e2, V @ e1)
+
+
+def orbit(scene, *, n_frames: int | None = None, seconds: float | None = None, fps: float = 24.0,
+          width: int | None = None, height: int | None = None, scale: float = 1.0,
+          full: bool | None = None, radius_scale: float = 1.0) -> CameraPath:
+    """An elliptical orbit around :func:`scene_centre`, looking at it.
+
+    The orbit lies in the plane perpendicular to "up" (:func:`scene_up`) at the cameras'
+    mean height above the centre. Its semi-axes are ``√2 ×`` the standard deviation of the
+    cameras' horizontal offsets along their two principal directions when the cameras
+    surround the centre (the largest angular gap between them is under 180°: a ring, for
+    which this is the ring's radius) — ``full`` orbit —, and a circle at their mean
+    horizontal distance swept back and forth over the arc they cover otherwise
+    (``θ(s) = θ_mid + ½ span · sin 2πs``: nothing is rendered from where no camera looked;
+    ``full=True`` forces a full turn). Focal length: the cameras' mean ``fy / H``.
+    """
+    cams = [v.camera for v in scene.views]
+    n = _frame_count(n_frames, seconds, fps)
+    w, h = _output_size(cams, width, height, scale)
+    X = scene_centre(cams, scene_points(scene))
+    up = scene_up(cams, X)
+    C = np.array([c.centre for c in cams]) - X
+    height_ = float(np.mean(C @ up))
+    V = C - np.outer(C @ up, up)
+    if np.max(np.linalg.norm(V, axis=1)) < 1e-9:
+        raise VibrInputError("the cameras are all straight above the centre: no orbit plane")
+    # in-plane basis: principal directions of the horizontal offsets
+    _, _, Wt = np.linalg.svd(V - 0.0, full_matrices=False)
+    e1 = Wt[0] - (Wt[0] @ up) * up
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    th = np.sort(_angles_in_plane(V, e1, e2))
+    gaps = np.diff(np.concatenate([th, [th[0] + 2 * np.pi]]))
+    surround = len(th) > 2 and float(gaps.max()) < np.pi
+    full = surround if full is None else bool(full)
+    s = np.arange(n) / n
+    if full:
+        if surround:
+            a = math.sqrt(2.0) * float(np.std(V @ e1)) * radius_scale
+            b = math.sqrt(2.0) * float(np.std(V @ e2)) * radius_scale
+        else:
+            a = b = float(np.mean(np.linalg.norm(V, axis=1))) * radius_scale
+        start = float(_angles_in_plane(V[:1], e1, e2)[0])
+        ang = start + 2 * np.pi * s
+        rad_a, rad_b = a, b
+    else:
+        k = int(np.argmax(gaps))
+        lo = th[(k + 1) % len(th)]
+        span = 2 * np.pi - float(gaps[k])
+        mid = lo + span / 2
+        ang = mid + 0.5 * span * np.sin(2 * np.pi * s)
+        rad_a = rad_b = float(np.mean(np.linalg.norm(V, axis=1))) * radius_scale
+    f_rel = float(np.mean([_vertical_focal(c) for c in cams]))
+    out = []
+    for t in ang:
+        eye = X + height_ * up + rad_a * math.cos(t) * e1 + rad_b * math.sin(t) * e2
+        out.append(_look_at(eye, X, up, f_rel, w, h))
+    return CameraPath(out, float(fps), None, w, h,
+                      {"kind": "orbit", "centre": X.tolist(), "up": up.tolist(), "full": full})
+
+
+def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, fps: float = 24.0,
+           width: int | None = None, height: int | None = None, scale: float = 1.0,
+           rots: float = 2.0, zrate: float = 0.5, radius_scale: float = 1.0) -> CameraPath:
+    """A forward-facing spiral around the mean camera, looking at :func:`scene_centre`
+    (LLFF, Mildenhall et al. 2019, ``render_path_spiral``). When the cameras surround the
+    centre (their mean centre is nearer to it than half their distance: a ring), around the
+    first view, with radii a tenth of its distance to the centre.
+
+    Mean camera: the mean centre and the mean rotation (``Rotation.mean``). In its axes
+    the eye moves on ``(r_x cos θ, −r_y sin θ, −r_z sin(zrate θ))``, ``θ`` over ``rots``
+    turns, with ``r`` the 90th percentile of the cameras' absolute offsets from the mean
+    camera along each axis (LLFF's radii) times ``radius_scale``.
+    """
+    from scipy.spatial.transform import Rotation
+
+    cams = [v.camera for v in scene.views]
+    n = _frame_count(n_frames, seconds, fps)
+    w, h = _output_size(cams, width, height, scale)
+    X = scene_centre(cams, scene_points(scene))
+    up = scene_up(cams, X)
+    C = np.array([c.centre for c in cams])
+    Cm = C.mean(0)
+    dist = float(np.mean(np.linalg.norm(C - X, axis=1)))
+    if np.linalg.norm(Cm - X) < 0.5 * dist:
+        # the cameras surround the centre (a ring): their mean camera is inside the object;
+        # spiral around the first view instead, radii a tenth of its distance to the centre
+        Cm = C[0]
+        Rm = Camera.look_at(Cm, X, up, np.eye(3), 1, 1).R
+        rad = np.full(3, 0.1 * float(np.linalg.norm(Cm - X))) * radius_scale
+    else:
+        Rm = Rotation.from_matrix(np.array([c.R for c in cams])).mean().as_matrix()  # world-to-camera
+        off = (C - Cm) @ Rm.T
+        rad = np.percentile(np.abs(off), 90, axis=0) * radius_scale
+    if not np.any(rad > 0):
+        raise VibrInputError("the cameras share one centre: no spiral radius")
+    f_rel = float(np.mean([_vertical_focal(c) for c in cams]))
+    out = []
+    for th in np.linspace(0.0, 2 * np.pi * rots, n, endpoint=False):
+        local = np.array([math.cos(th), -math.sin(th), -math.sin(th * zrate)]) * rad
+        eye = Cm + Rm.T @ local
+        out.append(_look_at(eye, X, up, f_rel, w, h))
+    return CameraPath(out, float(fps), None, w, h,
+                      {"kind": "spiral", "centre": X.tolist(), "radii": rad.tolist()})
+
+
+def scene_applied_transform(scene_path):
+    """The ``applied_transform`` (3×4) recorded in a scene's transforms.json, or None.
+
+    nerfstudio composes it into its dataparser transform (``nerfstudio_dataparser.py``:
+    ``transform_matrix @ applied_transform``), so a path in nerfstudio's normalised frame
+    maps back to the frame *before* it; vibr reads transforms.json poses as they are, so
+    it is applied again (:func:`read_camera_path`)."""
+    from .io.transforms import find_transforms
+
+    try:
+        tj = find_transforms(scene_path)
+    except Exception:  # noqa: BLE001 - not a transforms.json scene
+        return None
+    if tj is None:
+        return None
+    try:
+        with open(tj, encoding="utf-8") as f:
+            d = json.load(f)
+        A = d.get("applied_transform") if isinstance(d, dict) else None
+        return None if A is None else np.asarray(A, np.float64).reshape(3, 4)
+    except (OSError, ValueError, TypeError):
+        return None

@@ -1,0 +1,34 @@
+"""Headless Chromium for the viewer's test, benchmark and screenshot (not used by
+``vibr view`` itself, which serves whatever browser the user opens).
+
+Uses Debian's ``chromium`` package through the ``playwright`` Python package
+(``executable_path``); playwright's own browser download is never relied on.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+__all__ = ["CHROMIUM_ARGS", "chromium_path", "launch_chromium"]
+
+#: Flags for a headless, sandbox-free Chromium that talks to nothing but the page's server.
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+def chromium_path() -> str | None:
+    """The Chromium executable: ``$VIBR_CHROMIUM``, else /usr/bin/chromium, else
+    ``chromium`` on the PATH; None when there is none."""
+    for cand in (os.environ.get("VIBR_CHROMIUM"), "/usr/bin/chromium"):
+        if cand and os.path.isfile(cand) and os.access(cand, os.X_OK):
+            return cand
+    return shutil.which("chromium")
+
+
+def launch_chromium(playwright, timeout_s: float = 30.0):
+    """A headless Chromium browser from a started ``sync_playwright()`` context."""
+    exe = chromium_path()
+    if exe is None:
+        raise FileNotFoundError("chromium not found (Debian: apt-get install -y chromium)")
+    return playwright.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, timeout=timeout_s * 1000)

@@ -1,0 +1,123 @@
+"""What the viewer draws besides the rendered view: points, frustum sizes, thumbnails, up.
+
+Pure array code (no viser): the app (:mod:`vibr.viewer.app`) sends the results.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import Scene
+
+__all__ = ["point_cloud", "scene_scale", "frustum_size", "world_up", "thumbnail", "points_in_view"]
+
+
+def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """World points and their colours from the views' depth maps, at most ``max_points``.
+
+    Every view contributes pixels on a regular grid of stride
+    ``s = ceil(sqrt(N_pixels / max_points))`` (all views together), back-projected with their
+    depth (``X = C + depth · Rᵀ K⁻¹ x̄``, :meth:`vibr.camera.Camera.backproject`); a random
+    subset of ``max_points`` is kept when the grid gives more. Views without depth add
+    nothing; when no view has depth the scene's sparse points (grey) are used.
+
+    Returns
+    -------
+    points : (N, 3) float32
+    colours : (N, 3) uint8
+    """
+    views = [v for v in scene.views if v.depth is not None]
+    if not views:
+        if scene.points is not None and len(scene.points):
+            P = np.asarray(scene.points, dtype=np.float32)
+            P = _subsample(P, max_points, seed)
+            return P, np.full(P.shape, 160, np.uint8)
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
+    n_pix = sum(v.shape[0] * v.shape[1] for v in views)
+    step = max(1, int(np.ceil(np.sqrt(n_pix / max(1, max_points)))))
+    pts, cols = [], []
+    for v in views:
+        h, w = v.shape
+        z = v.depth[::step, ::step]
+        yy, xx = np.mgrid[0:h:step, 0:w:step]
+        ok = np.isfinite(z) & (z > 0)
+        if not np.any(ok):
+            continue
+        xy = np.stack([xx[ok], yy[ok]], -1).astype(np.float64)
+        pts.append(v.camera.backproject(xy, z[ok]).astype(np.float32))
+        cols.append(np.clip(v.image[::step, ::step][ok] * 255 + 0.5, 0, 255).astype(np.uint8))
+    if not pts:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
+    P, C = np.concatenate(pts), np.concatenate(cols)
+    if len(P) > max_points:
+        keep = np.random.default_rng(seed).choice(len(P), max_points, replace=False)
+        P, C = P[keep], C[keep]
+    return P, C
+
+
+def _subsample(P: np.ndarray, n: int, seed: int) -> np.ndarray:
+    if len(P) <= n:
+        return P
+    return P[np.random.default_rng(seed).choice(len(P), n, replace=False)]
+
+
+def scene_scale(scene: Scene, points: np.ndarray | None = None) -> float:
+    """A length for drawing (frustum size, point size): the median distance from the cameras
+    to the points when there are points, else the median distance between camera centres,
+    else 1."""
+    C = np.array([v.camera.centre for v in scene.views])
+    if points is not None and len(points):
+        sample = _subsample(np.asarray(points, np.float64), 2000, 0)
+        d = np.linalg.norm(sample[None, :, :] - C[:, None, :], axis=2)
+        s = float(np.median(d))
+        if s > 0:
+            return s
+    if len(C) > 1:
+        d = np.linalg.norm(C[:, None] - C[None], axis=2)[np.triu_indices(len(C), 1)]
+        s = float(np.median(d))
+        if s > 0:
+            return s
+    return 1.0
+
+
+def frustum_size(scene: Scene, scale: float) -> float:
+    """Depth (scene units) at which to draw the input cameras' frustums: 6 % of the scene
+    ``scale``, at most half the median distance from a camera to its nearest neighbour (so
+    that neighbouring frustums do not overlap: a light-field grid has a small baseline)."""
+    C = np.array([v.camera.centre for v in scene.views])
+    size = 0.06 * scale
+    if len(C) > 1:
+        d = np.linalg.norm(C[:, None] - C[None], axis=2)
+        np.fill_diagonal(d, np.inf)
+        nn = float(np.median(d.min(axis=1)))
+        if nn > 0:
+            size = min(size, 0.5 * nn)
+    return size
+
+
+def world_up(scene: Scene) -> np.ndarray:
+    """World "up": the mean of the cameras' image-up directions (−y axis, ``-R[1]``),
+    normalised; ``(0, -1, 0)`` when they cancel out."""
+    u = -np.mean([v.camera.R[1] for v in scene.views], axis=0)
+    n = float(np.linalg.norm(u))
+    return u / n if n > 1e-9 else np.array([0.0, -1.0, 0.0])
+
+
+def thumbnail(image: np.ndarray, long_side: int = 160) -> np.ndarray:
+    """uint8 copy of an H×W×3 [0, 1] image whose longer side is at most ``long_side``
+    (area-averaged by an integer factor, then strided)."""
+    h, w = image.shape[:2]
+    f = max(1, int(np.ceil(max(h, w) / long_side)))
+    hh, ww = (h // f) * f, (w // f) * f
+    small = image[:hh, :ww].reshape(hh // f, f, ww // f, f, 3).mean(axis=(1, 3))
+    return np.clip(small * 255 + 0.5, 0, 255).astype(np.uint8)
+
+
+def points_in_view(points: np.ndarray, camera) -> np.ndarray:
+    """The rows of ``points`` (N, 3) in front of ``camera`` and inside its image."""
+    if len(points) == 0:
+        return points
+    xy, z = camera.project(points)
+    inside = (z > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= camera.width - 0.5) & \
+             (xy[:, 1] >= -0.5) & (xy[:, 1] <= camera.height - 0.5)
+    return points[inside]

@@ -1,0 +1,193 @@
+"""The viewer's renders: a vibr camera and the GUI's settings in, an image out.
+
+Rendering is :func:`vibr.render.render` itself, from the ``n_views`` best sources for the
+camera (:func:`vibr.selection.select_views`, ranked on a fixed sample of the scene's points
+so that ranking costs no depth-map pass per request); nothing here is viewer-specific maths.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..camera import Camera
+from ..render import render
+from ..render.methods import METHODS
+from ..scene import Scene
+from ..selection import select_views
+from .geometry import points_in_view
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scaled_scene", "scene_with_depth"]
+
+
+class RenderAbandoned(Exception):
+    """A render stopped early because its request became stale."""
+
+
+@dataclass(frozen=True)
+class ViewSettings:
+    """What the GUI controls (paper names; see :mod:`vibr.render.methods`).
+
+    method : one of :data:`vibr.render.methods.METHODS` (default "gradient")
+    gamma : gradient-term weight (eq. energy_final), method "gradient" only
+    lam : TV weight, for intensities on [0, 255]
+    n_views : number of source views (the best for the camera)
+    preview_long_side : long side of the preview image while the camera moves (px)
+    full_long_side : long side of the image once the camera is still (px); None: the
+        scene's largest image side (the viewer fills it in)
+    """
+
+    method: str = "gradient"
+    gamma: float = 1.0
+    lam: float = 0.1
+    n_views: int = 8
+    preview_long_side: int = 256
+    full_long_side: int | None = None
+
+    def __post_init__(self):
+        from ..errors import VibrInputError
+
+        if self.method not in METHODS:
+            raise VibrInputError(f"unknown method {self.method!r} (choose from {', '.join(METHODS)})")
+        if self.n_views < 1 or self.preview_long_side < 8 or (self.full_long_side is not None and self.full_long_side < 8):
+            raise VibrInputError("n_views must be >= 1 and image sizes >= 8 px")
+        if not (self.gamma >= 0 and self.lam >= 0):
+            raise VibrInputError("gamma and lam must be >= 0")
+
+    def replace(self, **changes) -> "ViewSettings":
+        return replace(self, **changes)
+
+
+@dataclass
+class ViewImage:
+    """A render for the viewer: ``image`` H×W×3 float32 in [0, 1], the ``camera`` it is
+    for, the ``sources`` (view names) it used and ``seconds`` spent."""
+
+    image: np.ndarray
+    camera: Camera
+    sources: list
+    seconds: float
+    times: dict = field(default_factory=dict)
+
+
+class ViewRenderer:
+    """Render any camera of a scene whose views all have depth.
+
+    Parameters
+    ----------
+    scene : Scene
+        Every view with depth (:func:`scene_with_depth`).
+    rank_points : (N, 3) array, optional
+        World points used to rank the sources per camera; default a 4096-point sample of
+        the depth maps.
+    """
+
+    def __init__(self, scene: Scene, rank_points: np.ndarray | None = None):
+        from .geometry import point_cloud
+
+        self.scene = scene
+        self._long_side = max(max(v.shape) for v in scene.views)
+        self._scaled: dict[float, Scene] = {1.0: scene}
+        # one render at a time: numba's default (workqueue) threading layer must not be
+        # entered from two threads at once, and renders are CPU-bound anyway
+        self._lock = threading.Lock()
+        if rank_points is None:
+            rank_points, _ = point_cloud(scene, 4096, seed=1)
+        self.rank_points = np.asarray(rank_points, dtype=np.float64)
+
+    def scene_for(self, camera: Camera) -> Scene:
+        """The scene at the resolution of ``camera``: for an image much smaller than the
+        views (a preview), views resized by ``s = long side of camera / of the views``
+        (:func:`scaled_scene`, cached per ``s``): warping every full-resolution source pixel
+        would cost as much as a full-size render."""
+        s = max(camera.width, camera.height) / self._long_side
+        if s > 0.75:
+            return self.scene
+        s = round(s, 3)
+        if s not in self._scaled:
+            self._scaled[s] = scaled_scene(self.scene, s)
+        return self._scaled[s]
+
+    def sources_for(self, camera: Camera, n_views: int) -> list[int]:
+        """Indices of the ``n_views`` best views for ``camera``."""
+        if n_views >= len(self.scene):
+            return list(range(len(self.scene)))
+        pts = points_in_view(self.rank_points, camera)
+        return select_views(self.scene, camera, n_views, points=pts if len(pts) else None)
+
+    def render(self, camera: Camera, settings: ViewSettings, should_stop=None) -> ViewImage:
+        """Render ``camera`` with ``settings`` (its size is the camera's).
+
+        ``should_stop()``, when given, is polled after every solver iteration; when it
+        returns True the render is abandoned by raising :class:`RenderAbandoned` (a newer
+        camera arrived: finishing would only delay its image)."""
+        with self._lock:
+            return self._render(camera, settings, should_stop)
+
+    def _render(self, camera: Camera, settings: ViewSettings, should_stop) -> ViewImage:
+        t0 = time.perf_counter()
+        if should_stop is not None and should_stop():
+            raise RenderAbandoned()
+        idx = self.sources_for(camera, settings.n_views)
+        src = self.scene_for(camera).subset(idx)
+        cb = None
+        if should_stop is not None:
+            def cb(*_):
+                if should_stop():
+                    raise RenderAbandoned()
+        res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb)
+        dt = time.perf_counter() - t0
+        return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times))
+
+
+def scaled_scene(scene: Scene, s: float) -> Scene:
+    """Every view resized by ``s`` as :func:`vibr.io.load_scene` does with ``scale``: images
+    by :func:`vibr.io.images.resize_image`, cameras by :meth:`Camera.scaled`, depth and
+    sigma_z maps by nearest neighbour (:func:`vibr.io.images.resize_depth`)."""
+    from ..io.images import resize_depth, resize_image
+
+    views = []
+    for v in scene.views:
+        cam = v.camera.scaled(s)
+        sz = v.sigma_z
+        if sz is not None and np.ndim(sz) > 0:
+            sz = resize_depth(np.asarray(sz, np.float32), cam.shape)
+        views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
+                               depth=None if v.depth is None else resize_depth(v.depth, cam.shape),
+                               sigma_z=sz))
+    return scene.replace(views=views, meta=dict(scene.meta, viewer_scale=s))
+
+
+def scene_with_depth(scene: Scene, *, cache_dir=None) -> Scene:
+    """``scene`` with depth on every view.
+
+    A scene whose views all have depth is returned as is. Otherwise
+    :func:`vibr.depthcache.scene_with_depth` gives it depth (the scene's own, transferred,
+    or estimated once and cached on disk). Without that module (an older vibr), depth is
+    transferred from the views that have some (:func:`vibr.geometry.ensure_source_depth`)
+    or estimated from all views (:func:`vibr.stereo.estimate_depth`), uncached.
+    """
+    if scene.has_depth:
+        return scene
+    try:
+        from ..depthcache import scene_with_depth as _cached
+    except ImportError:
+        _cached = None
+    if _cached is not None:
+        logger.info("giving every view depth (the on-disk depth cache is used when present)")
+        return _cached(scene, depth="auto", cache_dir=cache_dir)
+    if any(v.depth is not None for v in scene.views):
+        from ..geometry import ensure_source_depth
+
+        logger.info("transferring depth to the views without it")
+        return ensure_source_depth(scene)
+    from ..stereo import estimate_depth
+
+    logger.info("the scene has no depth maps: estimating them from its %d views", len(scene))
+    return estimate_depth(scene)

@@ -1,0 +1,349 @@
+"""Fly-throughs (issue 21): camera paths (nerfstudio schema), path generators, depth cache,
+``vibr path`` / ``vibr render --path``, MP4 output."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from vibr.camera import Camera
+from vibr.errors import VibrInputError
+
+
+@pytest.fixture(autouse=True)
+def _cache_in_tmp(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("VIBR_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "vibr-cache"))
+
+
+@pytest.fixture(scope="module")
+def grid_dir(tmp_path_factory):
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    d = tmp_path_factory.mktemp("fly")
+    save_scene(make_scene("grid", n_views=9, width=64, height=64, seed=1), d / "s")
+    return d / "s"
+
+
+@pytest.fixture(scope="module")
+def arc_scene():
+    from vibr.synthetic import make_scene
+
+    return make_scene("arc", n_views=6, width=64, height=48, seed=0)
+
+
+def _same_cameras(a, b, tol=1e-9):
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert (x.width, x.height) == (y.width, y.height)
+        for m, n in ((x.K, y.K), (x.R, y.R), (x.t, y.t)):
+            assert np.abs(m - n).max() <= tol
+
+
+# ----------------------------------------------------------------------------- schema
+def test_opengl_camera_closed_form():
+    """nerfstudio's camera at the origin with identity camera_to_world looks down -z with y
+    up: a point 5 units in front projects to the centre, +x to the right, +y upwards."""
+    from vibr.path import c2w_opengl_from_camera, camera_from_c2w_opengl
+
+    W, H, fov = 80, 60, 50.0
+    cam = camera_from_c2w_opengl(np.eye(4), fov, W, H)
+    f = (H / 2) / math.tan(math.radians(fov) / 2)
+    assert np.allclose(cam.K, [[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1]], atol=1e-12)
+    assert np.allclose(cam.R, np.diag([1, -1, -1])) and np.allclose(cam.centre, 0)
+    xy, z = cam.project(np.array([[0, 0, -5.0], [1, 0, -5.0], [0, 1, -5.0]]))
+    assert np.allclose(z, 5) and np.allclose(xy[0], [(W - 1) / 2, (H - 1) / 2])
+    assert xy[1, 0] > xy[0, 0] and xy[2, 1] < xy[0, 1]
+    assert np.allclose(c2w_opengl_from_camera(cam), np.eye(4), atol=1e-15)
+
+
+@pytest.mark.parametrize("kind", ["interpolate", "orbit", "spiral"])
+def test_round_trip_nerfstudio_schema(arc_scene, tmp_path, kind):
+    from vibr import path as P
+
+    p = getattr(P, kind)(arc_scene, n_frames=17)
+    f = tmp_path / "p.json"
+    P.write_camera_path(f, p)
+    d = json.loads(f.read_text())
+    assert d["camera_type"] == "perspective" and (d["render_width"], d["render_height"]) == (64, 48)
+    assert len(d["camera_path"]) == 17 and d["fps"] == 24.0 and abs(d["seconds"] - 17 / 24) < 1e-12
+    fr = d["camera_path"][0]
+    assert len(fr["camera_to_world"]) == 16 and fr["aspect"] == 64 / 48 and 0 < fr["fov"] < 180
+    q = P.read_camera_path(f)
+    _same_cameras(p.cameras, q.cameras)
+    assert q.fps == 24.0 and (q.width, q.height) == (64, 48)
+
+
+def test_dataparser_transforms_map_back(arc_scene, tmp_path):
+    """A path written in nerfstudio's normalised frame (x_n = s (T_R x + T_t)) reads back in
+    the scene's frame with --dataparser-transforms."""
+    from scipy.spatial.transform import Rotation
+
+    from vibr import path as P
+
+    p = P.orbit(arc_scene, n_frames=5)
+    T = np.hstack([Rotation.from_rotvec([0.9, -0.4, 1.2]).as_matrix(), [[5.0], [-8.0], [3.0]]])
+    s = 0.2
+    frames = []
+    for c in p.cameras:
+        M = P.c2w_opengl_from_camera(c)
+        M[:3, :3] = T[:, :3] @ M[:3, :3]
+        M[:3, 3] = s * (T[:, :3] @ M[:3, 3] + T[:, 3])
+        frames.append({"camera_to_world": M.ravel().tolist(), "fov": P.fov_from_focal(c.K[1, 1], c.height),
+                       "aspect": c.width / c.height})
+    f = tmp_path / "ns.json"
+    f.write_text(json.dumps({"camera_type": "perspective", "render_width": 64, "render_height": 48,
+                             "seconds": 1.0, "fps": 5, "camera_path": frames}))
+    (tmp_path / "dp.json").write_text(json.dumps({"transform": T.tolist(), "scale": s}))
+    _same_cameras(p.cameras, P.read_camera_path(f, dataparser_transforms=tmp_path / "dp.json").cameras)
+    from vibr.flythrough import check_path_sees_scene
+
+    with pytest.raises(VibrInputError, match="nowhere near.*dataparser"):
+        check_path_sees_scene(arc_scene, P.read_camera_path(f).cameras)
+
+
+# ----------------------------------------------------------------------------- generators
+def _second_third_differences(P, n):
+    d2 = np.diff(P, 2, axis=0)
+    d3 = np.diff(P, 3, axis=0)
+    return np.abs(d2).max(), np.abs(d3).max()
+
+
+def test_interpolate_is_c2_and_passes_through_the_keys(arc_scene):
+    """C²: third differences shrink like h³ (second derivative continuous across the key
+    cameras; a C¹ spline's would jump and leave third differences ~h²). The keys are on the
+    curve, the first and last frames are the end cameras and no frame repeats."""
+    from vibr.path import interpolate
+
+    ratios = []
+    for n in (400, 800):
+        p = interpolate(arc_scene, n_frames=n)
+        C = np.array([c.centre for c in p.cameras])
+        Z = np.array([c.optical_axis for c in p.cameras])
+        d2, d3 = _second_third_differences(C, n)
+        e2, e3 = _second_third_differences(Z, n)
+        ratios.append((d3 / d2, e3 / e2))
+        assert np.linalg.norm(np.diff(C, axis=0), axis=1).min() > 0
+    # halving the step halves the ratio of third to second differences (O(h)); a jump of
+    # the second derivative would keep it constant
+    for k in range(2):
+        assert ratios[1][k] < 0.6 * ratios[0][k]
+    p = interpolate(arc_scene, n_frames=11)
+    assert p.cameras[0].allclose(arc_scene.views[0].camera.with_size(64, 48), atol=1e-9)
+    assert np.allclose(p.cameras[-1].centre, arc_scene.views[-1].camera.centre, atol=1e-9)
+    knots = np.array(p.meta["knots"])
+    from scipy.interpolate import CubicSpline
+
+    spline = CubicSpline(knots, [v.camera.centre for v in arc_scene.views], bc_type="natural")
+    assert np.allclose(spline(knots), [v.camera.centre for v in arc_scene.views])
+
+
+def test_interpolate_order_and_views(arc_scene):
+    from vibr.path import interpolate
+
+    names = arc_scene.names
+    p = interpolate(arc_scene, [names[3], names[0], names[5], names[1]], order="proximity", n_frames=4)
+    assert p.meta["views"][0] in (names[0], names[5]) and set(p.meta["views"]) == {names[i] for i in (0, 1, 3, 5)}
+    with pytest.raises(VibrInputError):
+        interpolate(arc_scene, [names[0], names[0]], n_frames=4)
+
+
+def _cameras_only(views):
+    from vibr.scene import Scene, View
+
+    return Scene([View(n, None, c) for n, c in views])
+
+
+def _fountain_cameras(d):
+    from vibr.io.strecha import read_strecha_camera
+
+    files = sorted((d / "gt_dense_cameras").glob("*.camera"))
+    return _cameras_only([(f.name.split(".")[0], read_strecha_camera(f).scaled(0.25)) for f in files])
+
+
+def _temple_cameras(d):
+    from vibr.io.middlebury import read_par
+
+    return _cameras_only([(n, Camera(K, R, t, 640, 480)) for n, K, R, t in read_par(d / "templeSR_par.txt")])
+
+
+@pytest.mark.parametrize("which", ["fountain", "temple"])
+@pytest.mark.parametrize("kind", ["orbit", "spiral"])
+def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
+    """The scene's centre (where the cameras' axes meet) projects within the middle third
+    of every frame, in front of the camera; an orbit stays at the cameras' mean distance."""
+    from vibr import path as P
+    from vibr.camera import axes_meeting_point
+
+    scene = _fountain_cameras(data_dir / "strecha_fountain-P11") if which == "fountain" \
+        else _temple_cameras(data_dir / "middlebury_templeSparseRing")
+    cams = [v.camera for v in scene.views]
+    X = axes_meeting_point(cams)
+    assert X is not None
+    p = getattr(P, kind)(scene, n_frames=60)
+    for c in p.cameras:
+        xy, z = c.project(X)
+        assert z > 0
+        assert c.width / 3 <= xy[0] <= 2 * c.width / 3 and c.height / 3 <= xy[1] <= 2 * c.height / 3
+    if kind == "orbit":
+        up = P.scene_up(cams)
+        hd = lambda C: np.linalg.norm((C - X) - ((C - X) @ up) * up)  # noqa: E731
+        mean_h = np.mean([hd(c.centre) for c in cams])
+        assert p.meta["full"] == (which == "temple")
+        d = [hd(c.centre) for c in p.cameras]
+        assert 0.7 * mean_h < np.min(d) and np.max(d) < 1.3 * mean_h
+
+
+# ----------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize("content,msg", [
+    ("{not json", "malformed JSON"),
+    ('{"render_width": 8, "render_height": 8, "fps": 24}', "camera_path"),
+    ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": []}', "no frames"),
+    ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '
+     '[2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": 50}]}', "not rigid"),
+    ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '
+     '[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": 0}]}', "fov"),
+    ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '
+     '[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": -30}]}', "fov"),
+])
+def test_bad_path_files_exit_2_one_line_no_output(grid_dir, tmp_path, capsys, content, msg):
+    from vibr.cli import main
+
+    f = tmp_path / "bad.json"
+    f.write_text(content)
+    out = tmp_path / "out.mp4"
+    assert main(["render", str(grid_dir), "--path", str(f), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err and str(f) in err
+    assert not out.exists() and not (tmp_path / "out_frames").exists()
+
+
+# ----------------------------------------------------------------------------- rendering
+def _psnr_png(a, b):
+    from vibr.metrics import psnr
+
+    return psnr(a, b, border=2)
+
+
+def test_frame_at_held_out_view_matches_render_target(grid_dir, tmp_path, capsys):
+    """A path frame exactly at view_004 with view_004 excluded renders what
+    `vibr render --target view_004` renders: same PSNR (within 0.05 dB)."""
+    from vibr.cli import main
+    from vibr.io import load_scene, read_image
+    from vibr.path import write_camera_path
+
+    scene = load_scene(grid_dir)
+    write_camera_path(tmp_path / "p.json", [scene["view_004"].camera], fps=1.0)
+    assert main(["render", str(grid_dir), "--target", "view_004", "-o", str(tmp_path / "t.png"), "-q"]) == 0
+    assert main(["render", str(grid_dir), "--path", str(tmp_path / "p.json"), "-o", str(tmp_path / "fr"),
+                 "--exclude", "view_004", "-q"]) == 0
+    capsys.readouterr()
+    truth = scene["view_004"].image
+    # the single view is written at 16 bits when it needs them, video frames at 8
+    t8 = np.rint(read_image(tmp_path / "t.png") * 255) / 255
+    fr = read_image(tmp_path / "fr" / "frame_00000.png")
+    a, b = _psnr_png(t8, truth), _psnr_png(fr, truth)
+    assert a > 30 and abs(a - b) <= 0.05
+    assert np.abs(t8 - fr).max() <= 1 / 255 + 1e-6
+
+
+def test_hand_written_nerfstudio_camera_renders_like_camera_json(grid_dir, tmp_path, capsys):
+    """A camera written by hand in nerfstudio's convention (OpenGL axes: the grid looks down
+    world +z, so camera_to_world = diag(1, -1, -1) at the centre) renders the same image as
+    the equivalent vibr camera JSON (R = I, t = -C)."""
+    from vibr.cli import main
+    from vibr.io import load_scene, read_image
+
+    scene = load_scene(grid_dir)
+    C = scene["view_004"].camera.centre + np.array([0.03, -0.02, 0.0])
+    f = scene["view_004"].camera.K[1, 1]
+    fov = math.degrees(2 * math.atan(32 / f))
+    ns = {"camera_type": "perspective", "render_width": 64, "render_height": 64, "seconds": 1, "fps": 1,
+          "camera_path": [{"camera_to_world": [1, 0, 0, C[0], 0, -1, 0, C[1], 0, 0, -1, C[2], 0, 0, 0, 1],
+                           "fov": fov, "aspect": 1.0}]}
+    (tmp_path / "ns.json").write_text(json.dumps(ns))
+    cam = {"K": [[f, 0, 31.5], [0, f, 31.5], [0, 0, 1]], "R": np.eye(3).tolist(), "t": (-C).tolist(),
+           "width": 64, "height": 64}
+    (tmp_path / "cam.json").write_text(json.dumps(cam))
+    assert main(["render", str(grid_dir), "--target", str(tmp_path / "cam.json"), "-o", str(tmp_path / "c.png"),
+                 "-q"]) == 0
+    assert main(["render", str(grid_dir), "--path", str(tmp_path / "ns.json"), "-o", str(tmp_path / "fr"),
+                 "--views", "9", "-q"]) == 0
+    capsys.readouterr()
+    a = read_image(tmp_path / "c.png")
+    b = read_image(tmp_path / "fr" / "frame_00000.png")
+    assert np.abs(a - b).max() <= 1 / 255 + 1e-6
+
+
+def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
+    """vibr path -> vibr render --path -> MP4 with the right frame count and size (decoded
+    back); a rerun skips the frames written; an odd size is padded to even."""
+    from vibr.cli import main
+    from vibr.io.video import read_video_info
+
+    pj = tmp_path / "o.json"
+    assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "5", "--size", "47x33", "-q"]) == 0
+    out = tmp_path / "o.mp4"
+    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(out), "--views", "4", "-q"]) == 0
+    txt = capsys.readouterr().out
+    assert "rendered 5 frames (0 already there)" in txt
+    assert read_video_info(out)[:3] == (5, 48, 34)
+    frames = sorted((tmp_path / "o_frames").glob("frame_*.png"))
+    assert len(frames) == 5
+    (frames[2]).unlink()
+    mtime = frames[0].stat().st_mtime_ns
+    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(out), "--views", "4", "-q"]) == 0
+    assert "rendered 1 frames (4 already there)" in capsys.readouterr().out
+    assert frames[0].stat().st_mtime_ns == mtime and frames[2].exists()
+    assert read_video_info(out)[:3] == (5, 48, 34)
+
+
+def test_view_weights_soft_and_continuous(arc_scene):
+    """Far from a rank swap the K best have weight 1 and the others 0 (select_views' set);
+    along a path the weights change continuously (no jump larger than the path's step
+    warrants)."""
+    from vibr.flythrough import _source_points, view_weights
+    from vibr.path import interpolate
+    from vibr.selection import select_views
+
+    pts = _source_points(arc_scene)
+    p = interpolate(arc_scene, n_frames=200, width=32, height=24)
+    W = np.array([view_weights(arc_scene, c, 3, view_points=pts) for c in p.cameras])
+    assert np.abs(np.diff(W, axis=0)).max() < 0.35
+    hard = [i for i in range(len(W)) if set(np.unique(W[i])) <= {0.0, 1.0}]
+    assert len(hard) > len(W) / 3
+    for i in hard[::10]:
+        assert sorted(np.flatnonzero(W[i])) == select_views(arc_scene, p.cameras[i], 3)
+
+
+def test_depth_cache_estimates_once(tmp_path, monkeypatch):
+    """Without depth, the first call estimates and writes the cache; the second loads it
+    (estimate_depth not called) and gives the same maps."""
+    import vibr.stereo as stereo
+    from vibr.depthcache import scene_with_depth
+    from vibr.synthetic import make_scene
+
+    from vibr.scene import Scene
+
+    s = make_scene("arc", n_views=4, width=48, height=40, seed=3)
+    bare = Scene([v.replace(depth=None, sigma_z=None) for v in s.views], s.name, None, None, None, {})
+    calls = []
+    truth = {v.name: v.depth for v in s.views}
+
+    def fake(scene, **kw):  # the cache is under test, not the estimator: the true depth, noised
+        calls.append(kw)
+        rng = np.random.default_rng(len(calls))
+        return Scene([v.replace(depth=truth[v.name] * (1 + 0.01 * rng.random(v.shape)).astype(np.float32),
+                                sigma_z=0.01) for v in scene.views], scene.name, scene.root, None, None, {})
+
+    monkeypatch.setattr(stereo, "estimate_depth", fake)
+    a = scene_with_depth(bare, cache_dir=tmp_path, exclude=[s.names[0]])
+    assert a.meta["depth_source"] == "estimated" and len(calls) == 1 and a.names == s.names[1:]
+    b = scene_with_depth(bare, cache_dir=tmp_path, exclude=[s.names[0]])
+    assert b.meta["depth_source"] == "cache" and len(calls) == 1
+    for u, v in zip(a.views, b.views):
+        assert np.array_equal(u.depth, v.depth, equal_nan=True)
+    scene_with_depth(bare, cache_dir=tmp_path)  # other views: another key
+    assert len(calls) == 2
+    assert scene_with_depth(s, cache_dir=tmp_path).meta["depth_source"] == "scene"

@@ -1,0 +1,154 @@
+"""The viewer in a real browser: headless Chromium (Debian's package) driven by playwright.
+
+Starts :class:`vibr.viewer.Viewer` on a free 127.0.0.1 port on a small synthetic scene,
+loads the page, and checks that
+
+* the browser's camera, reported back through viser, is the input camera the viewer moved
+  it to (the viser ↔ vibr conversion, end to end);
+* the full-size image sent for it is ``vibr.render``'s image for that camera (bit for bit up
+  to 1 grey level) and close to the input photograph (PSNR);
+* the browser received exactly those PNG bytes (websocket frames) and shows them: the
+  screenshot of the canvas matches the image resized to the canvas.
+
+The screenshot is kept as ``viewer.png`` in the test's tmp dir.
+"""
+
+from __future__ import annotations
+
+import io
+import socket
+import time
+
+import numpy as np
+import pytest
+
+
+
+def free_port() -> int:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def _need_browser():
+    from vibr.viewer.browser import chromium_path
+
+    if chromium_path() is None:
+        pytest.skip("chromium not found ($VIBR_CHROMIUM, /usr/bin/chromium or PATH; Debian: "
+                    "apt-get install -y chromium, which .ci/run does)")
+    return pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+
+
+def png_images_in(frames) -> list[bytes]:
+    """Every complete PNG file inside binary websocket frames (viser appends binary
+    payloads raw after its compressed message header)."""
+    out = []
+    for f in frames:
+        if not isinstance(f, (bytes, bytearray)):
+            continue
+        i = 0
+        while (i := f.find(b"\x89PNG\r\n\x1a\n", i)) >= 0:
+            j = f.find(b"IEND", i)
+            if j < 0:
+                break
+            out.append(bytes(f[i:j + 8]))  # IEND chunk type + 4-byte CRC
+            i = j + 8
+    return out
+
+
+#: Mean absolute difference (grey levels) between the canvas and the sent image resized to
+#: it bilinearly: the browser's texture filtering differs from skimage's resize at edges.
+SCREEN_TOL = 6.0
+
+
+def _screen_error(shot, image) -> float:
+    """Mean |screenshot − image resized to the canvas| over the canvas's lower left, which
+    the control panel (right) and the notification (top left) do not cover."""
+    import imageio.v3 as iio
+    from skimage.transform import resize
+
+    shown = iio.imread(shot)[..., :3].astype(np.float64)
+    expected = resize(image.astype(np.float64), shown.shape[:2], order=1)
+    region = (slice(150, 470), slice(60, 290))
+    return float(np.abs(shown[region] - expected[region]).mean())
+
+
+@pytest.fixture(scope="module")
+def small_scene():
+    from vibr.synthetic import make_scene
+
+    return make_scene("handheld", n_views=6, width=128, height=96)
+
+
+def test_viewer_in_chromium(small_scene, tmp_path):
+    sync_api = _need_browser()
+    import imageio.v3 as iio
+
+    from vibr.metrics import psnr
+    from vibr.viewer import Viewer, ViewerOptions, ViewRenderer, ViewSettings
+    from vibr.viewer.browser import launch_chromium
+
+    t_start = time.perf_counter()
+    settings = ViewSettings(method="gradient", n_views=4, preview_long_side=64, full_long_side=128)
+    viewer = Viewer(small_scene, ViewerOptions(port=free_port(), settings=settings, settle_s=0.3))
+    url = viewer.start()
+    frames = []
+    try:
+        with sync_api.sync_playwright() as pw:
+            browser = launch_chromium(pw)
+            try:
+                page = browser.new_page(viewport={"width": 640, "height": 480})
+                page.set_default_timeout(30_000)
+                page.on("websocket", lambda ws: ws.on("framereceived", lambda f: frames.append(f)))
+                page.goto(url, timeout=30_000)
+                rec = viewer.wait_for_image(kind="full", timeout=40)
+                assert rec is not None, "no full-size image was sent within 40 s"
+                # the viewer moved the browser to view 0; a render for exactly that camera
+                # arrives once the browser echoed it (earlier renders: its default camera)
+                cam0 = small_scene.views[0].camera
+                deadline = time.monotonic() + 30
+                while not (np.allclose(rec.camera.R, cam0.R, atol=1e-4)
+                           and np.allclose(rec.camera.centre, cam0.centre, atol=1e-4)):
+                    assert time.monotonic() < deadline, f"no render at view 0's camera: last {rec.camera}"
+                    rec = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=30)
+                    assert rec is not None
+                page.screenshot(path=str(tmp_path / "viewer_scene.png"), timeout=30_000)
+                # hide what is drawn over the background; screenshots until the browser
+                # repainted (software GL: up to seconds)
+                for key in ("show_points", "show_cameras"):
+                    viewer.gui[key].value = False
+                viewer._set_visible("points")
+                viewer._set_visible("cameras")
+                shot = tmp_path / "viewer.png"
+                deadline = time.monotonic() + 20
+                while True:
+                    time.sleep(1.0)
+                    page.screenshot(path=str(shot), timeout=30_000)
+                    err = _screen_error(shot, rec.image)
+                    if err < SCREEN_TOL or time.monotonic() > deadline:
+                        break
+            finally:
+                browser.close()
+    finally:
+        viewer.stop()
+
+    # the camera: the browser's report is view 0's camera, at the canvas' 4:3 aspect
+    assert (rec.camera.width, rec.camera.height) == (128, 96)
+    assert np.allclose(rec.camera.K, cam0.K, atol=1e-6)
+    # the image: vibr.render for that camera (1 grey level for float reductions)
+    ref = ViewRenderer(small_scene).render(rec.camera, viewer.settings)
+    ref8 = np.clip(ref.image * 255 + 0.5, 0, 255).astype(np.uint8)
+    assert ref.sources == rec.sources
+    diff = np.abs(ref8.astype(int) - rec.image.astype(int))
+    assert diff.max() <= 1, f"sent image differs from vibr.render by up to {diff.max()} grey levels"
+    assert psnr(rec.image / 255.0, small_scene.views[0].image) > 30.0
+    # the browser got those bytes
+    pngs = [iio.imread(io.BytesIO(b)) for b in png_images_in(frames)]
+    assert any(p.shape[:2] == rec.image.shape[:2] and np.array_equal(p[..., :3], rec.image) for p in pngs), \
+        f"the browser never received the sent image ({len(pngs)} PNG images received)"
+    # and shows them (the browser stretches the 128×96 image over the 640×480 canvas)
+    iio.imwrite(tmp_path / "sent.png", rec.image)
+    assert err < SCREEN_TOL, f"screenshot differs from the sent image by {err:.1f} grey levels on average"
+    assert time.perf_counter() - t_start < 90
