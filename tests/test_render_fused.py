@@ -40,7 +40,7 @@ def test_hessian_terms_equals_the_composition(H, W, coupled, gamma, scheme):
     assert abs(xGx - ((x64 * G).sum() if gamma else 0.0)) < tol
     assert abs(gx - ((x64 * bgt).sum() if gamma else 0.0)) < tol
     assert abs(tv - tv_value(x, coupled)) < 1e-4 * max(1.0, tv)
-    h2, (pAx, pGx, hh) = hessian_power(A, Ag if gamma else None, x, 0.7, gamma)
+    h2, (pAx, pGx, hh) = hessian_power(A, Ag if gamma else None, x, 0.7, gamma, scheme=scheme)
     np.testing.assert_array_equal(h2, h)
     assert abs(pAx - xAx) < tol and abs(pGx - xGx) < tol
     assert abs(hh - (h.astype(np.float64) ** 2).sum()) < 1e-5 * max(1.0, hh)
