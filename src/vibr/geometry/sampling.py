@@ -8,7 +8,7 @@ Steps (paper §5, docs/METHOD.md §2), per source view k:
 3. per pixel: warp ``tau_k``, in-target test, visibility against the z-buffer;
 4. per visible sample: ``tau``, ``∂tau/∂x_m``, ``1/|det|`` (capped), ``∂tau/∂z``, world
    point, colour, colour gradient ``∇v`` (the renderer's own ``D``,
-   :func:`vibr.render.operators.grad_image`: one discretisation for both sides of the
+   :func:`vibr.geometry.gradient.grad_image`: one discretisation for both sides of the
    gradient term), ``sigma_z``.
 """
 
@@ -22,6 +22,7 @@ from numba import njit, prange
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
+from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, grad_image
 from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
 from .samples import Samples
 from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
@@ -140,8 +141,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
         callers rendering many targets (:mod:`vibr.flythrough`).
     grad_scheme : {"forward", "central"}, optional
-        Discretisation of the sources' ``∇v`` (:data:`vibr.render.operators.GRAD_SCHEMES`;
-        default :data:`vibr.render.operators.DEFAULT_GRAD_SCHEME`), recorded in
+        Discretisation of the sources' ``∇v`` (:data:`vibr.geometry.gradient.GRAD_SCHEMES`;
+        default :data:`vibr.geometry.gradient.DEFAULT_GRAD_SCHEME`), recorded in
         ``meta["grad_scheme"]``: the renderer applies the same ``D`` to the target.
 
     Returns
@@ -156,8 +157,6 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     VibrInputError
         A source without depth, or no source sample landing in the target.
     """
-    from ..render.operators import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES
-
     grad_scheme = DEFAULT_GRAD_SCHEME if grad_scheme is None else grad_scheme
     if grad_scheme not in GRAD_SCHEMES:
         raise VibrInputError(f"grad_scheme must be one of {GRAD_SCHEMES}, got {grad_scheme!r}")
@@ -239,7 +238,6 @@ def _visibility(prepped, zbuf, vis_threshold):
 def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme) -> Samples:
     """The fields of every visible pixel: one allocation for all samples, each view's
     kernel writing its rows in place."""
-    from ..render.operators import grad_image
 
     N = int(sum(int(r.sum()) for _, r in states))
     xy = np.empty((N, 2))
