@@ -37,7 +37,7 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   Off by default: it wins on cotton and fountain but loses on the synthetic scenes
   (docs/RENDERER.md "Robust data term").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
-  the authors' code (METHOD §10), lam raised up to 100× where few samples land
+  the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
 """
 
@@ -173,7 +173,7 @@ def get_method(method: "str | Method") -> Method:
 
 
 #: The paper's (alpha, gamma, lam) when ``preset="paper"`` is given without them: the
-#: light-field setting of the authors' experiments (METHOD §10: lambda = 0.001 on [0, 1]).
+#: light-field setting of the authors' experiments (docs/METHOD.md §10: lambda = 0.001 on [0, 1]).
 PAPER_DEFAULTS = dict(alpha=1.0, gamma=1.0, lam=0.001)
 
 #: Paper gamma → vibr gamma: the authors apply ``dt_beta × gradient_step`` (0.1) to the

@@ -72,7 +72,7 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
     return SplatCoverage(sp, acc, acc >= p["hole_threshold"])
 
 
-#: TV weightings (METHOD §10): ``"uniform"`` lam everywhere, ``"samples"`` lam raised where
+#: TV weightings (docs/METHOD.md §10): ``"uniform"`` lam everywhere, ``"samples"`` lam raised where
 #: few samples land (:func:`tv_weight_map`).
 TV_WEIGHTINGS = ("uniform", "samples")
 
@@ -85,7 +85,7 @@ def tv_weight_map(acc, weighting: str = "samples", k_max: float = 100.0, m_full:
     on the pixel (the accumulated splat weight ``Bᵀ1``) blurred by a Gaussian of ``blur``
     px: ``k_max`` (100) times lam where no sample lands, falling linearly to lam at
     ``m_full`` samples. The defaults are the authors' light-field rule
-    ``max(λ, 100λ − m/8)`` at λ = 0.001 (METHOD §10: 100λ − m/8 = λ at m = 99·8λ = 0.792),
+    ``max(λ, 100λ − m/8)`` at λ = 0.001 (docs/METHOD.md §10: 100λ − m/8 = λ at m = 99·8λ = 0.792),
     made relative to lam so that it holds whatever lam's value and scale.
     """
     if weighting not in TV_WEIGHTINGS:
