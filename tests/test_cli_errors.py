@@ -174,8 +174,11 @@ def test_convert_refuses_existing_output_without_overwrite(capsys, tmp_path):
     code, err = run_cli(capsys, "convert", root, out)
     assert_one_line_error(code, err, out, "--overwrite")
     assert (out / "keep.txt").read_text() == "mine"
-    assert run_cli(capsys, "convert", root, out, "--overwrite")[0] == 0
-    assert (out / "transforms.json").is_file() and not (out / "keep.txt").exists()
+    # --overwrite (alias --force) never deletes a folder vibr did not write
+    for flag in ("--overwrite", "--force"):
+        code, err = run_cli(capsys, "convert", root, out, flag)
+        assert_one_line_error(code, err, out, "not written by vibr")
+        assert (out / "keep.txt").read_text() == "mine"
 
 
 def test_exit_status_of_the_real_command(tmp_path):

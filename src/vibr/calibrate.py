@@ -569,6 +569,11 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
     out = Path(out_dir)
     if out.exists() and not overwrite:
         raise OutputExists("output folder already exists", out)
+    if out.exists():
+        from .io.outputs import check_not_input, check_replaceable
+
+        check_not_input(out, [photos_dir])
+        check_replaceable(out)  # overwrite replaces only a folder vibr wrote
     parent = out.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
     scene, report = calibrate_scene(photos_dir, **kwargs)
@@ -579,13 +584,10 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
         # The calibration summary beside transforms.json (registered images, errors, times).
         with open(tmp / "scene" / "calibration.json", "w") as fh:
             json.dump(scene.meta["calibration"], fh, indent=2)
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
-            os.replace(out, old / "x")
-            os.replace(tmp / "scene", out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp / "scene", out)
+        from .io.outputs import replace_folder, write_marker
+
+        write_marker(tmp / "scene")  # lists calibration.json too
+        replace_folder(tmp / "scene", out, overwrite=overwrite)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     scene.root = out

@@ -91,7 +91,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
                    border: int = METRIC_BORDER, estimate_kw: dict | None = None,
                    render_kw: dict | None = None, intensity_scale: float | None = None,
                    geometry_kw: dict | None = None, use_lpips: bool = True,
-                   view_split: int | None = None) -> Evaluation:
+                   view_split: int | None = None, uncertainty: bool = False) -> Evaluation:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
@@ -114,6 +114,10 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         Also measure each setting separately on the evaluated pixels seen by at most
         ``view_split`` source views and on those seen by more (:func:`view_counts`): entry
         ``regions`` = {"few": {...}, "many": {...}} with psnr, dssim and the pixel fraction.
+    uncertainty : bool
+        Render with ``uncertainty=True`` and add entry ``uncertainty`` = {ause, spearman,
+        fractions, curve, oracle, rmse} (:func:`vibr.metrics.uncertainty_metrics`, the same
+        pixels as the other metrics; plot: :func:`vibr.uncertainty_figures.write_sparsification_figure`).
 
     Returns an :class:`Evaluation` whose ``report`` is JSON-serialisable: ``scene``,
     ``target``, ``sources``, ``scale`` (the image scale the scene was loaded at),
@@ -137,7 +141,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
-    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth)
+    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty)
     cover = np.ones(tview.shape, bool)
     if mask == "reconstructed":
         for _, res, _ in rows:
@@ -150,6 +154,11 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         entry = _measure(s, res, dt, tview.image, m, border, depth, intensity_scale)
         if lp is not None:
             entry["lpips"] = lp(res.image, tview.image)
+        if uncertainty:  # issue 28
+            from .metrics import uncertainty_metrics
+
+            entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
+                                                       border=border)
         if view_split is not None:
             base = cover if mask == "reconstructed" else np.ones(tview.shape, bool)
             entry["regions"] = _region_metrics(res.image, tview.image, base, counts, view_split, border)
@@ -198,7 +207,7 @@ def _checked_settings(settings, mask: str, intensity_scale):
     return settings, intensity_scale
 
 
-def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth):
+def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False):
     """Render the target once per setting from the shared samples: ``[(setting, result,
     seconds)]``."""
     from .render import render
@@ -207,7 +216,7 @@ def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, 
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
         params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
         t = time.perf_counter()
-        res = render(src, tview.camera, method=s.method, samples=samples, **params)
+        res = render(src, tview.camera, method=s.method, samples=samples, uncertainty=uncertainty, **params)
         rows.append((s, res, time.perf_counter() - t))
     return rows
 

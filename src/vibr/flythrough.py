@@ -75,19 +75,10 @@ class FrameContext:
 def _source_points(sources: Scene, max_points: int = 1024) -> list:
     """Per source, the strided subsample of its depth map backprojected to the world
     (exactly :func:`vibr.selection.target_points`' sampling, done once per source)."""
-    out = []
+    from .selection import depth_points
+
     per_view = max(64, max_points // max(1, len(sources)))
-    for v in sources.views:
-        if v.depth is None:
-            out.append(np.zeros((0, 3)))
-            continue
-        h, w = v.shape
-        step = max(1, int(np.sqrt(h * w / per_view)))
-        z = v.depth[::step, ::step]
-        yy, xx = np.mgrid[0:h:step, 0:w:step]
-        ok = np.isfinite(z)
-        out.append(v.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(float), z[ok]))
-    return out
+    return [depth_points(v, per_view) for v in sources.views]
 
 
 def _points_in_target(view_points, target: Camera, max_points: int = 1024):

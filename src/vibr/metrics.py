@@ -1,4 +1,5 @@
-"""Image quality metrics, optionally restricted to a mask: PSNR, SSIM and DSSIM.
+"""Image quality metrics, optionally restricted to a mask: PSNR, SSIM and DSSIM; and the
+metrics of a predicted per-pixel uncertainty: sparsification curves, AUSE, Spearman's rho.
 
 docs/METHOD.md §8: PSNR over the three channels, SSIM of Wang et al. (2004) with a
 Gaussian window of sigma 1.5, and the paper's DSSIM = 10⁴ · (1 − SSIM); all with an
@@ -11,7 +12,8 @@ import numpy as np
 
 from .errors import VibrInputError
 
-__all__ = ["psnr", "ssim", "dssim", "mse", "view_metrics", "METRIC_BORDER", "checkerboard_energy", "speckle_density"]
+__all__ = ["psnr", "ssim", "dssim", "mse", "view_metrics", "METRIC_BORDER", "checkerboard_energy",
+           "speckle_density", "pixel_error", "sparsification", "ause", "spearman", "uncertainty_metrics"]
 
 
 def _prepare(img, ref, mask, border, what):
@@ -165,3 +167,130 @@ def view_metrics(img, ref, mask=None, border: int = METRIC_BORDER) -> dict:
     edge excluded."""
     s = ssim(img, ref, mask, border)
     return {"psnr": psnr(img, ref, mask, border), "ssim": s, "dssim": 1e4 * (1.0 - s)}
+
+
+# ----------------------------------------------------------------------------- uncertainty
+def pixel_error(img, ref, scale: float = 255.0) -> np.ndarray:
+    """Per-pixel error (H, W) float64: the RMS over channels of ``img − ref``, times
+    ``scale`` (grey levels of 255 by default)."""
+    a = np.asarray(img, np.float64)
+    b = np.asarray(ref, np.float64)
+    if a.shape != b.shape:
+        raise VibrInputError(f"pixel_error: image has shape {a.shape} but the reference has {b.shape}")
+    d = (a - b) * float(scale)
+    return np.sqrt((d * d).mean(-1)) if d.ndim == 3 else np.abs(d)
+
+
+def _select(sigma, error, mask, border, what):
+    s = np.asarray(sigma, np.float64)
+    e = np.asarray(error, np.float64)
+    if s.shape != e.shape:
+        raise VibrInputError(f"{what}: sigma has shape {s.shape} but the error has {e.shape}")
+    m = np.ones(s.shape, bool) if mask is None else np.asarray(mask, bool)
+    if m.shape != s.shape:
+        raise VibrInputError(f"{what}: mask has shape {m.shape} but sigma has {s.shape}")
+    if border and s.ndim == 2:
+        m = m.copy()
+        b = int(border)
+        m[:b] = m[-b:] = False
+        m[:, :b] = m[:, -b:] = False
+    s, e = s[m].ravel(), e[m].ravel()
+    if not np.all(np.isfinite(e)):
+        raise VibrInputError(f"{what}: the error has non-finite values")
+    if np.any(np.isnan(s)):
+        raise VibrInputError(f"{what}: sigma has NaN values")
+    if s.size == 0:
+        raise VibrInputError(f"{what}: the mask selects no pixel")
+    return s, e
+
+
+def _removal_curve(key, e2, fractions):
+    """RMSE of the pixels left after removing the fraction f with the largest ``key``, at each
+    f of ``fractions``. Pixels with equal keys are removed together in expectation (each
+    one removes the mean squared error of its tie group), i.e. the expected curve over random
+    tie-breaking."""
+    order = np.argsort(-key, kind="stable")
+    k = key[order]
+    e2s = e2[order]
+    # tie groups: replace each squared error by its group's mean
+    start = np.r_[0, np.flatnonzero(k[1:] != k[:-1]) + 1]
+    sums = np.add.reduceat(e2s, start)
+    cnt = np.diff(np.r_[start, k.size])
+    e2s = np.repeat(sums / cnt, cnt)
+    n = e2s.size
+    tail = np.r_[np.cumsum(e2s[::-1])[::-1], 0.0]  # tail[i] = Σ e2s[i:]
+    out = np.empty(len(fractions))
+    for j, f in enumerate(fractions):
+        r = f * n  # pixels removed (fractional: linear inside a pixel)
+        i = min(int(np.floor(r)), n - 1)
+        rest = tail[i] - (r - i) * e2s[i]
+        out[j] = np.sqrt(max(rest, 0.0) / max(n - r, 1e-12))
+    return out
+
+
+def sparsification(sigma, error, mask=None, border: int = 0, n_points: int = 50,
+                   normalise: bool = True) -> dict:
+    """Sparsification curve of a predicted uncertainty and its oracle (Ilg et al. 2018,
+    "Uncertainty estimates and multi-hypotheses networks for optical flow", ECCV).
+
+    Pixels are removed in decreasing order of ``sigma``; ``curve[j]`` is the RMSE of the
+    ``error`` of the pixels left after removing the fraction ``fractions[j]``
+    (``fractions = j / n_points``, j = 0..n_points−1). The ``oracle`` removes them in
+    decreasing order of the error itself (the best any predictor can do). Ties in ``sigma``
+    are removed together in expectation (the expected curve over random tie-breaking), so a
+    constant ``sigma`` gives the flat curve of a random order. With ``normalise`` both curves
+    are divided by the RMSE of all selected pixels (they start at 1).
+
+    Parameters
+    ----------
+    sigma, error : (H, W) arrays
+        Predicted uncertainty (any monotone scale; ``inf`` allowed) and the true per-pixel
+        error (e.g. :func:`pixel_error`).
+    mask : (H, W) bool, optional
+    border : int
+        Pixels excluded on each side.
+
+    Returns
+    -------
+    dict with ``fractions``, ``curve``, ``oracle`` (lists of float) and ``rmse`` (all pixels).
+    """
+    s, e = _select(sigma, error, mask, border, "sparsification")
+    e2 = e * e
+    fr = np.arange(int(n_points)) / float(n_points)
+    curve = _removal_curve(s, e2, fr)
+    oracle = _removal_curve(e, e2, fr)
+    rmse = float(np.sqrt(e2.mean()))
+    if normalise and rmse > 0:
+        curve, oracle = curve / rmse, oracle / rmse
+    return {"fractions": fr.tolist(), "curve": curve.tolist(), "oracle": oracle.tolist(), "rmse": rmse}
+
+
+def ause(sigma=None, error=None, mask=None, border: int = 0, n_points: int = 50, *, curves=None) -> float:
+    """Area Under the Sparsification Error: ``mean_j (curve[j] − oracle[j])`` over the removed
+    fractions ``j / n_points`` (the rectangle rule over [0, 1) of :func:`sparsification`'s
+    normalised curves; lower is better, 0 for a predictor ordering the pixels as their
+    error). ``curves`` reuses the output of :func:`sparsification`."""
+    c = curves if curves is not None else sparsification(sigma, error, mask, border, n_points)
+    return float(np.mean(np.asarray(c["curve"]) - np.asarray(c["oracle"])))
+
+
+def spearman(sigma, error, mask=None, border: int = 0) -> float:
+    """Spearman's rank correlation between the predicted ``sigma`` and the ``error`` over the
+    selected pixels (scipy.stats.spearmanr, average ranks for ties); NaN when either is
+    constant."""
+    from scipy.stats import spearmanr
+
+    s, e = _select(sigma, error, mask, border, "spearman")
+    s = np.where(np.isinf(s), np.finfo(np.float64).max, s)  # inf ranks last, as it should
+    if s.size < 2 or np.all(s == s[0]) or np.all(e == e[0]):
+        return float("nan")
+    return float(spearmanr(s, e).statistic)
+
+
+def uncertainty_metrics(sigma, img, ref, mask=None, border: int = 0, scale: float = 255.0,
+                        n_points: int = 50) -> dict:
+    """AUSE, Spearman's rho and the sparsification curves of ``sigma`` against the per-pixel
+    error of ``img`` w.r.t. ``ref`` (:func:`pixel_error`, grey levels of ``scale``)."""
+    err = pixel_error(img, ref, scale)
+    c = sparsification(sigma, err, mask, border, n_points)
+    return {"ause": ause(curves=c), "spearman": spearman(sigma, err, mask, border), **c}

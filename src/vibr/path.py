@@ -367,17 +367,10 @@ def scene_centre(cameras, points: np.ndarray | None = None) -> np.ndarray:
 def scene_points(scene, max_points: int = 4096) -> np.ndarray | None:
     """World points of the scene: a strided subsample of its views' depth maps, else its
     sparse points, else None (used where the cameras' axes do not meet)."""
-    pts = []
+    from .selection import depth_points
+
     per_view = max(64, max_points // max(1, len(scene)))
-    for v in scene.views:
-        if v.depth is None:
-            continue
-        h, w = v.shape
-        step = max(1, int(np.sqrt(h * w / per_view)))
-        z = v.depth[::step, ::step]
-        yy, xx = np.mgrid[0:h:step, 0:w:step]
-        ok = np.isfinite(z)
-        pts.append(v.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(float), z[ok]))
+    pts = [depth_points(v, per_view) for v in scene.views if v.depth is not None]
     if pts:
         return np.concatenate(pts)
     if scene.points is not None and len(scene.points):

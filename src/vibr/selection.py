@@ -23,6 +23,19 @@ from .camera import Camera, axes_meeting_point
 from .scene import Scene
 
 
+def depth_points(view, n_points: int) -> np.ndarray:
+    """About ``n_points`` world points of ``view``'s depth map: the known depths of a
+    regular stride (``sqrt(H·W / n_points)`` pixels) backprojected; (0, 3) without depth."""
+    if view.depth is None:
+        return np.zeros((0, 3))
+    h, w = view.shape
+    step = max(1, int(np.sqrt(h * w / n_points)))
+    z = view.depth[::step, ::step]
+    yy, xx = np.mgrid[0:h:step, 0:w:step]
+    ok = np.isfinite(z)
+    return view.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(float), z[ok])
+
+
 def target_points(sources: Scene, target: Camera, max_points: int = 1024) -> np.ndarray:
     """(N, 3) world points the target camera sees, from the sources' geometry.
 
@@ -35,15 +48,9 @@ def target_points(sources: Scene, target: Camera, max_points: int = 1024) -> np.
     pts = []
     per_view = max(64, max_points // max(1, len(sources)))
     for v in sources.views:
-        if v.depth is None:
-            continue
-        h, w = v.shape
-        step = max(1, int(np.sqrt(h * w / per_view)))
-        z = v.depth[::step, ::step]
-        yy, xx = np.mgrid[0:h:step, 0:w:step]
-        ok = np.isfinite(z)
-        if np.any(ok):
-            pts.append(v.camera.backproject(np.stack([xx[ok], yy[ok]], -1).astype(float), z[ok]))
+        p = depth_points(v, per_view)
+        if len(p):
+            pts.append(p)
     if not pts and sources.points is not None and len(sources.points):
         pts = [np.asarray(sources.points, dtype=np.float64)]
     if pts:

@@ -33,8 +33,15 @@ Run 'vibr COMMAND --help' for each command's options.
 """
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line (exit 2), like every other error of vibr."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {' '.join(str(message).split())} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="vibr",
         description="Variational image-based rendering with gradient constraints "
         "(Nieto, Devernay & Crowley 2016): novel views from calibrated photos and depth.",
@@ -43,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"vibr {__version__}")
     _add_verbosity(parser, None)
+    parser.add_argument("--allow-outside-paths", action="store_true",
+                        help="accept transforms.json file paths that are absolute or lead out of the "
+                        "scene folder (refused by default)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in _COMMANDS:
         modname = f"{__name__}.{name}"
@@ -87,6 +97,9 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     configure_logging(verbosity(args))
+    from .. import io as vio
+
+    vio.ALLOW_OUTSIDE_PATHS = bool(getattr(args, "allow_outside_paths", False))
     try:
         return int(args.func(args) or 0)
     except VibrInputError as exc:
@@ -95,6 +108,8 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"vibr {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        vio.ALLOW_OUTSIDE_PATHS = False
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -57,8 +57,12 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..calibrate import calibrate
+    from ..io.outputs import check_output
     from . import verbosity
 
+    check_output(args.out, "dir", overwrite=args.overwrite, what="OUT_SCENE")
+    if args.work is not None:
+        check_output(args.work, "dir", what="--work")
     scene = calibrate(
         args.photos,
         args.out,

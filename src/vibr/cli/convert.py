@@ -21,7 +21,7 @@ examples:
   vibr convert ../shared/data/hci2016_cotton cotton_ns/
   vibr convert ../shared/data/strecha_fountain-P11 fountain_q/ --scale 0.25
   vibr convert ../shared/data/hci2016_cotton centre_cross/ --views input_Cam031,input_Cam039,input_Cam040,input_Cam041,input_Cam049
-  vibr convert SCENE out/ --overwrite               replace an existing out/
+  vibr convert SCENE out/ --overwrite               replace an out/ that vibr wrote
 """
 
 
@@ -35,17 +35,22 @@ def register(sub) -> None:
                    help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
     p.add_argument("--views", default=None,
                    help="comma-separated view names or indices to keep (default: all)")
-    add_overwrite_option(p, "OUT")
+    add_overwrite_option(p, "OUT (only a folder vibr wrote)")
     add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..io import load_scene, save_scene
+    from ..io.outputs import check_not_input, check_output, check_replaceable
     from .info import parse_views
 
+    out = check_output(args.out, "dir", overwrite=args.overwrite, what="OUT")
+    check_not_input(out, [args.scene])
+    if out.is_dir():
+        check_replaceable(out)
     scene = load_scene(args.scene, scale=args.scale, views=parse_views(args.views))
-    out = save_scene(scene, args.out, overwrite=args.overwrite)
+    out = save_scene(scene, out, overwrite=args.overwrite)
     nd = sum(v.depth is not None for v in scene.views)
     print(f"wrote {out}/transforms.json: {len(scene)} views ({scene.meta.get('format', '?')}), "
           f"{nd} with depth" + (f", {len(scene.points)} sparse points" if scene.points is not None else ""))

@@ -50,6 +50,14 @@ def run(args) -> int:
     from ..render import render
     from ..synthetic import make_scene
 
+    from ..io.outputs import check_output
+
+    if args.output is not None:
+        check_output(args.output, "file", what="-o")
+    if not 16 <= args.size <= 4096:
+        from ..errors import VibrInputError
+
+        raise VibrInputError(f"--size must be between 16 and 4096 pixels, got {args.size}")
     t0 = time.perf_counter()
     n = 9 if args.layout == "grid" else 8
     scene = make_scene(layout=args.layout, n_views=n, width=args.size, height=args.size, seed=args.seed)

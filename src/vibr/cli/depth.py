@@ -77,7 +77,7 @@ def register(sub) -> None:
                    help="dense output (MVS): fill unknown pixels from the planes of their colour "
                    "segments, then re-run the weighted median (docs/DEPTH.md). Better depth "
                    "maps; the renderer does better with the unknown pixels left out")
-    add_overwrite_option(p, "OUT")
+    add_overwrite_option(p, "OUT (only a folder vibr wrote)")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -89,8 +89,19 @@ def _split(s):
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, save_scene
+    import shutil
+
+    from ..io.checkpoint import resume_folder
+    from ..io.outputs import check_not_input, check_output, check_replaceable
     from ..stereo import estimate_depth
 
+    from ..validate import check_depth_params
+
+    check_depth_params(scale=args.depth_scale, depth_range=args.depth_range, n_neighbours=args.neighbours,
+                       **{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                            ("refine_iter", args.refine_iter), ("median_radius", args.median_radius),
+                                            ("sweep_scale", args.sweep_scale), ("coarse_iter", args.coarse_iter))
+                          if v is not None})  # before loading the scene
     src = Path(args.scene)
     in_place = args.out is None
     if in_place:
@@ -100,8 +111,16 @@ def run(args) -> int:
         if args.scale != 1.0:
             raise VibrInputError("--scale needs -o OUT (an in-place update keeps the scene's size)", src)
         out = tj.parent
+        check_output(out, "dir", overwrite=True, what="SCENE")
+        try:  # an in-place update replaces only a folder vibr wrote
+            check_replaceable(out)
+        except VibrInputError as exc:
+            raise VibrInputError(f"not updated in place ({exc.problem}); give -o OUT", out) from None
     else:
-        out = Path(args.out)
+        out = check_output(args.out, "dir", overwrite=args.overwrite, what="-o")
+        check_not_input(out, [args.scene])
+        if out.is_dir():
+            check_replaceable(out)
     scene = load_scene(args.scene, scale=args.scale)
     opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                              ("refine_iter", args.refine_iter),
@@ -111,13 +130,17 @@ def run(args) -> int:
     est = estimate_depth(scene, views=_split(args.views), scale=args.depth_scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
-                         consistency=not args.no_consistency, fill_segments=args.fill_segments, **opt)
+                         consistency=not args.no_consistency, fill_segments=args.fill_segments,
+                         checkpoint=resume_folder(out), **opt)  # a rerun after a kill resumes
     info = est.meta["depth_estimation"]
-    save_scene(est, out, overwrite=in_place or args.overwrite)
+    save_scene(est, out, overwrite=in_place or args.overwrite, in_place=in_place)
+    resumed = sum(bool(v.get("resumed")) for v in info["views"].values())
+    shutil.rmtree(resume_folder(out), ignore_errors=True)  # the job is complete
     tv = [v for v in info["views"].values() if v.get("role") == "target"]
     kept = [v["kept"] for v in tv]
     filled = sum(v.get("filled", 0.0) for v in tv)
     print(f"wrote {out}/transforms.json: depth for {len(kept)} view(s) by {info['method']} "
           f"in {info['time_s']:.1f} s, {100 * sum(kept) / max(1, len(kept)):.1f} % of pixels kept"
-          + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else ""))
+          + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else "")
+          + (f" ({resumed} view(s) kept from an interrupted run)" if resumed else ""))
     return 0

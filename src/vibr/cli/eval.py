@@ -79,6 +79,9 @@ def register(sub) -> None:
     add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
+    p.add_argument("--uncertainty", action="store_true",
+                   help="also score each render's per-pixel std. dev.: AUSE, Spearman rho and the "
+                        "sparsification curves in the report, the sparsification plot in --figures")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -90,10 +93,26 @@ def run(args) -> int:
 
     from ..errors import VibrInputError
 
+    from ..io.outputs import check_output
+
+    check_output(args.json, "file", what="--json")
+    if args.figures is not None:
+        check_output(args.figures, "dir", what="--figures")
     check_depth_args(args)
     settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
+    from ..render.methods import method_params
+    from ..validate import check_depth_params
+
+    for st in settings:  # every setting checked before the work
+        method_params(st.method, **dict(st.params, scale=args.intensity_scale, psf=args.psf))
+    check_depth_params(**{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                            ("depth_range", args.depth_range)) if v is not None})
+    if args.border < 0:
+        raise VibrInputError(f"--border must be >= 0, got {args.border}")
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     scene = load_scene(args.scene, scale=args.scale)
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
@@ -102,10 +121,15 @@ def run(args) -> int:
                         depth_files=args.depth_files, n_views=args.views, mask=args.mask,
                         border=args.border, estimate_kw=estimate_kw or None,
                         intensity_scale=args.intensity_scale,
-                        render_kw={"psf": args.psf} if args.psf else None)
+                        render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
     report = ev.report
     if args.figures:
         report["figures"] = write_evaluation_figures(ev, args.figures)
+        if args.uncertainty:
+            from ..uncertainty_figures import write_sparsification_figure
+
+            report["figures"]["sparsification"] = write_sparsification_figure(args.figures, report["results"],
+                                                                              prefix=ev.prefix)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")

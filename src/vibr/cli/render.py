@@ -48,6 +48,9 @@ def register(sub) -> None:
                    help="image scale the scene is loaded at, e.g. 0.5; a camera-file target is scaled "
                         "with it (default 1)")
     _add_path_options(p)
+    p.add_argument("--uncertainty", metavar="OUT_STD.png|.npy",
+                   help="also write the per-pixel standard deviation (grey levels of 255): a colour-mapped "
+                        "PNG with a scale bar, or the raw float32 array (.npy)")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -74,13 +77,25 @@ def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, read_camera_json, write_image
     from ..pipeline import prepare
+    from ..io.outputs import check_output
     from ..render import render
+    from ..render.methods import method_params
 
+    method_params(args.method, alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
+                  sigma_z=args.sigma_z, scale=args.intensity_scale, n_outer=args.outer,
+                  max_iter=args.iterations)  # parameters checked before the work
+    if args.views is not None and args.views < 1:
+        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     if (args.path is None) == (args.target is None):
         raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
     if args.path is not None:
+        check_output(args.output, "file" if args.output.lower().endswith(".mp4") else "dir",
+                     overwrite=True, what="-o")
         return _run_path(args)
+    check_output(args.output, "file", what="-o")
     check_depth_args(args)
+    if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
+        raise VibrInputError("--uncertainty output must end in .png or .npy", args.uncertainty)
     scene = load_scene(args.scene, scale=args.scale)
     tgt = args.target
     if tgt.lower().endswith(".json") or (os.path.isfile(tgt) and not tgt.isdigit()):
@@ -95,8 +110,14 @@ def run(args) -> int:
         raise VibrInputError(f"--views must be at least 1, got {args.views}")
     sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views)
-    res = render(sources, target, args.method, progress_bar=True, **render_params(args))  # -v: per pass
+    res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
+                 **render_params(args))  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth)
+    if args.uncertainty:
+        from ..uncertainty_figures import write_sigma
+
+        write_sigma(args.uncertainty, res.uncertainty)
+        print(f"wrote {args.uncertainty}")
     t = res.times
     logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
                 f"{res.n_samples} samples, coverage {100 * res.coverage.mean():.1f} %, "

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .._jit import FASTMATH
+
 __all__ = ["GRAD_SCHEMES", "DEFAULT_GRAD_SCHEME", "grad_image", "grad_image_adj"]
 
 
@@ -22,7 +24,7 @@ GRAD_SCHEMES = ("central", "forward")
 DEFAULT_GRAD_SCHEME = "forward"
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _grad_row(u, k, forward, gx, gy):
     """Row k of ``D u`` for one channel ``u`` (H, W) into ``gx``, ``gy`` (W,): the one
     implementation of the gradient term's ``D``, used for the target image
@@ -55,7 +57,7 @@ def _grad_row(u, k, forward, gx, gy):
         gy[j] = 0.5 * (a[j] - b[j])
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_image(u, forward, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -64,7 +66,7 @@ def _grad_image(u, forward, g):
     return g
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _grad_adj_row(gx, gym, gyi, gyp, i, H, forward, o):
     """Row i of ``Dᵀ g`` into ``o`` (W,), from the row's x component ``gx`` and the y
     components of rows i−1, i, i+1 (``gym``, ``gyi``, ``gyp``; those outside are not read).
@@ -109,7 +111,7 @@ def _grad_adj_row(gx, gym, gyi, gyp, i, H, forward, o):
                 o[j] -= 0.5 * gyi[j]
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_image_adj(g, forward, out):
     C, _, H, W = g.shape
     for i in prange(H):

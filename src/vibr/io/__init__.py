@@ -32,6 +32,9 @@ __all__ = ["load_scene", "save_scene", "detect_format", "read_image", "write_ima
 
 FORMATS = ("hci", "strecha", "middlebury", "transforms", "colmap")
 
+#: Default of ``load_scene(allow_outside=None)``; the CLI's ``--allow-outside-paths`` sets it.
+ALLOW_OUTSIDE_PATHS = False
+
 
 def detect_format(path) -> str:
     """Name of the scene format at ``path`` (one of :data:`FORMATS`).
@@ -70,7 +73,7 @@ def detect_format(path) -> str:
         "a COLMAP sparse model, a *_par.txt file, or images with .camera files)", p)
 
 
-def load_scene(path, *, scale: float = 1.0, views=None, **options):
+def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | None = None, **options):
     """Load a scene in any supported format (detected by :func:`detect_format`).
 
     Parameters
@@ -84,6 +87,10 @@ def load_scene(path, *, scale: float = 1.0, views=None, **options):
     views : list of int or str, optional
         Load only these views, in this order (positions in the format's view order, or
         names = image stems); only their images are read.
+    allow_outside : bool, optional
+        Accept ``transforms.json`` file paths that are absolute or lead out of the scene
+        folder (refused by default: a scene must not make vibr read arbitrary files).
+        None: :data:`ALLOW_OUTSIDE_PATHS`.
     **options
         Format-specific options, e.g. ``grid=(rows, cols)`` for an HCI folder without
         ``parameters.cfg``.
@@ -111,7 +118,8 @@ def load_scene(path, *, scale: float = 1.0, views=None, **options):
     if fmt == "transforms":
         from .transforms import load_transforms
 
-        return load_transforms(p, scale=scale, views=views)
+        return load_transforms(p, scale=scale, views=views,
+                               allow_outside=ALLOW_OUTSIDE_PATHS if allow_outside is None else allow_outside)
     if fmt == "colmap":
         from .colmap import load_colmap
 
@@ -136,9 +144,9 @@ def select_entries(entries: list[dict], views, root=None) -> list[dict]:
     for k in views:
         if isinstance(k, int) or (isinstance(k, str) and k.strip().lstrip("-").isdigit() and k.strip() not in names):
             i = int(k)
-            if not -len(entries) <= i < len(entries):
-                raise VibrInputError(f"no view {i}: the scene has {len(entries)} views", root)
-            i %= len(entries)
+            if not 0 <= i < len(entries):  # -1 is an error, not the last view
+                raise VibrInputError(f"no view {i}: the scene has {len(entries)} views "
+                                     f"(indices 0 to {len(entries) - 1})", root)
         else:
             k = str(k).strip()
             stem = os.path.splitext(k)[0]

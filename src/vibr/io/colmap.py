@@ -24,6 +24,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene
 from .camera_json import as_rotation
+from .colmap_check import check_colmap_model
 from .depthfiles import read_depth
 from .images import build_views
 
@@ -77,11 +78,12 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     if found is None:
         raise VibrInputError("no COLMAP model (cameras + images .bin/.txt) found", path)
     model, root = found
+    check_colmap_model(model)  # bounds, counts and references: pycolmap trusts the files
     try:
         rec = pycolmap.Reconstruction(str(model))
-    except Exception as exc:
-        raise VibrInputError(f"cannot read COLMAP model ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})",
-                             model) from None
+    except Exception:  # what the check above does not cover; pycolmap's words are C++ internals
+        raise VibrInputError("inconsistent COLMAP model: pycolmap cannot read it (records that "
+                             "contradict each other)", model) from None
     img_dirs = [d for d in (root / "images", model / "images", model.parent / "images") if d.is_dir()]
     if not img_dirs:
         raise VibrInputError("no images folder found beside the COLMAP model (expected root/images)", root)

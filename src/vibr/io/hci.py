@@ -60,28 +60,90 @@ def is_hci_folder(path) -> bool:
 
 
 def _read_cfg(path: Path) -> dict:
-    cp = configparser.ConfigParser()
+    cp = configparser.ConfigParser(interpolation=None)
     try:
         cp.read(path, encoding="utf-8")
-        ins, ext = cp["intrinsics"], cp["extrinsics"]
-        out = {
-            "focal_mm": ins.getfloat("focal_length_mm"),
-            "res_x": ins.getint("image_resolution_x_px"),
-            "res_y": ins.getint("image_resolution_y_px"),
-            "sensor_mm": ins.getfloat("sensor_size_mm"),
-            "cols": ext.getint("num_cams_x"),
-            "rows": ext.getint("num_cams_y"),
-            "baseline_mm": ext.getfloat("baseline_mm"),
-            "focus_m": ext.getfloat("focus_distance_m"),
-        }
-        pose = {k: ext.getfloat(k) for k in ext if k.startswith("center_cam_")}
-    except (configparser.Error, KeyError, ValueError, TypeError) as exc:
-        raise VibrInputError(f"malformed parameters.cfg ({type(exc).__name__}: {exc})", path) from None
-    for k in ("focal_mm", "sensor_mm", "baseline_mm", "focus_m", "cols", "rows", "res_x", "res_y"):
-        if out[k] is None or not out[k] > 0:
-            raise VibrInputError(f"parameters.cfg: {k} must be positive", path)
+    except configparser.Error as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else "syntax error"
+        raise VibrInputError(f"malformed parameters.cfg: {msg[:120]}", path) from None
+    except UnicodeDecodeError:
+        raise VibrInputError("malformed parameters.cfg: not UTF-8 text", path) from None
+    keys = {"focal_mm": ("intrinsics", "focal_length_mm", float),
+            "res_x": ("intrinsics", "image_resolution_x_px", int),
+            "res_y": ("intrinsics", "image_resolution_y_px", int),
+            "sensor_mm": ("intrinsics", "sensor_size_mm", float),
+            "cols": ("extrinsics", "num_cams_x", int), "rows": ("extrinsics", "num_cams_y", int),
+            "baseline_mm": ("extrinsics", "baseline_mm", float),
+            "focus_m": ("extrinsics", "focus_distance_m", float)}
+    out = {}
+    for k, (sec, key, kind) in keys.items():
+        if not cp.has_section(sec):
+            raise VibrInputError(f"parameters.cfg has no [{sec}] section", path)
+        if not cp.has_option(sec, key):
+            raise VibrInputError(f"parameters.cfg: [{sec}] has no {key}", path)
+        raw = cp.get(sec, key)
+        try:
+            v = kind(raw)
+        except ValueError:
+            raise VibrInputError(f"parameters.cfg: {key} = {raw[:40]!r} is not "
+                                 f"{'an integer' if kind is int else 'a number'}", path) from None
+        if not (math.isfinite(v) and v > 0) or (kind is int and v > 100000):
+            raise VibrInputError(f"parameters.cfg: {key} must be positive and finite, got {raw[:40]}", path)
+        out[k] = v
+    pose = {}
+    for k in cp.options("extrinsics"):
+        if k.startswith("center_cam_"):
+            try:
+                pose[k] = float(cp.get("extrinsics", k))
+            except ValueError:
+                pose[k] = None  # informative only (meta), not used by the cameras
     out["pose"] = pose
     return out
+
+
+def _read_ground_truth(disp_path: Path, depth_path: Path, H: int, W: int):
+    """The centre view's ground truth: (disparity, depth), disparity preferred (it defines
+    the grid relation); None where absent."""
+    disp = depth_gt = None
+    if disp_path.is_file():
+        disp = read_pfm(disp_path).astype(np.float64)
+        if disp.ndim != 2 or disp.shape != (H, W):
+            raise VibrInputError(f"disparity has shape {disp.shape}, views are {H}x{W}", disp_path)
+        if not np.all(np.isfinite(disp)):
+            raise VibrInputError(f"disparity has {int((~np.isfinite(disp)).sum())} NaN or infinite values", disp_path)
+    elif depth_path.is_file():
+        from ..scene import depth_from_file_values
+
+        depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
+    return disp, depth_gt
+
+
+def _grid_model(cfg, W: int, H: int, disp, depth_gt):
+    """Focal length (px), baseline and focus distance of the grid: parameters.cfg's, or the
+    equivalent pinhole model when there is none (module docstring)."""
+    if cfg is not None:
+        f = cfg["focal_mm"] * max(W, H) / cfg["sensor_mm"]
+        return f, cfg["baseline_mm"] / 1000.0, cfg["focus_m"], "parameters.cfg"
+    f, b = float(W), 1.0
+    if disp is not None:
+        Z0 = f * b / (np.abs(disp).max() + 1.0)
+    elif depth_gt is not None and np.any(np.isfinite(depth_gt)):
+        Z0 = float(np.nanmedian(depth_gt))
+    else:
+        Z0 = f * b
+    return f, b, Z0, "no parameters.cfg: f = width, b = 1, 1/Z0 = (max|d| + 1)/(f b)"
+
+
+def _centre_depth(disp, depth_gt, f, b, Z0, disp_path):
+    """Orthogonal depth of the centre view from its disparity: 1/Z = d/(f b) + 1/Z0."""
+    if disp is None:
+        return depth_gt
+    inv = disp / (f * b) + 1.0 / Z0
+    if np.any(inv <= 0):
+        raise VibrInputError(
+            f"disparity down to {disp.min():.4g} px lies beyond infinity for f·b = {f * b:.5g}, "
+            f"Z0 = {Z0:.5g}", disp_path)
+    return (1.0 / inv).astype(np.float32)
 
 
 def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | None = None) -> Scene:
@@ -143,45 +205,10 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
         raise VibrInputError(
             f"parameters.cfg says {cfg['res_x']}x{cfg['res_y']} but the views are {W}x{H}", cfg_path)
 
-    # Ground truth of the centre view: disparity preferred (it defines the grid relation).
     disp_path, depth_path = root / "gt_disp_lowres.pfm", root / "gt_depth_lowres.pfm"
-    disp = depth_gt = None
-    if disp_path.is_file():
-        disp = read_pfm(disp_path).astype(np.float64)
-        if disp.ndim != 2 or disp.shape != (H, W):
-            raise VibrInputError(f"disparity has shape {disp.shape}, views are {H}x{W}", disp_path)
-        if not np.all(np.isfinite(disp)):
-            raise VibrInputError(f"disparity has {int((~np.isfinite(disp)).sum())} NaN or infinite values", disp_path)
-    elif depth_path.is_file():
-        from ..scene import depth_from_file_values
-
-        depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
-
-    if cfg is not None:
-        f = cfg["focal_mm"] * max(W, H) / cfg["sensor_mm"]
-        b = cfg["baseline_mm"] / 1000.0
-        Z0 = cfg["focus_m"]
-        rule = "parameters.cfg"
-    else:
-        f, b = float(W), 1.0
-        if disp is not None:
-            Z0 = f * b / (np.abs(disp).max() + 1.0)
-        elif depth_gt is not None and np.any(np.isfinite(depth_gt)):
-            Z0 = float(np.nanmedian(depth_gt))
-        else:
-            Z0 = f * b
-        rule = "no parameters.cfg: f = width, b = 1, 1/Z0 = (max|d| + 1)/(f b)"
-
-    depth_c = None
-    if disp is not None:
-        inv = disp / (f * b) + 1.0 / Z0
-        if np.any(inv <= 0):
-            raise VibrInputError(
-                f"disparity down to {disp.min():.4g} px lies beyond infinity for f·b = {f * b:.5g}, "
-                f"Z0 = {Z0:.5g}", disp_path)
-        depth_c = (1.0 / inv).astype(np.float32)
-    elif depth_gt is not None:
-        depth_c = depth_gt
+    disp, depth_gt = _read_ground_truth(disp_path, depth_path, H, W)
+    f, b, Z0, rule = _grid_model(cfg, W, H, disp, depth_gt)
+    depth_c = _centre_depth(disp, depth_gt, f, b, Z0, disp_path)
 
     cx0, cy0 = (W - 1) / 2.0, (H - 1) / 2.0
     entries, grid_pos = [], {}

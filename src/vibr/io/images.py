@@ -353,17 +353,26 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
 
     if scale <= 0 or not np.isfinite(scale):
         raise VibrInputError(f"scale must be positive, got {scale}")
-
     headers = _HEADERS_ONLY.get()
+    if not headers:
+        from ..validate import check_memory
+
+        npx = sum(e["camera"].width * e["camera"].height for e in entries)  # float32 RGB + decoding
+        check_memory(16.0 * npx, f"loading {len(entries)} images ({npx / 1e6:.0f} Mpixels)",
+                     "load fewer views (--views) or resize the images first",
+                     entries[0]["path"] if entries else None)
 
     def work(e):
+        cam = e["camera"]
+        w, h = image_size(e["path"])  # the header, before decoding
         if headers:
-            w, h = image_size(e["path"])
             img, size = None, (h, w)
         else:
+            if check_size and (w, h) != (cam.width, cam.height):  # no decoding of a lying image
+                raise VibrInputError(f"image is {w}x{h} but its camera says {cam.width}x{cam.height}",
+                                     e["path"])
             img = read_image(e["path"])
             size = img.shape[:2]
-        cam = e["camera"]
         if size != cam.shape:
             if check_size:
                 raise VibrInputError(

@@ -79,8 +79,8 @@ def read_strecha_camera(path) -> Camera:
     if np.any(dist != 0):
         raise VibrInputError(f"non-zero lens distortion {dist.tolist()}: undistort the images first "
                              "(vibr handles pinhole cameras only)", p)
-    if w != int(w) or h != int(h):
-        raise VibrInputError(f"image size must be integers, got {w} {h}", p)
+    if not all(np.isfinite([w, h])) or w != int(w) or h != int(h) or not (1 <= w <= 1e6 and 1 <= h <= 1e6):
+        raise VibrInputError(f"image size must be whole numbers of 1 to 10^6 pixels, got {w:g} {h:g}", p)
     R = as_rotation(R_c2w, p, "R (camera-to-world)").T
     return Camera.from_centre(K, R, C, int(w), int(h), source=p)
 

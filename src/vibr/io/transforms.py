@@ -73,43 +73,60 @@ def read_ply_points(path) -> np.ndarray:
     with open(p, "rb") as f:
         data = f.read()
     end = data.find(b"end_header")
-    if not data.startswith(b"ply") or end < 0:
-        raise VibrInputError("not a PLY file", p)
+    nl = data.find(b"\n", end) if end >= 0 else -1
+    if not data.startswith(b"ply") or end < 0 or nl < 0:
+        raise VibrInputError("not a PLY file (no 'ply' ... 'end_header' header)", p)
     header = data[:end].decode("ascii", "replace").splitlines()
-    body = data[data.index(b"\n", end) + 1:]
-    fmt, n, props, first = None, None, [], None
+    body = data[nl + 1:]
+    fmt, n, props, first, cur = None, None, [], None, None
     for ln in header:
         tok = ln.split()
         if not tok:
             continue
-        if tok[0] == "format":
+        if tok[0] == "format" and len(tok) >= 2:
             fmt = tok[1]
-        elif tok[0] == "element":
+        elif tok[0] == "element" and len(tok) >= 3:
             first = first or tok[1]
             cur = tok[1]
             if cur == "vertex":
+                if not tok[2].isdigit():
+                    raise VibrInputError(f"PLY vertex count {tok[2]!r} is not a number", p)
                 n = int(tok[2])
         elif tok[0] == "property" and cur == "vertex":
-            if tok[1] == "list":
+            if len(tok) >= 2 and tok[1] == "list":
                 raise VibrInputError("PLY vertex element with list properties is not supported", p)
+            if len(tok) < 3:
+                raise VibrInputError(f"malformed PLY property line {ln!r}", p)
             props.append((tok[2], _PLY_TYPES.get(tok[1])))
     names = [q[0] for q in props]
     if n is None or first != "vertex" or not {"x", "y", "z"} <= set(names) or any(t is None for _, t in props):
         raise VibrInputError("PLY file needs a first 'vertex' element with x, y, z", p)
+    if len(set(names)) != len(names):
+        raise VibrInputError("PLY vertex properties are named twice", p)
+    if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+        raise VibrInputError(f"unknown PLY format {fmt!r}", p)
     try:
         if fmt == "ascii":
-            rows = body.decode("ascii").split("\n")[:n]
-            arr = np.array([[float(v) for v in r.split()[: len(props)]] for r in rows], dtype=np.float64)
+            rows = body.decode("ascii").split("\n")
+            if len(rows) < n:
+                raise ValueError
+            arr = np.array([[float(v) for v in r.split()[: len(props)]] for r in rows[:n]], dtype=np.float64)
             arr = arr.reshape(n, len(props))
             cols = {nm: arr[:, i] for i, nm in enumerate(names)}
         else:
             order = "<" if fmt == "binary_little_endian" else ">"
             dt = np.dtype([(nm, order + t) for nm, t in props])
+            if n * dt.itemsize > len(body):
+                raise VibrInputError(f"PLY file cut short: {n} vertices need {n * dt.itemsize} bytes, "
+                                     f"{len(body)} follow the header", p)
             rec = np.frombuffer(body, dtype=dt, count=n)
             cols = {nm: rec[nm] for nm in names}
     except (ValueError, UnicodeDecodeError):
         raise VibrInputError("malformed PLY vertex data", p) from None
-    return np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
+    pts = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
+    if not np.all(np.isfinite(pts)):
+        raise VibrInputError(f"PLY file has {int((~np.isfinite(pts).all(axis=1)).sum())} non-finite vertices", p)
+    return pts
 
 
 def write_ply_points(path, points: np.ndarray) -> None:
@@ -129,40 +146,53 @@ def _get(frame: dict, meta: dict, key: str, default=None):
 
 
 def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> Camera:
-    model = str(_get(frame, meta, "camera_model", "OPENCV")).upper()
+    model = str(_get(frame, meta, "camera_model", "OPENCV"))[:40].upper()
     if model in _BAD_MODELS:
         raise VibrInputError(f"frame {i}: camera_model {model} is not a pinhole; vibr needs undistorted "
                              "pinhole images", src)
     for k in _DISTORTION_KEYS:
         v = _get(frame, meta, k, 0.0)
-        if v not in (0, 0.0, None):
+        if isinstance(v, (list, dict)) or v not in (0, 0.0, None):
             raise VibrInputError(f"frame {i}: non-zero distortion {k} = {v}: undistort the images first "
                                  "(vibr handles pinhole cameras only)", src)
     w, h = _get(frame, meta, "w"), _get(frame, meta, "h")
     if w is None or h is None:
         w, h = image_size(img_path)
+    fi = f"frame {i}:"
+    w, h = _number(w, f"{fi} w", src, positive=True), _number(h, f"{fi} h", src, positive=True)
+    if w != int(w) or h != int(h) or max(w, h) > 1e6:
+        raise VibrInputError(f"{fi} image size {w:g}x{h:g} must be whole numbers of at most 10^6 pixels", src)
+    w, h = int(w), int(h)
+    fx, fy = _get(frame, meta, "fl_x"), _get(frame, meta, "fl_y")
+    if fx is None:
+        ax = _get(frame, meta, "camera_angle_x")
+        if ax is None:
+            raise VibrInputError(f"{fi} no focal length (fl_x or camera_angle_x)", src)
+        ax = _number(ax, f"{fi} camera_angle_x", src, positive=True)
+        if not ax < math.pi:
+            raise VibrInputError(f"{fi} camera_angle_x must be in (0, pi) radians, got {ax}", src)
+        fx = 0.5 * w / math.tan(0.5 * ax)
+    fx = _number(fx, f"{fi} fl_x", src, positive=True)
+    if fy is None:
+        ay = _get(frame, meta, "camera_angle_y")
+        if ay is not None:
+            ay = _number(ay, f"{fi} camera_angle_y", src, positive=True)
+            if not ay < math.pi:
+                raise VibrInputError(f"{fi} camera_angle_y must be in (0, pi) radians, got {ay}", src)
+        fy = fx if ay is None else 0.5 * h / math.tan(0.5 * ay)
+    fy = _number(fy, f"{fi} fl_y", src, positive=True)
+    cx = _number(_get(frame, meta, "cx", w / 2.0), f"{fi} cx", src) - 0.5
+    cy = _number(_get(frame, meta, "cy", h / 2.0), f"{fi} cy", src) - 0.5
+    skew = _number(frame.get("vibr_skew", 0.0), f"{fi} vibr_skew", src)
+    K = np.array([[fx, skew, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    if "transform_matrix" not in frame:
+        raise VibrInputError(f"frame {i} is missing key 'transform_matrix'", src)
     try:
-        w, h = int(w), int(h)
-        fx, fy = _get(frame, meta, "fl_x"), _get(frame, meta, "fl_y")
-        if fx is None:
-            ax = _get(frame, meta, "camera_angle_x")
-            if ax is None:
-                raise VibrInputError(f"frame {i}: no focal length (fl_x or camera_angle_x)", src)
-            fx = 0.5 * w / math.tan(0.5 * float(ax))
-        if fy is None:
-            ay = _get(frame, meta, "camera_angle_y")
-            fy = fx if ay is None else 0.5 * h / math.tan(0.5 * float(ay))
-        cx = float(_get(frame, meta, "cx", w / 2.0)) - 0.5
-        cy = float(_get(frame, meta, "cy", h / 2.0)) - 0.5
-        skew = float(frame.get("vibr_skew", 0.0))
-        K = np.array([[float(fx), skew, cx], [0.0, float(fy), cy], [0.0, 0.0, 1.0]])
         M = np.asarray(frame["transform_matrix"], dtype=np.float64)
-    except KeyError as exc:
-        raise VibrInputError(f"frame {i} is missing key {exc}", src) from None
-    except (TypeError, ValueError) as exc:
-        if isinstance(exc, VibrInputError):
-            raise
-        raise VibrInputError(f"frame {i}: bad camera values ({exc})", src) from None
+    except (TypeError, ValueError, OverflowError):
+        raise VibrInputError(f"{fi} transform_matrix must be a 4x4 array of numbers", src) from None
+    if M.shape in ((4, 4), (3, 4)) and not np.all(np.isfinite(M)):
+        raise VibrInputError(f"{fi} transform_matrix has non-finite values", src)
     if M.shape not in ((4, 4), (3, 4)):
         raise VibrInputError(f"frame {i}: transform_matrix must be 4x4, got shape {M.shape}", src)
     if M.shape == (4, 4) and not np.allclose(M[3], [0, 0, 0, 1]):
@@ -171,11 +201,21 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> 
     return Camera.from_centre(K, R_c2w.T, M[:3, 3], w, h, source=f"{src} frame {i}")
 
 
-def _resolve(base: Path, rel: str, what: str, src: str, i: int) -> Path:
-    if not isinstance(rel, str) or not rel:
-        raise VibrInputError(f"frame {i}: {what} must be a non-empty string", src)
+def _resolve(base: Path, rel: str, what: str, src: str, i: int, allow_outside: bool = False) -> Path:
+    where = f"frame {i}: " if i >= 0 else ""
+    if not isinstance(rel, str) or not rel or "\0" in rel:
+        raise VibrInputError(f"{where}{what} must be a non-empty string", src)
     p = Path(rel)
     p = p if p.is_absolute() else base / p
+    if not allow_outside:
+        try:
+            inside = p.resolve().is_relative_to(base.resolve())
+        except (OSError, RuntimeError, ValueError):
+            inside = False
+        if not inside:
+            raise VibrInputError(f"{where}{what} {rel!r} is {'absolute' if Path(rel).is_absolute() else 'outside'} "
+                                 "the scene folder: refused (load_scene(..., allow_outside=True) or "
+                                 "vibr --allow-outside-paths to accept it)", src)
     if not p.exists() and what == "file_path" and not p.suffix:
         for ext in (".png", ".jpg", ".jpeg"):
             if p.with_suffix(ext).is_file():
@@ -183,8 +223,33 @@ def _resolve(base: Path, rel: str, what: str, src: str, i: int) -> Path:
     return p
 
 
-def load_transforms(path, *, scale: float = 1.0, views=None) -> Scene:
-    """Load a ``transforms.json`` scene (a file or a folder holding ``transforms.json``)."""
+def _ints(v, n: int, what: str, src: str) -> tuple[int, ...]:
+    """``v`` as ``n`` non-negative integers (grid sizes and positions)."""
+    if not isinstance(v, (list, tuple)) or len(v) != n or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and x == int(x)
+            and 0 <= x < 2**31 for x in v):
+        raise VibrInputError(f"{what} must be {n} non-negative integers, got {str(v)[:60]}", src)
+    return tuple(int(x) for x in v)
+
+
+def _number(v, what: str, src: str, *, positive: bool = False) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+        raise VibrInputError(f"{what} must be a number, got {str(v)[:40]}", src)
+    try:
+        x = float(v)
+    except ValueError:
+        raise VibrInputError(f"{what} must be a number, got {v!r}", src) from None
+    if not math.isfinite(x) or (positive and not x > 0):
+        raise VibrInputError(f"{what} must be finite{' and > 0' if positive else ''}, got {x}", src)
+    return x
+
+
+def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool = False) -> Scene:
+    """Load a ``transforms.json`` scene (a file or a folder holding ``transforms.json``).
+
+    File paths (images, depth, sigma_z, points) must lie inside the scene folder: an
+    absolute path or one escaping it (``../``) is refused unless ``allow_outside``.
+    """
     from . import select_entries
 
     tf = find_transforms(path)
@@ -201,11 +266,13 @@ def load_transforms(path, *, scale: float = 1.0, views=None) -> Scene:
             raise VibrInputError(f"frame {i} is not a JSON object", src)
         if "file_path" not in fr:
             raise VibrInputError(f"frame {i} is missing key 'file_path'", src)
-        img = _resolve(base, fr["file_path"], "file_path", src, i)
-        name = str(fr.get("vibr_name", Path(str(fr["file_path"])).stem))
+        img = _resolve(base, fr["file_path"], "file_path", src, i, allow_outside)
+        name = fr.get("vibr_name", Path(fr["file_path"]).stem)
+        if not isinstance(name, str) or not name.strip():
+            raise VibrInputError(f"frame {i}: vibr_name must be a non-empty string", src)
         e = {"name": name, "path": img, "frame": fr, "i": i}
         if "vibr_grid_pos" in fr:
-            grid_pos[name] = tuple(int(v) for v in fr["vibr_grid_pos"])
+            grid_pos[name] = _ints(fr["vibr_grid_pos"], 2, f"frame {i}: vibr_grid_pos", src)
         entries.append(e)
     entries = select_entries(entries, views, base)
     for e in entries:
@@ -217,36 +284,37 @@ def load_transforms(path, *, scale: float = 1.0, views=None) -> Scene:
         e["camera"] = cam
         dp = _get(fr, {}, "depth_file_path")
         if dp is not None:
-            dpath = _resolve(base, dp, "depth_file_path", src, i)
+            dpath = _resolve(base, dp, "depth_file_path", src, i, allow_outside)
             fac = _get(fr, meta, "depth_unit_scale_factor")
-            e["depth"] = read_depth(dpath, None if fac is None else float(fac), shape=cam.shape)
+            fac = None if fac is None else _number(fac, f"frame {i}: depth_unit_scale_factor", src, positive=True)
+            e["depth"] = read_depth(dpath, fac, shape=cam.shape)
         sz = _get(fr, meta, "sigma_z")
         szp = fr.get("sigma_z_file_path")
         if szp is not None:
-            spath = _resolve(base, szp, "sigma_z_file_path", src, i)
+            spath = _resolve(base, szp, "sigma_z_file_path", src, i, allow_outside)
             s = read_depth(spath, 1.0, shape=cam.shape)  # same validation: finite, >= 0
             e["sigma_z"] = np.nan_to_num(s, nan=0.0)
         elif sz is not None:
-            try:
-                sz = float(sz)
-            except (TypeError, ValueError):
-                raise VibrInputError(f"frame {i}: sigma_z must be a number", src) from None
-            if not (np.isfinite(sz) and sz >= 0):
+            sz = _number(sz, f"frame {i}: sigma_z", src)
+            if not sz >= 0:
                 raise VibrInputError(f"frame {i}: sigma_z must be finite and >= 0, got {sz}", src)
             e["sigma_z"] = sz
     vs = build_views(entries, scale, desc="reading images")
     points = None
     if meta.get("ply_file_path"):
-        ply = _resolve(base, meta["ply_file_path"], "ply_file_path", src, -1)
+        ply = _resolve(base, meta["ply_file_path"], "ply_file_path", src, -1, allow_outside)
         if not ply.is_file():
             raise VibrInputError("sparse point file not found", ply)
         points = read_ply_points(ply)
-    grid = tuple(int(v) for v in meta["vibr_grid"]) if meta.get("vibr_grid") else None
+    grid = _ints(meta["vibr_grid"], 2, "vibr_grid", src) if meta.get("vibr_grid") else None
+    if grid is not None and min(grid) < 1:
+        raise VibrInputError(f"vibr_grid must be positive, got {list(grid)}", src)
     names = {v.name for v in vs}
     smeta = {"format": "transforms.json", "scale": scale, "transforms": src}
     if grid_pos:
         smeta["grid_pos"] = {n: p for n, p in grid_pos.items() if n in names}
-    name = str(meta.get("vibr_name", base.name))
+    name = meta.get("vibr_name", base.name)
+    name = name if isinstance(name, str) and name else base.name
     return Scene(vs, name=name, root=base, grid=grid, points=points, meta=smeta)
 
 
@@ -257,7 +325,7 @@ def _safe_name(name: str) -> str:
     return out or "view"
 
 
-def save_scene(scene: Scene, out_dir, *, overwrite: bool = False) -> Path:
+def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool = False) -> Path:
     """Write ``scene`` as a nerfstudio ``transforms.json`` folder (see the module docstring).
 
     Parameters
@@ -266,19 +334,35 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False) -> Path:
     out_dir : str or Path
         Created; if it exists, :class:`VibrInputError` unless ``overwrite``.
     overwrite : bool
-        Replace an existing ``out_dir`` (only after the new one is complete).
+        Replace an existing ``out_dir`` (only after the new one is complete), and only when
+        vibr wrote it: it has the marker :data:`vibr.io.outputs.MARKER` and holds nothing
+        but the files that marker lists (:func:`vibr.io.outputs.check_replaceable`).
+    in_place : bool
+        ``out_dir`` may be the scene's own folder (an in-place update; the scene's data is
+        in memory). Otherwise an ``out_dir`` that is or contains the scene's folder or one
+        of its files is refused.
 
-    Returns the output folder. Views without an image cannot be saved.
+    Returns the output folder. Views without an image cannot be saved. The folder gets a
+    marker file listing what vibr wrote, so that a later ``overwrite`` can replace it.
     """
     from concurrent.futures import ThreadPoolExecutor
 
     from ..progress import progress
 
+    from .outputs import check_not_input, check_replaceable, replace_folder, write_marker
+
     out = Path(out_dir).absolute()
+    if in_place:  # the scene is in memory; check_replaceable below guards its folder
+        if scene.root is None or Path(scene.root).resolve() != out.resolve():
+            raise VibrInputError("an in-place update must write to the scene's own folder", out)
+    else:
+        check_not_input(out, [scene.root] + [v.path for v in scene.views])
     if out.exists() and not overwrite:
         raise OutputExists("output folder already exists", out)
     if out.exists() and not out.is_dir():
         raise VibrInputError("output path exists and is not a folder", out)
+    if out.exists():
+        check_replaceable(out)  # before the work, and again at the swap
     for v in scene.views:
         if v.image is None:
             raise VibrInputError(f"view {v.name} has no image to save", v.path)
@@ -350,13 +434,8 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False) -> Path:
             json.dump(doc, f, indent=2)
             f.write("\n")
 
-        if out.exists():
-            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-            os.replace(out, trash / "old")
-            os.replace(tmp, out)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
+        write_marker(tmp)
+        replace_folder(tmp, out, overwrite=overwrite)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -20,7 +20,7 @@ logger = logging.getLogger(__name__)
 
 def render_samples(samples: Samples, method="gradient", *, source_centres=None,
                    target_centre=None, callback=None, progress_bar: bool = False,
-                   verbose: bool = False, **params) -> RenderResult:
+                   verbose: bool = False, uncertainty: bool = False, **params) -> RenderResult:
     """Render from precomputed :class:`~vibr.geometry.Samples` (see :func:`render` for the
     parameters) with the registered method (:mod:`vibr.render.methods`).
     ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr."""
@@ -29,7 +29,7 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
     if len(samples) == 0:
         raise VibrInputError("no source sample lands in the target view")
     return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
-                    callback=callback, progress_bar=progress_bar, verbose=verbose)
+                    callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty)
 
 
 def _ready_sources(sources: Scene, target) -> Scene:
@@ -55,7 +55,8 @@ def _ready_sources(sources: Scene, target) -> Scene:
 
 def render(sources: Scene, target: View | Camera, method="gradient", *,
            samples: Samples | None = None, callback=None, progress_bar: bool = False,
-           verbose: bool = False, geometry_kw: dict | None = None, **params) -> RenderResult:
+           verbose: bool = False, geometry_kw: dict | None = None, uncertainty: bool = False,
+           **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
     Minimises (docs/METHOD.md §5, paper eq. energy_final)
@@ -88,6 +89,9 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         Log each outer pass at INFO (else DEBUG) on the ``vibr.render`` logger.
     geometry_kw : dict, optional
         Arguments of :func:`vibr.geometry.compute_samples`.
+    uncertainty : bool
+        Also fill ``RenderResult.uncertainty``, the per-pixel std. dev. in grey levels
+        (:mod:`vibr.render.uncertainty`).
     **params
         alpha (1.0), gamma (1.0; gradient only), lam (0.1), sigma_s (1.0, grey levels),
         sigma_z (None: the geometry's), scale (255: the intensity scale all these refer to;
@@ -116,12 +120,15 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     if samples is None:
         from ..geometry import compute_samples
 
+        from ..validate import check_render_memory
+
         src = _ready_sources(sources, target)
+        check_render_memory([v.camera.shape for v in src.views], cam.shape)  # before allocating
         samples = compute_samples(src, cam, **(geometry_kw or {}))
     t_geo = time.perf_counter() - t0
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
-                         verbose=verbose, **params)
+                         verbose=verbose, uncertainty=uncertainty, **params)
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:

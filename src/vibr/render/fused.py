@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .._jit import FASTMATH
 from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row
 from .tv import _sqrt_sum, _tv_row, _weight_arg
 
@@ -32,7 +33,7 @@ __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start"]
 BAND = 24
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _dx_row(x, k, forward, dst):
     """Row k of ``D x`` (:func:`.operators._grad_row`, the one gradient) into ``dst``
     (C, 2, W + 2), columns shifted by one so that the zero pads at 0 and W + 1 make the
@@ -42,7 +43,7 @@ def _dx_row(x, k, forward, dst):
         _grad_row(x[c], k, forward, dst[c, 0, 1:W + 1], dst[c, 1, 1:W + 1])
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _stencil_row_padded(A, k, um, u0, up, out):
     """out[j] = Σ_s A[s, k, j] · u_dy[j + dx + 1] for padded rows (W + 2) above, at and
     below row k (all-zero rows where they fall outside the image)."""
@@ -56,7 +57,7 @@ def _stencil_row_padded(A, k, um, u0, up, out):
                   + a6[j] * up[j] + a7[j] * up[j + 1] + a8[j] * up[j + 2])
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, wmap, use_w, with_terms, band,
                    h, parts):
     C, H, W = x.shape
@@ -204,7 +205,7 @@ def power_start(shape):
     return out
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _forward_kernel(x, xp, hx, hxp, r, beta, dinv, step, out):
     # blocks of contiguous pixels, channels outside the inner loop: every stream is
     # read sequentially and the inner loop vectorises

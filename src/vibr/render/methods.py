@@ -97,18 +97,19 @@ class Method:
     overrides: dict = field(default_factory=dict)
 
     def render(self, samples, p: dict, *, source_centres=None, target_centre=None, callback=None,
-               progress_bar: bool = False, verbose: bool = False):
+               progress_bar: bool = False, verbose: bool = False, uncertainty=False):
         """Render from :class:`~vibr.geometry.Samples` with filled parameters ``p``
-        (:func:`method_params`); returns a :class:`~vibr.render.RenderResult`."""
+        (:func:`method_params`); returns a :class:`~vibr.render.RenderResult` (with its
+        ``uncertainty`` map when asked, :mod:`vibr.render.uncertainty`)."""
         if self.solve:
             from .variational import solve_variational
 
             return solve_variational(samples, p, self, callback=callback, progress_bar=progress_bar,
-                                     verbose=verbose)
-        return _render_ulr(self, samples, p, source_centres, target_centre)
+                                     verbose=verbose, uncertainty=uncertainty)
+        return _render_ulr(self, samples, p, source_centres, target_centre, uncertainty)
 
 
-def _render_ulr(method: Method, samples, p, source_centres, target_centre):
+def _render_ulr(method: Method, samples, p, source_centres, target_centre, uncertainty=False):
     """Buehler et al.'s blend of the ``ulr_k`` best views per pixel, holes by push–pull."""
     import time
 
@@ -124,12 +125,18 @@ def _render_ulr(method: Method, samples, p, source_centres, target_centre):
     cov = splat_coverage(samples, p, footprint=False, gradient=False)  # only its coverage
     times["assembly"] = time.perf_counter() - t_all
     t0 = time.perf_counter()
-    img, _ = ulr_blend(samples, source_centres, target_centre, k=p["ulr_k"], beta_res=p["ulr_beta_res"])
+    img, _, *var = ulr_blend(samples, source_centres, target_centre, k=p["ulr_k"],
+                             beta_res=p["ulr_beta_res"], spread=bool(uncertainty))
     img = push_pull(img * cov.acc[..., None], cov.acc)
     times["init"] = time.perf_counter() - t0
+    sig = None
+    if uncertainty:  # issue 28: the ULR-weighted spread of the blended views
+        from .uncertainty import ulr_sigma
+
+        sig = ulr_sigma(var[0], cov.coverage, scale=float(p["scale"]))
     times["total"] = time.perf_counter() - t_all
     return RenderResult(np.clip(img, 0, 1), cov.coverage, times=times, method=method.name, params=p,
-                        n_samples=len(samples))
+                        n_samples=len(samples), uncertainty=sig)
 
 
 #: The methods by name, in the order shown to users.
@@ -243,4 +250,6 @@ def method_params(method: str, preset: str | None = None, **params) -> dict:
         raise VibrInputError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {p['tv_weighting']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
-    return p
+    from ..validate import check_render_params
+
+    return check_render_params(p)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .._jit import FASTMATH
 from ..geometry.gradient import (DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_adj_row, _grad_row,  # noqa: F401
                                  _is_forward, grad_image, grad_image_adj)
 
@@ -315,7 +316,7 @@ def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_
     return cpart.sum()
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _stencil_point(A, u, c, i, j, H, W):
     s = 0.0
     for dy in range(-1, 2):
@@ -330,7 +331,7 @@ def _stencil_point(A, u, c, i, j, H, W):
     return s
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _stencil_row(A, u, c, i, out):
     """Row i of the 9-point stencil ``A`` applied to channel c of ``u`` (C, H, W).
 
@@ -354,7 +355,7 @@ def _stencil_row(A, u, c, i, out):
             out[j] = _stencil_point(A, u, c, i, j, H, W)
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _stencil_apply(A, u, out):
     """out[c] = Σ_s A[s] · shift_s(u[c]); planar (C, H, W) images, (9, H, W) stencil."""
     C, H, W = u.shape
@@ -364,7 +365,7 @@ def _stencil_apply(A, u, out):
     return out
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _dot(a, b):
     a1 = a.ravel()
     b1 = b.ravel()
@@ -566,7 +567,7 @@ def stencil_to_sparse(A):
 
 # ----------------------------------------------------------------------------- ∇ / div
 # Planar layout: images (C, H, W), gradients (C, 2, H, W) with [:, 0] = d/dx, [:, 1] = d/dy.
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _grad_fwd(u, g):
     C, H, W = u.shape
     for i in prange(H):
@@ -587,7 +588,7 @@ def _grad_fwd(u, g):
     return g
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _div_bwd(p, out):
     C, _, H, W = p.shape
     for i in prange(H):

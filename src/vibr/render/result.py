@@ -43,6 +43,9 @@ class RenderResult:
         The initial image (weighted blend + push–pull) the solver started from.
     iterations, power_iterations : int
         FISTA iterations and power iterations (step size) over all outer passes.
+    uncertainty : (H, W) float32 or None
+        Per-pixel standard deviation, grey levels of ``scale``, when rendered with
+        ``uncertainty=True`` (:mod:`vibr.render.uncertainty`; docs/RENDERER.md).
     """
 
     image: np.ndarray
@@ -58,3 +61,4 @@ class RenderResult:
     init: np.ndarray | None = None
     iterations: int = 0
     power_iterations: int = 0
+    uncertainty: np.ndarray | None = None

@@ -23,10 +23,11 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._jit import FASTMATH
 __all__ = ["tv_value", "TVProx"]
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _tv_row(ur, un, coupled, acc, wr, use_w):
     """One channel's share of a row of TV (forward differences, Neumann): ``ur`` the row,
     ``un`` the next one (the row itself on the last row). Coupled: adds |∇u_c|² to ``acc``
@@ -50,7 +51,7 @@ def _tv_row(ur, un, coupled, acc, wr, use_w):
     return s
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _sqrt_sum(acc, wr, use_w):
     s = 0.0
     if use_w:
@@ -62,7 +63,7 @@ def _sqrt_sum(acc, wr, use_w):
     return s
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _tv_value(u, coupled, wmap, use_w):
     C, H, W = u.shape
     rows = np.zeros(H)
@@ -99,7 +100,7 @@ def _weight_arg(weight):
 BAND = 24
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _r_row(p, p_old, beta, k, out):
     """Row k of the extrapolated dual r = p + beta (p − p_old) into out (C, 2, W)."""
     C = p.shape[0]
@@ -113,7 +114,7 @@ def _r_row(p, p_old, beta, k, out):
                 o[j] = pr[j] + beta * (pr[j] - po[j])
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=FASTMATH)
 def _x_row(z, rk, rkm, mu, dinv, use_d, k, o):
     """Row k of x = z + mu · d⁻¹ · div r from the dual rows k (rk) and k − 1 (rkm),
     (C, 2, W) each (``div_bwd``: Neumann, r_x[W−1] and r_y[H−1] are 0)."""
@@ -147,7 +148,7 @@ def _x_row(z, rk, rkm, mu, dinv, use_d, k, o):
                 orow[j] = zr[j] + mu * orow[j]
 
 
-@njit(parallel=True, cache=True, fastmath=True)
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _primal(z, p, mu, dinv, use_d, band, x):
     """x = z + mu · d⁻¹ · div p, planar: z, x (C, H, W), p (C, 2, H, W).
 
@@ -168,7 +169,7 @@ def _primal(z, p, mu, dinv, use_d, band, x):
                     x[c, i, :] = xrow[c]
 
 
-@njit(parallel=True, cache=True, fastmath=True, error_model="numpy")
+@njit(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
 def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, wmap, use_w, band, p_new, primal,
                x_out):
     """One accelerated dual step (Beck & Teboulle 2009, FGP): at r = p + beta (p − p_old),

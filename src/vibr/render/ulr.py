@@ -21,7 +21,7 @@ __all__ = ["ulr_blend"]
 
 
 def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
-              beta_res: float = 0.1, eps: float = 1e-6):
+              beta_res: float = 0.1, eps: float = 1e-6, spread: bool = False):
     """ULR colour per target pixel.
 
     Parameters
@@ -38,6 +38,9 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
     -------
     image : (H, W, 3) float32, 0 where no view lands
     weight : (H, W) float32, the accumulated bilinear splat weight (coverage)
+    variance : (H, W) float32, only with ``spread=True``
+        ``Σ_v w_v ‖c_v − c‖² / (3 Σ_v w_v)``: the ULR-weighted variance of the blended views'
+        colours around the blend (per channel, [0, 1] units; 0 where no view lands).
     """
     H, W = samples.target_shape
     Cs = np.asarray(source_centres, np.float64)
@@ -79,4 +82,8 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
     sw = wt.sum(0)
     # single-view pixels: w̃ = 0 with the inflated threshold only if p = thresh; guard anyway
     img = np.where(sw[..., None] > 0, (wt[..., None] * colour).sum(0) / np.maximum(sw, 1e-300)[..., None], 0.0)
-    return img.astype(np.float32), acc.astype(np.float32)
+    if not spread:
+        return img.astype(np.float32), acc.astype(np.float32)
+    dev = ((colour - img[None]) ** 2).sum(-1)  # (V, H, W); absent views have wt = 0
+    var = np.where(sw > 0, (wt * dev).sum(0) / (3 * np.maximum(sw, 1e-300)), 0.0)
+    return img.astype(np.float32), acc.astype(np.float32), var.astype(np.float32)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import VibrInputError
 from ..geometry.samples import Samples
 from .weights import geometric_weights, robust_factor
 from .operators import DEFAULT_GRAD_SCHEME, Splat
@@ -67,9 +68,17 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
         BtB, Btg, cg_unit = sp.normal(ones, grad_vals, dtype=np.float32)
         acc = BtB.sum(0, dtype=np.float64)
-        return SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg_unit, grad_vals)
+        return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg_unit, grad_vals))
     acc = sp.adjoint(ones)
-    return SplatCoverage(sp, acc, acc >= p["hole_threshold"])
+    return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"]))
+
+
+def _covering(cov: SplatCoverage) -> SplatCoverage:
+    """A target no sample covers is an error (not a grey image)."""
+    if not cov.coverage.any():
+        raise VibrInputError("the target camera sees nothing of the scene (coverage 0 %): check its "
+                             "position, orientation and intrinsics")
+    return cov
 
 
 #: TV weightings (docs/METHOD.md §10): ``"uniform"`` lam everywhere, ``"samples"`` lam raised where
@@ -169,7 +178,7 @@ def _outer_line(name, o, n_outer, res) -> str:
 
 
 def solve_variational(samples: Samples, p: dict, method, *, callback=None, progress_bar: bool = False,
-                      verbose: bool = False) -> RenderResult:
+                      verbose: bool = False, uncertainty=False) -> RenderResult:
     """Render from ``samples`` with a variational ``method`` (a
     :class:`vibr.render.methods.Method` with ``solve``): weights, initial image, then
     ``n_outer`` passes of (re-weight, assemble, FISTA). See :func:`vibr.render.render`."""
@@ -236,8 +245,16 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
             bar.update(1)
     if bar is not None:
         bar.close()
+    sig = None
+    if uncertainty:  # issue 28: Jacobi diag(H⁻¹) of the last pass's model + spread of the sources
+        from .uncertainty import variational_sigma
+
+        t0 = time.perf_counter()
+        sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho,
+                                terms=uncertainty)
+        times["uncertainty"] = time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
     p = dict(p, density=rho, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
     return RenderResult(img, cov.coverage, energy, terms, outer, times, method.name, p, len(samples),
-                        init=init, iterations=n_iter, power_iterations=n_power)
+                        init=init, iterations=n_iter, power_iterations=n_power, uncertainty=sig)

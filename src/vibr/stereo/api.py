@@ -454,7 +454,7 @@ def depth_options(options: DepthOptions | None = None, /, **kw) -> DepthOptions:
 
 # --------------------------------------------------------------------------- main API
 def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOptions | None = None,
-                   **kw) -> Scene:
+                   checkpoint=None, **kw) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
 
     Parameters
@@ -467,6 +467,10 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
     exclude : views never used as inputs (e.g. an evaluation's held-out target).
     options : DepthOptions, optional
         How to estimate (:class:`DepthOptions`).
+    checkpoint : folder, optional
+        MVS: keep each view's sweep result there as it finishes (atomic writes, keyed by the
+        view, its partners and the options: :class:`vibr.io.checkpoint.ViewCheckpoint`) and
+        read back the matching ones, so that a job killed midway and run again resumes.
     **kw : fields of :class:`DepthOptions` (``scale=0.5``, ``fill_segments=True``, ...) or
         keywords of :func:`~vibr.stereo.lightfield.lightfield_depth` (``step=0.05``), applied
         over ``options`` (:func:`depth_options`); any other name raises ``TypeError``.
@@ -487,13 +491,16 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
     """
     t_all = time.perf_counter()
     opt = depth_options(options, **kw)
+    from ..validate import check_depth_params
+
+    check_depth_params(**{f.name: getattr(opt, f.name) for f in fields(opt)})  # issue 24: ranges
     targets, inputs, excl, method, opt = _check_request(scene, views, exclude, opt)
     cams = [v.camera.scaled(opt.scale) if opt.scale != 1.0 else v.camera for v in scene.views]
     imgs = _Images(scene, cams)
     if method == "lightfield":
         depths, sigmas, stats = _estimate_lightfield(scene, targets, inputs, cams, imgs, opt)
     else:
-        depths, sigmas, stats = _estimate_mvs(scene, targets, inputs, cams, imgs, opt)
+        depths, sigmas, stats = _estimate_mvs(scene, targets, inputs, cams, imgs, opt, checkpoint)
     new_views = _at_scene_resolution(scene, targets, cams, depths, sigmas)
     meta = dict(scene.meta)
     meta["depth_estimation"] = {"method": method, "scale": opt.scale, "views": stats,
@@ -578,18 +585,26 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
     return depths, sigmas, stats
 
 
-def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions):
+def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpoint=None):
     """Plane-sweep MVS of each requested view (and of its consistency partners), then the
     consistency check and the optional segment completion of the requested views."""
     est, nbrs = _mvs_views(scene, cams, targets, inputs, opt)
     med_r = 9 if opt.median_radius is None else int(opt.median_radius)  # MVS default: 19×19 window
     raw, stats = {}, {}
+    ck = None
+    if checkpoint is not None:
+        from ..io.checkpoint import ViewCheckpoint
+
+        ck = ViewCheckpoint(checkpoint, {**{f.name: getattr(opt, f.name) for f in fields(opt)}, "med_r": med_r})
     for i in est:
         if not nbrs[i]:
             continue
         t0 = time.perf_counter()
-        raw[i], st, nbrs[i] = _sweep_view(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
-        st["time_s"] = time.perf_counter() - t0
+        if ck is None:
+            raw[i], st, nbrs[i] = _sweep_view(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
+        else:
+            raw[i], st, nbrs[i] = _sweep_view_resumable(ck, scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
+        st["time_s"] = st.get("time_s", time.perf_counter() - t0)
         st["role"] = "target" if i in targets else "consistency partner"
         stats[scene.views[i].name] = st
     depths, sigmas = {}, {}
@@ -674,6 +689,27 @@ def _sweep_view(scene, i, nb, cams, imgs, inputs, opt: DepthOptions, med_r: int)
     stats = {"depth_range": dr, "n_planes": D, "neighbours": [scene.views[j].name for j in nb],
              "confident": float(res.confident.mean()), "sweep_s": res.meta["time_s"]}
     return (d, res.sigma_z, res.meta.get("plane_gradient"), dr), stats, nb
+
+
+def _sweep_view_resumable(ck, scene, i, nb, cams, imgs, inputs, opt: DepthOptions, med_r: int):
+    """:func:`_sweep_view` through the checkpoint ``ck``: a result kept by an interrupted
+    run (same view, partners and options) is read back, a new one is kept."""
+    v = scene.views[i]
+    key = ck.key(v, cams[i], [scene.views[j] for j in nb])
+    hit = ck.load(v.name, key)
+    if hit is not None:
+        a, info = hit
+        grad = (a["grad_x"], a["grad_y"]) if "grad_x" in a else None
+        st = dict(info["stats"], resumed=True)
+        return (a["depth"], a["sigma_z"], grad, tuple(info["dr"])), st, [scene.index(n) for n in info["nb"]]
+    t0 = time.perf_counter()
+    (d, s, grad, dr), st, nb = _sweep_view(scene, i, nb, cams, imgs, inputs, opt, med_r)
+    st["time_s"] = time.perf_counter() - t0
+    arrays = {"depth": d, "sigma_z": np.asarray(s, np.float32)}
+    if grad is not None:
+        arrays["grad_x"], arrays["grad_y"] = grad
+    ck.save(v.name, key, arrays, {"dr": list(dr), "nb": [scene.views[j].name for j in nb], "stats": st})
+    return (d, s, grad, dr), st, nb
 
 
 def _check_view(scene, i, d, s, raw, est, nbrs, cams, opt: DepthOptions, st: dict):

@@ -1,0 +1,81 @@
+"""Issue 24: every subcommand with invalid numeric options, unwritable outputs and missing
+inputs exits with status 2, one line on stderr, no traceback, and writes nothing."""
+
+from __future__ import annotations
+
+import pytest
+
+from vibr.cli import main
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    d = tmp_path_factory.mktemp("sweep")
+    return save_scene(make_scene("grid", n_views=4, width=24, height=24, seed=0), d / "s")
+
+
+def _cases(s, o):
+    """(argv, output path that must not appear) per case; ``o`` is a fresh folder."""
+    r = ["render", s, "--target", "0", "-o", o / "r.png"]
+    e = ["eval", s, "--target", "0", "--method", "ulr,gradient", "--json", o / "r.json"]
+    d = ["depth", s, "-o", o / "d"]
+    cases = [(r + [flag, v], o / "r.png") for flag, v in [
+        ("--lam", "nan"), ("--alpha", "inf"), ("--iterations", "0"), ("--sigma-s", "0"), ("--gamma", "-1"),
+        ("--intensity-scale", "0"), ("--outer", "-1"), ("--views", "0"), ("--scale", "inf"), ("--scale", "abc"),
+        ("--target", "-1"), ("--sigma-z", "-2"), ("--scale", "0")]]
+    cases += [(e + [flag, v], o / "r.json") for flag, v in [
+        ("--lam", "nan"), ("--alpha", "inf"), ("--gamma", "-1"), ("--intensity-scale", "0"), ("--border", "-1"),
+        ("--views", "0"), ("--step-px", "0"), ("--max-planes", "0"), ("--scale", "-1"), ("--target", "-1"),
+        ("--lam", "1,x")]]
+    cases += [(d + [flag, *v.split()], o / "d") for flag, v in [
+        ("--step-px", "0"), ("--max-planes", "0"), ("--median-radius", "-1"), ("--depth-scale", "2"), ("--scale", "0"),
+        ("--neighbours", "0"), ("--refine-iter", "-1"), ("--depth-range", "5 1"), ("--depth-range", "nan 1"),
+        ("--sweep-scale", "0"), ("--views", "-1")]]
+    cases += [(["convert", s, o / "c", "--scale", v], o / "c") for v in ("0", "nan", "-1", "1e9")]
+    cases += [(["info", s, "--scale", v], None) for v in ("0", "nan")]
+    cases += [(["demo", "--size", v, "-o", o / "x.png"], o / "x.png") for v in ("0", "-3", "100000")]
+    # missing inputs
+    miss = o / "missing"
+    cases += [(["render", miss, "--target", "0", "-o", o / "r.png"], o / "r.png"),
+              (["eval", miss, "--target", "0", "--json", o / "r.json"], o / "r.json"),
+              (["depth", miss, "-o", o / "d"], o / "d"), (["convert", miss, o / "c"], o / "c"),
+              (["info", miss], None), (["calibrate", miss, o / "cal"], o / "cal"),
+              (["render", s, "--target", miss / "cam.json", "-o", o / "r.png"], o / "r.png"),
+              (["render", s, "--target", "0", "--depth", "files", "--depth-files", miss, "-o", o / "r.png"],
+               o / "r.png")]
+    # unwritable outputs (a read-only file system, a folder where a file goes)
+    ro = "/proc/vibr_sweep"
+    cases += [(["render", s, "--target", "0", "-o", f"{ro}/r.png"], None),
+              (["eval", s, "--target", "0", "--json", f"{ro}/r.json"], None),
+              (["eval", s, "--target", "0", "--json", o / "r.json", "--figures", f"{ro}/f"], o / "r.json"),
+              (["depth", s, "-o", f"{ro}/d"], None), (["convert", s, f"{ro}/c"], None),
+              (["calibrate", s, f"{ro}/cal"], None), (["demo", "-o", f"{ro}/x.png"], None),
+              (["render", s, "--target", "0", "-o", o], None)]
+    return cases
+
+
+def test_cli_sweep(scene, tmp_path, capsys):
+    import itertools
+
+    failures = []
+    for k, (argv, out) in enumerate(_cases(str(scene), tmp_path)):
+        argv = [str(a) for a in argv]
+        try:
+            code = main(["-q"] + argv)
+        except SystemExit as exc:  # argparse
+            code = exc.code
+        err = capsys.readouterr().err.strip()
+        ok = (code == 2 and err.count("\n") == 0 and "Traceback" not in err and err.startswith("vibr")
+              and (out is None or not out.exists()))
+        if not ok:
+            failures.append(f"{' '.join(argv)} -> {code}: {err[:300]}")
+        leftovers = [p for p in tmp_path.iterdir() if p.name != "missing"]
+        if leftovers:
+            failures.append(f"{' '.join(argv)} left {leftovers}")
+            for p in leftovers:
+                p.unlink() if p.is_file() else __import__("shutil").rmtree(p)
+    assert not failures, "\n".join(failures)
+    del itertools

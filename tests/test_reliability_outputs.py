@@ -1,0 +1,127 @@
+"""Issue 24, items 1 and 3: --overwrite never deletes what vibr did not write, and outputs
+are checked before the work (one line, exit 2, nothing written)."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from vibr.cli import main
+from vibr.errors import VibrInputError
+from vibr.io import save_scene
+from vibr.io.outputs import MARKER, check_output, read_marker
+
+from test_cli_errors import assert_one_line_error, make_transforms, run_cli
+
+
+def _tree(p):
+    return sorted(str(f.relative_to(p)) for f in p.rglob("*"))
+
+
+def test_convert_overwrite_refuses_an_ancestor_of_the_scene(capsys, tmp_path):
+    (tmp_path / "data").mkdir()
+    root = make_transforms(tmp_path / "data" / "s")
+    (tmp_path / "data" / "notes.txt").write_text("mine")
+    before = _tree(tmp_path)
+    for out in (tmp_path / "data", tmp_path, root):
+        code, err = run_cli(capsys, "convert", root, out, "--overwrite")
+        assert_one_line_error(code, err, "input")
+        assert _tree(tmp_path) == before
+
+
+def test_convert_overwrite_replaces_only_its_own_folder(capsys, tmp_path):
+    root = make_transforms(tmp_path / "s")
+    out = tmp_path / "out"
+    assert run_cli(capsys, "convert", root, out)[0] == 0
+    listed = read_marker(out)
+    assert "transforms.json" in listed and "images/a.png" in listed
+    assert run_cli(capsys, "convert", root, out, "--overwrite")[0] == 0   # vibr's own: replaced
+    assert run_cli(capsys, "convert", root, out, "--force")[0] == 0       # the old name still works
+    (out / "images" / "my_edit.png").write_bytes(b"user file")
+    code, err = run_cli(capsys, "convert", root, out, "--overwrite")
+    assert_one_line_error(code, err, out, "images/my_edit.png")
+    assert (out / "images" / "my_edit.png").read_bytes() == b"user file"
+
+
+def test_convert_refuses_an_output_holding_an_input(capsys, tmp_path):
+    """OUT inside SCENE is fine when new, but never replaces a folder of the input."""
+    root = make_transforms(tmp_path / "s")
+    assert run_cli(capsys, "convert", root, root / "converted")[0] == 0
+    (root / "sub").mkdir()
+    code, err = run_cli(capsys, "convert", root, root, "--overwrite")
+    assert_one_line_error(code, err, "input")
+    assert (root / "a.png").is_file() and (root / "transforms.json").is_file()
+
+
+def test_save_scene_library_refuses_input_folder(tmp_path):
+    from vibr.io import load_scene
+
+    root = make_transforms(tmp_path / "s")
+    scene = load_scene(root)
+    with pytest.raises(VibrInputError, match="input"):
+        save_scene(scene, tmp_path, overwrite=True)
+    assert (root / "a.png").is_file()
+
+
+def test_depth_in_place_only_on_a_folder_vibr_wrote(capsys, tmp_path):
+    root = make_transforms(tmp_path / "s")
+    (root / "notes.txt").write_text("mine")
+    before = _tree(root)
+    code, err = run_cli(capsys, "depth", root)
+    assert_one_line_error(code, err, root, "-o OUT")
+    assert _tree(root) == before
+    # --overwrite on a user folder: refused too
+    other = tmp_path / "o"
+    other.mkdir()
+    (other / "x.txt").write_text("mine")
+    code, err = run_cli(capsys, "depth", root, "-o", other, "--overwrite")
+    assert_one_line_error(code, err, other, "not written by vibr")
+    assert (other / "x.txt").read_text() == "mine"
+
+
+# ----------------------------------------------------------------------------- item 3
+def test_check_output_cases(tmp_path):
+    (tmp_path / "d").mkdir()
+    (tmp_path / "f.txt").write_text("x")
+    assert check_output(tmp_path / "r.png") == tmp_path / "r.png"
+    for path, kind, word in [("", "file", "empty"), (tmp_path / "d", "file", "folder"),
+                             (tmp_path / "f.txt", "dir", "not a folder"),
+                             (tmp_path / "missing" / "r.png", "file", "does not exist"),
+                             (tmp_path / "f.txt" / "r.png", "file", "not a folder"),
+                             ("/proc/vibr_test_out.png", "file", "cannot write")]:
+        with pytest.raises(VibrInputError, match=word):
+            check_output(path, kind)
+
+
+def _tiny_scene(tmp_path):
+    from vibr.synthetic import make_scene
+
+    s = make_scene("grid", n_views=4, width=32, height=24, seed=1)
+    return save_scene(s, tmp_path / "scene")
+
+
+@pytest.mark.parametrize("bad", ["dir", "missing_parent", "empty", "readonly"])
+def test_outputs_checked_before_the_work(capsys, tmp_path, bad):
+    """render -o / eval --json / eval --figures / convert OUT / depth -o: refused in
+    well under a second (before loading or computing), one line, nothing written."""
+    src = _tiny_scene(tmp_path)
+    (tmp_path / "adir").mkdir()
+    target = {"dir": tmp_path / "adir", "missing_parent": tmp_path / "no" / "such" / "x.png",
+              "empty": "", "readonly": "/proc/vibr_test/x.png"}[bad]
+    cmds = [["render", src, "--target", "0", "-o", target],
+            ["eval", src, "--target", "0", "--method", "ulr", "--json", target],
+            ["eval", src, "--target", "0", "--method", "ulr", "--json", tmp_path / "r.json",
+             "--figures", target if bad != "dir" else tmp_path / "scene" / "transforms.json"],
+            ["demo", "--size", "16", "-o", target]]
+    if bad != "dir":
+        cmds += [["convert", src, target], ["depth", src, "-o", target]]
+    for cmd in cmds:
+        before = _tree(tmp_path)
+        t0 = time.perf_counter()
+        code, err = run_cli(capsys, *cmd)
+        assert_one_line_error(code, err)
+        assert time.perf_counter() - t0 < 5.0, cmd
+        assert _tree(tmp_path) == before, cmd

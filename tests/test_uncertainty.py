@@ -1,0 +1,214 @@
+"""Per-pixel uncertainty of a render (issue 28): metrics in closed form, σ on a synthetic
+scene with exact and perturbed depth, the CLI outputs."""
+
+import numpy as np
+import pytest
+
+from vibr.metrics import ause, pixel_error, sparsification, spearman, uncertainty_metrics
+
+
+# ----------------------------------------------------------------------------- metrics
+def test_perfect_predictor_has_zero_ause_and_unit_rho():
+    rng = np.random.default_rng(0)
+    err = rng.gamma(2.0, 3.0, (40, 50))
+    for sig in (err, 3 * err + 1, np.sqrt(err)):  # any increasing function of the error
+        assert ause(sig, err) == pytest.approx(0.0, abs=1e-12)
+        assert spearman(sig, err) == pytest.approx(1.0)
+    assert spearman(-err, err) == pytest.approx(-1.0)
+    assert ause(-err, err) > 0.3  # the worst order is far from the oracle
+
+
+def test_sparsification_closed_form():
+    # four pixels, errors 0, 0, 3, 4 (RMSE = sqrt(25/4) = 2.5), fractions 0, ¼, ½, ¾
+    err = np.array([[0.0, 0.0], [3.0, 4.0]])
+    c = sparsification(err, err, n_points=4, normalise=False)
+    assert c["rmse"] == pytest.approx(2.5)
+    # oracle: remove 4, then 3: sqrt(25/4), sqrt(9/3), 0, 0
+    assert c["oracle"] == pytest.approx([2.5, np.sqrt(3.0), 0.0, 0.0])
+    assert c["curve"] == pytest.approx(c["oracle"])
+    # the reversed order removes the zeros first: sqrt(25/4), sqrt(25/3), sqrt(25/2), 4
+    r = sparsification(-err, err, n_points=4, normalise=False)
+    assert r["curve"] == pytest.approx([2.5, np.sqrt(25 / 3), np.sqrt(12.5), 4.0])
+    # normalised AUSE = mean(curve − oracle) / RMSE
+    want = np.mean(np.array(r["curve"]) - np.array(r["oracle"])) / 2.5
+    assert ause(-err, err, n_points=4) == pytest.approx(want)
+
+
+def test_ties_are_removed_in_expectation():
+    """A constant σ says nothing: its curve is the flat RMSE of a random order."""
+    rng = np.random.default_rng(1)
+    err = rng.random((30, 30))
+    c = sparsification(np.ones_like(err), err)
+    assert np.allclose(c["curve"], 1.0)
+    assert np.isnan(spearman(np.ones_like(err), err))
+    # inf (a pixel nobody sees) ranks as the largest σ
+    sig = err.copy()
+    sig[0, 0] = np.inf
+    err2 = err.copy()
+    err2[0, 0] = 10.0
+    assert ause(sig, err2) == pytest.approx(0.0, abs=1e-12)
+    assert spearman(sig, err2) == pytest.approx(1.0)
+
+
+def test_uncertainty_metrics_mask_border_and_errors():
+    from vibr.errors import VibrInputError
+
+    ref = np.zeros((10, 12, 3), np.float32)
+    img = ref.copy()
+    img[4, 5] = 10 / 255
+    e = pixel_error(img, ref)
+    assert e[4, 5] == pytest.approx(10.0, rel=1e-5) and e.sum() == pytest.approx(10.0, rel=1e-5)
+    m = uncertainty_metrics(e, img, ref, border=2)
+    assert m["ause"] == pytest.approx(0.0, abs=1e-9) and len(m["curve"]) == 50
+    with pytest.raises(VibrInputError):
+        uncertainty_metrics(e[:5], img, ref)
+    with pytest.raises(VibrInputError):
+        sparsification(e, e, mask=np.zeros((10, 12), bool))
+
+
+# ----------------------------------------------------------------------------- renderer
+@pytest.fixture(scope="module")
+def grid():
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", width=80, height=80, seed=3)
+    return sc.split(4)
+
+
+def _noisy_depth(sources, rel, seed=0):
+    """Sources whose depth maps carry Gaussian noise of std ``rel``·median depth (smoothed a
+    little, as a stereo error would be), with sigma_z stating it."""
+    from scipy.ndimage import gaussian_filter
+
+    from vibr.scene import Scene
+
+    rng = np.random.default_rng(seed)
+    views = []
+    for v in sources.views:
+        d = np.asarray(v.depth, np.float64)
+        sz = rel * float(np.nanmedian(d))
+        noise = gaussian_filter(rng.standard_normal(d.shape), 1.0)
+        noise *= sz / max(noise.std(), 1e-12)
+        views.append(v.replace(depth=(d + noise).astype(np.float32), sigma_z=max(sz, 1e-3 * np.nanmedian(d))))
+    return Scene(views, sources.name, sources.root, sources.grid, sources.points, dict(sources.meta))
+
+
+def test_render_fills_uncertainty_only_when_asked(grid):
+    from vibr.render import render
+    from vibr.render.uncertainty import hole_sigma
+
+    src, tg = grid
+    r0 = render(src, tg, "bvs", max_iter=15)
+    assert r0.uncertainty is None
+    for method in ("gradient", "ulr"):
+        r = render(src, tg, method, max_iter=15, uncertainty=True)
+        s = r.uncertainty
+        assert s.shape == tg.shape and s.dtype == np.float32
+        assert np.all(np.isfinite(s)) and np.all(s > 0 if method != "ulr" else s >= 0)
+        assert np.all(s <= hole_sigma() + 1e-3)
+        assert np.all(s[~r.coverage] == pytest.approx(hole_sigma()))
+    # the image does not depend on the flag (to the rounding of parallel sums)
+    r1 = render(src, tg, "bvs", max_iter=15, uncertainty=True)
+    assert np.allclose(r0.image, r1.image, atol=1e-5)
+
+
+def test_sigma_grows_with_injected_depth_noise(grid):
+    from vibr.render import render
+
+    src, tg = grid
+    med = []
+    for rel in (0.0, 0.005, 0.02):
+        s = src if rel == 0 else _noisy_depth(src, rel)
+        r = render(s, tg, "gradient", max_iter=20, uncertainty=True)
+        cov = r.coverage
+        med.append((float(np.median(r.uncertainty[cov])), float(np.mean(r.uncertainty[cov]))))
+    assert med[0][0] < med[1][0] < med[2][0], med
+    assert med[0][1] < med[1][1] < med[2][1], med
+
+
+def test_sigma_high_where_few_views_and_in_holes(grid):
+    """Disoccluded pixels (seen by few of the 8 sources) and push–pull pixels get a larger
+    σ than pixels every source sees."""
+    from vibr.evaluate import view_counts
+    from vibr.geometry import compute_samples
+    from vibr.render import render_samples
+    from vibr.render.uncertainty import hole_sigma
+
+    src, tg = grid
+    S = compute_samples(src, tg.camera)
+    # cut a hole: drop every sample landing in a 12×12 square
+    x, y = S.xy[:, 0], S.xy[:, 1]
+    S = S.select(~((x > 30) & (x < 42) & (y > 30) & (y < 42)))
+    n = view_counts(S)
+    r = render_samples(S, "gradient", max_iter=20, uncertainty=True)
+    s = r.uncertainty
+    few = (n >= 1) & (n <= 3) & r.coverage
+    many = n == len(src)
+    assert few.sum() > 20 and many.sum() > 1000
+    assert np.median(s[few]) > 2 * np.median(s[many]), (np.median(s[few]), np.median(s[many]))
+    hole = np.zeros_like(r.coverage)
+    hole[33:40, 33:40] = True
+    assert not r.coverage[hole].any()
+    assert np.all(s[hole] == pytest.approx(hole_sigma()))
+
+
+def test_sigma_ranks_the_errors_of_a_planar_proxy(grid):
+    """With the planar proxy the error sits where the plane is wrong; σ must find it."""
+    from vibr.pipeline import prepare
+    from vibr.render import render
+    from vibr.synthetic import make_scene
+
+    src, tg = prepare(make_scene("grid", width=80, height=80, seed=3), 4, depth="planar")
+    r = render(src, tg, "gradient", max_iter=20, uncertainty=True)
+    m = uncertainty_metrics(r.uncertainty, r.image, tg.image, border=2)
+    assert m["spearman"] > 0.4 and m["ause"] < 0.2, (m["spearman"], m["ause"])
+
+
+# ----------------------------------------------------------------------------- CLI
+def test_cli_render_writes_uncertainty_png_and_npy(tmp_path, capsys):
+    import imageio.v3 as iio
+
+    from vibr.cli import main
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    save_scene(make_scene("grid", n_views=9, width=64, height=64, seed=1), tmp_path / "s")
+    for ext in ("npy", "png"):
+        out = tmp_path / f"std.{ext}"
+        assert main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(tmp_path / "v.png"),
+                     "--method", "ulr" if ext == "png" else "gradient", "--iterations", "10",
+                     "--uncertainty", str(out), "-q"]) == 0
+        assert out.exists()
+        if ext == "npy":
+            a = np.load(out)
+            assert a.shape == (64, 64) and a.dtype == np.float32 and np.all(np.isfinite(a))
+        else:
+            a = iio.imread(out)
+            assert a.ndim == 3 and a.shape[1] == 64 and a.shape[0] > 64 and a.dtype == np.uint8
+    capsys.readouterr()
+    bad = tmp_path / "std.tif"
+    assert main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(tmp_path / "w.png"),
+                 "--uncertainty", str(bad), "-q"]) == 2
+    assert not bad.exists() and not (tmp_path / "w.png").exists()
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_cli_eval_uncertainty_report_and_plot(tmp_path):
+    import json
+
+    import imageio.v3 as iio
+
+    from vibr.cli import main
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    save_scene(make_scene("grid", n_views=9, width=64, height=64, seed=1), tmp_path / "s")
+    rep = tmp_path / "r.json"
+    assert main(["eval", str(tmp_path / "s"), "--target", "view_004", "--method", "ulr,gradient", "--gamma", "1",
+                 "--json", str(rep), "--figures", str(tmp_path / "fig"), "--uncertainty", "-q"]) == 0
+    r = json.loads(rep.read_text())
+    for row in r["results"]:
+        u = row["uncertainty"]
+        assert 0 <= u["ause"] < 1 and -1 <= u["spearman"] <= 1 and len(u["curve"]) == len(u["oracle"])
+    img = iio.imread(r["figures"]["sparsification"])
+    assert img.ndim == 3 and img.shape[0] > 100
