@@ -4,32 +4,34 @@ import numpy as np
 import pytest
 
 from vibr.render.fused import forward_step, hessian_power, hessian_terms, power_start
-from vibr.render.operators import grad_central, grad_central_adj, stencil_apply, stencil_to_sparse
+from vibr.render.operators import grad_image, grad_image_adj, stencil_apply, stencil_to_sparse
 from vibr.render.tv import tv_value
 
 SHAPES = [(1, 1), (1, 5), (2, 2), (3, 1), (5, 3), (7, 9), (24, 24), (25, 31), (50, 49), (97, 13)]
 
 
-def _reference(A, Ag, x, alpha, gamma):
+def _reference(A, Ag, x, alpha, gamma, scheme="forward"):
     x64 = x.astype(np.float64)
     C, H, W = x.shape
     Ax = stencil_apply(A.astype(np.float64), x64)
-    Dx = grad_central(x64)
-    G = grad_central_adj(stencil_apply(Ag.astype(np.float64), Dx.reshape(2 * C, H, W)).reshape(C, 2, H, W))
+    Dx = grad_image(x64, scheme)
+    G = grad_image_adj(stencil_apply(Ag.astype(np.float64), Dx.reshape(2 * C, H, W)).reshape(C, 2, H, W),
+                       scheme)
     return Ax, G, alpha * Ax + gamma * G
 
 
 @pytest.mark.parametrize("H,W", SHAPES)
 @pytest.mark.parametrize("coupled", [True, False])
-@pytest.mark.parametrize("gamma", [0.0, 1.7])
-def test_hessian_terms_equals_the_composition(H, W, coupled, gamma):
+@pytest.mark.parametrize("gamma,scheme", [(0.0, "forward"), (1.7, "forward"), (1.7, "central")])
+def test_hessian_terms_equals_the_composition(H, W, coupled, gamma, scheme):
     """h = alpha·Ax + gamma·DᵀA_gDx and the energy's inner products, bands and borders
     included (H = 97 spans several bands of rows)."""
     rng = np.random.default_rng(H * 100 + W)
     A, Ag = (rng.standard_normal((9, H, W)).astype(np.float32) for _ in range(2))
     x, b, bgt = (rng.standard_normal((3, H, W)).astype(np.float32) for _ in range(3))
-    h, (xAx, bx, xGx, gx, tv) = hessian_terms(A, Ag if gamma else None, x, b, bgt, 0.7, gamma, coupled)
-    Ax, G, want = _reference(A, Ag, x, 0.7, gamma)
+    h, (xAx, bx, xGx, gx, tv) = hessian_terms(A, Ag if gamma else None, x, b, bgt, 0.7, gamma, coupled,
+                                              scheme=scheme)
+    Ax, G, want = _reference(A, Ag, x, 0.7, gamma, scheme)
     np.testing.assert_allclose(h, want, atol=1e-5 * np.abs(want).max())
     x64 = x.astype(np.float64)
     tol = 1e-5 * x.size
@@ -38,7 +40,7 @@ def test_hessian_terms_equals_the_composition(H, W, coupled, gamma):
     assert abs(xGx - ((x64 * G).sum() if gamma else 0.0)) < tol
     assert abs(gx - ((x64 * bgt).sum() if gamma else 0.0)) < tol
     assert abs(tv - tv_value(x, coupled)) < 1e-4 * max(1.0, tv)
-    h2, (pAx, pGx, hh) = hessian_power(A, Ag if gamma else None, x, 0.7, gamma)
+    h2, (pAx, pGx, hh) = hessian_power(A, Ag if gamma else None, x, 0.7, gamma, scheme=scheme)
     np.testing.assert_array_equal(h2, h)
     assert abs(pAx - xAx) < tol and abs(pGx - xGx) < tol
     assert abs(hh - (h.astype(np.float64) ** 2).sum()) < 1e-5 * max(1.0, hh)

@@ -12,8 +12,8 @@ import numpy as np
 
 from .errors import VibrInputError
 
-__all__ = ["psnr", "ssim", "dssim", "mse", "pixel_error", "sparsification", "ause", "spearman",
-           "uncertainty_metrics"]
+__all__ = ["psnr", "ssim", "dssim", "mse", "view_metrics", "METRIC_BORDER", "checkerboard_energy",
+           "speckle_density", "pixel_error", "sparsification", "ause", "spearman", "uncertainty_metrics"]
 
 
 def _prepare(img, ref, mask, border, what):
@@ -114,6 +114,45 @@ def ssim(img, ref, mask=None, border: int = 0) -> float:
 def dssim(img, ref, mask=None, border: int = 0) -> float:
     """DSSIM as the paper defines it: ``10⁴ · (1 − SSIM)`` (see :func:`ssim`)."""
     return 1e4 * (1.0 - ssim(img, ref, mask, border))
+
+
+def _grey_mask(img, mask, border, shrink):
+    """Grey image (channel mean) and the pixels counted: ``mask`` minus ``border`` pixels,
+    eroded by ``shrink`` (the stencil's reach)."""
+    from scipy.ndimage import binary_erosion
+
+    g = np.asarray(img, np.float64)
+    g = g.mean(axis=2) if g.ndim == 3 else g
+    H, W = g.shape
+    m = np.ones((H, W), bool) if mask is None else np.asarray(mask, bool).copy()
+    if border:
+        m[:border] = m[-border:] = False
+        m[:, :border] = m[:, -border:] = False
+    if shrink:
+        m = binary_erosion(m, np.ones((2 * shrink + 1,) * 2, bool), border_value=0)
+    return g, m
+
+
+def checkerboard_energy(img, mask=None, border: int = 0) -> float:
+    """Energy at the Nyquist frequency (checkerboard) of the grey image g:
+    ``mean |g(i,j) − g(i+1,j) − g(i,j+1) + g(i+1,j+1)|`` over the 2×2 blocks whose top-left
+    pixel is counted (``mask``, ``border`` excluded). A pure checkerboard of amplitude a
+    gives 4a; a linear ramp gives 0 (issue 22)."""
+    g, m = _grey_mask(img, mask, border, 1)
+    d = np.abs(g[:-1, :-1] - g[1:, :-1] - g[:-1, 1:] + g[1:, 1:])
+    m = m[:-1, :-1]
+    return float(d[m].mean()) if m.any() else float("nan")
+
+
+def speckle_density(img, mask=None, border: int = 0, threshold: float = 0.1) -> float:
+    """Isolated outlier pixels per 10,000: pixels of the grey image (intensities in [0, 1])
+    that differ from the median of their 3×3 neighbourhood by more than ``threshold``
+    (issue 22; compare a render with its reference photo, which has its own)."""
+    from scipy.ndimage import median_filter
+
+    g, m = _grey_mask(img, mask, border, 1)
+    spk = np.abs(g - median_filter(g, size=3, mode="nearest")) > threshold
+    return float(1e4 * spk[m].mean()) if m.any() else float("nan")
 
 
 #: Pixels at each image edge left out of the metrics of a rendered view, by ``vibr render``

@@ -7,7 +7,7 @@ import argparse
 
 from ..pipeline import DEPTH_MODES
 from ..metrics import METRIC_BORDER
-from ..render.methods import DEFAULTS, METHODS, PSFS, REGISTRY
+from ..render.methods import DEFAULTS, METHODS, PRESETS, PSFS, REGISTRY
 
 #: How ``vibr render`` and ``vibr eval`` measure (one rule: vibr.metrics.view_metrics).
 METRIC_RULE = f"reconstructed pixels, {METRIC_BORDER}-px border excluded"
@@ -62,6 +62,10 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
     p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {_dm('n_outer')})")
     p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")
     p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
+    p.add_argument("--preset", choices=tuple(PRESETS), default=None,
+                   help="read --alpha/--gamma/--lam in these units: paper = the paper's symbols as the "
+                        "authors' code applies them (gamma x 0.1/4, lam x 255 on [0, 1] intensities, "
+                        "gradient term weighted by W, spatially varying TV; docs/RENDERER.md)")
     add_psf_option(p)
 
 
@@ -71,6 +75,8 @@ def render_params(args) -> dict:
     params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
                   scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
                   precond=True if args.precond else None, psf=args.psf)
+    if getattr(args, "preset", None) is not None:
+        params["preset"] = args.preset
     if args.sigma_z is not None:
         params["sigma_z"] = args.sigma_z
     return params

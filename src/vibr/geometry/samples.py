@@ -29,7 +29,8 @@ class Samples:
         Source colour ``v_k(m)`` in [0, 1].
     grad : (N, 3, 2) float32
         Source colour gradient ``∇v_k(m)`` (per channel, d/dx then d/dy), in source
-        pixels, central differences.
+        pixels: :func:`vibr.geometry.gradient.grad_image` of the source image with the
+        scheme of ``meta["grad_scheme"]``.
     jac : (N, 2, 2) float64
         ``∂tau_k/∂x_m`` (docs/METHOD.md §2 eq. deformation); rows are target x, y; columns source
         x, y.

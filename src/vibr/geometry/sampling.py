@@ -7,7 +7,9 @@ Steps (paper §5, docs/METHOD.md §2), per source view k:
 2. splat every pixel's quad into the target z-buffer (all views into one buffer);
 3. per pixel: warp ``tau_k``, in-target test, visibility against the z-buffer;
 4. per visible sample: ``tau``, ``∂tau/∂x_m``, ``1/|det|`` (capped), ``∂tau/∂z``, world
-   point, colour, central-difference colour gradient, ``sigma_z``.
+   point, colour, colour gradient ``∇v`` (the renderer's own ``D``,
+   :func:`vibr.geometry.gradient.grad_image`: one discretisation for both sides of the
+   gradient term), ``sigma_z``.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from numba import njit, prange
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
+from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, grad_image
 from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
 from .samples import Samples
 from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
@@ -48,7 +51,7 @@ def prepare_depth(view: View, *, fill_holes: bool = False, edge_rel: float = DEF
 
 
 @njit(parallel=True, cache=True)
-def _fields_kernel(state, row_off, z, zx, zy, M, c, A, Ck, img, max_inv_det, sig_map, sig_scalar,
+def _fields_kernel(state, row_off, z, zx, zy, M, c, A, Ck, img, gimg, max_inv_det, sig_map, sig_scalar,
                    k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
     """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples start at
     ``row_off[i]`` (row-major order, as ``np.flatnonzero`` would give)."""
@@ -58,9 +61,6 @@ def _fields_kernel(state, row_off, z, zx, zy, M, c, A, Ck, img, max_inv_det, sig
         buf = np.empty(10)
         s = row_off[i]
         y = float(i)
-        iu = i - 1 if i > 0 else 0
-        idn = i + 1 if i < H - 1 else H - 1
-        sy = 1.0 / (idn - iu) if idn > iu else 0.0
         for j in range(W):
             if state[i, j] != VISIBLE:
                 continue
@@ -85,13 +85,10 @@ def _fields_kernel(state, row_off, z, zx, zy, M, c, A, Ck, img, max_inv_det, sig
             src[s, 1] = i
             view[s] = k_view
             sig[s] = sig_map[i, j] if use_map else sig_scalar
-            jl = j - 1 if j > 0 else 0
-            jr = j + 1 if j < W - 1 else W - 1
-            sx = 1.0 / (jr - jl) if jr > jl else 0.0
             for ch in range(3):
                 colour[s, ch] = img[i, j, ch]
-                grad[s, ch, 0] = (img[i, jr, ch] - img[i, jl, ch]) * sx
-                grad[s, ch, 1] = (img[idn, j, ch] - img[iu, j, ch]) * sy
+                grad[s, ch, 0] = gimg[ch, 0, i, j]
+                grad[s, ch, 1] = gimg[ch, 1, i, j]
             s += 1
 
 
@@ -109,7 +106,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
                     fill_holes: bool = False, max_inv_det: float = DEFAULT_MAX_INV_DET,
                     edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
                     sigma_z_default: float | None = None, splat_mode: str = "affine",
-                    return_zbuffer: bool = False, prepared: dict | None = None) -> Samples:
+                    return_zbuffer: bool = False, prepared: dict | None = None,
+                    grad_scheme: str | None = None) -> Samples:
     """Visible warped source samples for a target camera (paper §5).
 
     Parameters
@@ -142,6 +140,10 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         ``view name → (z, z_x, z_y)`` from :func:`prepare_depth` with the same
         ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
         callers rendering many targets (:mod:`vibr.flythrough`).
+    grad_scheme : {"forward", "central"}, optional
+        Discretisation of the sources' ``∇v`` (:data:`vibr.geometry.gradient.GRAD_SCHEMES`;
+        default :data:`vibr.geometry.gradient.DEFAULT_GRAD_SCHEME`), recorded in
+        ``meta["grad_scheme"]``: the renderer applies the same ``D`` to the target.
 
     Returns
     -------
@@ -155,6 +157,9 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     VibrInputError
         A source without depth, or no source sample landing in the target.
     """
+    grad_scheme = DEFAULT_GRAD_SCHEME if grad_scheme is None else grad_scheme
+    if grad_scheme not in GRAD_SCHEMES:
+        raise VibrInputError(f"grad_scheme must be one of {GRAD_SCHEMES}, got {grad_scheme!r}")
     cam = target.camera if isinstance(target, View) else target
     if not isinstance(cam, Camera):
         raise VibrInputError("target must be a Camera or a View", None)
@@ -168,13 +173,14 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     with _Timer(times, cpu, "visibility"):
         states, counts = _visibility(prepped, zbuf, vis_threshold)
     with _Timer(times, cpu, "assembly"):
-        out = _gather_samples(prepped, states, cam.shape, max_inv_det, sigma_z_default)
+        out = _gather_samples(prepped, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme)
     if len(out) == 0:
         raise VibrInputError("no source view sees the target", tname)
     out.meta["counts"] = counts
     out.meta["times"] = times
     out.meta["cpu_times"] = cpu
     out.meta["vis_threshold"] = float(vis_threshold)
+    out.meta["grad_scheme"] = grad_scheme
     if return_zbuffer:
         out.meta["zbuffer"] = zbuf
     return out
@@ -229,9 +235,10 @@ def _visibility(prepped, zbuf, vis_threshold):
     return states, counts
 
 
-def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default) -> Samples:
+def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme) -> Samples:
     """The fields of every visible pixel: one allocation for all samples, each view's
     kernel writing its rows in place."""
+
     N = int(sum(int(r.sum()) for _, r in states))
     xy = np.empty((N, 2))
     jac = np.empty((N, 2, 2))
@@ -255,8 +262,9 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default) -> Sam
             sig_map, sig_scalar = np.zeros((0, 0)), float(sz)
         else:
             sig_map, sig_scalar = np.ascontiguousarray(sz, dtype=np.float64), 0.0
+        gimg = grad_image(np.ascontiguousarray(v.image.transpose(2, 0, 1)), grad_scheme)
         _fields_kernel(state, row_off, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
-                       v.image, float(max_inv_det), sig_map, sig_scalar, np.int32(k),
+                       v.image, gimg, float(max_inv_det), sig_map, sig_scalar, np.int32(k),
                        xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
         o += n
     return Samples(xy, colour, grad, jac, inv_det, dtau, sig, view, src, X, tuple(shape))

@@ -10,7 +10,7 @@ together with the inner products the energy needs, ``⟨x, Ax⟩``, ``⟨b, x⟩
 ``D x`` and ``A_g D x`` (six planes each) never leave the cache: each thread walks a band of
 rows and keeps three-row ring buffers of them (``A_g D x`` at row k needs ``D x`` at rows
 k−1..k+1, ``Dᵀ(A_g D x)`` at row i needs ``A_g D x`` at rows i−1..i+1). The result equals the
-composition ``stencil_apply``, ``grad_central``, ``grad_central_adj`` of
+composition ``stencil_apply``, ``grad_image``, ``grad_image_adj`` of
 :mod:`.operators` to float rounding (tested).
 
 :func:`forward_step` is the FISTA forward step at the extrapolated point from the stored
@@ -24,8 +24,8 @@ import numpy as np
 from numba import njit, prange
 
 from .._jit import FASTMATH
-from .operators import _central_adj_row, _stencil_row
-from .tv import _sqrt_sum, _tv_row
+from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row
+from .tv import _sqrt_sum, _tv_row, _weight_arg
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start"]
 
@@ -34,28 +34,13 @@ BAND = 24
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _dx_row(x, k, dst):
-    """Row k of the central-difference gradient (replicated border, as
-    ``operators.grad_central``) into ``dst`` (C, 2, W + 2), columns shifted by one so that
-    the zero pads at 0 and W + 1 make the stencil's border terms vanish."""
+def _dx_row(x, k, forward, dst):
+    """Row k of ``D x`` (:func:`.operators._grad_row`, the one gradient) into ``dst``
+    (C, 2, W + 2), columns shifted by one so that the zero pads at 0 and W + 1 make the
+    stencil's border terms vanish."""
     C, H, W = x.shape
-    km = max(k - 1, 0)
-    kp = min(k + 1, H - 1)
     for c in range(C):
-        xr = x[c, k]
-        gx = dst[c, 0]
-        gy = dst[c, 1]
-        if W > 1:
-            gx[1] = 0.5 * (xr[1] - xr[0])
-            for j in range(1, W - 1):
-                gx[j + 1] = 0.5 * (xr[j + 1] - xr[j - 1])
-            gx[W] = 0.5 * (xr[W - 1] - xr[W - 2])
-        else:
-            gx[1] = 0.0
-        a = x[c, kp]
-        b = x[c, km]
-        for j in range(W):
-            gy[j + 1] = 0.5 * (a[j] - b[j])
+        _grad_row(x[c], k, forward, dst[c, 0, 1:W + 1], dst[c, 1, 1:W + 1])
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -73,7 +58,8 @@ def _stencil_row_padded(A, k, um, u0, up, out):
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms, band, h, parts):
+def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, wmap, use_w, with_terms, band,
+                   h, parts):
     C, H, W = x.shape
     n_bands = parts.shape[0]
     for t in prange(n_bands):
@@ -99,7 +85,7 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms
                 for kk in range(max(k - 1, 0), min(k + 2, H)):
                     s = kk % 3
                     if dtag[s] != kk:
-                        _dx_row(x, kk, dring[s])
+                        _dx_row(x, kk, forward, dring[s])
                         dtag[s] = kk
                 g = gring[k % 3]
                 for c in range(C):
@@ -121,8 +107,8 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms
                 hr = h[c, i]
                 if use_grad:
                     # Dᵀ(A_g D x) at row i (slots of rows outside the image are not read)
-                    _central_adj_row(gring[i % 3, c, 0], gring[(i - 1) % 3, c, 1], gring[i % 3, c, 1],
-                                     gring[(i + 1) % 3, c, 1], i, H, gx_row)
+                    _grad_adj_row(gring[i % 3, c, 0], gring[(i - 1) % 3, c, 1], gring[i % 3, c, 1],
+                                  gring[(i + 1) % 3, c, 1], i, H, forward, gx_row)
                     if with_terms:
                         gr = bgt[c, i]
                         for j in range(W):
@@ -154,9 +140,9 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms
                         hh += np.float64(hv) * hv
                 if not with_terms:
                     continue
-                tv += _tv_row(xr, x[c, nxt], coupled, tvacc)
+                tv += _tv_row(xr, x[c, nxt], coupled, tvacc, wmap[min(np.int64(i), wmap.shape[0] - 1)], use_w)
             if coupled and with_terms:
-                tv += _sqrt_sum(tvacc)
+                tv += _sqrt_sum(tvacc, wmap[min(np.int64(i), wmap.shape[0] - 1)], use_w)
         parts[t, 0] = xAx
         parts[t, 1] = bx
         parts[t, 2] = xGx
@@ -165,25 +151,27 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, coupled, with_terms
         parts[t, 5] = hh
 
 
-def hessian_terms(A, Ag, x, b, bgt, alpha, gamma, coupled=True, out=None):
+def hessian_terms(A, Ag, x, b, bgt, alpha, gamma, coupled=True, out=None, scheme="forward", tv_weight=None):
     """``(h, (⟨x,Ax⟩, ⟨b,x⟩, ⟨x,DᵀA_gDx⟩, ⟨Dᵀb_g,x⟩, TV(x)))`` in one pass (module doc).
 
     ``A``, ``Ag`` (9, H, W) float32 stencils (``Ag`` None or gamma = 0: colour term only;
-    the gradient entries are then 0), ``x``, ``b``, ``bgt`` (C, H, W) float32 planar;
+    the gradient entries are then 0); ``scheme`` the discretisation of D
+    (:data:`.operators.GRAD_SCHEMES`); ``tv_weight`` (H, W) the spatially varying TV's
+    weight map (:func:`.tv.tv_value`), ``x``, ``b``, ``bgt`` (C, H, W) float32 planar;
     ``h`` = ``alpha·Ax + gamma·DᵀA_gDx`` is written to ``out`` (allocated when None).
     Inner products are accumulated in float64."""
-    h, s = _run(A, Ag, x, b, bgt, alpha, gamma, coupled, True, out)
+    h, s = _run(A, Ag, x, b, bgt, alpha, gamma, coupled, True, out, scheme, tv_weight)
     return h, (float(s[0]), float(s[1]), float(s[2]), float(s[3]), float(s[4]))
 
 
-def hessian_power(A, Ag, x, alpha, gamma, out=None):
+def hessian_power(A, Ag, x, alpha, gamma, out=None, scheme="forward"):
     """One power-iteration pass: ``h = alpha·Ax + gamma·DᵀA_gDx`` into ``out``, with
     ``(⟨x,Ax⟩, ⟨x,DᵀA_gDx⟩, ‖h‖²)``; reads only the stencils and ``x`` (no energy terms)."""
-    h, s = _run(A, Ag, x, x, x, alpha, gamma, True, False, out)
+    h, s = _run(A, Ag, x, x, x, alpha, gamma, True, False, out, scheme, None)
     return h, (float(s[0]), float(s[2]), float(s[5]))
 
 
-def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out):
+def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out, scheme, tv_weight):
     C, H, W = x.shape
     use_grad = Ag is not None and gamma != 0
     if out is None:
@@ -192,7 +180,8 @@ def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out):
     parts = np.zeros((n_bands, 6))
     if not use_grad:
         Ag, bgt = A, b  # unused placeholders of the right types
-    _hessian_terms(A, Ag, x, b, bgt, np.float32(alpha), np.float32(gamma), use_grad, bool(coupled),
+    _hessian_terms(A, Ag, x, b, bgt, np.float32(alpha), np.float32(gamma), use_grad,
+                   _is_forward(scheme), bool(coupled), *_weight_arg(tv_weight),
                    bool(with_terms), BAND, out, parts)
     return out, parts.sum(0)
 

@@ -13,8 +13,10 @@ gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term,
 Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/METHOD.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
-* ``gamma = 1.0`` gradient-term weight for ``gradient`` (eq. energy_final; the paper tests
-  0..3); forced to 0 for savsr and bvs.
+* ``gamma = 0.25`` gradient-term weight for ``gradient`` (eq. energy_final; vibr's units:
+  forward differences, docs/RENDERER.md "One image gradient": 0.25 with forward differences
+  measured equal or better than the former 1.0 with central ones; the paper's γ is reached
+  through ``preset="paper"``); forced to 0 for savsr and bvs.
 * ``lam = 0.1`` TV weight (eq. energy_final; the paper's light-field value, for [0, 255]
   intensities: a 1-grey-level step costs 0.1 per pixel of edge).
 * ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/METHOD.md §3, the authors' value).
@@ -27,6 +29,16 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   discretization right; footprints larger than a target pixel shrunk per axis to 1 px, see
   :class:`vibr.render.operators.Splat`). Worth it when the sources are finer than the
   target. ulr ignores it.
+* ``robust = "none"``, ``robust_c = 3`` the data term's loss (issue 22); ``"cauchy"``: the weights are
+  multiplied in each outer pass by the Cauchy IRLS factor ``1/(1 + (r/s)²)`` of each
+  sample's residual against the current estimate, ``s = robust_c · 1.4826 · median(r)``
+  (:func:`vibr.render.weights.robust_factor`): samples that disagree with the others
+  (occluded, mismatched: speckles) stop pulling the render; ``"none"`` is least squares.
+  Off by default: it wins on cotton and fountain but loses on the synthetic scenes
+  (docs/RENDERER.md "Robust data term").
+* ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
+  the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
+  (:func:`vibr.render.variational.tv_weight_map`).
 """
 
 from __future__ import annotations
@@ -38,14 +50,15 @@ import numpy as np
 from .operators import PSFS as _PSFS
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "get_method",
-           "method_params", "register_method"]
+           "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
-    alpha=1.0, gamma=1.0, lam=0.1, sigma_s=1.0, sigma_z=None, scale=255.0,
+    alpha=1.0, gamma=0.25, lam=0.1, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
+    robust="none", robust_c=3.0, tv_weighting="uniform",
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
@@ -166,13 +179,55 @@ def get_method(method: "str | Method") -> Method:
         raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(REGISTRY)})") from None
 
 
-def method_params(method: str, **params) -> dict:
+#: The paper's (alpha, gamma, lam) when ``preset="paper"`` is given without them: the
+#: light-field setting of the authors' experiments (docs/METHOD.md §10: lambda = 0.001 on [0, 1]).
+PAPER_DEFAULTS = dict(alpha=1.0, gamma=1.0, lam=0.001)
+
+#: Paper gamma → vibr gamma: the authors apply ``dt_beta × gradient_step`` (0.1) to the
+#: compact Laplacian divided by 4, i.e. ``γ·0.1/4 · Dᵀ D`` with vibr's forward differences.
+PAPER_GAMMA_FACTOR = 0.1 / 4
+#: Paper lambda → vibr lam: the paper's lambda is on [0, 1] intensities against a data
+#: term normalised per pixel to unit weight; vibr's lam is on its ``scale`` (255) with a
+#: data term of unit weight per grey level² (sigma_s = 1): lam = 255 · lambda.
+PAPER_LAM_FACTOR = 255.0
+
+
+def paper_params(params: dict) -> dict:
+    """The paper's units → vibr's (docs/RENDERER.md, "The paper's units"): ``alpha`` kept,
+    ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
+    weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``) and the spatially
+    varying TV (``tv_weighting="samples"``) unless given. ``params`` holds the paper's
+    alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any other vibr parameter."""
+    out = dict(params)
+    paper = {k: PAPER_DEFAULTS[k] if params.get(k) is None else float(params[k]) for k in PAPER_DEFAULTS}
+    if params.get("scale") not in (None, 255.0):
+        from ..errors import VibrInputError
+
+        raise VibrInputError("preset 'paper' fixes the intensity scale to 255")
+    out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
+               lam=paper["lam"] * PAPER_LAM_FACTOR)
+    for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples")):
+        if out.get(k) is None:
+            out[k] = v
+    return out
+
+
+#: Parameter presets by name: a function of the given parameters returning vibr's.
+PRESETS = {"paper": paper_params}
+
+
+def method_params(method: str, preset: str | None = None, **params) -> dict:
     """Defaults for ``method`` updated with ``params`` (None values keep the default;
     gamma is forced to 0 for the methods without the gradient term). Unknown keyword
-    arguments raise TypeError."""
+    arguments raise TypeError. ``preset`` (a name of :data:`PRESETS`, e.g. ``"paper"``)
+    reads ``params`` in that preset's units first."""
     from ..errors import VibrInputError
 
     m = get_method(method)
+    if preset is not None:
+        if preset not in PRESETS:
+            raise VibrInputError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
+        params = PRESETS[preset](params)
     unknown = set(params) - set(DEFAULTS)
     if unknown:
         raise TypeError(f"unknown render parameter(s): {', '.join(sorted(unknown))}")
@@ -185,6 +240,14 @@ def method_params(method: str, **params) -> dict:
             p[k] = v
     if p["psf"] not in PSFS:
         raise VibrInputError(f"psf must be one of {PSFS}, got {p['psf']!r}")
+    from .weights import ROBUST_LOSSES
+
+    if p["robust"] not in ROBUST_LOSSES:
+        raise VibrInputError(f"robust must be one of {ROBUST_LOSSES}, got {p['robust']!r}")
+    from .variational import TV_WEIGHTINGS
+
+    if p["tv_weighting"] not in TV_WEIGHTINGS:
+        raise VibrInputError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {p['tv_weighting']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
     from ..validate import check_render_params

@@ -13,9 +13,10 @@
   :func:`stencil_apply` applies it; ``½ uᵀAu − bᵀu + c = ½ Σ W (Bu − v)²`` (docs/METHOD.md §5).
 * ``∇`` / ``div = -∇ᵀ``: forward differences with Neumann boundary (Chambolle 2004),
   used by TV.
-* ``D`` / ``Dᵀ``: central differences with replicated border, used by the gradient term
-  (docs/METHOD.md §5) because the source gradients ``∇v_k`` of :class:`~vibr.geometry.Samples` are
-  central differences too (same half-pixel phase).
+* ``D`` / ``Dᵀ`` (:func:`grad_image`): the gradient term's image gradient (docs/METHOD.md §5),
+  forward or central differences (:data:`GRAD_SCHEMES`). The source gradients ``∇v_k`` of
+  :class:`~vibr.geometry.Samples` are computed by the same function, so both sides of the
+  term use one discretisation with one border rule.
 
 Inside the solver images are **planar** (C, H, W) float32 (C = 3 for RGB; contiguous rows
 vectorise), gradients (C, 2, H, W); stencils are (9, H, W) with entry
@@ -29,9 +30,13 @@ import numpy as np
 from numba import njit, prange
 
 from .._jit import FASTMATH
+from ..geometry.gradient import (DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_adj_row, _grad_row,  # noqa: F401
+                                 _is_forward, grad_image, grad_image_adj)
+
 __all__ = [
     "PSFS", "Splat", "stencil_apply", "stencil_to_sparse", "explicit_B",
     "grad_fwd", "div_bwd", "grad_central", "grad_central_adj", "dot",
+    "GRAD_SCHEMES", "DEFAULT_GRAD_SCHEME", "grad_image", "grad_image_adj",
 ]
 
 
@@ -636,76 +641,12 @@ def div_bwd(p, out=None) -> np.ndarray:
     return _div_bwd(p, out)
 
 
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _grad_central(u, g):
-    C, H, W = u.shape
-    for i in prange(H):
-        im, ip = max(i - 1, 0), min(i + 1, H - 1)
-        for c in range(C):
-            ur = u[c, i]
-            gx = g[c, 0, i]
-            if W > 1:
-                gx[0] = 0.5 * (ur[1] - ur[0])
-                for j in range(1, W - 1):
-                    gx[j] = 0.5 * (ur[j + 1] - ur[j - 1])
-                gx[W - 1] = 0.5 * (ur[W - 1] - ur[W - 2])
-            else:
-                gx[0] = 0.0
-            up, um = u[c, ip], u[c, im]
-            gy = g[c, 1, i]
-            for j in range(W):
-                gy[j] = 0.5 * (up[j] - um[j])
-    return g
-
-
-@njit(cache=True, fastmath=FASTMATH)
-def _central_adj_row(gx, gym, gyi, gyp, i, H, o):
-    """Row i of ``Dᵀ g`` into ``o`` (W,), from the row's x component ``gx`` and the y
-    components of rows i−1, i, i+1 (``gym``, ``gyi``, ``gyp``; those outside are not read).
-    Per axis: out[k] = ½(g[k-1]·[k≥1] + g[k]·[k=n-1]) − ½(g[k+1]·[k≤n-2] + g[k]·[k=0])."""
-    W = o.shape[0]
-    if W > 1:
-        o[0] = -0.5 * (gx[1] + gx[0])
-        for j in range(1, W - 1):
-            o[j] = 0.5 * (gx[j - 1] - gx[j + 1])
-        o[W - 1] = 0.5 * (gx[W - 2] + gx[W - 1])
-    else:
-        o[0] = 0.0
-    if H > 1:
-        if i >= 1:
-            for j in range(W):
-                o[j] += 0.5 * gym[j]
-        if i == H - 1:
-            for j in range(W):
-                o[j] += 0.5 * gyi[j]
-        if i <= H - 2:
-            for j in range(W):
-                o[j] -= 0.5 * gyp[j]
-        if i == 0:
-            for j in range(W):
-                o[j] -= 0.5 * gyi[j]
-
-
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _grad_central_adj(g, out):
-    C, _, H, W = g.shape
-    for i in prange(H):
-        for c in range(C):
-            _central_adj_row(g[c, 0, i], g[c, 1, max(i - 1, 0)], g[c, 1, i], g[c, 1, min(i + 1, H - 1)],
-                             i, H, out[c, i])
-    return out
-
-
 def grad_central(u, out=None) -> np.ndarray:
     """Central-difference gradient ``D u``, replicated border: (C, H, W) → (C, 2, H, W),
     ``(Du)_x(i,j) = ½ (u(i, min(j+1,W-1)) − u(i, max(j-1,0)))`` (same for y)."""
-    if out is None:
-        out = np.empty((u.shape[0], 2) + u.shape[1:], u.dtype)
-    return _grad_central(u, out)
+    return grad_image(u, "central", out)
 
 
 def grad_central_adj(g, out=None) -> np.ndarray:
     """Adjoint ``Dᵀ`` of :func:`grad_central`: (C, 2, H, W) → (C, H, W)."""
-    if out is None:
-        out = np.empty((g.shape[0],) + g.shape[2:], g.dtype)
-    return _grad_central_adj(g, out)
+    return grad_image_adj(g, "central", out)

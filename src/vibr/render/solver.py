@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .fused import forward_step, hessian_power, hessian_terms, power_start
-from .operators import dot, grad_central_adj
+from .operators import dot, grad_image_adj
 from .tv import TVProx
 
 __all__ = ["QuadraticModel", "Products", "SolveResult", "fista"]
@@ -65,6 +65,8 @@ class QuadraticModel:
     lam_int : float            TV weight for [0, 1] images (= lam / scale)
     scale : float              intensity scale the parameters refer to (energies × scale²)
     coupled : bool             colour-coupled TV
+    grad_scheme : str          discretisation of D (operators.GRAD_SCHEMES), as the samples' ∇v
+    tv_weight : (H, W) or None spatially varying TV: TV(u) = Σ_p tv_weight(p)|∇u(p)|
     """
 
     A: np.ndarray
@@ -78,6 +80,8 @@ class QuadraticModel:
     lam_int: float
     scale: float = 255.0
     coupled: bool = True
+    grad_scheme: str = "forward"
+    tv_weight: np.ndarray | None = None
 
     @property
     def use_grad(self) -> bool:
@@ -86,7 +90,7 @@ class QuadraticModel:
     def __post_init__(self):
         # Dᵀ b_g, so that the gradient term's products stay 3-channel:
         # E_grad = ½⟨x, DᵀA_gD x⟩ − ⟨Dᵀb_g, x⟩ + c_g
-        self.bgt = grad_central_adj(self.bg) if self.use_grad else None
+        self.bgt = grad_image_adj(self.bg, self.grad_scheme) if self.use_grad else None
         # the constant part of ∇f = H x − r, H = alpha A + gamma DᵀA_gD
         self.r = (self.alpha * self.b if not self.use_grad
                   else self.alpha * self.b + self.gamma * self.bgt).astype(np.float32)
@@ -97,7 +101,7 @@ class QuadraticModel:
         at ``x`` need. ``out`` receives ``H x``."""
         h, dots = hessian_terms(self.A, self.Ag if self.use_grad else None, x, self.b,
                                 self.bgt if self.use_grad else None, self.alpha, self.gamma,
-                                self.coupled, out=out)
+                                self.coupled, out=out, scheme=self.grad_scheme, tv_weight=self.tv_weight)
         return Products(h, dots)
 
     def terms(self, x, P: Products):
@@ -130,14 +134,15 @@ class QuadraticModel:
     def gershgorin(self) -> np.ndarray:
         """Per-pixel upper bound ``d ≥ row-sum |H|`` (H, W) so that ``diag(d) ⪰ H``.
 
-        The colour part is exact; for ``Dᵀ A_g D``, ‖D‖² ≤ 2 per axis pair, bounded with the
-        3×3 max of the A_g row sums."""
+        The colour part is exact; for ``Dᵀ A_g D``, the row sums of |Dᵀ|·|D| are ≤ 2
+        (central) or 8 (forward), bounded with the 3×3 max of the A_g row sums."""
         d = self.alpha * np.abs(self.A).sum(0)
         if self.use_grad:
             from scipy.ndimage import maximum_filter
 
             rg = np.abs(self.Ag).sum(0)
-            d = d + self.gamma * 2.0 * maximum_filter(rg, size=3, mode="nearest")
+            k = 8.0 if self.grad_scheme == "forward" else 2.0
+            d = d + self.gamma * k * maximum_filter(rg, size=3, mode="nearest")
         return d.astype(np.float32)
 
     def lipschitz(self, n_iter: int = 15, d=None, v0=None, state=None) -> float:
@@ -157,7 +162,8 @@ class QuadraticModel:
             buf = np.empty_like(x)
             for _ in range(n_iter):
                 sc = 1.0 / math.sqrt(max(nx, 1e-300))
-                h, (xAx, xGx, hh) = hessian_power(self.A, Ag, x, self.alpha * sc, self.gamma * sc, out=buf)
+                h, (xAx, xGx, hh) = hessian_power(self.A, Ag, x, self.alpha * sc, self.gamma * sc, out=buf,
+                                                   scheme=self.grad_scheme)
                 lam = (self.alpha * xAx + self.gamma * xGx) / max(nx, 1e-300)
                 x, buf, nx = h, x, hh
         else:
@@ -252,7 +258,7 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
     s2 = model.scale ** 2
     x = np.ascontiguousarray(u0, dtype=np.float32).copy()
     if prox is None:
-        prox = TVProx(x.shape, model.coupled, tv_iter)
+        prox = TVProx(x.shape, model.coupled, tv_iter, weight=model.tv_weight)
     prox.n_iter = tv_iter
     d, dinv, L, n_power = _metric_and_step(model, precond, d_floor, power_state)
     # three image buffers and three product buffers rotate (x, x_prev, candidate z): after

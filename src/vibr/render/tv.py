@@ -28,10 +28,11 @@ __all__ = ["tv_value", "TVProx"]
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _tv_row(ur, un, coupled, acc):
+def _tv_row(ur, un, coupled, acc, wr, use_w):
     """One channel's share of a row of TV (forward differences, Neumann): ``ur`` the row,
     ``un`` the next one (the row itself on the last row). Coupled: adds |∇u_c|² to ``acc``
-    (W,) and returns 0 (the caller sums √acc over channels); else returns Σ_j |∇u_c|."""
+    (W,) and returns 0 (the caller sums w·√acc over channels); else returns Σ_j w_j |∇u_c|
+    (``wr`` the row of the TV weight map, used when ``use_w``)."""
     W = ur.shape[0]
     s = 0.0
     if coupled:
@@ -45,40 +46,54 @@ def _tv_row(ur, un, coupled, acc):
         for j in range(W - 1):
             gx = ur[j + 1] - ur[j]
             gy = un[j] - ur[j]
-            s += math.sqrt(gx * gx + gy * gy)
-        s += abs(un[W - 1] - ur[W - 1])
+            s += (wr[j] if use_w else 1.0) * math.sqrt(gx * gx + gy * gy)
+        s += (wr[W - 1] if use_w else 1.0) * abs(un[W - 1] - ur[W - 1])
     return s
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _sqrt_sum(acc):
+def _sqrt_sum(acc, wr, use_w):
     s = 0.0
-    for j in range(acc.shape[0]):
-        s += math.sqrt(acc[j])
+    if use_w:
+        for j in range(acc.shape[0]):
+            s += wr[j] * math.sqrt(acc[j])
+    else:
+        for j in range(acc.shape[0]):
+            s += math.sqrt(acc[j])
     return s
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _tv_value(u, coupled):
+def _tv_value(u, coupled, wmap, use_w):
     C, H, W = u.shape
     rows = np.zeros(H)
     for i in prange(H):
         acc = np.zeros(W, np.float32)
         nxt = min(i + 1, H - 1)  # last row: gy = 0
+        wr = wmap[min(np.int64(i), wmap.shape[0] - 1)]
         s = 0.0
         for c in range(C):
-            s += _tv_row(u[c, i], u[c, nxt], coupled, acc)
+            s += _tv_row(u[c, i], u[c, nxt], coupled, acc, wr, use_w)
         if coupled:
-            s += _sqrt_sum(acc)
+            s += _sqrt_sum(acc, wr, use_w)
         rows[i] = s
     return rows.sum()
 
 
-def tv_value(u, coupled: bool = True) -> float:
-    """``TV(u)`` of a planar (C, H, W) image (or (H, W)), see the module docstring."""
+def tv_value(u, coupled: bool = True, weight=None) -> float:
+    """``TV(u)`` of a planar (C, H, W) image (or (H, W)), see the module docstring;
+    ``weight`` (H, W): the spatially varying TV ``Σ_p weight(p) |∇u(p)|``."""
     if u.ndim == 2:
         u = u[None]
-    return float(_tv_value(u, coupled))
+    w, use_w = _weight_arg(weight)
+    return float(_tv_value(u, coupled, w, use_w))
+
+
+def _weight_arg(weight):
+    """(array, use) for the kernels: the (H, W) float32 weight map, or a dummy."""
+    if weight is None:
+        return np.ones((1, 1), np.float32), False
+    return np.ascontiguousarray(weight, dtype=np.float32), True
 
 
 #: rows per band of :func:`_dual_step` (each thread walks its band once)
@@ -155,9 +170,11 @@ def _primal(z, p, mu, dinv, use_d, band, x):
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
-def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, band, p_new, primal, x_out):
+def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, wmap, use_w, band, p_new, primal,
+               x_out):
     """One accelerated dual step (Beck & Teboulle 2009, FGP): at r = p + beta (p − p_old),
-    x = z + mu d⁻¹ div r, p_new = P_{|·|≤1}(r + step ∇x); with ``primal``, also the
+    x = z + mu d⁻¹ div r, p_new = P_{|·|≤w}(r + step ∇x) (w = 1, or the weight map
+    ``wmap`` of the spatially varying TV when ``use_w``); with ``primal``, also the
     prox's result ``x_out = z + mu d⁻¹ div p_new`` (the last step of a call).
 
     Each thread walks a band of rows keeping two-row rings of r, x and p_new, so every row
@@ -211,14 +228,20 @@ def _dual_step(z, p, p_old, beta, mu, dinv, use_d, step, coupled, band, p_new, p
                 if coupled:
                     for j in range(W):
                         nrm[j] += qx[j] * qx[j] + qy[j] * qy[j]
+            wr = wmap[min(np.int64(i), wmap.shape[0] - 1)]
             if coupled:
-                for j in range(W):
-                    nrm[j] = one / max(one, math.sqrt(nrm[j]))
+                if use_w:
+                    for j in range(W):
+                        nrm[j] = one / max(one, math.sqrt(nrm[j]) / wr[j])
+                else:
+                    for j in range(W):
+                        nrm[j] = one / max(one, math.sqrt(nrm[j]))
             pi = pr[i % 2]
             for c in range(C):
                 if not coupled:
                     for j in range(W):
-                        nrm[j] = one / max(one, math.sqrt(q[c, 0, j] * q[c, 0, j] + q[c, 1, j] * q[c, 1, j]))
+                        a = math.sqrt(q[c, 0, j] * q[c, 0, j] + q[c, 1, j] * q[c, 1, j])
+                        nrm[j] = one / max(one, a / wr[j] if use_w else a)
                 for d in range(2):
                     qd = q[c, d]
                     pd = pi[c, d]
@@ -246,9 +269,13 @@ class TVProx:
         Vectorial colour TV (default) or channel-wise.
     n_iter : int
         Inner dual iterations per call (warm start makes a handful enough).
+    weight : (H, W) array, optional
+        Spatially varying TV ``Σ_p weight(p) |∇x(p)|`` (weight ≥ 1 relative to ``mu``): the
+        dual is projected on the balls ``|p(q)| ≤ weight(q)``.
     """
 
-    def __init__(self, shape, coupled: bool = True, n_iter: int = 5, dtype=np.float32):
+    def __init__(self, shape, coupled: bool = True, n_iter: int = 5, dtype=np.float32, weight=None):
+        self.wmap, self.use_w = _weight_arg(weight)
         self.shape = tuple(shape)
         self.coupled = bool(coupled)
         self.n_iter = int(n_iter)
@@ -287,7 +314,7 @@ class TVProx:
         for k in range(n):
             # the last step also forms the primal result (no separate pass)
             _dual_step(z, p, p_old if beta != 0.0 else p, np.float32(beta), mu32, dinv, use_d, step,
-                       self.coupled, BAND, free, k == n - 1, out)
+                       self.coupled, self.wmap, self.use_w, BAND, free, k == n - 1, out)
             p_old, p, free = p, free, p_old
             t_new = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * t * t))
             beta = (t - 1.0) / t_new

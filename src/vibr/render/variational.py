@@ -21,14 +21,15 @@ import numpy as np
 
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
-from .weights import geometric_weights
-from .operators import Splat
+from .weights import geometric_weights, robust_factor
+from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
 from .solver import QuadraticModel, fista
 from .tv import TVProx
 
-__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "initial_image", "solve_variational"]
+__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "initial_image", "solve_variational",
+           "TV_WEIGHTINGS", "tv_weight_map"]
 
 logger = logging.getLogger(__name__)
 
@@ -80,6 +81,32 @@ def _covering(cov: SplatCoverage) -> SplatCoverage:
     return cov
 
 
+#: TV weightings (docs/METHOD.md §10): ``"uniform"`` lam everywhere, ``"samples"`` lam raised where
+#: few samples land (:func:`tv_weight_map`).
+TV_WEIGHTINGS = ("uniform", "samples")
+
+
+def tv_weight_map(acc, weighting: str = "samples", k_max: float = 100.0, m_full: float = 0.792,
+                  blur: float = 1.0):
+    """The spatially varying TV's weight ``g(p)/lam`` (H, W) float32, or None for "uniform".
+
+    ``g = max(lam, k_max·lam − (k_max − 1)·lam·m/m_full)`` with ``m`` the samples landing
+    on the pixel (the accumulated splat weight ``Bᵀ1``) blurred by a Gaussian of ``blur``
+    px: ``k_max`` (100) times lam where no sample lands, falling linearly to lam at
+    ``m_full`` samples. The defaults are the authors' light-field rule
+    ``max(λ, 100λ − m/8)`` at λ = 0.001 (docs/METHOD.md §10: 100λ − m/8 = λ at m = 99·8λ = 0.792),
+    made relative to lam so that it holds whatever lam's value and scale.
+    """
+    if weighting not in TV_WEIGHTINGS:
+        raise ValueError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {weighting!r}")
+    if weighting == "uniform":
+        return None
+    from scipy.ndimage import gaussian_filter
+
+    m = gaussian_filter(np.asarray(acc, np.float64), blur, mode="nearest") if blur > 0 else acc
+    return np.maximum(1.0, k_max - (k_max - 1.0) * m / m_full).astype(np.float32)
+
+
 def sample_density(acc, coverage, normalise: bool) -> float:
     """rho: the mean accumulated bilinear weight over covered pixels (≈ number of views
     seeing a pixel, at equal resolution). Data terms are divided by it so that alpha, gamma
@@ -116,6 +143,8 @@ class _Weights:
         sw = self.samples.meta.get("sample_weight")
         if sw is not None:  # vibr.flythrough's blend weight of the sample's view
             w *= np.asarray(sw, np.float32)
+        if u is not None and p["robust"] != "none":
+            w *= robust_factor(self.samples, u, self.sp, p["robust_c"], p["robust"])
         self.times["weights"] += time.perf_counter() - t0
         return w
 
@@ -171,9 +200,12 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     u = np.ascontiguousarray(init.transpose(2, 0, 1))  # planar (3, H, W) from here on
     times["init"] = time.perf_counter() - t0
 
+    # D of the target side = the D the geometry stage applied to the sources
+    grad_scheme = samples.meta.get("grad_scheme", DEFAULT_GRAD_SCHEME)
     n_outer = max(1, int(p["n_outer"]))
     energy, terms, outer = [], [], []
-    prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"])
+    tv_w = tv_weight_map(cov.acc, p["tv_weighting"])
+    prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=tv_w)
     grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
     power_state: dict = {}
     n_iter = n_power = 0
@@ -183,13 +215,14 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
 
         bar = progress(total=n_outer, desc=f"render {method.name}")
     for o in range(n_outer):
-        if method.reweight:
+        if method.reweight or (o == 0 and p["robust"] != "none"):
+            # savsr keeps its weights, but a robust loss reweights them once from the blend
             Wk = weights(u.transpose(1, 2, 0))
         t0 = time.perf_counter()
         A, b, c = sp.normal(Wk, samples.colour, dtype=np.float32)
         Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
         model = QuadraticModel(A, b, float(c), Ag, bg, float(cg),
-                               p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"])
+                               p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"], grad_scheme, tv_w)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         outer.append(len(energy))

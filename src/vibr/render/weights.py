@@ -20,7 +20,8 @@ from numba import njit, prange
 
 from ..geometry.samples import Samples
 
-__all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights"]
+__all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
+           "robust_factor"]
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
 
@@ -123,3 +124,32 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
                     sz_map, sz_scalar, np.asarray(samples.inv_det),
                     np.inf if inv_det_cap is None else float(inv_det_cap), float(sigma_s) ** 2, out)
     return out
+
+
+#: Robust data terms (issue 22): ``"none"`` (least squares) or ``"cauchy"`` (IRLS).
+ROBUST_LOSSES = ("none", "cauchy")
+
+
+def robust_factor(samples: Samples, u, splat, c: float = 3.0, loss: str = "cauchy") -> np.ndarray:
+    """IRLS factor of the data term's weights for a robust loss (N,) float32.
+
+    With the residual of each sample against the current estimate,
+    ``r_m = ‖v_m − (B u)(m)‖ / √3`` (RGB root mean square), and the robust scale
+    ``s = c · 1.4826 · median(r)`` (``c`` times the median absolute deviation's estimate of
+    the residuals' standard deviation), the Cauchy (Lorentzian) loss
+    ``ρ(r) = ½ s² log(1 + (r/s)²)`` gives the reweighting factor
+    ``ρ'(r)/r = 1 / (1 + (r/s)²)``: samples that disagree with the others (occluded or
+    mismatched ones, the speckles of issue 22) lose their weight in the next outer pass,
+    the inliers keep theirs (Holland & Welsch 1977, "Robust regression using iteratively
+    reweighted least-squares"). ``loss="none"`` gives ones.
+    """
+    if loss not in ROBUST_LOSSES:
+        raise ValueError(f"robust must be one of {ROBUST_LOSSES}, got {loss!r}")
+    n = len(samples)
+    if loss == "none" or u is None or n == 0:
+        return np.ones(n, np.float32)
+    bu = splat.apply(np.ascontiguousarray(u, dtype=np.float32))
+    r2 = ((bu - samples.colour) ** 2).sum(1) / 3.0
+    s = c * 1.4826 * float(np.sqrt(np.median(r2)))
+    s2 = max(s * s, 1e-12)
+    return (1.0 / (1.0 + r2 / s2)).astype(np.float32)
