@@ -203,7 +203,20 @@ def test_figures_downscale_and_crop_inside_mask(tmp_path):
     assert 20 - 8 < r <= 30 and 30 - 8 < c <= 40
     assert downscale_image(np.ones((5, 7, 3), np.float32), 2).shape == (2, 3, 3)
     info = write_figures(tmp_path, ref, {"a": a, "b": b}, mask, prefix="t", downscale=2)
-    assert read_image(info["compare"]).shape == ((2 * 32 + 4) // 2, (3 * 48 + 2 * 4) // 2, 3)
+    fig = read_image(info["compare"])
+    assert fig.shape == ((2 * (32 + 14) + 4) // 2, (3 * 48 + 2 * 4) // 2, 3)  # two rows, each under a 14-px label
+    crops = read_image(info["crops"])
+    strip = crops[:14, : crops.shape[1] // 3]  # the reference panel's label
+    assert (strip < 0.5).any() and (strip > 0.9).mean() > 0.5  # dark text on white
+
+
+def test_label_panel_writes_text_above_the_image():
+    from vibr.figures import label_panel
+
+    img = np.zeros((10, 60, 3), np.float32)
+    out = label_panel(img, "bvs")
+    assert out.shape == (24, 60, 3) and np.array_equal(out[14:], img)
+    assert (out[:14] < 0.5).any() and not (label_panel(img, "")[:14] < 0.5).any()
 
 
 def test_view_counts_closed_form():

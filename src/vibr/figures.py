@@ -54,6 +54,16 @@ def downscale_image(a: np.ndarray, f: int) -> np.ndarray:
     return a.reshape(H // f, f, W // f, f, -1).mean(axis=(1, 3))
 
 
+def label_panel(img: np.ndarray, text: str, height: int = 14) -> np.ndarray:
+    """``img`` with a white strip above it carrying ``text`` (Pillow's default font), so a
+    figure's panels say what they show."""
+    from PIL import Image, ImageDraw
+
+    strip = Image.new("RGB", (img.shape[1], height), (255, 255, 255))
+    ImageDraw.Draw(strip).text((2, 1), text, fill=(0, 0, 0))
+    return np.concatenate([np.asarray(strip, np.float32) / 255.0, np.asarray(img, np.float32)], axis=0)
+
+
 def _write_png(path: Path, img: np.ndarray) -> None:
     """An 8-bit PNG at full zlib compression (figures are kept in docs), written atomically."""
     from PIL import Image
@@ -78,17 +88,21 @@ def write_figures(folder, ref: np.ndarray, images: dict[str, np.ndarray], mask=N
     top = [ref] + [np.clip(images[n], 0, 1) for n in names]
     m = np.ones(ref.shape[:2], bool) if mask is None else np.asarray(mask, bool)
     bottom = [np.repeat(m[..., None].astype(np.float32), 3, -1)] + [error_map(images[n], ref, max_err) for n in names]
-    sep = np.ones((ref.shape[0], 4, 3), np.float32)
+    labelled = lambda ims, texts: [label_panel(i, t) for i, t in zip(ims, texts)]  # noqa: E731
+    top_l = labelled(top, ["reference"] + names)
+    bottom_l = labelled(bottom, ["evaluated pixels"] + [f"error {n} (max {max_err:g})" for n in names])
+    sep = np.ones((top_l[0].shape[0], 4, 3), np.float32)
     row = lambda ims: np.concatenate(sum(([i, sep] for i in ims), [])[:-1], axis=1)  # noqa: E731
-    grid = np.concatenate([row(top), np.ones((4, row(top).shape[1], 3), np.float32), row(bottom)], axis=0)
+    grid = np.concatenate([row(top_l), np.ones((4, row(top_l).shape[1], 3), np.float32), row(bottom_l)], axis=0)
     compare = folder / f"{prefix}_compare.png"
     _write_png(compare, downscale_image(grid, downscale))
 
     size = max(16, min(ref.shape[:2]) // 6)
     r, c = most_different_window(top[1:] if len(top) > 2 else top, size, m)
     crop = lambda a: np.kron(a[r : r + size, c : c + size], np.ones((4, 4, 1), np.float32))  # noqa: E731
-    sepc = np.ones((size * 4, 4, 3), np.float32)
-    crops = np.concatenate(sum(([crop(i), sepc] for i in top), [])[:-1], axis=1)
+    crops_l = [label_panel(crop(i), t) for i, t in zip(top, ["reference"] + names)]
+    sepc = np.ones((crops_l[0].shape[0], 4, 3), np.float32)
+    crops = np.concatenate(sum(([c_, sepc] for c_ in crops_l), [])[:-1], axis=1)
     crops_path = folder / f"{prefix}_crops.png"
     _write_png(crops_path, crops)
     return {"compare": str(compare), "crops": str(crops_path), "columns": ["reference"] + names,
