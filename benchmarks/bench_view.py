@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -36,15 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
+from vibr.viewer.browser import free_port
+
 _REPO = Path(__file__).resolve().parents[1]
 
-
-def _free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
 
 
 def _stats(xs) -> str:
@@ -74,7 +68,7 @@ def synthetic(updates: int) -> dict:
     scene = make_scene("handheld", n_views=9, width=768, height=768)
     print(f"synthetic scene: {len(scene)} views of 768x768 built in {time.perf_counter() - t0:.1f} s", flush=True)
     settings = ViewSettings(n_views=8, preview_long_side=256, full_long_side=768)
-    viewer = Viewer(scene, ViewerOptions(port=_free_port(), settings=settings))
+    viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=settings))
     targets = [_midway(scene.views[0].camera, scene.views[1 + k % (len(scene) - 1)].camera)
                for k in range(updates + 1)]  # the first one warms up
     prev, prev_render, full, full_render = [], [], [], []
@@ -130,7 +124,7 @@ def _startup_once(scene_dir: str, scale: float, cache_dir: str) -> None:
         scene = load_scene(scene_dir, scale=scale)
         scene = scene_with_depth(scene, cache_dir=cache_dir)
         t_depth = time.perf_counter() - t0
-        viewer = Viewer(scene, ViewerOptions(port=_free_port(), settings=ViewSettings(n_views=8)))
+        viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=ViewSettings(n_views=8)))
         try:
             url = viewer.start()
             page = browser.new_page(viewport={"width": 900, "height": 600})

@@ -6,18 +6,12 @@ import numpy as np
 import pycolmap
 import pytest
 
+from _colmap_model import _rot
+
 from vibr.errors import VibrInputError
 from vibr.io import load_scene
 from vibr.io.depthfiles import write_colmap_bin
 from vibr.io.images import write_image
-
-
-def _rot(ax, ang):
-    c, s = np.cos(ang), np.sin(ang)
-    R = np.eye(3)
-    i, j = [(1, 2), (0, 2), (0, 1)][ax]
-    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
-    return R
 
 
 def write_model(root, *, model="PINHOLE", params=(100.0, 110.0, 32.0, 24.0), sparse="sparse/0", depth=True):

@@ -23,6 +23,7 @@ from vibr.viewer import (CameraState, LatestRequestWorker, Viewer, ViewerOptions
                          camera_from_viser, image_size, viser_pose_from_camera)
 from vibr.viewer.convert import matrix_to_quat, quat_to_matrix
 from vibr.viewer.geometry import point_cloud
+from vibr.viewer.browser import free_port
 
 _SRC = str(Path(__file__).resolve().parents[1] / "src")
 
@@ -32,13 +33,6 @@ def _env():
     env["PYTHONPATH"] = _SRC + os.pathsep + env.get("PYTHONPATH", "")
     return env
 
-
-def _free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
 
 
 @pytest.fixture(scope="module")
@@ -192,7 +186,7 @@ def test_view_cli_port_in_use(tmp_path):
 
 
 def test_view_cli_bad_scene(tmp_path):
-    port = _free_port()
+    port = free_port()
     r = subprocess.run([sys.executable, "-m", "vibr", "view", str(tmp_path / "missing"), "--port", str(port)],
                        capture_output=True, text=True, timeout=60, env=_env())
     assert r.returncode == 2
@@ -208,7 +202,7 @@ def test_view_cli_serves_and_stops(tiny_scene, tmp_path):
     from vibr.io import save_scene
 
     save_scene(tiny_scene, tmp_path / "scene")
-    port = _free_port()
+    port = free_port()
     p = subprocess.Popen([sys.executable, "-m", "vibr", "view", str(tmp_path / "scene"), "--port", str(port)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
     try:

@@ -16,20 +16,12 @@ The screenshot is kept as ``viewer.png`` in the test's tmp dir.
 from __future__ import annotations
 
 import io
-import socket
 import time
 
 import numpy as np
 import pytest
 
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
+from vibr.viewer.browser import free_port
 
 
 def _need_browser():

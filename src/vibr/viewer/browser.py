@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import socket
 
-__all__ = ["CHROMIUM_ARGS", "chromium_path", "launch_chromium"]
+__all__ = ["CHROMIUM_ARGS", "chromium_path", "free_port", "launch_chromium"]
 
 #: Flags for a headless, sandbox-free Chromium that talks to nothing but the page's server.
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -32,3 +33,10 @@ def launch_chromium(playwright, timeout_s: float = 30.0):
     if exe is None:
         raise FileNotFoundError("chromium not found (Debian: apt-get install -y chromium)")
     return playwright.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS, timeout=timeout_s * 1000)
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on ``host`` now (the OS's choice), for a test or benchmark server."""
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
