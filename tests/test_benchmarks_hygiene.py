@@ -31,8 +31,7 @@ def test_no_markdown_by_default(monkeypatch, tmp_path):
     pt = _paper_tables()
     written = []
     monkeypatch.setattr(pt, "write_results", lambda path, *a, **k: written.append(path))
-    monkeypatch.setattr(pt, "run_cotton", lambda *a, **k: [])
-    monkeypatch.setattr(pt, "run_fountain", lambda *a, **k: [])
+    monkeypatch.setattr(pt, "run_cases", lambda args, data, cases, log: [])
     monkeypatch.setattr(pt, "data_dir", lambda arg: tmp_path)
     pt.main(["--quick", "--out", str(tmp_path / "out")])
     assert written == []
