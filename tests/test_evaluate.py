@@ -118,8 +118,8 @@ def test_cli_eval_json_on_an_unseen_scene_folder(scene_dir, tmp_path, capsys):
     from vibr.io import read_image
 
     fig = read_image(rep["figures"]["compare"])
-    assert fig.shape[0] == 2 * 40 + 4 and fig.shape[1] == 5 * 48 + 4 * 4
-    assert read_image(rep["figures"]["crops"]).shape[0] == 4 * 16
+    assert fig.shape[0] == 2 * (14 + 40) + 4 and fig.shape[1] == 5 * 48 + 4 * 4  # rows under 14-px labels
+    assert read_image(rep["figures"]["crops"]).shape[0] == 14 + 4 * 16
 
 
 def test_cli_eval_image_scale_and_planar(scene_dir, tmp_path, capsys):
