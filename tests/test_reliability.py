@@ -19,7 +19,6 @@ from vibr.io import load_scene, save_scene
 from _colmap_model import write_colmap_model
 from _fuzz import run_case
 
-pytest.importorskip("pycolmap")
 
 
 # ----------------------------------------------------------------------------- item 2

@@ -116,8 +116,6 @@ def test_cotton_stride1_gradient(cotton_dir):
     from vibr.io import load_scene
     from vibr.render import render
 
-    if not cotton_dir.is_dir():
-        pytest.skip("cotton not found")
     sc = load_scene(cotton_dir)
     inv = {rc: n for n, rc in sc.meta["grid_pos"].items()}
     names = [inv[(4 + dr, 4 + dc)] for dr in (-1, 0, 1) for dc in (-1, 0, 1)]

@@ -30,7 +30,9 @@ def _need_browser():
     if chromium_path() is None:
         pytest.skip("chromium not found ($VIBR_CHROMIUM, /usr/bin/chromium or PATH; Debian: "
                     "apt-get install -y chromium, which .ci/run does)")
-    return pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    import playwright.sync_api
+
+    return playwright.sync_api
 
 
 def png_images_in(frames) -> list[bytes]:
