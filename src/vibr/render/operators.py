@@ -247,19 +247,93 @@ def _sum_in_order(a):
     return s
 
 
+@njit(cache=True)
+def accumulate_bucket(r, q0, q1, order, wb, x0, fx, fy, coef, use_coef, vals, S, la, A, rhs):
+    """Splat the samples ``order[q0:q1]`` (all with top row r) with weights ``wb[q - q0]``:
+    adds ``Σ Bᵀ diag(w) B`` (S = 9: the 9-point stencil into ``A``; S = 1: only its row
+    sums ``Bᵀ w`` into ``A[0]``; S = 0: nothing) and ``Σ Bᵀ (w·vals)`` (into ``rhs``) at
+    rows r, r + 1; returns ``½ Σ w |vals|²``. Row i of B: 2×2 block at (x0[i], r),
+    coefficients :func:`_row_coef`.
+
+    The samples accumulate into ``la`` (≥ (2, W, S + K) float64, zeroed here), a private
+    two-row buffer laid out (row, x, entry), so the scattered += of a sample stay within a
+    few cache lines; it is added to the (entry, row, x) outputs once. Callers run buckets
+    of one parity of r at a time (a bucket writes rows r and r + 1 only): no two threads
+    write the same row, and the sums do not depend on the number of threads."""
+    K = vals.shape[1]
+    W = rhs.shape[2]
+    jmin = W
+    jmax = -1
+    acc = 0.0
+    for ra in range(2):
+        for j in range(W):
+            for e in range(S + K):
+                la[ra, j, e] = 0.0
+    for q in range(q0, q1):
+        i = order[q]
+        wi = np.float64(wb[q - q0])
+        if wi == 0.0:
+            continue
+        b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
+        w0 = wi * b0
+        w1 = wi * b1
+        w2 = wi * b2
+        w3 = wi * b3
+        x = x0[i]
+        jmin = min(jmin, x)
+        jmax = max(jmax, x + 1)
+        if S == 9:
+            # corner (dy, dx) of the sample couples to corner (dy', dx') through entry
+            # 3 (dy' − dy + 1) + (dx' − dx + 1); unrolled for the 4 × 4 pairs
+            la[0, x, 4] += w0 * b0
+            la[0, x, 5] += w0 * b1
+            la[0, x, 7] += w0 * b2
+            la[0, x, 8] += w0 * b3
+            la[0, x + 1, 3] += w1 * b0
+            la[0, x + 1, 4] += w1 * b1
+            la[0, x + 1, 6] += w1 * b2
+            la[0, x + 1, 7] += w1 * b3
+            la[1, x, 1] += w2 * b0
+            la[1, x, 2] += w2 * b1
+            la[1, x, 4] += w2 * b2
+            la[1, x, 5] += w2 * b3
+            la[1, x + 1, 0] += w3 * b0
+            la[1, x + 1, 1] += w3 * b1
+            la[1, x + 1, 3] += w3 * b2
+            la[1, x + 1, 4] += w3 * b3
+        elif S == 1:
+            la[0, x, 0] += w0
+            la[0, x + 1, 0] += w1
+            la[1, x, 0] += w2
+            la[1, x + 1, 0] += w3
+        s = 0.0
+        for k in range(K):
+            v = np.float64(vals[i, k])
+            la[0, x, S + k] += w0 * v
+            la[0, x + 1, S + k] += w1 * v
+            la[1, x, S + k] += w2 * v
+            la[1, x + 1, S + k] += w3 * v
+            s += v * v
+        acc += 0.5 * wi * s
+    for ra in range(2):
+        ya = r + ra
+        for e in range(S):
+            Ae = A[e, ya]
+            for j in range(jmin, jmax + 1):
+                Ae[j] += la[ra, j, e]
+        for k in range(K):
+            rk = rhs[k, ya]
+            for j in range(jmin, jmax + 1):
+                rk[j] += la[ra, j, S + k]
+    return acc
+
+
 @njit(parallel=True, cache=True)
 def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_stencil):
     """Σ Bᵀ diag(w) B (9-point stencil, into ``A``), Σ Bᵀ (w·vals) (into ``rhs``) and
     returns ½ Σ w |vals|². Row i of B: 2×2 block at (x0, y0), coefficients bilinear from
-    (fx, fy) when ``coef`` is empty, else ``coef[i]`` (see :func:`_B_apply`).
-
-    Rows of samples are processed in two passes of even / odd top rows: a sample with
-    top row r writes rows r and r+1 only, so buckets of one parity never collide. Each
-    bucket accumulates into a private two-row buffer laid out (row, x, entry), so the
-    scattered += of a sample stay within a few cache lines; the buffer is added to the
-    (entry, row, x) outputs once per bucket.
-    """
-    K = vals.shape[1]
+    (fx, fy) when ``coef`` is empty, else ``coef[i]`` (see :func:`_B_apply`); samples in
+    buckets of their top row (``order``, ``starts``), see :func:`accumulate_bucket`."""
     W = rhs.shape[2]
     n_rows = starts.shape[0] - 1
     S = 9 if with_stencil else 0
@@ -269,62 +343,12 @@ def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_
         for r in prange(n_rows):
             if r % 2 != parity or starts[r] == starts[r + 1]:
                 continue
-            la = np.zeros((2, W, S + K), np.float64)
-            jmin = W
-            jmax = -1
-            acc = 0.0
-            for q in range(starts[r], starts[r + 1]):
-                i = order[q]
-                wi = np.float64(w[i])
-                if wi == 0.0:
-                    continue
-                b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
-                w0 = wi * b0
-                w1 = wi * b1
-                w2 = wi * b2
-                w3 = wi * b3
-                x = x0[i]
-                jmin = min(jmin, x)
-                jmax = max(jmax, x + 1)
-                if with_stencil:
-                    # corner (dy, dx) of the sample couples to corner (dy', dx') through entry
-                    # 3 (dy' − dy + 1) + (dx' − dx + 1); unrolled for the 4 × 4 pairs
-                    la[0, x, 4] += w0 * b0
-                    la[0, x, 5] += w0 * b1
-                    la[0, x, 7] += w0 * b2
-                    la[0, x, 8] += w0 * b3
-                    la[0, x + 1, 3] += w1 * b0
-                    la[0, x + 1, 4] += w1 * b1
-                    la[0, x + 1, 6] += w1 * b2
-                    la[0, x + 1, 7] += w1 * b3
-                    la[1, x, 1] += w2 * b0
-                    la[1, x, 2] += w2 * b1
-                    la[1, x, 4] += w2 * b2
-                    la[1, x, 5] += w2 * b3
-                    la[1, x + 1, 0] += w3 * b0
-                    la[1, x + 1, 1] += w3 * b1
-                    la[1, x + 1, 3] += w3 * b2
-                    la[1, x + 1, 4] += w3 * b3
-                s = 0.0
-                for k in range(K):
-                    v = np.float64(vals[i, k])
-                    la[0, x, S + k] += w0 * v
-                    la[0, x + 1, S + k] += w1 * v
-                    la[1, x, S + k] += w2 * v
-                    la[1, x + 1, S + k] += w3 * v
-                    s += v * v
-                acc += 0.5 * wi * s
-            cpart[r] = acc
-            for ra in range(2):
-                ya = r + ra
-                for e in range(S):
-                    Ae = A[e, ya]
-                    for j in range(jmin, jmax + 1):
-                        Ae[j] += la[ra, j, e]
-                for k in range(K):
-                    rk = rhs[k, ya]
-                    for j in range(jmin, jmax + 1):
-                        rk[j] += la[ra, j, S + k]
+            q0, q1 = starts[r], starts[r + 1]
+            wb = np.empty(q1 - q0, w.dtype)
+            for q in range(q0, q1):
+                wb[q - q0] = w[order[q]]
+            la = np.empty((2, W, S + vals.shape[1]), np.float64)
+            cpart[r] = accumulate_bucket(r, q0, q1, order, wb, x0, fx, fy, coef, use_coef, vals, S, la, A, rhs)
     return _sum_in_order(cpart)
 
 

@@ -12,40 +12,80 @@ remains as soon as one pixel has weight > 0.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit, prange
 
 __all__ = ["push_pull"]
 
 
+@njit(parallel=True, cache=True)
 def _down(c, w):
-    H, W = w.shape
-    Hp, Wp = H + (H % 2), W + (W % 2)
-    cw = np.zeros((Hp, Wp) + c.shape[2:], np.float32)
-    ww = np.zeros((Hp, Wp), np.float32)
-    cw[:H, :W] = c * w[..., None]
-    ww[:H, :W] = w
-    cs = cw.reshape(Hp // 2, 2, Wp // 2, 2, -1).sum((1, 3))
-    ws = ww.reshape(Hp // 2, 2, Wp // 2, 2).sum((1, 3))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cd = np.where(ws[..., None] > 0, cs / np.maximum(ws, 1e-300)[..., None], 0.0)
-    return cd, np.minimum(ws, 1.0)
+    """One push level: 2×2 weighted averages of ``c`` (H, W, C) with weights ``w`` (H, W)
+    (odd sizes padded with weight 0), and the weights' sums clamped to 1."""
+    H, W, C = c.shape
+    h, wd = (H + 1) // 2, (W + 1) // 2
+    cd = np.zeros((h, wd, C), np.float32)
+    ws = np.empty((h, wd), np.float32)
+    for i in prange(h):
+        cs = np.empty(C, np.float32)
+        for j in range(wd):
+            s = np.float32(0.0)
+            cs[:] = 0.0
+            for di in range(2):
+                ii = 2 * i + di
+                if ii >= H:
+                    continue
+                for dj in range(2):
+                    jj = 2 * j + dj
+                    if jj >= W:
+                        continue
+                    wv = w[ii, jj]
+                    s += wv
+                    for k in range(C):
+                        cs[k] += c[ii, jj, k] * wv
+            if s > 0:
+                for k in range(C):
+                    cd[i, j, k] = cs[k] / s
+            ws[i, j] = min(s, np.float32(1.0))
+    return cd, ws
 
 
-def _up(c, shape):
-    H, W = shape
-    h, w = c.shape[:2]
-    # bilinear upsampling aligned on pixel centres (coarse pixel k covers fine 2k, 2k+1)
-    ys = np.clip((np.arange(H) - 0.5) / 2.0, 0, h - 1)
-    xs = np.clip((np.arange(W) - 0.5) / 2.0, 0, w - 1)
-    y0 = np.minimum(np.floor(ys).astype(int), max(h - 2, 0))
-    x0 = np.minimum(np.floor(xs).astype(int), max(w - 2, 0))
-    fy = (ys - y0)[:, None, None] if h > 1 else np.zeros((H, 1, 1))
-    fx = (xs - x0)[None, :, None] if w > 1 else np.zeros((1, W, 1))
-    y1 = np.minimum(y0 + 1, h - 1)
-    x1 = np.minimum(x0 + 1, w - 1)
-    fy = fy.astype(np.float32)
-    fx = fx.astype(np.float32)
-    rows = c[y0] * (1 - fy) + c[y1] * fy  # bilinear = linear along y, then along x
-    return rows[:, x0] * (1 - fx) + rows[:, x1] * fx
+@njit(cache=True)
+def _axis(n, m):
+    """Bilinear up-sampling from m to n samples, aligned on pixel centres (coarse pixel k
+    covers fine 2k, 2k + 1): (lower index, upper index, fraction) per fine sample."""
+    i0 = np.empty(n, np.int64)
+    i1 = np.empty(n, np.int64)
+    f = np.zeros(n, np.float32)
+    for i in range(n):
+        t = min(max((i - 0.5) / 2.0, 0.0), m - 1.0)
+        k = min(int(np.floor(t)), max(m - 2, 0))
+        i0[i] = k
+        i1[i] = min(k + 1, m - 1)
+        if m > 1:
+            f[i] = np.float32(t - k)
+    return i0, i1, f
+
+
+@njit(parallel=True, cache=True)
+def _pull(c_up, cl, wl):
+    """One pull level: ``cl + (1 − wl)(up(c_up) − cl)`` with ``up`` the bilinear
+    up-sampling of the coarser level ``c_up`` to the shape of ``cl``."""
+    H, W, C = cl.shape
+    h, w = c_up.shape[:2]
+    y0, y1, fy = _axis(H, h)
+    x0, x1, fx = _axis(W, w)
+    out = np.empty_like(cl)
+    one = np.float32(1.0)
+    for i in prange(H):
+        a, b, ty = y0[i], y1[i], fy[i]
+        for j in range(W):
+            p, q, tx = x0[j], x1[j], fx[j]
+            for k in range(C):
+                r0 = c_up[a, p, k] * (one - ty) + c_up[b, p, k] * ty
+                r1 = c_up[a, q, k] * (one - ty) + c_up[b, q, k] * ty
+                up = r0 * (one - tx) + r1 * tx
+                out[i, j, k] = cl[i, j, k] + (one - wl[i, j]) * (up - cl[i, j, k])
+    return out
 
 
 def push_pull(colour_sum, weight, eps: float = 1e-8) -> np.ndarray:
@@ -68,14 +108,13 @@ def push_pull(colour_sum, weight, eps: float = 1e-8) -> np.ndarray:
     if squeeze:
         S = S[..., None]
     w = np.maximum(np.asarray(weight, np.float32), np.float32(0.0))
-    c = np.where(w[..., None] > eps, S / np.maximum(w, eps)[..., None], 0.0)
-    w = np.minimum(w, 1.0)
-    levels = [(c, w)]
+    c = np.where(w[..., None] > eps, S / np.maximum(w, np.float32(eps))[..., None], np.float32(0.0))
+    w = np.minimum(w, np.float32(1.0))
+    levels = [(np.ascontiguousarray(c, np.float32), np.ascontiguousarray(w))]
     while max(levels[-1][1].shape) > 1:
         levels.append(_down(*levels[-1]))
     c_up = levels[-1][0]
     for cl, wl in reversed(levels[:-1]):
-        up = _up(c_up, wl.shape)
-        c_up = cl + (1 - wl[..., None]) * (up - cl)  # w·c + (1 − w)·up
-    out = c_up.astype(np.float32)
+        c_up = _pull(c_up, cl, wl)  # w·c + (1 − w)·up
+    out = c_up
     return out[..., 0] if squeeze else out

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
-from .weights import geometric_weights, robust_factor
+from .weights import coverage_blend, robust_factor, weighted_normal
 from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
@@ -45,6 +45,8 @@ class SplatCoverage:
     Btg: np.ndarray | None = None
     cg_unit: float = 0.0
     grad_vals: np.ndarray | None = None
+    wsum: np.ndarray | None = None   # (1, H, W) Bᵀ w, w the deformation-only weight (initial blend)
+    bw: np.ndarray | None = None     # (3, H, W) Bᵀ (w · colour)
 
 
 def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool) -> SplatCoverage:
@@ -61,16 +63,15 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         sp = Splat(samples.xy, shape, jac=samples.jac, psf="footprint")
     else:
         sp = Splat(samples.xy, shape)
-    # per-sample blend weight in [0, 1] (vibr.flythrough fades a source leaving the set), else 1
-    sw = samples.meta.get("sample_weight")
-    ones = np.ones(len(samples), np.float32) if sw is None else np.asarray(sw, np.float32)
+    # one pass: the unit-weight stencils (the per-sample blend weight sw in [0, 1] of
+    # vibr.flythrough, else 1) and the initial blend's deformation-weighted splat
+    A0, rhs0, c0, wsum, bw = coverage_blend(samples, sp, p["sigma_s"], gradient)
     if gradient:
+        acc = A0.sum(0, dtype=np.float64)
         grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
-        BtB, Btg, cg_unit = sp.normal(ones, grad_vals, dtype=np.float32)
-        acc = BtB.sum(0, dtype=np.float64)
-        return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg_unit, grad_vals))
-    acc = sp.adjoint(ones)
-    return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"]))
+        return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], A0, rhs0, c0, grad_vals, wsum, bw))
+    acc = A0[0].astype(np.float64)
+    return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], wsum=wsum, bw=bw))
 
 
 def _covering(cov: SplatCoverage) -> SplatCoverage:
@@ -115,38 +116,38 @@ def sample_density(acc, coverage, normalise: bool) -> float:
     return float(acc[coverage].mean()) if normalise and coverage.any() else 1.0
 
 
-def initial_image(sp: Splat, Wk, colour, acc) -> np.ndarray:
-    """``Σ W b c / Σ W b`` (the W-weighted splat), holes filled by push–pull; (H, W, 3).
+def initial_image(cov: SplatCoverage) -> np.ndarray:
+    """``Σ W b c / Σ W b`` (the deformation-weighted splat of :func:`splat_coverage`), holes
+    filled by push–pull; (H, W, 3).
 
     The push–pull weight is the plain coverage, so that "≥ 1" means "one full sample
     landed here"."""
-    A0, bw, _ = sp.normal(Wk, colour, dtype=np.float32)
-    wsum = A0.sum(0)  # Σ_s (BᵀWB)[s] = Bᵀ W 1: rows of B sum to one (either PSF)
-    del A0
-    blend = np.where(wsum > 0, bw / np.maximum(wsum, 1e-30), 0.0).transpose(1, 2, 0)
-    return push_pull(blend * acc[..., None], acc)
+    wsum = cov.wsum[0]  # Σ_s (BᵀWB)[s] = Bᵀ W 1: rows of B sum to one (either PSF)
+    blend = np.where(wsum > 0, cov.bw / np.maximum(wsum, 1e-30), 0.0).transpose(1, 2, 0)
+    return push_pull(blend * cov.acc[..., None], cov.acc)
 
 
-class _Weights:
-    """``W_km`` (docs/METHOD.md §3) divided by rho, timed into ``times["weights"]``."""
+class _ColourTerm:
+    """The colour term's stencils ``A, b, c`` with the weights ``W_km`` (docs/METHOD.md §3)
+    divided by rho, the weights computed inside the assembly
+    (:func:`vibr.render.weights.weighted_normal`); timed into ``times["weights"]``. ``W``
+    (N,) is kept only when something needs it (``keep``)."""
 
-    def __init__(self, samples, p, sp, rho, geometric: bool, times):
-        self.samples, self.p, self.sp, self.rho, self.times = samples, p, sp, rho, times
+    def __init__(self, samples, p, sp, rho, geometric: bool, times, keep: bool):
+        self.samples, self.p, self.sp, self.rho, self.times, self.keep = samples, p, sp, rho, times, keep
         self.sigma_z = p["sigma_z"] if geometric else 0.0
 
     def __call__(self, u):
         t0 = time.perf_counter()
         p = self.p
-        w = geometric_weights(self.samples, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
-                              grad_max=p["grad_max"], splat=self.sp, dtype=np.float32)
-        w *= np.float32(1.0 / self.rho)
-        sw = self.samples.meta.get("sample_weight")
-        if sw is not None:  # vibr.flythrough's blend weight of the sample's view
-            w *= np.asarray(sw, np.float32)
+        rf = None
         if u is not None and p["robust"] != "none":
-            w *= robust_factor(self.samples, u, self.sp, p["robust_c"], p["robust"])
+            rf = robust_factor(self.samples, u, self.sp, p["robust_c"], p["robust"])
+        A, b, c, Wk = weighted_normal(self.samples, self.sp, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
+                                      grad_max=p["grad_max"], wscale=1.0 / self.rho, factor=rf,
+                                      keep_weights=self.keep)
         self.times["weights"] += time.perf_counter() - t0
-        return w
+        return A, b, c, Wk
 
 
 class _GradientTerm:
@@ -164,7 +165,9 @@ class _GradientTerm:
         elif self.Ag is None:
             # visibility / none: every (visible) sample, sensor precision 1/sigma_s²
             cw = 1.0 / (p["sigma_s"] ** 2 * self.rho)
-            self.Ag, self.bg, self.cg = cov.BtB * np.float32(cw), cov.Btg * np.float32(cw), cov.cg_unit * cw
+            cov.BtB *= np.float32(cw)  # in place: the unit-weight stencils are not needed again
+            cov.Btg *= np.float32(cw)
+            self.Ag, self.bg, self.cg = cov.BtB, cov.Btg, cov.cg_unit * cw
             cov.BtB = cov.Btg = None
         H, W = cov.acc.shape
         self.bg = self.bg.reshape(3, 2, H, W)
@@ -191,12 +194,13 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     sp = cov.splat
     times["assembly"] += time.perf_counter() - t0
     rho = sample_density(cov.acc, cov.coverage, p["normalise"])
-    weights = _Weights(samples, p, sp, rho, method.geometric, times)
+    need_w = p["grad_weighting"] == "W" or bool(uncertainty)
+    colour_term = _ColourTerm(samples, p, sp, rho, method.geometric, times, need_w)
 
-    # initial weights: deformation only (u unknown yet); initial image: their blend + push-pull
-    Wk = weights(None)
+    # initial image: the deformation-weighted blend (u unknown yet) + push-pull
     t0 = time.perf_counter()
-    init = initial_image(sp, Wk, samples.colour, cov.acc)
+    init = initial_image(cov)
+    cov.wsum = cov.bw = None
     u = np.ascontiguousarray(init.transpose(2, 0, 1))  # planar (3, H, W) from here on
     times["init"] = time.perf_counter() - t0
 
@@ -217,9 +221,10 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     for o in range(n_outer):
         if method.reweight or (o == 0 and p["robust"] != "none"):
             # savsr keeps its weights, but a robust loss reweights them once from the blend
-            Wk = weights(u.transpose(1, 2, 0))
+            A, b, c, Wk = colour_term(u.transpose(1, 2, 0))
+        elif o == 0:
+            A, b, c, Wk = colour_term(None)  # deformation only
         t0 = time.perf_counter()
-        A, b, c = sp.normal(Wk, samples.colour, dtype=np.float32)
         Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
         model = QuadraticModel(A, b, float(c), Ag, bg, float(cg),
                                p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"], grad_scheme, tv_w)

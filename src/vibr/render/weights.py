@@ -19,9 +19,10 @@ import numpy as np
 from numba import njit, prange
 
 from ..geometry.samples import Samples
+from .operators import _sum_in_order, accumulate_bucket
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
-           "robust_factor"]
+           "robust_factor", "sample_weight", "weighted_normal", "coverage_blend"]
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
 
@@ -52,30 +53,44 @@ def deformation_weight(samples: Samples, cap: float | None = None) -> np.ndarray
     return np.minimum(w, cap) if cap is not None else w
 
 
+@njit(cache=True, inline="always")
+def grad_at(g, x, y, a, b):
+    """∇u at a sample's landing point: ``g`` (H, W, 2) bilinearly interpolated in the cell
+    (x, y) with fractions (a, b) (float64)."""
+    gx = ((1 - a) * (1 - b) * g[y, x, 0] + a * (1 - b) * g[y, x + 1, 0]
+          + (1 - a) * b * g[y + 1, x, 0] + a * b * g[y + 1, x + 1, 0])
+    gy = ((1 - a) * (1 - b) * g[y, x, 1] + a * (1 - b) * g[y, x + 1, 1]
+          + (1 - a) * b * g[y + 1, x, 1] + a * b * g[y + 1, x + 1, 1])
+    return gx, gy
+
+
+@njit(cache=True, inline="always")
+def sample_weight(inv_det, cap, sz, dtau_x, dtau_y, gx, gy, sigma_s2):
+    """THE per-sample weight ``W_km`` (docs/METHOD.md §3), one sample, float64:
+    ``min(1/|det|, cap) / (sigma_s² + (sigma_z · ∂tau/∂z · ∇u(tau(x_m)))²)``; non-finite
+    ``inv_det`` or ``sz`` count as 0. Every kernel that weights samples calls this function
+    (:func:`geometric_weights` here, the fused assembly of :mod:`vibr.render.fused`)."""
+    s = sz
+    if not math.isfinite(s):
+        s = 0.0
+    d = inv_det
+    if not math.isfinite(d):
+        d = 0.0
+    d = min(d, cap)
+    p = s * (dtau_x * gx + dtau_y * gy)
+    return d / (sigma_s2 + p * p)
+
+
 @njit(parallel=True, cache=True)
 def _weights_kernel(x0, y0, fx, fy, g, dtau, sz, sz_scalar, inv_det, cap, sigma_s2, out):
-    """out_m = min(1/|det|, cap) / (sigma_s² + (sigma_z,m · ∂tau/∂z · ∇u(tau(x_m)))²), with
-    ∇u bilinearly interpolated from ``g`` (H, W, 2); non-finite inputs count as 0."""
+    """out_m = :func:`sample_weight` with ∇u bilinearly interpolated from ``g`` (H, W, 2)."""
     n = x0.shape[0]
     use_map = sz.shape[0] == n
     for i in prange(n):
-        a = np.float64(fx[i])
-        b = np.float64(fy[i])
-        x = x0[i]
-        y = y0[i]
-        gx = ((1 - a) * (1 - b) * g[y, x, 0] + a * (1 - b) * g[y, x + 1, 0]
-              + (1 - a) * b * g[y + 1, x, 0] + a * b * g[y + 1, x + 1, 0])
-        gy = ((1 - a) * (1 - b) * g[y, x, 1] + a * (1 - b) * g[y, x + 1, 1]
-              + (1 - a) * b * g[y + 1, x, 1] + a * b * g[y + 1, x + 1, 1])
+        gx, gy = grad_at(g, x0[i], y0[i], np.float64(fx[i]), np.float64(fy[i]))
         s = sz[i] if use_map else sz_scalar
-        if not math.isfinite(s):
-            s = 0.0
-        d = inv_det[i]
-        if not math.isfinite(d):
-            d = 0.0
-        d = min(d, cap)
-        p = s * (dtau[i, 0] * gx + dtau[i, 1] * gy)
-        out[i] = d / (sigma_s2 + p * p)
+        out[i] = sample_weight(np.float64(inv_det[i]), cap, np.float64(s), np.float64(dtau[i, 0]),
+                               np.float64(dtau[i, 1]), gx, gy, sigma_s2)
 
 
 def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *,
@@ -112,10 +127,7 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
         return (deformation_weight(samples, inv_det_cap) * base).astype(dtype, copy=False)
     from .operators import Splat
 
-    g = luminance_gradient(u) * np.float32(scale)
-    if grad_max is not None:
-        mag = np.sqrt((g ** 2).sum(-1, keepdims=True))
-        g *= np.minimum(1.0, grad_max / np.maximum(mag, 1e-12)).astype(np.float32)
+    g = _weight_gradient(u, scale, grad_max)
     sp = splat if splat is not None else Splat(samples.xy, samples.target_shape)
     out = np.empty(len(samples), dtype)
     sz_map = sz if sz.ndim == 1 else np.zeros(0)
@@ -124,6 +136,16 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
                     sz_map, sz_scalar, np.asarray(samples.inv_det),
                     np.inf if inv_det_cap is None else float(inv_det_cap), float(sigma_s) ** 2, out)
     return out
+
+
+def _weight_gradient(u, scale, grad_max):
+    """``∇u`` of the weights: the luminance gradient on the ``scale``, its magnitude
+    clamped at ``grad_max``; (H, W, 2) float32."""
+    g = luminance_gradient(u) * np.float32(scale)
+    if grad_max is not None:
+        mag = np.sqrt((g ** 2).sum(-1, keepdims=True))
+        g *= np.minimum(1.0, grad_max / np.maximum(mag, 1e-12)).astype(np.float32)
+    return np.ascontiguousarray(g)
 
 
 #: Robust data terms (issue 22): ``"none"`` (least squares) or ``"cauchy"`` (IRLS).
@@ -153,3 +175,139 @@ def robust_factor(samples: Samples, u, splat, c: float = 3.0, loss: str = "cauch
     s = c * 1.4826 * float(np.sqrt(np.median(r2)))
     s2 = max(s * s, 1e-12)
     return (1.0 / (1.0 + r2 / s2)).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- fused assembly
+# The weights are only ever needed inside the normal equations: the kernels below compute
+# each sample's weight (sample_weight, the one formula) while splatting it, bucket by bucket
+# of target rows (operators.accumulate_bucket), so the weights never make an (N,) pass of
+# their own. They live in this module so that numba's cache, keyed by the file, is rebuilt
+# whenever the formula changes.
+
+@njit(parallel=True, cache=True)
+def _coverage_kernel(bx0, fx, fy, coef, order, starts, sw, gvals, inv_det, sigma_s2, colour, S0, A0, rhs0,
+                     wsum, bw):
+    """One pass for the coverage and the initial blend: ``Σ Bᵀ diag(sw) B`` (S0 = 9, into
+    A0) or ``Bᵀ sw`` (S0 = 1, into A0[0]), ``Bᵀ (sw·gvals)`` (into rhs0), and ``Bᵀ w``
+    (into wsum[0]), ``Bᵀ (w·colour)`` (into bw) with the deformation-only weight
+    ``w = sw · sample_weight(u unknown)``; returns ``½ Σ sw |gvals|²``."""
+    n = order.shape[0]
+    W = bw.shape[2]
+    n_rows = starts.shape[0] - 1
+    use_coef = coef.shape[0] == n and n > 0
+    use_sw = sw.shape[0] == n
+    cpart = np.zeros(n_rows, np.float64)
+    for parity in range(2):
+        for r in prange(n_rows):
+            q0, q1 = starts[r], starts[r + 1]
+            if r % 2 != parity or q0 == q1:
+                continue
+            la = np.empty((2, W, max(S0 + gvals.shape[1], 4)), np.float64)
+            wb = np.empty(q1 - q0, np.float32)
+            for q in range(q0, q1):
+                wb[q - q0] = sw[order[q]] if use_sw else np.float32(1.0)
+            cpart[r] = accumulate_bucket(r, q0, q1, order, wb, bx0, fx, fy, coef, use_coef, gvals, S0, la,
+                                         A0, rhs0)
+            for q in range(q0, q1):
+                i = order[q]
+                w = np.float32(sample_weight(np.float64(inv_det[i]), np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, sigma_s2))
+                wb[q - q0] = w * sw[i] if use_sw else w
+            accumulate_bucket(r, q0, q1, order, wb, bx0, fx, fy, coef, use_coef, colour, 1, la, wsum, bw)
+    return _sum_in_order(cpart)
+
+
+@njit(parallel=True, cache=True)
+def _weighted_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_scalar, dtau, g, use_g, sigma_s2,
+                     wscale, sw, rf, colour, A, rhs, w_out):
+    """``A = Σ Bᵀ diag(W) B``, ``b = Σ Bᵀ (W·colour)``, returns ``½ Σ W |colour|²`` with
+    ``W = float32(sample_weight) · wscale · sw · rf`` computed on the fly (∇u from ``g``
+    when ``use_g``, else u unknown: deformation only; ``sw``, ``rf`` empty: 1); the weights
+    go to ``w_out`` too when it has N entries."""
+    n = order.shape[0]
+    W = rhs.shape[2]
+    n_rows = starts.shape[0] - 1
+    use_coef = coef.shape[0] == n and n > 0
+    use_map = sz.shape[0] == n
+    use_sw = sw.shape[0] == n
+    use_rf = rf.shape[0] == n
+    keep = w_out.shape[0] == n
+    cpart = np.zeros(n_rows, np.float64)
+    for parity in range(2):
+        for r in prange(n_rows):
+            q0, q1 = starts[r], starts[r + 1]
+            if r % 2 != parity or q0 == q1:
+                continue
+            wb = np.empty(q1 - q0, np.float32)
+            for q in range(q0, q1):
+                i = order[q]
+                gx = gy = 0.0
+                if use_g:
+                    gx, gy = grad_at(g, x0[i], y0[i], np.float64(fx[i]), np.float64(fy[i]))
+                s = sz[i] if use_map else sz_scalar
+                w = np.float32(sample_weight(np.float64(inv_det[i]), np.inf, np.float64(s), np.float64(dtau[i, 0]),
+                                             np.float64(dtau[i, 1]), gx, gy, sigma_s2)) * wscale
+                if use_sw:
+                    w = w * sw[i]
+                if use_rf:
+                    w = w * rf[i]
+                wb[q - q0] = w
+                if keep:
+                    w_out[i] = w
+            la = np.empty((2, W, 9 + colour.shape[1]), np.float64)
+            cpart[r] = accumulate_bucket(r, q0, q1, order, wb, bx0, fx, fy, coef, use_coef, colour, 9, la, A, rhs)
+    return _sum_in_order(cpart)
+
+
+def _opt(a, dtype=np.float32):
+    """An optional per-sample array for the kernels: the array, or an empty one."""
+    return np.zeros(0, dtype) if a is None else np.ascontiguousarray(a, dtype)
+
+
+def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool = True):
+    """One pass over the samples for what the render needs before its first estimate.
+
+    Returns ``(A0, rhs0, c0, wsum, bw)``: with ``gradient``, ``A0 = Σ Bᵀ diag(sw) B`` (9, H, W)
+    and ``rhs0 = Bᵀ (sw·∇v)`` (6, H, W), ``c0 = ½ Σ sw |∇v|²`` (the gradient term's stencils
+    at unit weight, ``sw`` = ``meta["sample_weight"]`` or 1); without, ``A0 = Bᵀ sw``
+    (1, H, W) and an empty ``rhs0``; and the deformation-only weighted splat of the
+    initial blend, ``wsum = Bᵀ w`` (1, H, W), ``bw = Bᵀ (w·colour)`` (3, H, W), ``w = sw ·``
+    :func:`sample_weight` (u unknown). float32 outputs, float64 sums."""
+    H, W = samples.target_shape
+    n = len(samples)
+    sw = samples.meta.get("sample_weight")
+    if gradient:
+        gv = np.ascontiguousarray(samples.grad, np.float32).reshape(n, -1)
+        A0, rhs0 = np.zeros((9, H, W), np.float32), np.zeros((gv.shape[1], H, W), np.float32)
+    else:
+        gv = np.zeros((n, 0), np.float32)
+        A0, rhs0 = np.zeros((1, H, W), np.float32), np.zeros((0, H, W), np.float32)
+    wsum, bw = np.zeros((1, H, W), np.float32), np.zeros((3, H, W), np.float32)
+    c0 = _coverage_kernel(splat.bx0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts, _opt(sw), gv,
+                          np.asarray(samples.inv_det), float(sigma_s) ** 2, np.asarray(samples.colour), A0.shape[0],
+                          A0, rhs0, wsum, bw)
+    return A0, rhs0, float(c0), wsum, bw
+
+
+def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=None, *, scale: float = 255.0,
+                    grad_max: float | None = 64.0, wscale: float = 1.0, factor=None, keep_weights: bool = False):
+    """The colour term's normal equations with the weights :func:`geometric_weights` would
+    give (times ``wscale``, ``meta["sample_weight"]`` and ``factor`` (N,), e.g.
+    :func:`robust_factor`), computed inside the assembly: ``(A, b, c, W)`` with ``A`` (9, H,
+    W), ``b`` (3, H, W) float32 as :meth:`vibr.render.operators.Splat.normal` and ``W`` (N,)
+    float32 when ``keep_weights`` (else None). Bit-identical to ``splat.normal`` of the
+    float32 weights (tested)."""
+    H, W = samples.target_shape
+    n = len(samples)
+    sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z, np.float64)
+    use_g = u is not None and bool(np.any(np.nan_to_num(sz) > 0))
+    g = _weight_gradient(u, scale, grad_max) if use_g else np.zeros((1, 1, 2), np.float32)
+    sz_map = sz if sz.ndim == 1 else np.zeros(0)
+    sz_scalar = float(sz) if sz.ndim == 0 else 0.0
+    A = np.zeros((9, H, W), np.float32)
+    b = np.zeros((3, H, W), np.float32)
+    w_out = np.empty(n if keep_weights else 0, np.float32)
+    c = _weighted_kernel(splat.x0, splat.y0, splat.fx, splat.fy, splat.bx0, splat.coef, splat.order, splat.starts,
+                         np.asarray(samples.inv_det), sz_map, sz_scalar, np.asarray(samples.dtau_dz), g, use_g,
+                         float(sigma_s) ** 2, np.float32(wscale), _opt(samples.meta.get("sample_weight")),
+                         _opt(factor), np.asarray(samples.colour), A, b, w_out)
+    return A, b, float(c), (w_out if keep_weights else None)
