@@ -37,3 +37,42 @@ def test_closed_form_on_a_ramp():
     # no depth uncertainty (SAVSR): only the deformation weight over sigma_s²
     np.testing.assert_allclose(geometric_weights(S, u, sigma_s=2.0, sigma_z=0.0), np.array(inv_det) / 4)
     np.testing.assert_allclose(geometric_weights(S, None, sigma_s=1.0), inv_det)
+
+
+def test_fused_assembly_equals_weights_then_normal():
+    """weighted_normal (the weights computed inside the assembly) is bit-identical to
+    geometric_weights → ×1/rho, ×sample_weight, ×robust factor → Splat.normal; and
+    coverage_blend's stencils equal Splat.normal at unit weight, its blend the deformation
+    weights' splat (bilinear and footprint PSF)."""
+    from vibr.render.operators import Splat
+    from vibr.render.weights import coverage_blend, weighted_normal
+
+    rng = np.random.default_rng(3)
+    H, W, n = 23, 31, 4000
+    xy = np.c_[rng.uniform(0, W - 1, n), rng.uniform(0, H - 1, n)]
+    inv_det = rng.uniform(0.2, 3, n)
+    inv_det[::50] = np.inf
+    sz = rng.uniform(0, 0.05, n)
+    sz[::70] = np.nan
+    S = _samples(xy, rng.normal(0, 20, (n, 2)), sz, inv_det, (H, W))
+    S.colour[:] = rng.uniform(0, 1, (n, 3))
+    S.grad[:] = rng.normal(0, 0.1, (n, 3, 2))
+    S.jac[:] = np.eye(2) * 0.7 + rng.normal(0, 0.1, (n, 2, 2))
+    S.meta["sample_weight"] = rng.uniform(0, 1, n).astype(np.float32)
+    u = rng.uniform(0, 1, (H, W, 3)).astype(np.float32)
+    rf = rng.uniform(0.1, 1, n).astype(np.float32)
+    for psf in ("bilinear", "footprint"):
+        sp = Splat(S.xy, (H, W), jac=S.jac, psf=psf)
+        w = geometric_weights(S, u, 1.5, None, splat=sp, dtype=np.float32)
+        w *= np.float32(1 / 2.5)
+        w *= S.meta["sample_weight"]
+        w *= rf
+        A, b, c = sp.normal(w, S.colour, dtype=np.float32)
+        A2, b2, c2, w2 = weighted_normal(S, sp, u, 1.5, None, wscale=1 / 2.5, factor=rf, keep_weights=True)
+        assert np.array_equal(w, w2) and np.array_equal(A, A2) and np.array_equal(b, b2) and c == c2
+        A0, g0, c0, wsum, bw = coverage_blend(S, sp, 1.5, gradient=True)
+        Ar, gr, cr = sp.normal(S.meta["sample_weight"], S.grad.reshape(n, 6), dtype=np.float32)
+        assert np.array_equal(A0, Ar) and np.array_equal(g0, gr) and c0 == cr
+        wd = (geometric_weights(S, None, 1.5, dtype=np.float32) * S.meta["sample_weight"]).astype(np.float64)
+        np.testing.assert_allclose(wsum[0], sp.adjoint(wd), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(bw, sp.adjoint(S.colour, wd).transpose(2, 0, 1), rtol=1e-5, atol=1e-6)
