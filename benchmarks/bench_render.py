@@ -3,9 +3,13 @@
 Prints, as medians over ``--repeat`` runs (after one warm-up run that loads the compiled
 kernels):
 
-* the time of each stage: depth preparation, z-buffer splatting (warps of every source
-  pixel's quad), visibility, sample fields (warps, Jacobians, colours, gradients of the
-  visible samples), weights, initial blend (+ push–pull), operator assembly, solve, total;
+* the time of each stage (:data:`STAGES`): depth preparation, z-buffer splatting (warps of
+  every source pixel's quad), visibility, sample fields (warps, Jacobians, colours,
+  gradients of the visible samples), the splat set-up with the coverage pass (the gradient
+  term's unit-weight stencils and the initial blend's splat, one pass), the initial blend's
+  push–pull, the weights with the colour stencils (one fused pass per outer pass), solve,
+  total; each against its own floor, the time its minimal traffic (:func:`stage_traffic`)
+  takes at the bandwidth measured in the same run;
 * the iteration counts (FISTA iterations and power iterations for the step size);
 * the peak resident memory of the process;
 * the memory bandwidth of the machine, measured in the same run (STREAM triad
@@ -97,24 +101,74 @@ def run_once(sources, target, measure_bw=False, **params):
     out = {
         "depth preparation": g["depth"], "z-buffer (quad warps)": g["zbuffer"],
         "visibility": g["visibility"], "sample fields (warps, Jacobians)": g["assembly"],
-        "geometry": t_geo, "weights": r.times["weights"], "initial blend": r.times["init"],
-        "operator assembly": r.times["assembly"], "solve": r.times["solve"], "total": total,
+        "geometry": t_geo, STAGES[4]: r.times["assembly"], STAGES[5]: r.times["init"],
+        STAGES[6]: r.times["weights"], "solve": r.times["solve"], "total": total,
         "iterations": r.iterations, "power iterations": r.power_iterations,
         "samples": len(S), "image": r.image, "coverage": r.coverage,
     }
+    traffic = stage_traffic(S, sources, target.shape, int(r.params["n_outer"]))
     if bw is not None:
-        floor, _ = floor_seconds(out, target.shape, bw)
+        floor, tr = floor_seconds(out, target.shape, bw)
+        traffic["solve"] = tr
         out["bandwidth"] = bw
         out["solve / floor"] = out["solve"] / floor
+        for k, b in traffic.items():
+            out[k + " / floor"] = out[k] / (b / bw)
+    for k, b in traffic.items():
+        out[k + " MB moved"] = b / 1e6
+    del S
     return out
 
 
-def median_runs(sources, target, repeat, measure_bw=False, **params):
+#: The stages of the table, in order (the render's fused passes named by what they compute).
+STAGES = ("depth preparation", "z-buffer (quad warps)", "visibility", "sample fields (warps, Jacobians)",
+          "splat set-up + coverage (fused with the blend's splat)", "initial blend (push-pull)",
+          "weights + colour stencils (fused, all outer passes)", "solve")
+
+
+def stage_traffic(S, sources, shape, n_outer):
+    """Bytes each stage must read and write at least once (its floor's traffic).
+
+    n_src source pixels, N samples, P target pixels, ``b(S)`` the bytes of one sample
+    (every field of :class:`vibr.geometry.Samples`):
+
+    * depth preparation: read the depth, write z, z_x, z_y (float64): n_src (d + 24);
+    * z-buffer: read z, z_x, z_y, write the target z-buffer (float64): 24 n_src + 8 P;
+    * visibility: read z, z_x, z_y and the z-buffer, write the state (1 byte): 25 n_src + 8 P;
+    * sample fields: read z, z_x, z_y, state, colour (12), its gradient (24, written
+      first), write the samples: n_src (24 + 1 + 12 + 48) + N b(S);
+    * splat set-up + coverage: read xy, write the cell (x0, y0 int32, fx, fy float64) and
+      the row order (int64), read them back with ∇v, colour, 1/|det|, write 19 planes:
+      N (16 + 32 + 32 + 24 + 12 + 8) + 76 P;
+    * initial blend: read the 4 blend planes and the coverage (float64), write 3 planes, the
+      pyramid a third more: 4/3 · 40 P;
+    * weights + colour stencils, per outer pass: read the cell and order (32), 1/|det|,
+      sigma_z, ∂tau/∂z, colour, write 12 planes: N (32 + b(inv_det) + b(sigma_z) + b(dtau) + 12) + 48 P.
+    """
+    P = int(shape[0]) * int(shape[1])
+    N = len(S)
+    n_src = sum(v.depth.size for v in sources.views)
+    d = sources.views[0].depth.itemsize
+    bS = sum(getattr(S, f).nbytes for f in ("xy", "colour", "grad", "jac", "inv_det", "dtau_dz", "sigma_z",
+                                             "view", "src_xy", "X")) / max(N, 1)
+    per = lambda f: getattr(S, f).nbytes / max(N, 1)  # noqa: E731
+    return {
+        STAGES[0]: n_src * (d + 24), STAGES[1]: 24 * n_src + 8 * P, STAGES[2]: 25 * n_src + 8 * P,
+        STAGES[3]: n_src * (24 + 1 + 12 + 48) + N * bS, STAGES[4]: N * (16 + 32 + 32 + 24 + 12 + 8) + 76 * P,
+        STAGES[5]: 4 / 3 * 40 * P,
+        STAGES[6]: n_outer * (N * (32 + per("inv_det") + per("sigma_z") + per("dtau_dz") + 12) + 48 * P),
+    }
+
+
+def median_runs(sources, target, repeat, measure_bw=False, all_runs=False, **params):
     run_once(sources, target, **params)  # warm-up: loads the compiled kernels
     runs = [run_once(sources, target, measure_bw, **params) for _ in range(repeat)]
     keys = [k for k in runs[0] if k not in ("image", "coverage")]
     med = {k: float(np.median([r[k] for r in runs])) for k in keys}
-    return med, runs[-1]
+    last = runs[-1]
+    if all_runs:
+        return med, last, [{k: r[k] for k in keys} for r in runs]
+    return med, last
 
 
 def floor_seconds(med, shape, bw):
@@ -181,14 +235,20 @@ def main(argv=None):
     sources, target = scene.split(ti)
     print(f"# synthetic 3x3 grid, {a.size}x{a.size}, target {target.name} from {len(sources)} sources "
           f"(made in {time.perf_counter() - t0:.1f} s); medians of {a.repeat} runs")
-    med, last = median_runs(sources, target, a.repeat, measure_bw=True)
+    med, last, runs = median_runs(sources, target, a.repeat, measure_bw=True, all_runs=True)
     floor, traffic = floor_seconds(med, target.shape, med["bandwidth"])
     q = {"psnr": psnr(last["image"], target.image, mask=last["coverage"], border=2),
          "dssim": dssim(last["image"], target.image, mask=last["coverage"], border=2)}
-    print("\n| stage | median s |\n|---|---|")
-    for k in ("depth preparation", "z-buffer (quad warps)", "visibility", "sample fields (warps, Jacobians)",
-              "weights", "initial blend", "operator assembly", "solve", "total"):
-        print(f"| {k} | {med[k]:.3f} |")
+    print("\n| stage | median s | min–max s | MB moved (floor traffic) | floor s (this run's bandwidth) | s / floor |")
+    print("|---|---|---|---|---|---|")
+    for k in STAGES + ("total",):
+        ts = [r[k] for r in runs]
+        if k + " / floor" in med:
+            fl = med[k + " MB moved"] * 1e6 / med["bandwidth"]
+            extra = f"{med[k + ' MB moved']:.0f} | {fl:.4f} | {med[k + ' / floor']:.1f} |"
+        else:
+            extra = " | | |"
+        print(f"| {k} | {med[k]:.3f} | {min(ts):.3f}–{max(ts):.3f} | {extra}")
     print(f"\niterations: {med['iterations']:.0f} FISTA + {med['power iterations']:.0f} power; "
           f"{med['samples']:.0f} samples; PSNR {q['psnr']:.2f} dB, DSSIM {q['dssim']:.1f} (covered pixels)")
     # a power iteration is one operator application, 24 of a FISTA iteration's 51 planes
@@ -201,7 +261,10 @@ def main(argv=None):
     print(f"peak resident memory: {peak_rss_mb():.0f} MB")
     report["main"] = {"size": a.size, "n_sources": len(sources), **med, **q, "floor_s": floor,
                       "traffic_bytes": traffic, "solve_over_floor": med["solve / floor"],
-                      "peak_rss_MB": peak_rss_mb()}
+                      "peak_rss_mb": peak_rss_mb(), "runs": runs,
+                      "total_min": min(r["total"] for r in runs), "total_max": max(r["total"] for r in runs)}
+    for k in ("solve", "total", "solve_over_floor", "peak_rss_mb"):
+        report[k] = report["main"][k]
     del scene, sources, target, last
 
     if a.scaling:

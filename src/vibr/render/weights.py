@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..geometry.samples import Samples
+from ..geometry.gradient import _grad_row
 from .operators import _sum_in_order, accumulate_bucket
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
@@ -53,7 +54,7 @@ def deformation_weight(samples: Samples, cap: float | None = None) -> np.ndarray
     return np.minimum(w, cap) if cap is not None else w
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def grad_at(g, x, y, a, b):
     """∇u at a sample's landing point: ``g`` (H, W, 2) bilinearly interpolated in the cell
     (x, y) with fractions (a, b) (float64)."""
@@ -64,7 +65,7 @@ def grad_at(g, x, y, a, b):
     return gx, gy
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def sample_weight(inv_det, cap, sz, dtau_x, dtau_y, gx, gy, sigma_s2):
     """THE per-sample weight ``W_km`` (docs/METHOD.md §3), one sample, float64:
     ``min(1/|det|, cap) / (sigma_s² + (sigma_z · ∂tau/∂z · ∇u(tau(x_m)))²)``; non-finite
@@ -138,14 +139,42 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
     return out
 
 
+@njit(parallel=True, cache=True)
+def _weight_gradient_kernel(u, scale, grad_max, clamp, out):
+    """:func:`_weight_gradient` in one pass: the luminance rows, their central gradient
+    (:func:`vibr.geometry.gradient._grad_row`), the scale and the clamp, in float32 in
+    the order of the numpy expressions (bit-identical to them)."""
+    H, W, _ = u.shape
+    l0, l1, l2 = _LUMA[0], _LUMA[1], _LUMA[2]
+    lum = np.empty((H, W), np.float32)
+    for i in prange(H):
+        for j in range(W):
+            lum[i, j] = l0 * u[i, j, 0] + l1 * u[i, j, 1] + l2 * u[i, j, 2]
+    tiny = np.float32(1e-12)
+    one = np.float32(1.0)
+    for i in prange(H):
+        gx = np.empty(W, np.float32)
+        gy = np.empty(W, np.float32)
+        _grad_row(lum, i, False, gx, gy)
+        for j in range(W):
+            a = gx[j] * scale
+            b = gy[j] * scale
+            if clamp:
+                f = min(one, grad_max / max(np.sqrt(a * a + b * b), tiny))
+                a *= f
+                b *= f
+            out[i, j, 0] = a
+            out[i, j, 1] = b
+
+
 def _weight_gradient(u, scale, grad_max):
-    """``∇u`` of the weights: the luminance gradient on the ``scale``, its magnitude
-    clamped at ``grad_max``; (H, W, 2) float32."""
-    g = luminance_gradient(u) * np.float32(scale)
-    if grad_max is not None:
-        mag = np.sqrt((g ** 2).sum(-1, keepdims=True))
-        g *= np.minimum(1.0, grad_max / np.maximum(mag, 1e-12)).astype(np.float32)
-    return np.ascontiguousarray(g)
+    """``∇u`` of the weights: the luminance gradient (:func:`luminance_gradient`) on the
+    ``scale``, its magnitude clamped at ``grad_max``; (H, W, 2) float32."""
+    u = np.asarray(u, np.float32)
+    out = np.empty(u.shape[:2] + (2,), np.float32)
+    _weight_gradient_kernel(u, np.float32(scale), np.float32(0.0 if grad_max is None else grad_max),
+                            grad_max is not None, out)
+    return out
 
 
 #: Robust data terms (issue 22): ``"none"`` (least squares) or ``"cauchy"`` (IRLS).
