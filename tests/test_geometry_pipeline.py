@@ -31,9 +31,10 @@ def test_translation_plane_samples():
     np.testing.assert_allclose(s.xy[:, 1], s.src_xy[:, 1], atol=1e-9)
     assert len(s) == H * (W - int(shift))  # the 4 leftmost columns land outside
     assert s.meta["counts"]["s"]["outside"] == H * int(shift)
-    np.testing.assert_allclose(s.jac, np.broadcast_to(np.eye(2), (len(s), 2, 2)), atol=1e-12)
+    np.testing.assert_allclose(s.jac, np.broadcast_to(np.eye(2), (len(s), 2, 2)), atol=1e-7)
     np.testing.assert_allclose(s.inv_det, 1.0)
-    np.testing.assert_allclose(s.dtau_dz, np.broadcast_to([F * b / z**2, 0], (len(s), 2)), rtol=1e-12, atol=1e-12)
+    # (the fields other than xy are float32)
+    np.testing.assert_allclose(s.dtau_dz, np.broadcast_to([F * b / z**2, 0], (len(s), 2)), rtol=1e-7, atol=1e-12)
     np.testing.assert_allclose(s.sigma_z, 0.05)
     # colours and (default: forward-difference) gradients of the source at src_xy
     x, y = s.src_xy[:, 0], s.src_xy[:, 1]
@@ -46,7 +47,7 @@ def test_translation_plane_samples():
     # world points: depth z in the source frame, reproject onto src_xy
     np.testing.assert_allclose(s.X[:, 2], z)
     xy, _ = src.camera.project(s.X)
-    np.testing.assert_allclose(xy, s.src_xy, atol=1e-9)
+    np.testing.assert_allclose(xy, s.src_xy, atol=1e-5)  # X is float32
     assert s.view.dtype == np.int32 and s.src_xy.dtype == np.int32
     assert s.colour.dtype == np.float32 and s.grad.dtype == np.float32
     assert np.all((s.xy >= 0) & (s.xy <= [W - 1, H - 1]))

@@ -4,7 +4,9 @@ Every visible source pixel (k, m) becomes one sample: where it lands in the targ
 (``tau_k(x_m)``, docs/METHOD.md §2 eq. projection), its colour and colour gradient in the source,
 the local Jacobian of the warp, the deformation factor ``1/|det ∂tau_k/∂x_m|``, the depth
 derivative ``∂tau_k/∂z`` and the depth uncertainty. Samples of all source views are
-concatenated; ``view`` tells which view each came from. The renderer knows nothing of
+concatenated; ``view`` tells which view each came from. :func:`vibr.geometry.compute_samples`
+returns them sorted by the target pixel they land on (row-major), so that the renderer's
+passes, bucketed by target row, stream through the arrays. The renderer knows nothing of
 cameras: it sees only these arrays.
 """
 
@@ -31,20 +33,20 @@ class Samples:
         Source colour gradient ``∇v_k(m)`` (per channel, d/dx then d/dy), in source
         pixels: :func:`vibr.geometry.gradient.grad_image` of the source image with the
         scheme of ``meta["grad_scheme"]``.
-    jac : (N, 2, 2) float64
+    jac : (N, 2, 2) float32
         ``∂tau_k/∂x_m`` (docs/METHOD.md §2 eq. deformation); rows are target x, y; columns source
         x, y.
-    inv_det : (N,) float64
+    inv_det : (N,) float32
         Deformation weight ``1 / |det ∂tau_k/∂x_m|``.
-    dtau_dz : (N, 2) float64
+    dtau_dz : (N, 2) float32
         ``∂tau_k/∂z`` (docs/METHOD.md §2 eq. geometrie), target pixels per scene unit of depth.
-    sigma_z : (N,) float64
+    sigma_z : (N,) float32
         Depth standard deviation of the sample, scene units.
     view : (N,) int32
         Index of the source view (into the list of sources).
     src_xy : (N, 2) int32
         The sample's source pixel (x = column, y = row).
-    X : (N, 3) float64
+    X : (N, 3) float32
         The sample's 3D point in world coordinates (for view-dependent blending, ULR).
     target_shape : (H, W)
     meta : dict
@@ -79,10 +81,10 @@ class Samples:
     def concatenate(parts: list["Samples"], target_shape) -> "Samples":
         if not parts:
             z2 = np.zeros((0, 2))
-            return Samples(z2, np.zeros((0, 3), np.float32), np.zeros((0, 3, 2), np.float32),
-                           np.zeros((0, 2, 2)), np.zeros(0), z2.copy(), np.zeros(0),
-                           np.zeros(0, np.int32), np.zeros((0, 2), np.int32), np.zeros((0, 3)),
-                           tuple(target_shape))
+            f4 = np.float32
+            return Samples(z2, np.zeros((0, 3), f4), np.zeros((0, 3, 2), f4), np.zeros((0, 2, 2), f4),
+                           np.zeros(0, f4), np.zeros((0, 2), f4), np.zeros(0, f4), np.zeros(0, np.int32),
+                           np.zeros((0, 2), np.int32), np.zeros((0, 3), f4), tuple(target_shape))
         cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
         return Samples(cat("xy"), cat("colour"), cat("grad"), cat("jac"), cat("inv_det"),
                        cat("dtau_dz"), cat("sigma_z"), cat("view"), cat("src_xy"),

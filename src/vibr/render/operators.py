@@ -42,21 +42,25 @@ __all__ = [
 
 # ----------------------------------------------------------------------------- helpers
 @njit(cache=True)
-def _bucket_by_row(y0, n_rows):
-    """Counting sort of samples by the top row of their 2×2 block: (order, starts)."""
+def _bucket_by_cell(x0, y0, n_rows, W):
+    """Counting sort of samples by their 2×2 block (top row, then left column):
+    ``(order, starts)``, ``starts[r]`` the first sample whose top row is r (so the
+    samples of a row are contiguous, and within it those of one block)."""
     n = y0.shape[0]
-    counts = np.zeros(n_rows + 1, np.int64)
+    counts = np.zeros(n_rows * W + 1, np.int64)
     for i in range(n):
-        counts[y0[i] + 1] += 1
-    for r in range(n_rows):
-        counts[r + 1] += counts[r]
-    starts = counts.copy()
+        counts[y0[i] * W + x0[i] + 1] += 1
+    for c in range(n_rows * W):
+        counts[c + 1] += counts[c]
     fill = counts[:-1].copy()
-    order = np.empty(n, np.int64)
+    order = np.empty(n, np.int32)  # (Splat refuses 2³¹ samples or more)
     for i in range(n):
-        r = y0[i]
-        order[fill[r]] = i
-        fill[r] += 1
+        c = y0[i] * W + x0[i]
+        order[fill[c]] = i
+        fill[c] += 1
+    starts = np.empty(n_rows + 1, np.int64)
+    for r in range(n_rows + 1):
+        starts[r] = counts[r * W]
     return order, starts
 
 
@@ -248,73 +252,113 @@ def _sum_in_order(a):
 
 
 @njit(cache=True)
-def accumulate_bucket(r, q0, q1, order, wb, x0, fx, fy, coef, use_coef, vals, S, la, A, rhs):
-    """Splat the samples ``order[q0:q1]`` (all with top row r) with weights ``wb[q - q0]``:
-    adds ``Σ Bᵀ diag(w) B`` (S = 9: the 9-point stencil into ``A``; S = 1: only its row
-    sums ``Bᵀ w`` into ``A[0]``; S = 0: nothing) and ``Σ Bᵀ (w·vals)`` (into ``rhs``) at
-    rows r, r + 1; returns ``½ Σ w |vals|²``. Row i of B: 2×2 block at (x0[i], r),
-    coefficients :func:`_row_coef`.
+def _flush_block(la, x, S, K, s00, s01, s02, s03, s11, s12, s13, s22, s23, s33, cv):
+    """Add one 2×2 block's sums into the two-row buffer ``la`` (see :func:`accumulate_bucket`):
+    ``s_ij = Σ w b_i b_j`` (corners 0..3 = top-left, top-right, bottom-left, bottom-right)
+    and ``cv[i, k] = Σ w b_i v_k``."""
+    if S == 9:
+        # corner (dy, dx) couples to corner (dy', dx') through entry 3 (dy' − dy + 1) + (dx' − dx + 1)
+        la[0, x, 4] += s00
+        la[0, x, 5] += s01
+        la[0, x, 7] += s02
+        la[0, x, 8] += s03
+        la[0, x + 1, 3] += s01
+        la[0, x + 1, 4] += s11
+        la[0, x + 1, 6] += s12
+        la[0, x + 1, 7] += s13
+        la[1, x, 1] += s02
+        la[1, x, 2] += s12
+        la[1, x, 4] += s22
+        la[1, x, 5] += s23
+        la[1, x + 1, 0] += s03
+        la[1, x + 1, 1] += s13
+        la[1, x + 1, 3] += s23
+        la[1, x + 1, 4] += s33
+    elif S == 1:  # the weight sums, kept in cv[:, K]
+        la[0, x, 0] += cv[0, K]
+        la[0, x + 1, 0] += cv[1, K]
+        la[1, x, 0] += cv[2, K]
+        la[1, x + 1, 0] += cv[3, K]
+    for k in range(K):
+        la[0, x, S + k] += cv[0, k]
+        la[0, x + 1, S + k] += cv[1, k]
+        la[1, x, S + k] += cv[2, k]
+        la[1, x + 1, S + k] += cv[3, k]
+    cv[:] = 0.0
 
-    The samples accumulate into ``la`` (≥ (2, W, S + K) float64, zeroed here), a private
-    two-row buffer laid out (row, x, entry), so the scattered += of a sample stay within a
-    few cache lines; it is added to the (entry, row, x) outputs once. Callers run buckets
-    of one parity of r at a time (a bucket writes rows r and r + 1 only): no two threads
-    write the same row, and the sums do not depend on the number of threads."""
+
+@njit(cache=True)
+def accumulate_bucket(r, q0, q1, order, wb, x0, fx, fy, coef, use_coef, vals, S, la, A, rhs):
+    """Splat the samples ``order[q0:q1]`` (all with top row r, sorted by block) with weights
+    ``wb[q - q0]``: adds ``Σ Bᵀ diag(w) B`` (S = 9: the 9-point stencil into ``A``; S = 1:
+    only its row sums ``Bᵀ w`` into ``A[0]``; S = 0: nothing) and ``Σ Bᵀ (w·vals)`` (into
+    ``rhs``) at rows r, r + 1; returns ``½ Σ w |vals|²``. Row i of B: 2×2 block at
+    (x0[i], r), coefficients :func:`_row_coef`.
+
+    The samples of one block are summed in registers (``s_ij = Σ w b_i b_j``: 10 sums, the
+    stencil is symmetric) and added once per block to ``la`` (≥ (2, W, S + K) float64,
+    zeroed here), a private two-row buffer laid out (row, x, entry), itself added to the
+    (entry, row, x) outputs once. Callers run buckets of one parity of r at a time (a
+    bucket writes rows r and r + 1 only): no two threads write the same row, and the sums
+    do not depend on the number of threads."""
     K = vals.shape[1]
     W = rhs.shape[2]
+    E = S + K
+    for ra in range(2):
+        for j in range(W):
+            for e in range(E):
+                la[ra, j, e] = 0.0
+    cv = np.zeros((4, K + 1), np.float64)
     jmin = W
     jmax = -1
     acc = 0.0
-    for ra in range(2):
-        for j in range(W):
-            for e in range(S + K):
-                la[ra, j, e] = 0.0
+    cur = -1
+    s00 = s01 = s02 = s03 = s11 = s12 = s13 = s22 = s23 = s33 = 0.0
     for q in range(q0, q1):
         i = order[q]
         wi = np.float64(wb[q - q0])
         if wi == 0.0:
             continue
+        x = x0[i]
+        if x != cur:
+            if cur >= 0:
+                _flush_block(la, cur, S, K, s00, s01, s02, s03, s11, s12, s13, s22, s23, s33, cv)
+            s00 = s01 = s02 = s03 = s11 = s12 = s13 = s22 = s23 = s33 = 0.0
+            cur = x
+            jmin = min(jmin, x)
+            jmax = max(jmax, x + 1)
         b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
         w0 = wi * b0
         w1 = wi * b1
         w2 = wi * b2
         w3 = wi * b3
-        x = x0[i]
-        jmin = min(jmin, x)
-        jmax = max(jmax, x + 1)
         if S == 9:
-            # corner (dy, dx) of the sample couples to corner (dy', dx') through entry
-            # 3 (dy' − dy + 1) + (dx' − dx + 1); unrolled for the 4 × 4 pairs
-            la[0, x, 4] += w0 * b0
-            la[0, x, 5] += w0 * b1
-            la[0, x, 7] += w0 * b2
-            la[0, x, 8] += w0 * b3
-            la[0, x + 1, 3] += w1 * b0
-            la[0, x + 1, 4] += w1 * b1
-            la[0, x + 1, 6] += w1 * b2
-            la[0, x + 1, 7] += w1 * b3
-            la[1, x, 1] += w2 * b0
-            la[1, x, 2] += w2 * b1
-            la[1, x, 4] += w2 * b2
-            la[1, x, 5] += w2 * b3
-            la[1, x + 1, 0] += w3 * b0
-            la[1, x + 1, 1] += w3 * b1
-            la[1, x + 1, 3] += w3 * b2
-            la[1, x + 1, 4] += w3 * b3
+            s00 += w0 * b0
+            s01 += w0 * b1
+            s02 += w0 * b2
+            s03 += w0 * b3
+            s11 += w1 * b1
+            s12 += w1 * b2
+            s13 += w1 * b3
+            s22 += w2 * b2
+            s23 += w2 * b3
+            s33 += w3 * b3
         elif S == 1:
-            la[0, x, 0] += w0
-            la[0, x + 1, 0] += w1
-            la[1, x, 0] += w2
-            la[1, x + 1, 0] += w3
+            cv[0, K] += w0
+            cv[1, K] += w1
+            cv[2, K] += w2
+            cv[3, K] += w3
         s = 0.0
         for k in range(K):
             v = np.float64(vals[i, k])
-            la[0, x, S + k] += w0 * v
-            la[0, x + 1, S + k] += w1 * v
-            la[1, x, S + k] += w2 * v
-            la[1, x + 1, S + k] += w3 * v
+            cv[0, k] += w0 * v
+            cv[1, k] += w1 * v
+            cv[2, k] += w2 * v
+            cv[3, k] += w3 * v
             s += v * v
         acc += 0.5 * wi * s
+    if cur >= 0:
+        _flush_block(la, cur, S, K, s00, s01, s02, s03, s11, s12, s13, s22, s23, s33, cv)
     for ra in range(2):
         ya = r + ra
         for e in range(S):
@@ -460,7 +504,7 @@ class Splat:
 
     Attributes
     ----------
-    x0, y0, fx, fy : (N,)
+    x0, y0, fx, fy : (N,) int32, int32, float64, float64
         The bilinear cell and fractions of ``xy`` (bilinear *interpolation* at ``tau``,
         whatever the PSF: the weights of docs/METHOD.md §3 sample ``∇u`` there).
     bx0, by0 : (N,) int32
@@ -480,6 +524,8 @@ class Splat:
         H, W = self.shape
         xy = np.ascontiguousarray(xy, dtype=np.float64).reshape(-1, 2)
         self.n = xy.shape[0]
+        if self.n >= 2 ** 31:
+            raise ValueError(f"{self.n} samples: at most 2³¹ − 1 in one Splat (split the target)")
         self.x0, self.y0, self.fx, self.fy = _bilinear_setup(xy, H, W)
         self.n_shrunk = self.n_degenerate = 0
         if psf == "bilinear":
@@ -498,7 +544,7 @@ class Splat:
             _footprint_setup(xy, jac, H, W, self.coef, self.bx0, self.by0, flags)
             counts = np.bincount(flags, minlength=3)
             self.n_shrunk, self.n_degenerate = int(counts[1]), int(counts[2])
-        self.order, self.starts = _bucket_by_row(self.by0, max(H - 1, 1))
+        self.order, self.starts = _bucket_by_cell(self.bx0, self.by0, max(H - 1, 1), W)
 
     @property
     def shrunk_fraction(self) -> float:

@@ -327,8 +327,8 @@ def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=No
     float32 weights (tested)."""
     H, W = samples.target_shape
     n = len(samples)
-    sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z, np.float64)
-    use_g = u is not None and bool(np.any(np.nan_to_num(sz) > 0))
+    sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z)
+    use_g = u is not None and bool(np.nanmax(sz, initial=0.0) > 0) if sz.size else False
     g = _weight_gradient(u, scale, grad_max) if use_g else np.zeros((1, 1, 2), np.float32)
     sz_map = sz if sz.ndim == 1 else np.zeros(0)
     sz_scalar = float(sz) if sz.ndim == 0 else 0.0
