@@ -216,11 +216,23 @@ def _sort_by_cell(S: Samples) -> None:
     """Reorder the samples by target cell (:func:`_cell_order`), in place, one field at a
     time: the renderer's passes over the samples, bucketed by target row, then stream
     through memory instead of gathering from every view's stretch of the arrays."""
-    if len(S) >= 2 ** 31:
+    if len(S) == 0 or len(S) >= 2 ** 31:
         return
     order = _cell_order(S.xy, *S.target_shape)
     for f in ("xy", "colour", "grad", "jac", "inv_det", "dtau_dz", "sigma_z", "view", "src_xy", "X"):
-        setattr(S, f, np.take(getattr(S, f), order, axis=0))
+        a = getattr(S, f)
+        out = np.empty_like(a)
+        _take_rows(a.reshape(len(a), -1), order, out.reshape(len(a), -1))
+        setattr(S, f, out)
+
+
+@njit(parallel=True, cache=True)
+def _take_rows(a, order, out):
+    """``out[i] = a[order[i]]`` for (N, k) arrays, in parallel."""
+    for i in prange(order.shape[0]):
+        o = order[i]
+        for c in range(a.shape[1]):
+            out[i, c] = a[o, c]
 
 
 class _Timer:
