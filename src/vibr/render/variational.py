@@ -221,6 +221,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     for o in range(n_outer):
         if method.reweight or (o == 0 and p["robust"] != "none"):
             # savsr keeps its weights, but a robust loss reweights them once from the blend
+            model = A = b = None  # the previous pass's stencils go before the new ones come
             A, b, c, Wk = colour_term(u.transpose(1, 2, 0))
         elif o == 0:
             A, b, c, Wk = colour_term(None)  # deformation only
