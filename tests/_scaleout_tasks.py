@@ -78,4 +78,15 @@ def print_render_digest():
     res = {r["label"]: [float(r["psnr"]).hex(), float(r["dssim"]).hex(), r.get("iterations"),
                         hashlib.sha1(np.ascontiguousarray(ev.images[r["label"]]).tobytes()).hexdigest()]
            for r in ev.report["results"]}
+    # the reductions themselves, on random data (an end-to-end render can round a last-bit
+    # difference away; these cannot): inner product, TV, the fused pass's energy terms
+    from vibr.render.fused import hessian_terms
+    from vibr.render.operators import dot
+    from vibr.render.tv import tv_value
+
+    rng = np.random.default_rng(0)
+    a, b = rng.standard_normal((2, 3, 301, 257)).astype(np.float32)
+    A = rng.random((9, 301, 257)).astype(np.float32)
+    _, terms = hessian_terms(A, None, a, b, None, 1.0, 0.0)
+    res["kernels"] = [float(v).hex() for v in (dot(a, b), tv_value(a), tv_value(a, False), *terms)]
     print(json.dumps({"threads": numba.get_num_threads(), "results": res}), flush=True)

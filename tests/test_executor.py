@@ -133,7 +133,7 @@ def test_a_render_is_bit_identical_on_1_and_2_numba_threads():
         assert p.returncode == 0, p.stderr[-3000:]
         out.append(json.loads(p.stdout.strip().splitlines()[-1]))
     assert [o["threads"] for o in out] == [1, 2]
-    assert len(out[0]["results"]) == 4
+    assert len(out[0]["results"]) == 5 and len(out[0]["results"]["kernels"]) == 8
     assert out[0]["results"] == out[1]["results"]
 
 
