@@ -56,3 +56,37 @@ def fail_once(ctx, task):
 
 def die_always(ctx, task):
     os._exit(17)
+
+
+def print_render_digest():
+    """Evaluate one held-out view of a small synthetic scene with every method, depth estimated
+    from the sources (plane sweep), and print one JSON line: numba's thread count and, per
+    setting, the PSNR / DSSIM bits, the iterations and a hash of the rendered image
+    (tests/test_executor.py runs this with 1 and with 2 numba threads)."""
+    import hashlib
+    import json
+
+    import numba
+    import numpy as np
+
+    from vibr.evaluate import run_evaluation, settings_grid
+    from vibr.synthetic import make_scene
+
+    scene = make_scene("grid", n_views=9, width=80, height=64, seed=5)
+    settings = settings_grid(["ulr", "savsr", "bvs", "gradient"], gammas=(1.0,))
+    ev = run_evaluation(scene, "view_004", settings, depth="estimated", use_lpips=False)
+    res = {r["label"]: [float(r["psnr"]).hex(), float(r["dssim"]).hex(), r.get("iterations"),
+                        hashlib.sha1(np.ascontiguousarray(ev.images[r["label"]]).tobytes()).hexdigest()]
+           for r in ev.report["results"]}
+    # the reductions themselves, on random data (an end-to-end render can round a last-bit
+    # difference away; these cannot): inner product, TV, the fused pass's energy terms
+    from vibr.render.fused import hessian_terms
+    from vibr.render.operators import dot
+    from vibr.render.tv import tv_value
+
+    rng = np.random.default_rng(0)
+    a, b = rng.standard_normal((2, 3, 301, 257)).astype(np.float32)
+    A = rng.random((9, 301, 257)).astype(np.float32)
+    _, terms = hessian_terms(A, None, a, b, None, 1.0, 0.0)
+    res["kernels"] = [float(v).hex() for v in (dot(a, b), tv_value(a), tv_value(a, False), *terms)]
+    print(json.dumps({"threads": numba.get_num_threads(), "results": res}), flush=True)

@@ -9,9 +9,9 @@ in task order; it does not schedule anything itself:
     one after the other in this process (the default).
 ``executor=N`` (int ≥ 2) or ``"processes:N"``
     N local processes (:class:`concurrent.futures.ProcessPoolExecutor`, *spawn* start
-    method). Each process gets ``NUMBA_NUM_THREADS = cores // N`` in its environment
-    before it starts (numba reads it once, when it is first imported), so that N processes
-    do not run N × cores threads on the cores.
+    method). Each process gets ``NUMBA_NUM_THREADS = cores // N`` (and the same for the
+    BLAS / OpenMP pools) in its environment before it starts (numba reads it once, when it
+    is first imported), so that N processes do not run N × cores threads on the cores.
 ``executor="local"`` or ``"local:N"``
     a Dask ``LocalCluster`` started for this call (N worker processes, default 2, one
     thread each, numba threads = cores // N) and closed at the end.
@@ -231,7 +231,9 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
     pending = list(range(len(tasks)))
     ctx = multiprocessing.get_context("spawn")
     pool = None
-    with _environ(**{_THREADS_VAR: threads}), progress(total=len(tasks), desc=desc) as bar:
+    # BLAS / OpenMP pools sized like numba's, as Dask's nanny does for its workers
+    blas = {k: threads for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    with _environ(**{_THREADS_VAR: threads}, **blas), progress(total=len(tasks), desc=desc) as bar:
         try:
             while pending:
                 if pool is None:

@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._jit import FASTMATH
+from .operators import _sum_in_order
 __all__ = ["tv_value", "TVProx"]
 
 
@@ -77,7 +78,7 @@ def _tv_value(u, coupled, wmap, use_w):
         if coupled:
             s += _sqrt_sum(acc, wr, use_w)
         rows[i] = s
-    return rows.sum()
+    return _sum_in_order(rows)  # not rows.sum(): a parallel reduction, thread-count dependent
 
 
 def tv_value(u, coupled: bool = True, weight=None) -> float:
