@@ -21,7 +21,7 @@ time is taken when the rendered image has been encoded and queued to the client
 
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
-    python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic]
+    python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic] [--encode]
 """
 
 from __future__ import annotations
@@ -167,6 +167,33 @@ def fountain(scene_dir: Path, scale: float) -> dict:
     return out
 
 
+def encode_ab(repeat: int = 7) -> None:
+    """The full view's PNG encoding: viser's own encoder (what ``set_background_image``
+    does without OpenCV) against :func:`vibr.viewer.app.encode_png` (zlib level 1), on a
+    768² image of the synthetic scene, alternating, medians."""
+    import imageio.v3 as iio
+
+    from vibr.synthetic import make_scene
+    from vibr.viewer.app import encode_png
+
+    img = np.clip(make_scene("handheld", n_views=1, width=768, height=768).views[0].image * 255 + 0.5,
+                  0, 255).astype(np.uint8)
+    fns = {"viser's encoder (imageio PNG, default level)": lambda: iio.imwrite("<bytes>", img, extension=".png"),
+           "encode_png (Pillow, zlib level 1)": lambda: encode_png(img)}
+    ts = {k: [] for k in fns}
+    size = {}
+    for _ in range(repeat):
+        for k, f in fns.items():
+            t0 = time.perf_counter()
+            size[k] = len(f())
+            ts[k].append(time.perf_counter() - t0)
+    print("| 768² PNG encoding | median s (min-max) | bytes |\n|---|---|---|")
+    for k in fns:
+        print(f"| {k} | {np.median(ts[k]):.3f} ({min(ts[k]):.3f}-{max(ts[k]):.3f}) | {size[k]} |")
+    a, b = fns
+    print(f"\nratio {np.median(ts[a]) / np.median(ts[b]):.1f}x; load average {os.getloadavg()[0]:.1f}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--updates", type=int, default=7, help="camera updates measured (default 7)")
@@ -174,7 +201,11 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-synthetic", action="store_true")
     ap.add_argument("--data", default=os.environ.get("VIBR_DATA", str(_REPO.parent / "shared" / "data")))
     ap.add_argument("--_startup", nargs=3, help=argparse.SUPPRESS)
+    ap.add_argument("--encode", action="store_true", help="only the PNG encoding comparison")
     a = ap.parse_args(argv)
+    if a.encode:
+        encode_ab()
+        return 0
     if a._startup:
         _startup_once(a._startup[0], float(a._startup[1]), a._startup[2])
         return 0
