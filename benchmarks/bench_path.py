@@ -200,9 +200,6 @@ def main():
         print(f"| {k} | {v} |")
 
 
-if __name__ == "__main__":
-    main()
-
 
 def ab_prepared(scene_dir, cache, scale=0.25, views=8, n=6, frames=60):
     """Per-frame time with and without the per-source depth slopes prepared once
@@ -266,3 +263,7 @@ def breakdown(scene_dir, cache, scale=0.25, views=8, frames=60, step=6):
     print(f"| **frame** | {tot:.3f} | |")
     print(f"\nsamples per frame: median {np.median([r['samples'] for r in rs]):.0f}; iterations: "
           f"{[r['iterations'] for r in rs]}; sources: {[len(r['views']) for r in rs]}")
+
+
+if __name__ == "__main__":
+    main()

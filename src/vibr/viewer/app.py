@@ -46,9 +46,9 @@ class ViewerOptions:
     settle_s : seconds the camera must be still before the full-size render
     path_out : where "export path" writes camera_path.json
     fps, seconds_per_keyframe : timing of the exported path (nerfstudio's fps / seconds)
-    warm_up : at start, render the first view's preview on a background thread while the
-        scene is drawn and the browser loads the page (numba loads its compiled kernels on
-        a process's first render; the preview's resized views are made once)
+    warm_up : at start, render a 32-px image on a background thread while the scene is
+        drawn and the browser loads the page: numba loads its compiled kernels on a
+        process's first render, which is then not the client's
     """
 
     host: str = "127.0.0.1"
@@ -200,15 +200,14 @@ class Viewer:
         return self.url
 
     def _warm_up(self) -> None:
-        """The preview of the first view (where a new client's camera is put), rendered and
-        discarded: a client's first render then finds the kernels and the preview's resized
-        views ready (it waits for this one on the renderer's lock)."""
+        """A 32-px render of the first view, discarded: the client's first render finds the
+        compiled kernels loaded (it waits for this one on the renderer's lock)."""
         s = self.settings
         cam = self.scene.views[0].camera
-        cam = cam.scaled(min(1.0, s.preview_long_side / max(cam.width, cam.height)))
+        cam = cam.scaled(min(1.0, 32 / max(cam.width, cam.height)))
         t0 = time.perf_counter()
         try:
-            self.renderer.warm_up(cam, s)
+            self.renderer.render(cam, s)
         except Exception:  # noqa: BLE001 - only time is lost; the client's own render reports
             logger.debug("viewer warm-up render failed", exc_info=True)
             return

@@ -40,7 +40,8 @@ class ViewSettings:
     """What the GUI controls (paper names; see :mod:`vibr.render.methods`).
 
     method : one of :data:`vibr.render.methods.METHODS` (default "gradient")
-    gamma : gradient-term weight (eq. energy_final), method "gradient" only
+    gamma : gradient-term weight (eq. energy_final), method "gradient" only (default 1.0,
+        not :data:`vibr.render.methods.DEFAULTS`' 0.25: docs/VIEWER.md, "Where the time goes")
     lam : TV weight, for intensities on [0, 255]
     n_views : number of source views (the best for the camera)
     preview_long_side : long side of the preview image while the camera moves (px)
@@ -72,13 +73,15 @@ class ViewSettings:
 @dataclass
 class ViewImage:
     """A render for the viewer: ``image`` H×W×3 float32 in [0, 1], the ``camera`` it is
-    for, the ``sources`` (view names) it used and ``seconds`` spent."""
+    for, the ``sources`` (view names) it used, ``seconds`` spent, the renderer's stage
+    ``times`` and its solver ``iterations``."""
 
     image: np.ndarray
     camera: Camera
     sources: list
     seconds: float
     times: dict = field(default_factory=dict)
+    iterations: int = 0
 
 
 class ViewRenderer:
@@ -159,14 +162,6 @@ class ViewRenderer:
         with self._lock:
             return self._render(camera, settings, should_stop)
 
-    def warm_up(self, camera: Camera, settings: ViewSettings) -> ViewImage:
-        """Render ``camera`` (a small one) and prepare every view's depth at full scale, so
-        that the next renders find the compiled kernels loaded and the per-source work done."""
-        with self._lock:
-            out = self._render(camera, settings, None)
-            self.prepared_for(self.scene, range(len(self.scene)))
-            return out
-
     def _render(self, camera: Camera, settings: ViewSettings, should_stop) -> ViewImage:
         t0 = time.perf_counter()
         if should_stop is not None and should_stop():
@@ -183,7 +178,7 @@ class ViewRenderer:
         res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb,
                      geometry_kw={"prepared": prepared})
         dt = time.perf_counter() - t0
-        return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times))
+        return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times), res.iterations)
 
 
 def scaled_scene(scene: Scene, s: float) -> Scene:
