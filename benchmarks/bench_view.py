@@ -22,7 +22,7 @@ time is taken when the rendered image has been encoded and queued to the client
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
     python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic]
-    python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared
+    python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu
                                            (A/B comparisons, alternating in one process)
 """
 
@@ -249,8 +249,9 @@ def ab_settings(size: int = 768, cameras: int = 2) -> None:
 
 def ab_overhead(size: int = 768, cameras: int = 2, repeat: int = 2) -> None:
     """Per-request overhead of the viewer: ``ViewRenderer.render`` against the bare
-    ``compute_samples`` + ``render_samples`` (renderer defaults) for the same camera and
-    sources, and bench_render's case (grid 3×3, centre view from the other 8), alternating."""
+    ``compute_samples`` + ``render_samples`` (the viewer's gamma and lam) for the same camera
+    and sources, and bench_render's case (grid 3×3, centre view from the other 8, same
+    settings), alternating."""
     from vibr.geometry import compute_samples
     from vibr.render import render_samples
     from vibr.synthetic import make_scene
@@ -271,7 +272,7 @@ def ab_overhead(size: int = 768, cameras: int = 2, repeat: int = 2) -> None:
     def direct(c, src=None, tgt=None):
         src = scene.subset(r.sources_for(c, 8)) if src is None else src
         t0 = time.perf_counter()
-        res = render_samples(compute_samples(src, tgt or c), "gradient")
+        res = render_samples(compute_samples(src, tgt or c), "gradient", gamma=st.gamma, lam=st.lam)
         return time.perf_counter() - t0, res.iterations
 
     fns = {"viewer (ViewRenderer.render)": viewer, "bare compute_samples + render_samples": direct,
@@ -314,6 +315,50 @@ def ab_prepared(size: int = 768, cameras: int = 4) -> None:
     print(f"identical images: {all(same)}; load average {os.getloadavg()[0]:.1f}")
 
 
+def browser_cpu(seconds: float = 20.0) -> None:
+    """CPU used by headless Chromium showing an idle viewer page (its WebGL scene drawn by
+    software on this machine) while nothing is rendered: the share of the 2 cores the
+    viewer's renders do not get while the browser runs on the same machine."""
+    import psutil
+    from playwright.sync_api import sync_playwright
+
+    from vibr.synthetic import make_scene
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer.browser import launch_chromium
+
+    scene = make_scene("handheld", n_views=6, width=128, height=96)
+    v = Viewer(scene, ViewerOptions(port=free_port(), settings=ViewSettings(n_views=4)))
+    me = psutil.Process()
+
+    def children_cpu():
+        t = 0.0
+        for p in me.children(recursive=True):
+            try:
+                c = p.cpu_times()
+                t += c.user + c.system
+            except psutil.Error:
+                pass
+        return t
+
+    url = v.start()
+    try:
+        with sync_playwright() as pw:
+            b = launch_chromium(pw)
+            page = b.new_page(viewport={"width": 800, "height": 800})
+            page.goto(url, timeout=60_000)
+            v.wait_for_image(kind="full", timeout=300)
+            time.sleep(3)
+            c0, w0, s0 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
+            time.sleep(seconds)
+            c1, w1, s1 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
+            b.close()
+    finally:
+        v.stop()
+    print(f"idle viewer page for {w1 - w0:.0f} s: browser processes {c1 - c0:.1f} CPU s "
+          f"({(c1 - c0) / (w1 - w0):.2f} cores), viewer process {s1 - s0:.1f} CPU s; "
+          f"load average {os.getloadavg()[0]:.1f}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--updates", type=int, default=7, help="camera updates measured (default 7)")
@@ -325,7 +370,11 @@ def main(argv=None) -> int:
     ap.add_argument("--ab-settings", action="store_true", help="only the render-settings comparison")
     ap.add_argument("--ab-overhead", action="store_true", help="only the viewer against the bare render")
     ap.add_argument("--ab-prepared", action="store_true", help="only kept against per-request depth preparation")
+    ap.add_argument("--browser-cpu", action="store_true", help="only the CPU an idle viewer page takes")
     a = ap.parse_args(argv)
+    if a.browser_cpu:
+        browser_cpu()
+        return 0
     if a.ab_prepared:
         ab_prepared()
         return 0
