@@ -13,6 +13,9 @@ Steps (the depth cache is a fresh folder under --out, so the first render estima
 5. popping: mean absolute change between consecutive frames (grey levels of 255) of run 1,
    max / median, and the change at the frames where the selected set changes;
 6. with --hard, the same path rendered with hard view selection (blend 0), for comparison.
+
+``--breakdown CACHE``: where a frame's time goes (``render_frame``'s stage times, medians
+over every 6th frame of the path after one warm-up frame, in this process).
 """
 
 from __future__ import annotations
@@ -95,8 +98,14 @@ def main():
     ap.add_argument("--ttff-only", metavar="CACHE",
                     help="only step 4, twice, with this cache folder (from an earlier run; the first "
                          "repetition fills the cache of resized views if it is empty)")
+    ap.add_argument("--breakdown", metavar="CACHE",
+                    help="only the per-frame stage times: frames of the path rendered in this process "
+                         "with the depth from this cache folder (from an earlier run)")
     a = ap.parse_args()
     scene = str(Path(a.data) / "strecha_fountain-P11")
+    if a.breakdown:
+        breakdown(scene, a.breakdown, scale=a.scale, views=a.views, frames=a.frames)
+        return
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = out / f"cache-{os.getpid()}"
@@ -191,9 +200,6 @@ def main():
         print(f"| {k} | {v} |")
 
 
-if __name__ == "__main__":
-    main()
-
 
 def ab_prepared(scene_dir, cache, scale=0.25, views=8, n=6, frames=60):
     """Per-frame time with and without the per-source depth slopes prepared once
@@ -223,3 +229,41 @@ def ab_prepared(scene_dir, cache, scale=0.25, views=8, n=6, frames=60):
     print(f"preparing all {len(sc)} sources once: {t_prep:.3f} s")
     for mode, t in times.items():
         print(f"{mode}: median {np.median(t):.3f} s per frame (min {min(t):.3f}, max {max(t):.3f}, n={len(t)})")
+
+
+def breakdown(scene_dir, cache, scale=0.25, views=8, frames=60, step=6):
+    """Median stage times of :func:`vibr.flythrough.render_frame` over frames 1, 1+step, ..."""
+    import tempfile
+
+    sys.path.insert(0, str(REPO / "src"))
+    from vibr.depthcache import load_scene_cached, scene_with_depth
+    from vibr.flythrough import FrameContext, prepare_sources, render_frame
+    from vibr.path import interpolate
+
+    t0 = time.perf_counter()
+    sc = scene_with_depth(load_scene_cached(scene_dir, scale=scale, cache_dir=cache), cache_dir=cache)
+    t_load = time.perf_counter() - t0
+    p = interpolate(sc, n_frames=frames)
+    ctx = FrameContext(sc, p.cameras, tempfile.mkdtemp(), n_views=views, overwrite=True)
+    t0 = time.perf_counter()
+    prepare_sources(ctx)
+    t_prep = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    render_frame(ctx, 0)
+    t_first = time.perf_counter() - t0
+    rs = [render_frame(ctx, i) for i in range(1, frames, step)]
+    print(f"scene + depth from the caches {t_load:.2f} s, per-source preparation {t_prep:.2f} s, "
+          f"first frame (kernels loaded) {t_first:.2f} s; {len(rs)} frames, load average "
+          f"{os.getloadavg()[0]:.1f}\n")
+    print("| stage | median s per frame | share |\n|---|---|---|")
+    tot = float(np.median([r["seconds"] for r in rs]))
+    for k in rs[0]["times"]:
+        m = float(np.median([r["times"].get(k, 0.0) for r in rs]))
+        print(f"| {k} | {m:.3f} | {100 * m / tot:.0f} % |")
+    print(f"| **frame** | {tot:.3f} | |")
+    print(f"\nsamples per frame: median {np.median([r['samples'] for r in rs]):.0f}; iterations: "
+          f"{[r['iterations'] for r in rs]}; sources: {[len(r['views']) for r in rs]}")
+
+
+if __name__ == "__main__":
+    main()

@@ -13,13 +13,17 @@ time is taken when the rendered image has been encoded and queued to the client
    camera and the preview rendered before it, as a user experiences it; the render time of
    the full image alone is given too.
 2. **fountain at scale 0.25** (``../shared/data/strecha_fountain-P11``, 11 views of
-   768×512, no depth maps): the time from process start to the first full view sent, cold
-   (depth estimated, into an empty depth cache) and warm (the depth cache filled by the
-   cold run), each in a fresh Python process.
+   768×512, no depth maps): the time from loading the scene to the first full view sent,
+   as ``vibr view --cache-dir CACHE`` does it, cold (photographs decoded and resized,
+   depth estimated, into an empty cache) and warm (the scene and depth caches filled by
+   the cold run), each in a fresh Python process (Chromium already open), with the time
+   of each stage.
 
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
     python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic]
+    python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu
+                                           (A/B comparisons, alternating in one process)
 """
 
 from __future__ import annotations
@@ -109,34 +113,73 @@ def synthetic(updates: int) -> dict:
     return {"preview": prev, "preview_render": prev_render, "full": full, "full_render": full_render}
 
 
+def _compiled_kernels() -> list:
+    """The numba kernels this process compiled instead of loading them from the cache."""
+    import gc
+
+    from numba.core.registry import CPUDispatcher
+
+    return [f"{d.py_func.__module__}.{d.__name__}" for d in gc.get_objects()
+            if isinstance(d, CPUDispatcher) and d.stats.cache_misses]
+
+
 def _startup_once(scene_dir: str, scale: float, cache_dir: str) -> None:
-    """In a fresh process: load, depth (cache), start, first full view in Chromium."""
-    t0 = time.perf_counter()
+    """In a fresh process, as ``vibr view --cache-dir CACHE`` does: load (scene cache),
+    depth (depth cache), start, first full view in Chromium; the time of each stage."""
+    t_proc = time.perf_counter()
     from playwright.sync_api import sync_playwright
 
-    from vibr.io import load_scene
+    from vibr.depthcache import load_scene_cached
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings, scene_with_depth
     from vibr.viewer.browser import launch_chromium
+
+    stages = {"imports": time.perf_counter() - t_proc}
+    cpu = {}
+    clock = [time.perf_counter(), time.process_time()]
+
+    def _lap():
+        """Wall seconds since the last lap (the process CPU seconds of all its threads,
+        less sensitive to a loaded machine, go to ``cpu`` under the stage's name)."""
+        w, c = time.perf_counter(), time.process_time()
+        dw, dc = w - clock[0], c - clock[1]
+        clock[:] = [w, c]
+        cpu[len(cpu)] = dc
+        return dw
 
     with sync_playwright() as pw:
         browser = launch_chromium(pw)  # the user's browser is already open
         t0 = time.perf_counter()
-        scene = load_scene(scene_dir, scale=scale)
+        clock[:] = [t0, time.process_time()]
+        scene = load_scene_cached(scene_dir, scale=scale, cache_dir=cache_dir)
+        stages["load scene"] = _lap()
         scene = scene_with_depth(scene, cache_dir=cache_dir)
+        stages["depth"] = _lap()
         t_depth = time.perf_counter() - t0
-        viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=ViewSettings(n_views=8)))
+        warm = os.environ.get("VIBR_BENCH_WARM_UP", "1") != "0"  # 0: ViewerOptions(warm_up=False)
+        viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=ViewSettings(n_views=8), warm_up=warm))
         try:
             url = viewer.start()
+            stages["viewer start (scene drawn)"] = _lap()
             page = browser.new_page(viewport={"width": 900, "height": 600})
             page.goto(url, timeout=60_000)
+            stages["page loaded"] = _lap()
+            pre = viewer.wait_for_image(kind="preview", timeout=300)
+            stages["first preview sent"] = _lap()
             rec = viewer.wait_for_image(kind="full", timeout=300)
+            stages["first full view sent"] = _lap()
             t_first = time.perf_counter() - t0
+            if rec is not None:
+                stages["  of which the full render"] = rec.render_seconds
+            if pre is not None:
+                stages["  of which the preview render"] = pre.render_seconds
         finally:
             viewer.stop()
             browser.close()
     print(json.dumps({"depth_s": t_depth, "first_full_s": t_first, "ok": rec is not None,
+                      "compiled_at_start": _compiled_kernels(),
                       "size": [rec.camera.width, rec.camera.height] if rec else None,
-                      "depth_source": scene.meta.get("depth_source")}))
+                      "depth_source": scene.meta.get("depth_source"), "stages": stages,
+                      "cpu": dict(zip([k for k in stages if k != "imports" and not k.startswith(" ")], cpu.values()))}))
 
 
 def fountain(scene_dir: Path, scale: float) -> dict:
@@ -152,6 +195,170 @@ def fountain(scene_dir: Path, scale: float) -> dict:
     return out
 
 
+def encode_ab(repeat: int = 7) -> None:
+    """The full view's PNG encoding: viser's own encoder (what ``set_background_image``
+    does without OpenCV) against :func:`vibr.viewer.app.encode_png` (zlib level 1), on a
+    768² image of the synthetic scene, alternating, medians."""
+    import imageio.v3 as iio
+
+    from vibr.synthetic import make_scene
+    from vibr.viewer.app import encode_png
+
+    img = np.clip(make_scene("handheld", n_views=1, width=768, height=768).views[0].image * 255 + 0.5,
+                  0, 255).astype(np.uint8)
+    fns = {"viser's encoder (imageio PNG, default level)": lambda: iio.imwrite("<bytes>", img, extension=".png"),
+           "encode_png (Pillow, zlib level 1)": lambda: encode_png(img)}
+    ts = {k: [] for k in fns}
+    size = {}
+    for _ in range(repeat):
+        for k, f in fns.items():
+            t0 = time.perf_counter()
+            size[k] = len(f())
+            ts[k].append(time.perf_counter() - t0)
+    print("| 768² PNG encoding | median s (min-max) | bytes |\n|---|---|---|")
+    for k in fns:
+        print(f"| {k} | {np.median(ts[k]):.3f} ({min(ts[k]):.3f}-{max(ts[k]):.3f}) | {size[k]} |")
+    a, b = fns
+    print(f"\nratio {np.median(ts[a]) / np.median(ts[b]):.1f}x; load average {os.getloadavg()[0]:.1f}")
+
+
+def ab_settings(size: int = 768, cameras: int = 2) -> None:
+    """The viewer's render with its former defaults (gamma 1.0, lam 0.1) against the
+    renderer's defaults (:data:`vibr.render.methods.DEFAULTS`), alternating, on the
+    benchmark's scene and cameras: FISTA iterations (deterministic) and times."""
+    from vibr.render.methods import DEFAULTS
+    from vibr.synthetic import make_scene
+    from vibr.viewer import ViewSettings
+    from vibr.viewer.renderer import ViewRenderer
+
+    scene = make_scene("handheld", n_views=9, width=size, height=size)
+    r = ViewRenderer(scene)
+    cams = [_midway(scene.views[0].camera, scene.views[1 + k].camera) for k in range(cameras + 1)]
+    variants = {"gamma 1.0, lam 0.1 (former ViewSettings)": ViewSettings(gamma=1.0, lam=0.1, n_views=8),
+                f"gamma {DEFAULTS['gamma']}, lam {DEFAULTS['lam']} (DEFAULTS)":
+                    ViewSettings(gamma=DEFAULTS["gamma"], lam=DEFAULTS["lam"], n_views=8)}
+    r.render(cams[0], next(iter(variants.values())))  # warm-up
+    print("| settings | camera | FISTA iterations | render s | solve s |\n|---|---|---|---|---|")
+    for k, cam in enumerate(cams[1:]):
+        for name, st in (variants.items() if k % 2 == 0 else reversed(variants.items())):
+            out = r.render(cam, st)
+            print(f"| {name} | {k + 1} | {out.iterations} | {out.seconds:.2f} | "
+                  f"{out.times['solve']:.2f} |", flush=True)
+    print(f"\nload average {os.getloadavg()[0]:.1f}")
+
+
+def ab_overhead(size: int = 768, cameras: int = 2, repeat: int = 2) -> None:
+    """Per-request overhead of the viewer: ``ViewRenderer.render`` against the bare
+    ``compute_samples`` + ``render_samples`` (the viewer's gamma and lam) for the same camera
+    and sources, and bench_render's case (grid 3×3, centre view from the other 8, same
+    settings), alternating."""
+    from vibr.geometry import compute_samples
+    from vibr.render import render_samples
+    from vibr.synthetic import make_scene
+    from vibr.viewer import ViewSettings
+    from vibr.viewer.renderer import ViewRenderer
+
+    scene = make_scene("handheld", n_views=9, width=size, height=size)
+    grid = make_scene("grid", width=size, height=size, grid=(3, 3))
+    gsrc, gt = grid.subset([0, 1, 2, 3, 5, 6, 7, 8]), grid.views[4].camera
+    r = ViewRenderer(scene)
+    st = ViewSettings(n_views=8)
+    cams = [_midway(scene.views[0].camera, scene.views[1 + k].camera) for k in range(cameras + 1)]
+
+    def viewer(c):
+        out = r.render(c, st)
+        return out.seconds, out.iterations
+
+    def direct(c, src=None, tgt=None):
+        src = scene.subset(r.sources_for(c, 8)) if src is None else src
+        t0 = time.perf_counter()
+        res = render_samples(compute_samples(src, tgt or c), "gradient", gamma=st.gamma, lam=st.lam)
+        return time.perf_counter() - t0, res.iterations
+
+    fns = {"viewer (ViewRenderer.render)": viewer, "bare compute_samples + render_samples": direct,
+           "bench_render's case (grid centre)": lambda c: direct(c, gsrc, gt)}
+    viewer(cams[0]), direct(cams[0], gsrc, gt)  # warm-up
+    print("| variant | camera | seconds | FISTA iterations |\n|---|---|---|---|")
+    for _ in range(repeat):
+        for name, f in fns.items():
+            for k, c in enumerate(cams[1:]):
+                t, it = f(c)
+                print(f"| {name} | {k + 1} | {t:.2f} | {it} |", flush=True)
+    print(f"\nload average {os.getloadavg()[0]:.1f}")
+
+
+def ab_prepared(size: int = 768, cameras: int = 4) -> None:
+    """Full renders with each source's depth preparation kept for the session against
+    prepared per request (``PREPARED_BUDGET_BYTES`` = 0), two renderers, alternating."""
+    import vibr.viewer.renderer as R
+    from vibr.synthetic import make_scene
+
+    scene = make_scene("handheld", n_views=9, width=size, height=size)
+    st = R.ViewSettings(n_views=8)
+    cams = [_midway(scene.views[0].camera, scene.views[1 + k % 8].camera) for k in range(cameras + 1)]
+    budget = R.PREPARED_BUDGET_BYTES
+    rs = {"kept": R.ViewRenderer(scene), "per request": R.ViewRenderer(scene)}
+    rs["kept"].render(cams[0], st)
+    tot, geo, same = {k: [] for k in rs}, {k: [] for k in rs}, []
+    for k in range(1, cameras + 1):
+        imgs = []
+        for mode in (("kept", "per request") if k % 2 else ("per request", "kept")):
+            R.PREPARED_BUDGET_BYTES = budget if mode == "kept" else 0
+            out = rs[mode].render(cams[k], st)
+            tot[mode].append(out.seconds)
+            geo[mode].append(out.times["geometry"])
+            imgs.append(out.image)
+        same.append(np.array_equal(*imgs))
+    R.PREPARED_BUDGET_BYTES = budget
+    for m in rs:
+        print(f"{m}: render {_stats(tot[m])}; geometry stage {_stats(geo[m])}")
+    print(f"identical images: {all(same)}; load average {os.getloadavg()[0]:.1f}")
+
+
+def browser_cpu(seconds: float = 20.0) -> None:
+    """CPU used by headless Chromium showing an idle viewer page (its WebGL scene drawn by
+    software on this machine) while nothing is rendered: the share of the 2 cores the
+    viewer's renders do not get while the browser runs on the same machine."""
+    import psutil
+    from playwright.sync_api import sync_playwright
+
+    from vibr.synthetic import make_scene
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer.browser import launch_chromium
+
+    scene = make_scene("handheld", n_views=6, width=128, height=96)
+    v = Viewer(scene, ViewerOptions(port=free_port(), settings=ViewSettings(n_views=4)))
+    me = psutil.Process()
+
+    def children_cpu():
+        t = 0.0
+        for p in me.children(recursive=True):
+            try:
+                c = p.cpu_times()
+                t += c.user + c.system
+            except psutil.Error:
+                pass
+        return t
+
+    url = v.start()
+    try:
+        with sync_playwright() as pw:
+            b = launch_chromium(pw)
+            page = b.new_page(viewport={"width": 800, "height": 800})
+            page.goto(url, timeout=60_000)
+            v.wait_for_image(kind="full", timeout=300)
+            time.sleep(3)
+            c0, w0, s0 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
+            time.sleep(seconds)
+            c1, w1, s1 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
+            b.close()
+    finally:
+        v.stop()
+    print(f"idle viewer page for {w1 - w0:.0f} s: browser processes {c1 - c0:.1f} CPU s "
+          f"({(c1 - c0) / (w1 - w0):.2f} cores), viewer process {s1 - s0:.1f} CPU s; "
+          f"load average {os.getloadavg()[0]:.1f}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--updates", type=int, default=7, help="camera updates measured (default 7)")
@@ -159,7 +366,27 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-synthetic", action="store_true")
     ap.add_argument("--data", default=os.environ.get("VIBR_DATA", str(_REPO.parent / "shared" / "data")))
     ap.add_argument("--_startup", nargs=3, help=argparse.SUPPRESS)
+    ap.add_argument("--encode", action="store_true", help="only the PNG encoding comparison")
+    ap.add_argument("--ab-settings", action="store_true", help="only the render-settings comparison")
+    ap.add_argument("--ab-overhead", action="store_true", help="only the viewer against the bare render")
+    ap.add_argument("--ab-prepared", action="store_true", help="only kept against per-request depth preparation")
+    ap.add_argument("--browser-cpu", action="store_true", help="only the CPU an idle viewer page takes")
     a = ap.parse_args(argv)
+    if a.browser_cpu:
+        browser_cpu()
+        return 0
+    if a.ab_prepared:
+        ab_prepared()
+        return 0
+    if a.ab_overhead:
+        ab_overhead()
+        return 0
+    if a.ab_settings:
+        ab_settings()
+        return 0
+    if a.encode:
+        encode_ab()
+        return 0
     if a._startup:
         _startup_once(a._startup[0], float(a._startup[1]), a._startup[2])
         return 0
@@ -177,6 +404,10 @@ def main(argv=None) -> int:
                   f"{f['cold']['first_full_s']:6.1f} s  (depth {f['cold']['depth_s']:.1f} s)", "< 60 s"),
                  ("fountain ×0.25: start → first full view, depth cache",
                   f"{f['warm']['first_full_s']:6.1f} s  (depth {f['warm']['depth_s']:.2f} s)", "< 10 s")]
+        for label in ("cold", "warm"):
+            print(f"\nfountain start, {label}: " + ", ".join(f"{k} {v:.2f} s" for k, v in f[label]["stages"].items()))
+            print(f"  process CPU seconds (all threads): " + ", ".join(f"{k} {v:.2f}" for k, v in f[label]["cpu"].items()))
+            print(f"  kernels compiled in that process (not loaded from numba's cache): {f[label]['compiled_at_start']}")
     print(f"\n| measurement | median (spread) | target |\n|---|---|---|")
     for r in rows:
         print(f"| {r[0]} | {r[1].strip()} | {r[2]} |")

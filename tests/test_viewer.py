@@ -249,3 +249,52 @@ def test_previews_render_from_views_at_their_scale(tiny_scene):
     assert r.scene_for(tiny_scene.views[0].camera) is tiny_scene  # full size: the views as they are
     out = r.render(small, ViewSettings(n_views=3))
     assert out.image.shape == (24, 32, 3)
+
+
+def test_kept_depth_preparation_gives_the_per_request_image(tiny_scene, monkeypatch):
+    """The per-source depth preparation the renderer keeps for the session (full size and
+    each preview scale) renders exactly what preparing it per request renders."""
+    import vibr.viewer.renderer as R
+    from vibr.render import render
+
+    r = R.ViewRenderer(tiny_scene)
+    cams = [tiny_scene.views[0].camera, tiny_scene.views[2].camera.scaled(0.5)]
+    kept = [r.render(c, ViewSettings(n_views=3)) for c in cams + cams]
+    assert set(r._prepared) == {1.0, 0.5} and len(r._prepared[1.0]) >= 3
+    for c, out in zip(cams + cams, kept):
+        src = r.scene_for(c).subset(r.sources_for(c, 3))
+        assert np.array_equal(out.image, render(src, c, gamma=1.0, lam=0.1).image)  # ViewSettings()
+    monkeypatch.setattr(R, "PREPARED_BUDGET_BYTES", 0)  # nothing kept: prepared per request
+    r0 = R.ViewRenderer(tiny_scene)
+    assert np.array_equal(r0.render(cams[0], ViewSettings(n_views=3)).image, kept[0].image)
+    assert r0._prepared_bytes == 0
+
+
+def test_full_view_png_is_lossless():
+    import io
+
+    import imageio.v3 as iio
+
+    from vibr.viewer.app import encode_png
+
+    img = np.random.default_rng(0).integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    assert np.array_equal(iio.imread(io.BytesIO(encode_png(img))), img)
+
+
+def test_identical_camera_echo_is_not_a_new_request(tiny_scene):
+    """The browser reports one move several times: only a changed camera makes a request."""
+    from types import SimpleNamespace
+
+    from vibr.viewer import Viewer, ViewerOptions
+
+    v = Viewer(tiny_scene, ViewerOptions(warm_up=False))
+    got = []
+    v._workers[7] = SimpleNamespace(submit=lambda payload, t_update=None: got.append(payload))
+    v._hide_frustums_at = lambda pos: None
+    cam = SimpleNamespace(wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 0.0), fov=0.8, aspect=1.5,
+                          client=SimpleNamespace(client_id=7))
+    v._on_camera(cam)
+    v._on_camera(cam)
+    assert len(got) == 1
+    v._on_camera(SimpleNamespace(**dict(vars(cam), position=(0.0, 0.0, 0.1))))
+    assert len(got) == 2

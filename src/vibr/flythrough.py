@@ -151,7 +151,8 @@ def view_weights(sources: Scene, camera: Camera, n_views: int | None, *, blend: 
 
 def render_frame(ctx: FrameContext, i: int) -> dict:
     """Render frame ``i`` of the path and write it (the per-frame task, see the module
-    docstring). Returns a small dict: index, skipped, seconds, views and weights."""
+    docstring). Returns a small dict: index, skipped, seconds, views and weights, and the
+    seconds of each stage (``times``)."""
     from .geometry import compute_samples
     from .io import write_image
     from .render import render_samples
@@ -161,6 +162,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
         return {"index": i, "skipped": True, "seconds": 0.0}
     t0 = time.perf_counter()
     cam = ctx.cameras[i]
+    tm = {}
     w = view_weights(ctx.sources, cam, ctx.n_views, blend=ctx.blend,
                      view_points=ctx.view_points or None)
     idx = np.flatnonzero(w > 0)
@@ -168,18 +170,24 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
         raise VibrInputError(f"frame {i}: no source view sees it (camera {cam})")
     views = [ctx.sources.views[k] for k in idx]
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
+    tm["view weights"] = -t0 + (t := time.perf_counter())
     try:
         samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
     except VibrInputError as exc:
         raise VibrInputError(f"frame {i}: {exc.problem}") from None
+    tm["geometry"] = -t + (t := time.perf_counter())
     ws = w[idx]
     if np.any(ws < 1.0):
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
                          target_centre=cam.centre, **ctx.params)
+    tm["render"] = -t + (t := time.perf_counter())
     write_image(out, res.image, bits=8)
+    tm["write"] = time.perf_counter() - t
+    tm.update({f"geometry: {k}": v for k, v in samples.meta.get("times", {}).items()})
+    tm.update({f"render: {k}": v for k, v in res.times.items() if k != "total"})
     return {"index": i, "skipped": False, "seconds": time.perf_counter() - t0,
-            "views": [v.name for v in views], "weights": ws.tolist(),
+            "views": [v.name for v in views], "weights": ws.tolist(), "times": tm, "samples": len(samples),
             "coverage": float(res.coverage.mean()), "iterations": res.iterations}
 
 

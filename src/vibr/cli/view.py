@@ -39,6 +39,9 @@ def register(sub) -> None:
     add_method_option(p)
     p.add_argument("--views", type=int, default=8, metavar="K", help="initial number of source views (default 8)")
     p.add_argument("--max-points", type=int, default=300_000, help="points in the point cloud (default 300000)")
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="cache of the loaded scene and of estimated depth (default $VIBR_CACHE_DIR or "
+                        "~/.cache/vibr; the same cache as 'vibr render --path')")
     p.add_argument("--path-out", default="camera_path.json", help="file 'export path' writes (default camera_path.json)")
     add_quiet(p)
     p.set_defaults(func=run)
@@ -46,7 +49,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..errors import VibrInputError
-    from ..io import load_scene
+    from ..depthcache import load_scene_cached
     from ..viewer import Viewer, ViewerOptions, ViewSettings, check_port_free, scene_with_depth
 
     if not 0 <= args.port <= 65535:
@@ -55,11 +58,12 @@ def run(args) -> int:
         raise VibrInputError("--views must be >= 1 and --max-points >= 0")
     settings = ViewSettings(method=args.method, n_views=args.views)
     check_port_free(args.host, args.port)  # fail before the (slow) loading
-    scene = load_scene(args.scene, scale=args.scale)
+    # the resized photographs and the estimated depth come from the on-disk cache when there
+    scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=args.cache_dir)
     if not scene.has_depth:
         logger.info("%s has no depth maps: estimating them once (cached for the next start) ...", scene.name)
         t0 = time.perf_counter()
-        scene = scene_with_depth(scene)
+        scene = scene_with_depth(scene, cache_dir=args.cache_dir)
         logger.info("depth ready in %.1f s", time.perf_counter() - t0)
     # a browser's aborted preconnect is logged with a traceback by websockets: not an error here
     logging.getLogger("websockets.server").setLevel(logging.CRITICAL)

@@ -30,7 +30,8 @@ from .worker import LatestRequestWorker, Request
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "check_port_free"]
+__all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "check_port_free", "encode_png",
+           "send_background"]
 
 _SOURCE_COLOUR = (255, 96, 0)
 _FRUSTUM_COLOUR = (60, 60, 60)
@@ -45,6 +46,9 @@ class ViewerOptions:
     settle_s : seconds the camera must be still before the full-size render
     path_out : where "export path" writes camera_path.json
     fps, seconds_per_keyframe : timing of the exported path (nerfstudio's fps / seconds)
+    warm_up : at start, render a 32-px image on a background thread while the scene is
+        drawn and the browser loads the page: numba loads its compiled kernels on a
+        process's first render, which is then not the client's
     """
 
     host: str = "127.0.0.1"
@@ -54,6 +58,7 @@ class ViewerOptions:
     path_out: str = "camera_path.json"
     fps: float = 24.0
     seconds_per_keyframe: float = 1.0
+    warm_up: bool = True
     settings: ViewSettings = field(default_factory=ViewSettings)
 
 
@@ -88,6 +93,37 @@ class SentImage:
     sources: list
     seconds: float
     render_seconds: float
+
+
+def encode_png(img: np.ndarray, compress_level: int = 1) -> bytes:
+    """Lossless PNG bytes of an H×W×3 uint8 image with zlib level ``compress_level``.
+
+    viser's own encoder (Pillow's default level when OpenCV is absent) is several times
+    slower for slightly smaller files (measured in docs/VIEWER.md, "Where the time goes")."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(img)).save(buf, format="PNG", compress_level=compress_level)
+    return buf.getvalue()
+
+
+def send_background(client, img: np.ndarray, kind: str) -> None:
+    """Show ``img`` (uint8) as ``client``'s background: a preview as JPEG (quality 90), a
+    full-size view losslessly as PNG (:func:`encode_png`), queued as viser's own
+    ``BackgroundImageMessage``; through ``set_background_image`` (slower PNG encoding)
+    when this viser has no such message."""
+    if kind == "preview":
+        client.scene.set_background_image(img, format="jpeg", jpeg_quality=90)
+        return
+    try:
+        from viser import _messages
+
+        queue = client.scene._websock_interface.queue_message
+        msg = _messages.BackgroundImageMessage(format="png", rgb_data=encode_png(img), depth_data=None)
+    except (ImportError, AttributeError, TypeError):
+        client.scene.set_background_image(img, format="png")
+        return
+    queue(msg)
 
 
 def check_port_free(host: str, port: int) -> None:
@@ -151,6 +187,8 @@ class Viewer:
             server.stop()
             raise VibrInputError(f"port {o.port} on {o.host} is not available")
         self.server = server
+        if o.warm_up:
+            threading.Thread(target=self._warm_up, name="vibr-view-warm-up", daemon=True).start()
         try:
             self._draw_scene()
             self._add_gui()
@@ -160,6 +198,20 @@ class Viewer:
             self.stop()
             raise
         return self.url
+
+    def _warm_up(self) -> None:
+        """A 32-px render of the first view, discarded: the client's first render finds the
+        compiled kernels loaded (it waits for this one on the renderer's lock)."""
+        s = self.settings
+        cam = self.scene.views[0].camera
+        cam = cam.scaled(min(1.0, 32 / max(cam.width, cam.height)))
+        t0 = time.perf_counter()
+        try:
+            self.renderer.render(cam, s)
+        except Exception:  # noqa: BLE001 - only time is lost; the client's own render reports
+            logger.debug("viewer warm-up render failed", exc_info=True)
+            return
+        logger.info("viewer: warm-up render in %.2f s", time.perf_counter() - t0)
 
     @property
     def port(self) -> int:
@@ -374,9 +426,12 @@ class Viewer:
         st = CameraState.of(cam)
         cid = cam.client.client_id
         with self._lock:
+            same = self._states.get(cid) == st
             self._states[cid] = st
             w = self._workers.get(cid)
-        if w is not None:
+        # the browser often reports one move several times: an identical camera would only
+        # abandon or repeat the render of the request already made for it
+        if w is not None and not same:
             w.submit((st, self.settings), t_update=t)
         self._hide_frustums_at(st.position)
 
@@ -403,10 +458,7 @@ class Viewer:
         if kind == "full" and stale is not None and stale():
             return
         img = np.clip(out.image * 255.0 + 0.5, 0, 255).astype(np.uint8)
-        if kind == "preview":
-            client.scene.set_background_image(img, format="jpeg", jpeg_quality=90)
-        else:
-            client.scene.set_background_image(img, format="png")
+        send_background(client, img, kind)
         client.flush()
         dt = time.perf_counter() - req.t_update
         rec = SentImage(img, cam, kind, req.seq, out.sources, dt, out.seconds)

@@ -26,6 +26,11 @@ logger = logging.getLogger(__name__)
 __all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scaled_scene", "scene_with_depth"]
 
 
+#: Memory the per-source depth preparation kept for a session may take (bytes): three
+#: float64 maps per view (fountain at scale 0.25, 11 views of 768×512: 104 MB).
+PREPARED_BUDGET_BYTES = 1 << 30
+
+
 class RenderAbandoned(Exception):
     """A render stopped early because its request became stale."""
 
@@ -35,7 +40,8 @@ class ViewSettings:
     """What the GUI controls (paper names; see :mod:`vibr.render.methods`).
 
     method : one of :data:`vibr.render.methods.METHODS` (default "gradient")
-    gamma : gradient-term weight (eq. energy_final), method "gradient" only
+    gamma : gradient-term weight (eq. energy_final), method "gradient" only (default 1.0,
+        not :data:`vibr.render.methods.DEFAULTS`' 0.25: docs/VIEWER.md, "Where the time goes")
     lam : TV weight, for intensities on [0, 255]
     n_views : number of source views (the best for the camera)
     preview_long_side : long side of the preview image while the camera moves (px)
@@ -67,13 +73,15 @@ class ViewSettings:
 @dataclass
 class ViewImage:
     """A render for the viewer: ``image`` H×W×3 float32 in [0, 1], the ``camera`` it is
-    for, the ``sources`` (view names) it used and ``seconds`` spent."""
+    for, the ``sources`` (view names) it used, ``seconds`` spent, the renderer's stage
+    ``times`` and its solver ``iterations``."""
 
     image: np.ndarray
     camera: Camera
     sources: list
     seconds: float
     times: dict = field(default_factory=dict)
+    iterations: int = 0
 
 
 class ViewRenderer:
@@ -94,6 +102,10 @@ class ViewRenderer:
         self.scene = scene
         self._long_side = max(max(v.shape) for v in scene.views)
         self._scaled: dict[float, Scene] = {1.0: scene}
+        # per scene scale: view name -> prepare_depth's (z, z_x, z_y), computed once per
+        # session instead of once per request, within a memory budget
+        self._prepared: dict[float, dict[str, tuple]] = {}
+        self._prepared_bytes = 0
         # one render at a time: numba's default (workqueue) threading layer must not be
         # entered from two threads at once, and renders are CPU-bound anyway
         self._lock = threading.Lock()
@@ -113,6 +125,26 @@ class ViewRenderer:
         if s not in self._scaled:
             self._scaled[s] = scaled_scene(self.scene, s)
         return self._scaled[s]
+
+    def prepared_for(self, scene: Scene, idx) -> dict:
+        """``view name → (z, z_x, z_y)`` (:func:`vibr.geometry.prepare_depth`, the geometry
+        stage's defaults) of the views ``idx`` of ``scene`` (this renderer's scene or one of
+        its :meth:`scene_for` scalings): target-independent, so kept for the session (up to
+        :data:`PREPARED_BUDGET_BYTES`; views beyond it are prepared per request)."""
+        from ..geometry import prepare_depth
+
+        key = float(scene.meta.get("viewer_scale", 1.0))
+        cache = self._prepared.setdefault(key, {})
+        for k in idx:
+            v = scene.views[k]
+            if v.name in cache:
+                continue
+            need = 3 * 8 * v.depth.size
+            if self._prepared_bytes + need > PREPARED_BUDGET_BYTES:
+                continue
+            cache[v.name] = prepare_depth(v)
+            self._prepared_bytes += need
+        return cache
 
     def sources_for(self, camera: Camera, n_views: int) -> list[int]:
         """Indices of the ``n_views`` best views for ``camera``."""
@@ -135,15 +167,18 @@ class ViewRenderer:
         if should_stop is not None and should_stop():
             raise RenderAbandoned()
         idx = self.sources_for(camera, settings.n_views)
-        src = self.scene_for(camera).subset(idx)
+        scene = self.scene_for(camera)
+        src = scene.subset(idx)
+        prepared = self.prepared_for(scene, idx)
         cb = None
         if should_stop is not None:
             def cb(*_):
                 if should_stop():
                     raise RenderAbandoned()
-        res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb)
+        res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb,
+                     geometry_kw={"prepared": prepared})
         dt = time.perf_counter() - t0
-        return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times))
+        return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times), res.iterations)
 
 
 def scaled_scene(scene: Scene, s: float) -> Scene:
