@@ -137,16 +137,23 @@ def _warp_band_hsums(I, srcs, A, b, v, w, hv, wv, h0, h1, ib0, ib1, radius, OK, 
         px = A[v, 0, 1] * ii + A[v, 0, 2] + w * b[v, 0]
         py = A[v, 1, 1] * ii + A[v, 1, 2] + w * b[v, 1]
         pz = A[v, 2, 1] * ii + A[v, 2, 2] + w * b[v, 2]
+        # affine along the row (A[v, 2, 0] = 0: parallel cameras, light fields): the same
+        # 1/qz for the whole row, one division per row instead of one per pixel
+        affine = A[v, 2, 0] == 0.0 and pz > 1e-12
+        iz_row = 1.0 / pz if affine else 0.0
         for j in range(W):
             qx = px + A[v, 0, 0] * j
             qy = py + A[v, 1, 0] * j
-            qz = pz + A[v, 2, 0] * j
-            if qz <= 1e-12:
-                if inband:
-                    OK[v, ii - ib0, j] = 0
-                Jrow[j] = 0.0
-                continue
-            iz = 1.0 / qz
+            if affine:
+                iz = iz_row
+            else:
+                qz = pz + A[v, 2, 0] * j
+                if qz <= 1e-12:
+                    if inband:
+                        OK[v, ii - ib0, j] = 0
+                    Jrow[j] = 0.0
+                    continue
+                iz = 1.0 / qz
             x = qx * iz
             y = qy * iz
             if inband:
@@ -557,6 +564,39 @@ def support_weights(I, offs, sigma_c, sigma_s, guide):
     return wts, wI, sd
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def _window_sums_inside(i, j, v, wts, wI, offs, srcs, cx, cy, cz, ex0, ex1, ex2, ey0, ey1, ey2):
+    """The weighted window sums ``(Σ ω J, Σ ω J², Σ wI J)`` of :func:`_plane_cost` for a
+    window whose samples all land inside source ``v`` (no clamping, no test per sample)."""
+    sJ = 0.0
+    sJJ = 0.0
+    sIJ = 0.0
+    if ex2 == 0.0 and ey2 == 0.0:
+        # affine homography (parallel cameras: light fields): every sample has the
+        # centre's 1/pz, computed once (the same numbers, one division per view instead
+        # of one per sample)
+        iz = 1.0 / cz
+        for k in range(offs.shape[0]):
+            dy = offs[k, 0]
+            dx = offs[k, 1]
+            q = _bilinear_inside(srcs, v, (cx + dx * ex0 + dy * ey0) * iz, (cy + dx * ex1 + dy * ey1) * iz)
+            wq = wts[i, j, k] * q
+            sJ += wq
+            sJJ += wq * q
+            sIJ += wI[i, j, k] * q
+    else:
+        for k in range(offs.shape[0]):
+            dy = offs[k, 0]
+            dx = offs[k, 1]
+            iz = 1.0 / (cz + dx * ex2 + dy * ey2)
+            q = _bilinear_inside(srcs, v, (cx + dx * ex0 + dy * ey0) * iz, (cy + dx * ex1 + dy * ey1) * iz)
+            wq = wts[i, j, k] * q
+            sJ += wq
+            sJJ += wq * q
+            sIJ += wI[i, j, k] * q
+    return sJ, sJJ, sIJ
+
+
 @njit(cache=True, fastmath=True)
 def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs, lam1):
     """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
@@ -622,18 +662,8 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
             if not inside:
                 break
         if inside:
-            for k in range(nwin):
-                wk = wts[i, j, k]
-                dy = offs[k, 0]
-                dx = offs[k, 1]
-                iz = 1.0 / (cz + dx * ex2 + dy * ey2)
-                x = (cx + dx * ex0 + dy * ey0) * iz
-                y = (cy + dx * ex1 + dy * ey1) * iz
-                q = _bilinear_inside(srcs, v, x, y)
-                wq = wk * q
-                sJ += wq
-                sJJ += wq * q
-                sIJ += wI[i, j, k] * q
+            sJ, sJJ, sIJ = _window_sums_inside(i, j, v, wts, wI, offs, srcs, cx, cy, cz, ex0, ex1,
+                                               ex2, ey0, ey1, ey2)
             vJ = sJJ - sJ * sJ
             if vJ < 0.0:
                 vJ = 0.0
