@@ -177,6 +177,19 @@ def variant_table(reports):
     return "\n".join(lines)
 
 
+def targets(reports):
+    """The issue's two targets, checked on the reports given."""
+    best, fountain = [], []
+    for rep in reports:
+        r = rep["rows"]
+        v = r[f"vibr[{CHOSEN}]"]
+        best.append(v["ause"] < min(r["baseline: sample spread"]["ause"], r["baseline: 1/views"]["ause"]))
+        if rep["case"].startswith("fountain"):
+            fountain.append(f"{rep['case']} {v['spearman']:.2f} ({'met' if v['spearman'] >= 0.4 else '**not met**'})")
+    return (f"Targets: vibr's σ has the lowest AUSE on {sum(best)} of {len(best)} cases; Spearman ρ ≥ 0.4 on "
+            f"fountain: {', '.join(fountain) or 'no fountain case run'}.")
+
+
 SECTION = "## Uncertainty: calibration of the per-pixel σ (issue 28)"
 BEGIN, END = "<!-- uncert:begin -->", "<!-- uncert:end -->"
 
@@ -191,7 +204,7 @@ def write_docs(reports, cmd, seconds):
             "image with a 2-pixel border excluded (push–pull filled pixels included). vibr σ, sample spread and "
             "1/views are scored against the same `gradient` render; the ULR columns against a ULR render.\n\n"
             f"{table(reports)}\n\nThe terms of vibr's σ² (the choice: `{CHOSEN}`), AUSE / ρ:\n\n"
-            f"{variant_table(reports)}\n")
+            f"{variant_table(reports)}\n\n{targets(reports)}\n")
     body = f"{BEGIN}\n{body}{END}\n"
     if BEGIN in text and END in text:
         pre, rest = text.split(BEGIN, 1)
@@ -323,6 +336,7 @@ def main(argv=None):
     print(table(reports))
     print()
     print(variant_table(reports))
+    print(targets(reports))
     if a.write_docs:
         cmd = "python benchmarks/uncertainty_table.py --write-docs" + (
             "" if a.cases == ",".join(all_cases()) else f" --cases {shlex.quote(a.cases)}")
