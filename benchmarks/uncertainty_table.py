@@ -341,7 +341,8 @@ def main(argv=None):
         cmd = "python benchmarks/uncertainty_table.py --write-docs" + (
             "" if a.cases == ",".join(all_cases()) else f" --cases {shlex.quote(a.cases)}")
         if a.from_json:
-            cmd = (f"python benchmarks/uncertainty_table.py --out {a.from_json}`, then `"
+            cmd = (f"python benchmarks/uncertainty_table.py --cache CACHE --out {a.from_json} --cases …` "
+                   "(processes in parallel, one per group of cases; CACHE keeps the prepared scenes), then `"
                    f"{cmd} --from-json {a.from_json}")
         write_docs(reports, cmd, time.perf_counter() - t0)
         print("wrote docs/RESULTS.md")
