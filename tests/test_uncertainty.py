@@ -213,3 +213,45 @@ def test_cli_eval_uncertainty_report_and_plot(tmp_path):
         assert 0 <= u["ause"] < 1 and -1 <= u["spearman"] <= 1 and len(u["curve"]) == len(u["oracle"])
     img = iio.imread(r["figures"]["sparsification"])
     assert img.ndim == 3 and img.shape[0] > 100
+
+
+def test_sample_statistics_one_pass_matches_separate_splats(grid):
+    """The one-pass kernel's three splats equal the residual spread, ``(Σ w B)² / Σ w² B``
+    and the weighted mean of ``sigma_z² ‖∂tau/∂z‖²`` computed by separate splats."""
+    from vibr.geometry import compute_samples
+    from vibr.render.operators import Splat
+    from vibr.render.uncertainty import residual_spread, sample_statistics
+
+    src, tg = grid
+    S = compute_samples(src, tg.camera)
+    sp = Splat(S.xy, S.target_shape)
+    rng = np.random.default_rng(0)
+    w = rng.uniform(0.1, 2.0, sp.n)
+    u = rng.random((3,) + S.target_shape).astype(np.float32)
+    sz = rng.uniform(0.0, 0.3, sp.n)
+    ws = sp.adjoint(np.ones(sp.n), w)
+    st = sample_statistics(sp, w, S.colour, u, ws, sz, S.dtau_dz)
+    ok = ws > 0
+    assert ok.mean() > 0.9
+    assert np.allclose(st["s2"], residual_spread(sp, w, S.colour, u, ws), rtol=1e-9, atol=1e-12)
+    w2 = sp.adjoint(np.ones(sp.n), w * w)
+    assert np.allclose(st["n_eff"][ok], ws[ok] ** 2 / w2[ok], rtol=1e-9)
+    assert np.all(st["n_eff"][~ok] == 0)
+    pv = sp.adjoint(sz ** 2 * (S.dtau_dz ** 2).sum(1), w)
+    assert np.allclose(st["pos_var"][ok], pv[ok] / ws[ok], rtol=1e-9)
+    # Cauchy–Schwarz: (Σ w B)² ≤ Σ w² B · Σ B, so n_eff ≤ Σ B, equal for equal weights
+    nb = sp.adjoint(np.ones(sp.n))
+    assert np.all(st["n_eff"][ok] <= nb[ok] * (1 + 1e-9))
+    eq = sample_statistics(sp, np.ones(sp.n), S.colour, u, nb)
+    assert np.all(eq["pos_var"] == 0)
+    assert np.allclose(eq["n_eff"][ok], nb[ok], rtol=1e-9)
+
+
+def test_hole_distance():
+    from vibr.render.uncertainty import hole_distance
+
+    cov = np.ones((9, 11), bool)
+    assert np.all(np.isinf(hole_distance(cov)))
+    cov[4, 5] = False
+    d = hole_distance(cov)
+    assert d[4, 5] == 0 and d[4, 8] == pytest.approx(3.0) and d[1, 1] == pytest.approx(5.0)

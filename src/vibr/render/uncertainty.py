@@ -16,9 +16,15 @@ around the rendered image,
 
     s²(p) = Σ_km W_km B_kmp ‖v_k(m) − (B_k u)(m)‖² / (3 Σ_km W_km B_kmp)     (grey levels²).
 
-The rendered view's standard deviation is
+The spread is the variance of one sample; the weighted mean of ``n_eff = (Σ W B)² / Σ W² B``
+samples has the variance ``s²/n_eff`` on top (the standard error), so the spread term is
+``s²·(1 + 1/n_eff)``. Pixels next to a push–pull filled region border a disocclusion, where
+the depth is least reliable: they get ``(σ_hole / (1 + d))²`` with ``d`` the distance in
+pixels to the nearest filled pixel (:func:`hole_distance`). The rendered view's standard
+deviation is
 
-    σ(p) = min(σ_hole, sqrt(1/diag(H)_p + s²(p)))   where the samples cover p,
+    σ(p) = min(σ_hole, sqrt(1/diag(H)_p + s²(p)·(1 + 1/n_eff(p)) + (σ_hole/(1 + d(p)))²))
+                                                     where the samples cover p,
     σ(p) = σ_hole                                   where push–pull filled it,
 
 with ``σ_hole = s / √12`` the standard deviation of an intensity known only to lie in
@@ -42,7 +48,8 @@ from .operators import _row_coef
 logger = logging.getLogger(__name__)
 
 __all__ = ["HOLE_SIGMA_FRACTION", "hole_sigma", "hessian_diagonal", "model_variance",
-           "sample_spread", "residual_spread", "TERMS", "variational_sigma", "ulr_sigma", "sample_spread_sigma",
+           "sample_spread", "residual_spread", "sample_statistics", "hole_distance", "HOLE_RANGE", "TERMS",
+           "variational_sigma", "ulr_sigma", "sample_spread_sigma",
            "view_count_sigma"]
 
 #: σ of a pixel filled by push–pull, as a fraction of the intensity scale: the standard
@@ -139,6 +146,72 @@ def _residual_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, out):
                 out[y + 1, x + 1] += b3 * e
 
 
+@njit(parallel=True, cache=True)
+def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dtau_dz, out):
+    """One pass over the samples, three splats into ``out`` (3, H, W):
+    ``out[0] = Σ_m w_m B_m· ‖colour_m − (B u)(m)‖² / C`` (the residual),
+    ``out[1] = Σ_m w_m² B_m·`` (for the effective number of samples) and
+    ``out[2] = Σ_m w_m B_m· sigma_z_m² ‖∂tau/∂z_m‖²`` (the position variance, target px²;
+    0 when ``sigma_z`` is empty).
+    Same buckets as :func:`_residual_splat` (threads never write the same row)."""
+    C, H, W = u.shape
+    n_rows = starts.shape[0] - 1
+    use_coef = coef.shape[0] == x0.shape[0] and x0.shape[0] > 0
+    with_pos = sigma_z.shape[0] == x0.shape[0]
+    for parity in range(2):
+        for r in prange(n_rows):
+            if r % 2 != parity or starts[r] == starts[r + 1]:
+                continue
+            for q in range(starts[r], starts[r + 1]):
+                i = order[q]
+                wi = np.float64(w[i])
+                if wi == 0.0:
+                    continue
+                b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
+                x = x0[i]
+                y = y0[i]
+                e = 0.0
+                for c in range(C):
+                    uc = u[c]
+                    bu = b0 * uc[y, x] + b1 * uc[y, x + 1] + b2 * uc[y + 1, x] + b3 * uc[y + 1, x + 1]
+                    d = np.float64(colour[i, c]) - bu
+                    e += d * d
+                pv = 0.0
+                if with_pos:
+                    sz = sigma_z[i]
+                    pv = sz * sz * (dtau_dz[i, 0] * dtau_dz[i, 0] + dtau_dz[i, 1] * dtau_dz[i, 1])
+                vals = (e * wi / C, wi * wi, wi * pv)
+                for k in range(3):
+                    v = vals[k]
+                    o = out[k]
+                    o[y, x] += b0 * v
+                    o[y, x + 1] += b1 * v
+                    o[y + 1, x] += b2 * v
+                    o[y + 1, x + 1] += b3 * v
+
+
+def sample_statistics(splat, weight, colour, u, wsum, sigma_z=None, dtau_dz=None):
+    """Per-pixel statistics of the samples around the rendered image ``u`` (planar (C, H, W),
+    units of ``colour``), from one pass (:func:`_sigma_splat`); ``wsum = Σ_m w_m B_mp``.
+
+    Returns a dict of (H, W) float64 arrays (0 where ``wsum = 0``): ``s2`` the weighted
+    variance of the samples around ``B u`` (units of ``colour`` squared), ``n_eff`` the
+    effective number of samples ``(Σ w B)² / Σ w² B``, ``pos_var`` the weighted mean of the
+    samples' position variance ``sigma_z² ‖∂tau/∂z‖²`` (target pixels²; 0 without ``sigma_z``)."""
+    if sigma_z is None:
+        sigma_z, dtau_dz = np.zeros(0), np.zeros((0, 2))
+    H, W = splat.shape
+    acc = np.zeros((3, H, W), np.float64)
+    _sigma_splat(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts,
+                 np.ascontiguousarray(weight), np.ascontiguousarray(colour), np.ascontiguousarray(u, np.float32),
+                 np.ascontiguousarray(sigma_z, np.float64), np.ascontiguousarray(dtau_dz, np.float64), acc)
+    ws = np.asarray(wsum, np.float64)
+    ok = ws > 0
+    inv = np.where(ok, 1.0 / np.where(ok, ws, 1.0), 0.0)
+    return {"s2": acc[0] * inv, "n_eff": np.where(acc[1] > 0, ws * ws / np.where(acc[1] > 0, acc[1], 1.0), 0.0),
+            "pos_var": acc[2] * inv}
+
+
 def residual_spread(splat, weight, colour, u, wsum) -> np.ndarray:
     """``s²(p) = Σ_m w_m B_mp ‖colour_m − (B u)(m)‖² / (C · wsum(p))`` (H, W) float64, in the
     units of ``colour`` and ``u`` squared; ``wsum = Σ_m w_m B_mp`` (the row sums of the stencil
@@ -161,7 +234,23 @@ def _finish(var, coverage, scale):
 
 
 #: The terms of σ² (docs/RENDERER.md "Uncertainty": chosen by measurement).
-TERMS = ("model", "spread")
+TERMS = ("model", "spread", "hole")
+
+
+#: Range (pixels) of the variance inflation next to push–pull filled pixels:
+#: σ² is multiplied by ``1 + HOLE_RANGE / d`` (docs/RENDERER.md "Uncertainty").
+HOLE_RANGE = 4.0
+
+
+def hole_distance(coverage) -> np.ndarray:
+    """Euclidean distance (pixels, (H, W) float64) of each pixel to the nearest pixel
+    push–pull filled (``~coverage``); 0 on those, ``inf`` when there is none."""
+    from scipy.ndimage import distance_transform_edt
+
+    cov = np.asarray(coverage, bool)
+    if cov.all():
+        return np.full(cov.shape, np.inf)
+    return distance_transform_edt(cov)
 
 
 def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float = 255.0,
@@ -186,9 +275,10 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
         The density normalisation rho the data terms were divided by
         (``RenderResult.params["density"]``): the model's variance is that of the
         unnormalised energy (the paper's), ``1 / (rho · diag(H))``.
-    terms : sequence of {"model", "spread"} or a "+"-joined string
+    terms : sequence of {"model", "spread", "hole"} or a "+"-joined string
         The variances added: the model's ``1/diag(H)`` and the disagreement of the sources
-        ``s²`` (module docstring); default both.
+        ``s²·(1 + 1/n_eff)``; ``hole`` multiplies their sum by ``1 + HOLE_RANGE / d`` near
+        push–pull filled pixels (module docstring); default all three.
     """
     if terms is True:
         terms = TERMS
@@ -205,7 +295,13 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
         up = np.asarray(u)
         if not (up.ndim == 3 and up.shape[0] == np.shape(colour)[1]):
             up = up.transpose(2, 0, 1)  # (H, W, C) → planar
-        var = var + residual_spread(splat, weight, colour, up, model.A.sum(0, dtype=np.float64)) * float(scale) ** 2
+        st = sample_statistics(splat, weight, colour, up, model.A.sum(0, dtype=np.float64))
+        neff = st["n_eff"]
+        inv_n = np.where(neff > 0, 1.0 / np.where(neff > 0, neff, 1.0), 0.0)
+        var = var + st["s2"] * (1.0 + inv_n) * float(scale) ** 2
+    if "hole" in terms:
+        with np.errstate(divide="ignore", invalid="ignore"):  # holes: σ_hole below
+            var = var * (1.0 + HOLE_RANGE / hole_distance(coverage))
     return _finish(var, coverage, scale)
 
 
