@@ -37,3 +37,20 @@ def test_no_markdown_by_default(monkeypatch, tmp_path):
     assert written == []
     pt.main(["--quick", "--out", str(tmp_path / "out"), "--doc", str(tmp_path / "R.md")])
     assert written == [str(tmp_path / "R.md")]
+
+
+def test_write_results_keeps_later_sections_and_generates_the_discussion(tmp_path):
+    """The discussion is rewritten from the reports (a hand-written one does not survive) and
+    what follows it (other scripts' marker sections) is kept byte for byte."""
+    import argparse
+
+    pt = _paper_tables()
+    doc = tmp_path / "R.md"
+    later = "## Uncertainty\n\n<!-- uncert:begin -->\n| a | b |\n<!-- uncert:end -->\n"
+    doc.write_text("# old\n\n<!-- BEGIN DISCUSSION -->\nhand-written 12.34 dB\n<!-- END DISCUSSION -->\n\n" + later)
+    args = argparse.Namespace(fountain_scale=0.25, strides=[2], cotton_depths=["gt"], out=tmp_path / "out")
+    pt.write_results(str(doc), args, [], [], [], [], 1.0, "2026-01-01 00:00", (1.0, 1.0, 1.0), [],
+                     git={"commit": "0" * 40, "dirty": ""})
+    text = doc.read_text()
+    assert "hand-written 12.34" not in text and "from this run's JSON" in text
+    assert text.endswith(later) and text.count("<!-- uncert:begin -->") == 1
