@@ -60,7 +60,7 @@ BORDER = 2
 
 def settings():
     """(label, method, params) of the sweep, in table order."""
-    out = [("ULR", "ulr", {}), ("BVS", "bvs", {})]
+    out = [("ULR", "ulr", {}), ("BVS", "bvs", {"lam": 0.1})]  # BVS at the paper's light-field lam
     out += [(f"γ{g:g} λ{l:g}", "gradient", {"gamma": g, "lam": l, "tv_weighting": "uniform"})
             for g in GAMMAS for l in LAMS]
     out += [(f"γ{g:g} λ0.1 TVs", "gradient", {"gamma": g, "lam": 0.1, "tv_weighting": "samples"})
