@@ -7,6 +7,7 @@ import argparse
 
 from ..pipeline import DEPTH_MODES
 from ..metrics import METRIC_BORDER
+from ..autotune import AUTO, GAMMA_GRID, LAM_GRID
 from ..render.methods import DEFAULTS, METHODS, PRESETS, PSFS, REGISTRY
 
 #: How ``vibr render`` and ``vibr eval`` measure (one rule: vibr.metrics.view_metrics).
@@ -24,6 +25,16 @@ def _dm(key) -> str:
     """The default of ``key`` and the methods that override it, e.g. "2; ulr: 0, savsr: 1"."""
     over = [f"{m.name}: {m.overrides[key]:g}" for m in REGISTRY.values() if key in m.overrides]
     return _d(key) + (f"; {', '.join(over)}" if over else "")
+
+
+def _weight(text: str):
+    """A non-negative number, or "auto" (:mod:`vibr.autotune`)."""
+    if text.strip().lower() == AUTO:
+        return AUTO
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or {AUTO!r}, got {text!r}") from None
 
 
 def method_help() -> str:
@@ -53,8 +64,13 @@ def add_intensity_scale_option(p: argparse.ArgumentParser) -> None:
 def add_render_params(p: argparse.ArgumentParser) -> None:
     """The renderer's parameters for one render (defaults from ``DEFAULTS``)."""
     p.add_argument("--alpha", type=float, help=f"colour-term weight (default {_d('alpha')})")
-    p.add_argument("--gamma", type=float, help=f"gradient-term weight, method gradient only (default {_d('gamma')})")
-    p.add_argument("--lam", type=float, help=f"TV weight, on the --intensity-scale (default {_d('lam')})")
+    p.add_argument("--gamma", type=_weight, metavar="G|" + AUTO,
+                   help=f"gradient-term weight, method gradient only, or {AUTO}: chosen per scene by "
+                        f"leave-one-source-out on the sources over {', '.join(map(str, GAMMA_GRID))} "
+                        f"(default {_d('gamma')})")
+    p.add_argument("--lam", type=_weight, metavar="L|" + AUTO,
+                   help=f"TV weight, on the --intensity-scale, or {AUTO} (over {', '.join(map(str, LAM_GRID))}) "
+                        f"(default {_d('lam')})")
     p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
     p.add_argument("--sigma-z", type=float,
                    help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")

@@ -83,7 +83,9 @@ def run(args) -> int:
     from ..render import render
     from ..render.methods import method_params
 
-    method_params(args.method, alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
+    numeric = lambda v: None if v == "auto" else v  # noqa: E731 - "auto" is resolved by render()
+    method_params(args.method, alpha=args.alpha, gamma=numeric(args.gamma), lam=numeric(args.lam),
+                  sigma_s=args.sigma_s,
                   sigma_z=args.sigma_z, scale=args.intensity_scale, n_outer=args.outer,
                   max_iter=args.iterations)  # parameters checked before the work
     if args.views is not None and args.views < 1:

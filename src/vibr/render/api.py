@@ -25,11 +25,27 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
     parameters) with the registered method (:mod:`vibr.render.methods`).
     ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr."""
     m = get_method(method)
+    if "auto" in (params.get("gamma"), params.get("lam")):
+        raise VibrInputError("gamma/lam 'auto' tunes on the source views: use vibr.render.render "
+                             "(render_samples has only the samples)")
     p = method_params(m.name, **params)
     if len(samples) == 0:
         raise VibrInputError("no source sample lands in the target view")
     return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
                     callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty)
+
+
+def _resolve_auto(src: Scene, cam: Camera, m, params: dict) -> dict:
+    """``gamma`` / ``lam`` = "auto" replaced by the leave-one-source-out choice of
+    :func:`vibr.autotune.tune` (only the target's camera is passed: never its image)."""
+    from .methods import DEFAULTS
+
+    given = [DEFAULTS[k] if params.get(k) is None else params[k] for k in ("gamma", "lam")]
+    if "auto" not in given:
+        return params
+    from ..autotune import resolve_auto
+
+    return resolve_auto(src, cam, m.name, params)
 
 
 def _ready_sources(sources: Scene, target) -> Scene:
@@ -126,6 +142,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         check_render_memory([v.camera.shape for v in src.views], cam.shape)  # before allocating
         samples = compute_samples(src, cam, **(geometry_kw or {}))
     t_geo = time.perf_counter() - t0
+    params = _resolve_auto(src, cam, m, params)
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
                          verbose=verbose, uncertainty=uncertainty, **params)

@@ -13,12 +13,14 @@ gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term,
 Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/METHOD.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
-* ``gamma = 0.25`` gradient-term weight for ``gradient`` (eq. energy_final; vibr's units:
-  forward differences, docs/RENDERER.md "One image gradient": 0.25 with forward differences
-  measured equal or better than the former 1.0 with central ones; the paper's γ is reached
-  through ``preset="paper"``); forced to 0 for savsr and bvs.
-* ``lam = 0.1`` TV weight (eq. energy_final; the paper's light-field value, for [0, 255]
-  intensities: a 1-grey-level step costs 0.1 per pixel of edge).
+* ``gamma = 0.1`` gradient-term weight for ``gradient`` and ``lam = 0.3`` TV weight (grey
+  levels of 255: a 1-grey-level step costs 0.3 per pixel of edge), with the uniform TV
+  (eq. energy_final; vibr's units: forward differences, docs/RENDERER.md "One image
+  gradient"; the paper's γ is reached through ``preset="paper"``): chosen by
+  ``benchmarks/sweep_defaults.py`` (issue 23), the best mean all-pixel PSNR over the
+  *choose* half of a sweep across cotton, fountain, temple and the synthetic scenes, reported
+  on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs.
+  ``"auto"`` for either: chosen per scene by leave-one-source-out (:mod:`vibr.autotune`).
 * ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/METHOD.md §3, the authors' value).
 * ``sigma_z = None`` depth std. dev., scene units: the samples' own (the geometry stage's
   per-view value, default 1 % of the median depth).
@@ -54,7 +56,7 @@ __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
-    alpha=1.0, gamma=0.25, lam=0.1, sigma_s=1.0, sigma_z=None, scale=255.0,
+    alpha=1.0, gamma=0.1, lam=0.3, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
