@@ -18,7 +18,8 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
 
-__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL"]
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "fallback_depth", "FALLBACK_FACTOR",
+           "FALLBACK_SIGMA_Z_REL"]
 
 #: Default proxy uncertainty: ``sigma_z = PROXY_SIGMA_Z_REL · D`` (ten times the default
 #: of estimated depth, :data:`vibr.geometry.sampling.DEFAULT_SIGMA_Z_REL`), or half the
@@ -100,3 +101,60 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
              for v in sources.views]
     meta = dict(sources.meta, proxy={"depth": depth, "sigma_z": float(sigma_z)})
     return sources.replace(views=views, meta=meta)
+
+
+#: Fallback proxy (issue 23): unknown source pixels get a fronto-parallel plane of their own
+#: view at ``FALLBACK_FACTOR`` times the view's farthest known depth (its 99th percentile),
+#: with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times that depth.
+FALLBACK_FACTOR = 1.25
+FALLBACK_SIGMA_Z_REL = 0.25
+
+
+def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
+                   sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None) -> Scene:
+    """Give the source pixels of unknown depth (NaN) a fallback proxy behind the known geometry.
+
+    Stereo leaves untextured regions (a black backdrop, the sky) without depth; dropped,
+    they leave the renderer nothing but push–pull there, which smears the object's colours
+    over what every source shows as background. Here each view ``k`` with known depth
+    ``z_k`` gets, at its unknown pixels, the plane of its own camera at orthogonal depth
+
+        ``D_k = factor · P99(z_k)``  (behind the farthest known depth)
+
+    with ``sigma_z = sigma_rel · D_k`` (large, so that such a sample's weight collapses
+    wherever the image has texture). The plane lies behind every known surface, so the
+    renderer's z-buffer hides it wherever known geometry projects: known geometry wins
+    wherever it exists, the fallback covers what only it sees. Known pixels keep their
+    depth and their sigma_z (the view's own map, or ``default_sigma_rel`` · median known
+    depth, the geometry stage's default, made explicit because the median would otherwise
+    include the plane). A view with no known depth gets the largest ``D_k`` of the others.
+
+    Returns the scene with ``meta["fallback"] = {name: {"depth": D_k, "fraction": f_k}}``
+    for the views that had unknown pixels (``f_k`` their fraction).
+    """
+    from .sampling import DEFAULT_SIGMA_Z_REL
+
+    dsr = DEFAULT_SIGMA_Z_REL if default_sigma_rel is None else float(default_sigma_rel)
+    far = {}
+    for v in sources.views:
+        if v.depth is not None and np.isfinite(v.depth).any():
+            far[v.name] = float(factor) * float(np.percentile(v.depth[np.isfinite(v.depth)], 99))
+    if not far:
+        return sources
+    views, info = [], {}
+    for v in sources.views:
+        z = np.full(v.camera.shape, np.nan, np.float32) if v.depth is None else np.asarray(v.depth, np.float32)
+        unknown = ~np.isfinite(z)
+        if not unknown.any():
+            views.append(v)
+            continue
+        D = far.get(v.name, max(far.values()))
+        known = ~unknown
+        if v.sigma_z is not None:
+            s = np.broadcast_to(np.asarray(v.sigma_z, np.float32), z.shape).copy()
+        else:
+            s = np.full(z.shape, dsr * float(np.median(z[known])) if known.any() else 0.0, np.float32)
+        s[unknown] = sigma_rel * D
+        views.append(v.replace(depth=np.where(unknown, np.float32(D), z), sigma_z=s))
+        info[v.name] = {"depth": D, "fraction": float(unknown.mean())}
+    return sources.replace(views=views, meta=dict(sources.meta, fallback=info))

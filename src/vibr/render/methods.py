@@ -58,7 +58,7 @@ DEFAULTS = dict(
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0, tv_weighting="uniform",
+    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=0,
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
@@ -105,7 +105,8 @@ class Method:
             from .variational import solve_variational
 
             return solve_variational(samples, p, self, callback=callback, progress_bar=progress_bar,
-                                     verbose=verbose, uncertainty=uncertainty)
+                                     verbose=verbose, uncertainty=uncertainty,
+                                     centres=(source_centres, target_centre))
         return _render_ulr(self, samples, p, source_centres, target_centre, uncertainty)
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
-from .weights import geometric_weights, robust_factor
+from .weights import geometric_weights, robust_factor, view_prior
 from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
@@ -130,15 +130,21 @@ def initial_image(sp: Splat, Wk, colour, acc) -> np.ndarray:
 class _Weights:
     """``W_km`` (docs/METHOD.md §3) divided by rho, timed into ``times["weights"]``."""
 
-    def __init__(self, samples, p, sp, rho, geometric: bool, times):
+    def __init__(self, samples, p, sp, rho, geometric: bool, times, centres=(None, None)):
         self.samples, self.p, self.sp, self.rho, self.times = samples, p, sp, rho, times
         self.sigma_z = p["sigma_z"] if geometric else 0.0
+        self.prior = None
+        if p.get("view_k", 0) and centres[0] is not None and centres[1] is not None:
+            # what ULR knows: angle and resolution penalties, the view_k best views per pixel
+            t0 = time.perf_counter()
+            self.prior = view_prior(samples, centres[0], centres[1], int(p["view_k"]), p["ulr_beta_res"])
+            times["weights"] += time.perf_counter() - t0
 
     def __call__(self, u):
         t0 = time.perf_counter()
         p = self.p
         w = geometric_weights(self.samples, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
-                              grad_max=p["grad_max"], splat=self.sp, dtype=np.float32)
+                              grad_max=p["grad_max"], splat=self.sp, dtype=np.float32, prior=self.prior)
         w *= np.float32(1.0 / self.rho)
         sw = self.samples.meta.get("sample_weight")
         if sw is not None:  # vibr.flythrough's blend weight of the sample's view
@@ -178,7 +184,7 @@ def _outer_line(name, o, n_outer, res) -> str:
 
 
 def solve_variational(samples: Samples, p: dict, method, *, callback=None, progress_bar: bool = False,
-                      verbose: bool = False, uncertainty=False) -> RenderResult:
+                      verbose: bool = False, uncertainty=False, centres=(None, None)) -> RenderResult:
     """Render from ``samples`` with a variational ``method`` (a
     :class:`vibr.render.methods.Method` with ``solve``): weights, initial image, then
     ``n_outer`` passes of (re-weight, assemble, FISTA). See :func:`vibr.render.render`."""
@@ -191,7 +197,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     sp = cov.splat
     times["assembly"] += time.perf_counter() - t0
     rho = sample_density(cov.acc, cov.coverage, p["normalise"])
-    weights = _Weights(samples, p, sp, rho, method.geometric, times)
+    weights = _Weights(samples, p, sp, rho, method.geometric, times, centres)
 
     # initial weights: deformation only (u unknown yet); initial image: their blend + push-pull
     Wk = weights(None)
