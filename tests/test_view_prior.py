@@ -64,7 +64,7 @@ def test_fallback_plane_closed_form():
         views.append(v.replace(depth=z, sigma_z=None))
     views[3] = views[3].replace(depth=np.full(views[3].depth.shape, np.nan, np.float32))  # no depth at all
     src = sc.replace(views=views)
-    out = fallback_depth(src, factor=1.5, sigma_rel=0.2)
+    out = fallback_depth(src, factor=1.5, sigma_rel=0.2, percentile=99)
     far = {}
     for v, o in zip(src.views[:3], out.views[:3]):
         known = np.isfinite(v.depth)
@@ -80,6 +80,15 @@ def test_fallback_plane_closed_form():
     # known geometry wins: the plane is behind every known depth of its view
     for o in out.views[:3]:
         assert o.depth.max() > 1.2 * np.nanmax(np.where(o.sigma_z < 0.1, o.depth, np.nan))
+
+
+def test_fallback_default_is_the_median_plane():
+    sc = make_scene("grid", 4, 24, 20)
+    v = sc.views[0]
+    z = v.depth.copy()
+    z[:6, :6] = np.nan
+    out = fallback_depth(sc.replace(views=[v.replace(depth=z)]))
+    np.testing.assert_allclose(out.views[0].depth[:6, :6], np.median(z[np.isfinite(z)]), rtol=1e-6)
 
 
 def test_fallback_keeps_complete_depth():

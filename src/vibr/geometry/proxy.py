@@ -19,7 +19,7 @@ from ..errors import VibrInputError
 from ..scene import Scene, View
 
 __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "fallback_depth", "FALLBACK_FACTOR",
-           "FALLBACK_SIGMA_Z_REL"]
+           "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
 #: Default proxy uncertainty: ``sigma_z = PROXY_SIGMA_Z_REL · D`` (ten times the default
 #: of estimated depth, :data:`vibr.geometry.sampling.DEFAULT_SIGMA_Z_REL`), or half the
@@ -104,30 +104,35 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
 
 
 #: Fallback proxy (issue 23): unknown source pixels get a fronto-parallel plane of their own
-#: view at ``FALLBACK_FACTOR`` times the view's farthest known depth (its 99th percentile),
-#: with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times that depth.
-FALLBACK_FACTOR = 1.25
+#: view at ``FALLBACK_FACTOR`` times the ``FALLBACK_PERCENTILE``-th percentile of the view's
+#: known depth (its median: through the known geometry, not behind it — docs/RENDERER.md,
+#: "Fallback proxy"), with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times that depth.
+FALLBACK_FACTOR = 1.0
+FALLBACK_PERCENTILE = 50.0
 FALLBACK_SIGMA_Z_REL = 0.25
 
 
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
-                   sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None) -> Scene:
-    """Give the source pixels of unknown depth (NaN) a fallback proxy behind the known geometry.
+                   sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
+                   percentile: float = FALLBACK_PERCENTILE) -> Scene:
+    """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
-    Stereo leaves untextured regions (a black backdrop, the sky) without depth; dropped,
-    they leave the renderer nothing but push–pull there, which smears the object's colours
-    over what every source shows as background. Here each view ``k`` with known depth
-    ``z_k`` gets, at its unknown pixels, the plane of its own camera at orthogonal depth
+    Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
+    without depth; dropped, they leave the renderer nothing but push–pull there, which
+    smears the object's colours over what every source shows as background. Here each view
+    ``k`` with known depth ``z_k`` gets, at its unknown pixels, the plane of its own camera
+    at orthogonal depth
 
-        ``D_k = factor · P99(z_k)``  (behind the farthest known depth)
+        ``D_k = factor · P_percentile(z_k)``  (default: the median known depth)
 
     with ``sigma_z = sigma_rel · D_k`` (large, so that such a sample's weight collapses
-    wherever the image has texture). The plane lies behind every known surface, so the
-    renderer's z-buffer hides it wherever known geometry projects: known geometry wins
-    wherever it exists, the fallback covers what only it sees. Known pixels keep their
-    depth and their sigma_z (the view's own map, or ``default_sigma_rel`` · median known
-    depth, the geometry stage's default, made explicit because the median would otherwise
-    include the plane). A view with no known depth gets the largest ``D_k`` of the others.
+    wherever the image has texture and the samples of known depth, sigma_z ≈ 1 % of the
+    depth, win there). Known pixels keep their depth and their sigma_z (the view's own
+    map, or ``default_sigma_rel`` · median known depth, the geometry stage's default, made
+    explicit because the median would otherwise include the plane). A view with no known
+    depth gets the largest ``D_k`` of the others. ``factor > 1`` with ``percentile=99``
+    puts the plane behind the known geometry instead (measured worse where stereo leaves
+    most of an object unknown: docs/RENDERER.md).
 
     Returns the scene with ``meta["fallback"] = {name: {"depth": D_k, "fraction": f_k}}``
     for the views that had unknown pixels (``f_k`` their fraction).
@@ -138,7 +143,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     far = {}
     for v in sources.views:
         if v.depth is not None and np.isfinite(v.depth).any():
-            far[v.name] = float(factor) * float(np.percentile(v.depth[np.isfinite(v.depth)], 99))
+            far[v.name] = float(factor) * float(np.percentile(v.depth[np.isfinite(v.depth)], percentile))
     if not far:
         return sources
     views, info = [], {}
