@@ -82,13 +82,20 @@ def test_fallback_plane_closed_form():
         assert o.depth.max() > 1.2 * np.nanmax(np.where(o.sigma_z < 0.1, o.depth, np.nan))
 
 
-def test_fallback_default_is_the_median_plane():
+def test_fallback_default_plane_just_behind_the_known_depth():
     sc = make_scene("grid", 4, 24, 20)
-    v = sc.views[0]
-    z = v.depth.copy()
-    z[:6, :6] = np.nan
-    out = fallback_depth(sc.replace(views=[v.replace(depth=z)]))
-    np.testing.assert_allclose(out.views[0].depth[:6, :6], np.median(z[np.isfinite(z)]), rtol=1e-6)
+    views = []
+    for v in sc.views[:2]:
+        z = v.depth.copy()
+        z[:6, :6] = np.nan
+        views.append(v.replace(depth=z))
+    out = fallback_depth(sc.replace(views=views))
+    far = [1.03 * np.percentile(v.depth[np.isfinite(v.depth)], 99) for v in views]
+    for o, D in zip(out.views, far):
+        np.testing.assert_allclose(o.depth[:6, :6], D, rtol=1e-6)
+    common = fallback_depth(sc.replace(views=views), common=True)
+    for o in common.views:
+        np.testing.assert_allclose(o.depth[:6, :6], max(far), rtol=1e-6)
 
 
 def test_fallback_keeps_complete_depth():
@@ -96,3 +103,20 @@ def test_fallback_keeps_complete_depth():
     out = fallback_depth(sc)
     for a, b in zip(sc.views, out.views):
         assert a is b
+
+
+def test_prepare_applies_the_fallback_when_asked():
+    from vibr.pipeline import prepare
+
+    sc = make_scene("grid", 4, 16, 16)
+    views = []
+    for v in sc.views:
+        z = v.depth.copy()
+        z[:4, :4] = np.nan
+        views.append(v.replace(depth=z))
+    sc = sc.replace(views=views)
+    src, _ = prepare(sc, 0, depth="gt")
+    assert all(np.isnan(v.depth).any() for v in src.views)  # off by default
+    src, _ = prepare(sc, 0, depth="gt", fallback=True)
+    assert not any(np.isnan(v.depth).any() for v in src.views)
+    assert set(src.meta["fallback"]) == {v.name for v in src.views}

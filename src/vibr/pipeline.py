@@ -15,11 +15,11 @@ chosen geometry:
     which is the paper's "ground-truth geometry" protocol.
 ``estimated``
     estimated from the sources alone (:func:`vibr.stereo.estimate_depth`); the target never
-    takes part. Source pixels that stereo leaves unknown (a black backdrop, the sky) get the
-    fallback proxy (:func:`vibr.geometry.fallback_depth`: a plane of their view behind its
-    farthest known depth, with a large sigma_z), so that they still take part where no
-    known surface hides them and push–pull is left for what no source sees
-    (``fallback=False`` leaves them unknown).
+    takes part. With ``fallback=True``, source pixels that stereo leaves unknown (a black
+    backdrop, the sky) get the fallback proxy (:func:`vibr.geometry.fallback_depth`: a
+    plane of their view just behind its farthest known depth, with a large sigma_z), so
+    that they still take part where no known surface hides them (off by default: it wins
+    on the temple ring and loses on fountain, docs/RENDERER.md "Fallback proxy").
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
     paper's coarsest proxy, with a large depth uncertainty. Its depth and uncertainty come
@@ -89,7 +89,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Extra arguments of :func:`vibr.stereo.estimate_depth`.
     fallback : bool, optional
         Give source pixels of unknown depth the fallback proxy
-        (:func:`vibr.geometry.fallback_depth`); default: with estimated depth only.
+        (:func:`vibr.geometry.fallback_depth`); default off.
 
     Returns
     -------
@@ -111,8 +111,6 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         from .stereo import estimate_depth
 
         src = estimate_depth(src, **(estimate_kw or {}))
-        if fallback is None:
-            fallback = True
     elif depth == "planar":
         src = _planar_depth(scene, src, tcam)
     else:

@@ -105,16 +105,17 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
 
 #: Fallback proxy (issue 23): unknown source pixels get a fronto-parallel plane of their own
 #: view at ``FALLBACK_FACTOR`` times the ``FALLBACK_PERCENTILE``-th percentile of the view's
-#: known depth (its median: through the known geometry, not behind it — docs/RENDERER.md,
-#: "Fallback proxy"), with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times that depth.
-FALLBACK_FACTOR = 1.0
-FALLBACK_PERCENTILE = 50.0
+#: known depth (just behind its farthest known depth, beyond the visibility test's 2 %
+#: margin; docs/RENDERER.md, "Fallback proxy"), with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times
+#: that depth.
+FALLBACK_FACTOR = 1.03
+FALLBACK_PERCENTILE = 99.0
 FALLBACK_SIGMA_Z_REL = 0.25
 
 
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
-                   percentile: float = FALLBACK_PERCENTILE) -> Scene:
+                   percentile: float = FALLBACK_PERCENTILE, common: bool = False) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -123,16 +124,17 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     ``k`` with known depth ``z_k`` gets, at its unknown pixels, the plane of its own camera
     at orthogonal depth
 
-        ``D_k = factor · P_percentile(z_k)``  (default: the median known depth)
+        ``D_k = factor · P_percentile(z_k)``  (default: 1.03 · the 99th percentile)
 
     with ``sigma_z = sigma_rel · D_k`` (large, so that such a sample's weight collapses
     wherever the image has texture and the samples of known depth, sigma_z ≈ 1 % of the
     depth, win there). Known pixels keep their depth and their sigma_z (the view's own
     map, or ``default_sigma_rel`` · median known depth, the geometry stage's default, made
     explicit because the median would otherwise include the plane). A view with no known
-    depth gets the largest ``D_k`` of the others. ``factor > 1`` with ``percentile=99``
-    puts the plane behind the known geometry instead (measured worse where stereo leaves
-    most of an object unknown: docs/RENDERER.md).
+    depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
+    largest ``D_k``. The plane behind the known geometry lets the target z-buffer hide a
+    fallback sample wherever a known surface projects (known geometry wins); other
+    placements measured in docs/RENDERER.md.
 
     Returns the scene with ``meta["fallback"] = {name: {"depth": D_k, "fraction": f_k}}``
     for the views that had unknown pixels (``f_k`` their fraction).
@@ -153,7 +155,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         if not unknown.any():
             views.append(v)
             continue
-        D = far.get(v.name, max(far.values()))
+        D = max(far.values()) if common else far.get(v.name, max(far.values()))
         known = ~unknown
         if v.sigma_z is not None:
             s = np.broadcast_to(np.asarray(v.sigma_z, np.float32), z.shape).copy()
