@@ -36,6 +36,10 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (occluded, mismatched: speckles) stop pulling the render; ``"none"`` is least squares.
   Off by default: it wins on cotton and fountain but loses on the synthetic scenes
   (docs/RENDERER.md "Robust data term").
+* ``view_k = 0``: > 0 multiplies each sample's data weight by ULR's view prior
+  (:func:`vibr.render.weights.view_prior`: Buehler's angle + ``ulr_beta_res`` × resolution
+  penalty, the ``view_k`` best views per pixel; docs/RENDERER.md "What ULR knows"); 0 weighs
+  every view alike. Needs the camera centres (``render`` passes them).
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).

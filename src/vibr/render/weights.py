@@ -1,6 +1,8 @@
 """Per-sample weights of the data term (paper §5.6, docs/METHOD.md §3; after Pujades et al. 2014).
 
-``W_km = omega_km · |det ∂tau_k/∂x_m|⁻¹`` with the geometric weight
+``W_km = pi_km · omega_km · |det ∂tau_k/∂x_m|⁻¹`` (``pi_km`` the optional view prior,
+:func:`view_prior`, 1 without; the formula in ONE function, :func:`sample_weight`) with the
+geometric weight
 
     omega_km = 1 / (sigma_s² + sigma_z,k² · (∂tau_k/∂z · ∇u(tau_k(x_m)))²)
 
