@@ -4,8 +4,8 @@
 
     python benchmarks/view_prior_table.py [--cases fountain_0002,...] [--data DIR]
 
-Cases: ``fountain_000N`` (scale 0.25, the 10 other views, estimated depth), ``temple`` and
-``temple_fallback`` (templeSR0004 from its 4 best views, estimated depth, without / with the
+Cases: ``fountain_000N`` (scale 0.25, the 10 other views, estimated depth; ``_fallback``
+appended: with the fallback proxy), ``temple`` and ``temple_fallback`` (templeSR0004 from its 4 best views, estimated depth, without / with the
 fallback proxy), ``cotton_S_DEPTH`` (input_Cam040 from its 3×3 block at stride S; DEPTH gt,
 estimated or planar).
 """
@@ -31,7 +31,8 @@ def prepared(data: Path, name: str):
         return prepare(load_scene(data / "middlebury_templeSparseRing"), "templeSR0004", n_views=4,
                        depth="estimated", fallback=name.endswith("fallback"))
     if name.startswith("fountain"):
-        return prepare(load_scene(data / "strecha_fountain-P11", scale=0.25), name[-4:], depth="estimated")
+        return prepare(load_scene(data / "strecha_fountain-P11", scale=0.25), name.split("_")[1],
+                       depth="estimated", fallback=name.endswith("fallback"))
     _, s, dep = name.split("_")
     s = int(s)
     nb = [f"input_Cam{(4 + dr * s) * 9 + 4 + dc * s:03d}" for dr in (-1, 0, 1) for dc in (-1, 0, 1)
