@@ -15,7 +15,11 @@ chosen geometry:
     which is the paper's "ground-truth geometry" protocol.
 ``estimated``
     estimated from the sources alone (:func:`vibr.stereo.estimate_depth`); the target never
-    takes part.
+    takes part. With ``fallback=True``, source pixels that stereo leaves unknown (a black
+    backdrop, the sky) get the fallback proxy (:func:`vibr.geometry.fallback_depth`: a
+    plane of their view just behind its farthest known depth, with a large sigma_z), so
+    that they still take part where no known surface hides them (off by default: it wins
+    on the temple ring and loses on fountain, docs/RENDERER.md "Fallback proxy").
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
     paper's coarsest proxy, with a large depth uncertainty. Its depth and uncertainty come
@@ -64,7 +68,7 @@ def _depth_file_for(folder: Path, name: str) -> Path:
 
 def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int | str] | None = None,
             depth: str = "auto", depth_files: str | os.PathLike | None = None, n_views: int | None = None,
-            estimate_kw: dict | None = None) -> tuple[Scene, View | Camera]:
+            estimate_kw: dict | None = None, fallback: bool | None = None) -> tuple[Scene, View | Camera]:
     """Choose the target and the sources, and give every source a depth map.
 
     Parameters
@@ -83,6 +87,9 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Keep only this many source views, the best for the target (:mod:`vibr.selection`).
     estimate_kw : dict, optional
         Extra arguments of :func:`vibr.stereo.estimate_depth`.
+    fallback : bool, optional
+        Give source pixels of unknown depth the fallback proxy
+        (:func:`vibr.geometry.fallback_depth`); default off.
 
     Returns
     -------
@@ -108,6 +115,10 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         src = _planar_depth(scene, src, tcam)
     else:
         src = _files_depth(src, depth_files)
+    if fallback:
+        from .geometry import fallback_depth
+
+        src = fallback_depth(src)
     return src, tview
 
 

@@ -18,7 +18,8 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
 
-__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL"]
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "fallback_depth", "FALLBACK_FACTOR",
+           "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
 #: Default proxy uncertainty: ``sigma_z = PROXY_SIGMA_Z_REL · D`` (ten times the default
 #: of estimated depth, :data:`vibr.geometry.sampling.DEFAULT_SIGMA_Z_REL`), or half the
@@ -100,3 +101,67 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
              for v in sources.views]
     meta = dict(sources.meta, proxy={"depth": depth, "sigma_z": float(sigma_z)})
     return sources.replace(views=views, meta=meta)
+
+
+#: Fallback proxy (issue 23): unknown source pixels get a fronto-parallel plane of their own
+#: view at ``FALLBACK_FACTOR`` times the ``FALLBACK_PERCENTILE``-th percentile of the view's
+#: known depth (just behind its farthest known depth, beyond the visibility test's 2 %
+#: margin; docs/RENDERER.md, "Fallback proxy"), with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times
+#: that depth.
+FALLBACK_FACTOR = 1.03
+FALLBACK_PERCENTILE = 99.0
+FALLBACK_SIGMA_Z_REL = 0.25
+
+
+def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
+                   sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
+                   percentile: float = FALLBACK_PERCENTILE, common: bool = False) -> Scene:
+    """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
+
+    Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
+    without depth; dropped, they leave the renderer nothing but push–pull there, which
+    smears the object's colours over what every source shows as background. Here each view
+    ``k`` with known depth ``z_k`` gets, at its unknown pixels, the plane of its own camera
+    at orthogonal depth
+
+        ``D_k = factor · P_percentile(z_k)``  (default: 1.03 · the 99th percentile)
+
+    with ``sigma_z = sigma_rel · D_k`` (large, so that such a sample's weight collapses
+    wherever the image has texture and the samples of known depth, sigma_z ≈ 1 % of the
+    depth, win there). Known pixels keep their depth and their sigma_z (the view's own
+    map, or ``default_sigma_rel`` · median known depth, the geometry stage's default, made
+    explicit because the median would otherwise include the plane). A view with no known
+    depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
+    largest ``D_k``. The plane behind the known geometry lets the target z-buffer hide a
+    fallback sample wherever a known surface projects (known geometry wins); other
+    placements measured in docs/RENDERER.md.
+
+    Returns the scene with ``meta["fallback"] = {name: {"depth": D_k, "fraction": f_k}}``
+    for the views that had unknown pixels (``f_k`` their fraction).
+    """
+    from .sampling import DEFAULT_SIGMA_Z_REL
+
+    dsr = DEFAULT_SIGMA_Z_REL if default_sigma_rel is None else float(default_sigma_rel)
+    far = {}
+    for v in sources.views:
+        if v.depth is not None and np.isfinite(v.depth).any():
+            far[v.name] = float(factor) * float(np.percentile(v.depth[np.isfinite(v.depth)], percentile))
+    if not far:
+        return sources
+    views, info = [], {}
+    for v in sources.views:
+        z = np.full(v.camera.shape, np.nan, np.float32) if v.depth is None else np.asarray(v.depth, np.float32)
+        unknown = ~np.isfinite(z)
+        if not unknown.any():
+            views.append(v)
+            continue
+        D = max(far.values()) if common else far.get(v.name, max(far.values()))
+        known = ~unknown
+        if v.sigma_z is not None:
+            s = np.broadcast_to(np.asarray(v.sigma_z, np.float32), z.shape).copy()
+        else:
+            s = np.full(z.shape, dsr * float(np.median(z[known])) if known.any() else 0.0, np.float32)
+        s[unknown] = sigma_rel * D
+        views.append(v.replace(depth=np.where(unknown, np.float32(D), z), sigma_z=s))
+        info[v.name] = {"depth": D, "fraction": float(unknown.mean())}
+    return sources.replace(views=views, meta=dict(sources.meta, fallback=info))

@@ -38,6 +38,10 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (occluded, mismatched: speckles) stop pulling the render; ``"none"`` is least squares.
   Off by default: it wins on cotton and fountain but loses on the synthetic scenes
   (docs/RENDERER.md "Robust data term").
+* ``view_k = 0``: > 0 multiplies each sample's data weight by ULR's view prior
+  (:func:`vibr.render.weights.view_prior`: Buehler's angle + ``ulr_beta_res`` × resolution
+  penalty, the ``view_k`` best views per pixel; docs/RENDERER.md "What ULR knows"); 0 weighs
+  every view alike. Needs the camera centres (``render`` passes them).
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -60,7 +64,7 @@ DEFAULTS = dict(
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0, tv_weighting="uniform",
+    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=0,
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
@@ -107,7 +111,8 @@ class Method:
             from .variational import solve_variational
 
             return solve_variational(samples, p, self, callback=callback, progress_bar=progress_bar,
-                                     verbose=verbose, uncertainty=uncertainty)
+                                     verbose=verbose, uncertainty=uncertainty,
+                                     centres=(source_centres, target_centre))
         return _render_ulr(self, samples, p, source_centres, target_centre, uncertainty)
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from ..geometry.samples import Samples
 from .operators import Splat
 
-__all__ = ["ulr_blend"]
+__all__ = ["ulr_blend", "ulr_penalty", "ulr_view_weights"]
 
 
 def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
@@ -43,16 +43,8 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
         colours around the blend (per channel, [0, 1] units; 0 where no view lands).
     """
     H, W = samples.target_shape
-    Cs = np.asarray(source_centres, np.float64)
-    Cu = np.asarray(target_centre, np.float64)
-    X = samples.X
-    a = X - Cs[samples.view]
-    b = X - Cu
-    na = np.linalg.norm(a, axis=1)
-    nb = np.linalg.norm(b, axis=1)
-    cosang = np.clip((a * b).sum(1) / np.maximum(na * nb, 1e-300), -1.0, 1.0)
-    pen = np.arccos(cosang) + beta_res * np.maximum(0.0, na - nb) / np.maximum(nb, 1e-300)
-    V = len(Cs)
+    pen = ulr_penalty(samples, source_centres, target_centre, beta_res)
+    V = len(np.asarray(source_centres))
     colour = np.zeros((V, H, W, 3))
     pview = np.full((V, H, W), np.inf)
     acc = np.zeros((H, W))
@@ -69,16 +61,7 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
         colour[v][ok] = s[ok, :3] / wv[ok, None]
         pview[v][ok] = s[ok, 3] / wv[ok]
         acc += wv
-    order = np.sort(pview, axis=0)
-    kk = min(k, V - 1)
-    thresh = order[kk] if V > k else np.full((H, W), np.inf)
-    # fewer than k+1 views here: use the largest present penalty (slightly inflated)
-    finite = np.isfinite(order)
-    nfin = finite.sum(0)
-    last = np.take_along_axis(order, np.maximum(nfin - 1, 0)[None], 0)[0]
-    thresh = np.where(np.isfinite(thresh), thresh, last * 1.01 + eps)
-    with np.errstate(invalid="ignore", divide="ignore"):  # absent views: inf penalties
-        wt = np.where(np.isfinite(pview), np.maximum(0.0, 1.0 - pview / thresh[None]) / (pview + eps), 0.0)
+    wt = ulr_view_weights(pview, k, eps)
     sw = wt.sum(0)
     # single-view pixels: w̃ = 0 with the inflated threshold only if p = thresh; guard anyway
     img = np.where(sw[..., None] > 0, (wt[..., None] * colour).sum(0) / np.maximum(sw, 1e-300)[..., None], 0.0)
@@ -87,3 +70,35 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
     dev = ((colour - img[None]) ** 2).sum(-1)  # (V, H, W); absent views have wt = 0
     var = np.where(sw > 0, (wt * dev).sum(0) / (3 * np.maximum(sw, 1e-300)), 0.0)
     return img.astype(np.float32), acc.astype(np.float32), var.astype(np.float32)
+
+
+def ulr_penalty(samples: Samples, source_centres, target_centre, beta_res: float = 0.1) -> np.ndarray:
+    """Buehler's penalty of each sample (N,) float64: the angle (radians) between the rays from
+    the source and from the target centre to the sample's 3D point, plus ``beta_res`` times
+    the relative excess distance of the source, ``max(0, ‖X − C_k‖ − ‖X − C_u‖) / ‖X − C_u‖``."""
+    Cs = np.asarray(source_centres, np.float64)
+    Cu = np.asarray(target_centre, np.float64)
+    X = samples.X
+    a = X - Cs[samples.view]
+    b = X - Cu
+    na = np.linalg.norm(a, axis=1)
+    nb = np.linalg.norm(b, axis=1)
+    cosang = np.clip((a * b).sum(1) / np.maximum(na * nb, 1e-300), -1.0, 1.0)
+    return np.arccos(cosang) + beta_res * np.maximum(0.0, na - nb) / np.maximum(nb, 1e-300)
+
+
+def ulr_view_weights(pview, k: int = 4, eps: float = 1e-6) -> np.ndarray:
+    """Buehler's blending weights (V, H, W) float64 (not normalised) from the per-view
+    penalties ``pview`` (V, H, W), +inf where a view does not land: the k best views get
+    ``w = (1 − p / p_(k+1)) / p`` with ``p_(k+1)`` the (k+1)-th smallest penalty (where
+    fewer than k+1 views land: the largest present penalty, inflated by 1 %), the others 0."""
+    V = pview.shape[0]
+    order = np.sort(pview, axis=0)
+    kk = min(k, V - 1)
+    thresh = order[kk] if V > k else np.full(pview.shape[1:], np.inf)
+    # fewer than k+1 views here: use the largest present penalty (slightly inflated)
+    nfin = np.isfinite(order).sum(0)
+    last = np.take_along_axis(order, np.maximum(nfin - 1, 0)[None], 0)[0]
+    thresh = np.where(np.isfinite(thresh), thresh, last * 1.01 + eps)
+    with np.errstate(invalid="ignore", divide="ignore"):  # absent views: inf penalties
+        return np.where(np.isfinite(pview), np.maximum(0.0, 1.0 - pview / thresh[None]) / (pview + eps), 0.0)

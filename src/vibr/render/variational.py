@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
-from .weights import coverage_blend, robust_factor, weighted_normal
+from .weights import coverage_blend, robust_factor, view_prior, weighted_normal
 from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
@@ -49,14 +49,16 @@ class SplatCoverage:
     bw: np.ndarray | None = None     # (3, H, W) Bᵀ (w · colour)
 
 
-def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool) -> SplatCoverage:
+def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool,
+                   blend_factor=None) -> SplatCoverage:
     """B for ``samples`` and the coverage ``Bᵀ1 ≥ hole_threshold``.
 
     With ``footprint``, ``B_kmp = area(P_km ∩ p) / area(P_km)``, ``P_km`` the source pixel's
     parallelogram (paper §4.1, fig. discretization right; footprints over 1 px shrunk per
     axis); otherwise the bilinear PSF. With ``gradient``, ``Bᵀ B`` and ``Bᵀ ∇v`` with unit
     weights: the gradient term's stencil up to its constant weight (grad_weighting
-    visibility/none), and ``Σ_s (BᵀB)[s] = Bᵀ1`` is the coverage.
+    visibility/none), and ``Σ_s (BᵀB)[s] = Bᵀ1`` is the coverage. ``blend_factor`` (N,)
+    multiplies the initial blend's weights (the view prior, :func:`vibr.render.weights.view_prior`).
     """
     shape = samples.target_shape
     if footprint:
@@ -65,7 +67,7 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         sp = Splat(samples.xy, shape)
     # one pass: the unit-weight stencils (the per-sample blend weight sw in [0, 1] of
     # vibr.flythrough, else 1) and the initial blend's deformation-weighted splat
-    A0, rhs0, c0, wsum, bw = coverage_blend(samples, sp, p["sigma_s"], gradient)
+    A0, rhs0, c0, wsum, bw = coverage_blend(samples, sp, p["sigma_s"], gradient, blend_factor)
     if gradient:
         acc = A0.sum(0, dtype=np.float64)
         grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
@@ -127,15 +129,27 @@ def initial_image(cov: SplatCoverage) -> np.ndarray:
     return push_pull(blend * cov.acc[..., None], cov.acc)
 
 
+def _view_prior(samples, p, centres, times):
+    """ULR's view prior per sample (:func:`vibr.render.weights.view_prior`) when
+    ``p["view_k"]`` > 0 and the centres are known, else None; timed into ``times["weights"]``."""
+    if not p.get("view_k", 0) or centres[0] is None or centres[1] is None:
+        return None
+    t0 = time.perf_counter()
+    prior = view_prior(samples, centres[0], centres[1], int(p["view_k"]), p["ulr_beta_res"])
+    times["weights"] += time.perf_counter() - t0
+    return prior
+
+
 class _ColourTerm:
     """The colour term's stencils ``A, b, c`` with the weights ``W_km`` (docs/METHOD.md §3)
     divided by rho, the weights computed inside the assembly
     (:func:`vibr.render.weights.weighted_normal`); timed into ``times["weights"]``. ``W``
     (N,) is kept only when something needs it (``keep``)."""
 
-    def __init__(self, samples, p, sp, rho, geometric: bool, times, keep: bool):
+    def __init__(self, samples, p, sp, rho, geometric: bool, times, keep: bool, prior=None):
         self.samples, self.p, self.sp, self.rho, self.times, self.keep = samples, p, sp, rho, times, keep
         self.sigma_z = p["sigma_z"] if geometric else 0.0
+        self.prior = prior
 
     def __call__(self, u):
         t0 = time.perf_counter()
@@ -143,6 +157,8 @@ class _ColourTerm:
         rf = None
         if u is not None and p["robust"] != "none":
             rf = robust_factor(self.samples, u, self.sp, p["robust_c"], p["robust"])
+        if self.prior is not None:
+            rf = self.prior if rf is None else rf * self.prior
         A, b, c, Wk = weighted_normal(self.samples, self.sp, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
                                       grad_max=p["grad_max"], wscale=1.0 / self.rho, factor=rf,
                                       keep_weights=self.keep)
@@ -181,21 +197,24 @@ def _outer_line(name, o, n_outer, res) -> str:
 
 
 def solve_variational(samples: Samples, p: dict, method, *, callback=None, progress_bar: bool = False,
-                      verbose: bool = False, uncertainty=False) -> RenderResult:
+                      verbose: bool = False, uncertainty=False, centres=(None, None)) -> RenderResult:
     """Render from ``samples`` with a variational ``method`` (a
     :class:`vibr.render.methods.Method` with ``solve``): weights, initial image, then
-    ``n_outer`` passes of (re-weight, assemble, FISTA). See :func:`vibr.render.render`."""
+    ``n_outer`` passes of (re-weight, assemble, FISTA). See :func:`vibr.render.render`.
+    ``centres`` = (source centres (V, 3), target centre (3,)) for the view prior
+    (``p["view_k"]`` > 0)."""
     t_all = time.perf_counter()
     times = {"weights": 0.0, "init": 0.0, "assembly": 0.0, "solve": 0.0}
     s = float(p["scale"])
     gamma = p["gamma"] if method.gradient else 0.0
+    prior = _view_prior(samples, p, centres, times)
     t0 = time.perf_counter()
-    cov = splat_coverage(samples, p, footprint=p["psf"] == "footprint", gradient=gamma > 0)
+    cov = splat_coverage(samples, p, footprint=p["psf"] == "footprint", gradient=gamma > 0, blend_factor=prior)
     sp = cov.splat
     times["assembly"] += time.perf_counter() - t0
     rho = sample_density(cov.acc, cov.coverage, p["normalise"])
     need_w = p["grad_weighting"] == "W" or bool(uncertainty)
-    colour_term = _ColourTerm(samples, p, sp, rho, method.geometric, times, need_w)
+    colour_term = _ColourTerm(samples, p, sp, rho, method.geometric, times, need_w, prior)
 
     # initial image: the deformation-weighted blend (u unknown yet) + push-pull
     t0 = time.perf_counter()

@@ -1,6 +1,8 @@
 """Per-sample weights of the data term (paper §5.6, docs/METHOD.md §3; after Pujades et al. 2014).
 
-``W_km = omega_km · |det ∂tau_k/∂x_m|⁻¹`` with the geometric weight
+``W_km = pi_km · omega_km · |det ∂tau_k/∂x_m|⁻¹`` (``pi_km`` the optional view prior,
+:func:`view_prior`, 1 without: a per-sample factor like the robust one) with the geometric
+weight
 
     omega_km = 1 / (sigma_s² + sigma_z,k² · (∂tau_k/∂z · ∇u(tau_k(x_m)))²)
 
@@ -23,7 +25,7 @@ from ..geometry.gradient import _grad_row
 from .operators import _sum_in_order, accumulate_bucket
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
-           "robust_factor", "sample_weight", "weighted_normal", "coverage_blend"]
+           "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior"]
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
 
@@ -96,7 +98,8 @@ def _weights_kernel(x0, y0, fx, fy, g, dtau, sz, sz_scalar, inv_det, cap, sigma_
 
 def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *,
                       scale: float = 255.0, grad_max: float | None = 64.0,
-                      inv_det_cap: float | None = None, splat=None, dtype=np.float64) -> np.ndarray:
+                      inv_det_cap: float | None = None, splat=None, dtype=np.float64,
+                      prior=None) -> np.ndarray:
     """Data-term weights ``W_km`` (docs/METHOD.md §3), (N,) ``dtype`` (float64 by default).
 
     Parameters
@@ -120,7 +123,16 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
         Cap of the deformation weight (see :func:`deformation_weight`).
     splat : vibr.render.operators.Splat, optional
         Precomputed bilinear interpolation of ``samples.xy`` (saves its set-up).
+    prior : (N,) array, optional
+        Per-sample view prior (:func:`view_prior`), a factor of the weight.
     """
+    w = _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_cap, splat, dtype)
+    if prior is not None:
+        w *= np.asarray(prior, w.dtype)
+    return w
+
+
+def _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_cap, splat, dtype):
     sz = samples.sigma_z if sigma_z is None else sigma_z
     sz = np.asarray(sz, np.float64)
     base = 1.0 / (sigma_s ** 2)
@@ -214,17 +226,18 @@ def robust_factor(samples: Samples, u, splat, c: float = 3.0, loss: str = "cauch
 # whenever the formula changes.
 
 @njit(parallel=True, cache=True)
-def _coverage_kernel(bx0, fx, fy, coef, order, starts, sw, gvals, inv_det, sigma_s2, colour, S0, A0, rhs0,
+def _coverage_kernel(bx0, fx, fy, coef, order, starts, sw, bf, gvals, inv_det, sigma_s2, colour, S0, A0, rhs0,
                      wsum, bw):
     """One pass for the coverage and the initial blend: ``Σ Bᵀ diag(sw) B`` (S0 = 9, into
     A0) or ``Bᵀ sw`` (S0 = 1, into A0[0]), ``Bᵀ (sw·gvals)`` (into rhs0), and ``Bᵀ w``
     (into wsum[0]), ``Bᵀ (w·colour)`` (into bw) with the deformation-only weight
-    ``w = sw · sample_weight(u unknown)``; returns ``½ Σ sw |gvals|²``."""
+    ``w = sw · bf · sample_weight(u unknown)`` (``bf`` empty: 1); returns ``½ Σ sw |gvals|²``."""
     n = order.shape[0]
     W = bw.shape[2]
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == n and n > 0
     use_sw = sw.shape[0] == n
+    use_bf = bf.shape[0] == n
     cpart = np.zeros(n_rows, np.float64)
     for parity in range(2):
         for r in prange(n_rows):
@@ -241,6 +254,8 @@ def _coverage_kernel(bx0, fx, fy, coef, order, starts, sw, gvals, inv_det, sigma
                 i = order[q]
                 w = np.float32(sample_weight(np.float64(inv_det[i]), np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, sigma_s2))
                 wb[q - q0] = w * sw[i] if use_sw else w
+                if use_bf:
+                    wb[q - q0] = wb[q - q0] * bf[i]
             accumulate_bucket(r, q0, q1, order, wb, bx0, fx, fy, coef, use_coef, colour, 1, la, wsum, bw)
     return _sum_in_order(cpart)
 
@@ -292,7 +307,7 @@ def _opt(a, dtype=np.float32):
     return np.zeros(0, dtype) if a is None else np.ascontiguousarray(a, dtype)
 
 
-def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool = True):
+def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool = True, blend_factor=None):
     """One pass over the samples for what the render needs before its first estimate.
 
     Returns ``(A0, rhs0, c0, wsum, bw)``: with ``gradient``, ``A0 = Σ Bᵀ diag(sw) B`` (9, H, W)
@@ -300,7 +315,8 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
     at unit weight, ``sw`` = ``meta["sample_weight"]`` or 1); without, ``A0 = Bᵀ sw``
     (1, H, W) and an empty ``rhs0``; and the deformation-only weighted splat of the
     initial blend, ``wsum = Bᵀ w`` (1, H, W), ``bw = Bᵀ (w·colour)`` (3, H, W), ``w = sw ·``
-    :func:`sample_weight` (u unknown). float32 outputs, float64 sums."""
+    :func:`sample_weight` (u unknown) ``· blend_factor`` (N,) when given (e.g. :func:`view_prior`).
+    float32 outputs, float64 sums."""
     H, W = samples.target_shape
     n = len(samples)
     sw = samples.meta.get("sample_weight")
@@ -311,7 +327,7 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
         gv = np.zeros((n, 0), np.float32)
         A0, rhs0 = np.zeros((1, H, W), np.float32), np.zeros((0, H, W), np.float32)
     wsum, bw = np.zeros((1, H, W), np.float32), np.zeros((3, H, W), np.float32)
-    c0 = _coverage_kernel(splat.bx0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts, _opt(sw), gv,
+    c0 = _coverage_kernel(splat.bx0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts, _opt(sw), _opt(blend_factor), gv,
                           np.asarray(samples.inv_det), float(sigma_s) ** 2, np.asarray(samples.colour), A0.shape[0],
                           A0, rhs0, wsum, bw)
     return A0, rhs0, float(c0), wsum, bw
@@ -340,3 +356,42 @@ def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=No
                          float(sigma_s) ** 2, np.float32(wscale), _opt(samples.meta.get("sample_weight")),
                          _opt(factor), np.asarray(samples.colour), A, b, w_out)
     return A, b, float(c), (w_out if keep_weights else None)
+
+
+def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta_res: float = 0.1,
+               eps: float = 1e-6) -> np.ndarray:
+    """What ULR knows, as a per-sample factor of the data weight (N,) float32 in [0, 1].
+
+    Buehler et al.'s penalty of each sample (:func:`vibr.render.ulr.ulr_penalty`: the angle
+    between the target's and the source's rays to the sample's 3D point, plus ``beta_res``
+    times the source's relative excess distance, a resolution penalty), averaged per view
+    and target pixel (bilinear splat); per pixel the ``k`` best views get Buehler's weight
+    ``(1 − p/p_(k+1)) / p`` (:func:`vibr.render.ulr.ulr_view_weights`), divided by the
+    pixel's largest, so the best view has 1, the (k+1)-th and worse 0. A sample reads its
+    view's map bilinearly at its landing point. Computed once per render (it does not
+    depend on u)."""
+    from .operators import Splat
+    from .ulr import ulr_penalty, ulr_view_weights
+
+    H, W = samples.target_shape
+    n = len(samples)
+    pen = ulr_penalty(samples, source_centres, target_centre, beta_res)
+    V = len(np.asarray(source_centres))
+    pview = np.full((V, H, W), np.inf)
+    splats = []
+    for v in range(V):
+        sel = np.flatnonzero(samples.view == v)
+        sp = Splat(samples.xy[sel], (H, W)) if sel.size else None
+        splats.append((sel, sp))
+        if sp is None:
+            continue
+        s = sp.adjoint(np.stack([pen[sel], np.ones(sel.size)], 1))
+        ok = s[..., 1] > 1e-3
+        pview[v][ok] = s[ok, 0] / s[ok, 1]
+    wt = ulr_view_weights(pview, k, eps)
+    wt /= np.maximum(wt.max(0), 1e-300)[None]
+    out = np.zeros(n, np.float32)
+    for v, (sel, sp) in enumerate(splats):
+        if sp is not None:
+            out[sel] = np.clip(sp.apply(wt[v]), 0.0, 1.0)
+    return out

@@ -1,0 +1,122 @@
+"""What ULR knows in the variational weights (issue 23): the view prior (angle and resolution
+penalties, the k best views per pixel) and the fallback proxy for unknown source depth."""
+
+import numpy as np
+
+from vibr.geometry import fallback_depth
+from vibr.geometry.samples import Samples
+from vibr.render.api import render_samples
+from vibr.render.weights import geometric_weights, view_prior
+from vibr.synthetic import make_scene
+
+
+def _two_view_samples(H=6, W=8, colours=(0.3, 0.7)):
+    """Every target pixel seen by two views, on a point 5 units in front of the target (at the
+    origin): view 0 from 0.1 to the side (angle ≈ 0.02 rad), view 1 from 1.0 (≈ 0.2 rad)."""
+    yy, xx = np.mgrid[0:H, 0:W].astype(float)
+    xy1 = np.stack([xx.ravel() + 0.25, yy.ravel() + 0.25], 1)
+    n1 = len(xy1)
+    xy = np.concatenate([xy1, xy1])
+    n = len(xy)
+    X = np.tile([[0.0, 0.0, 5.0]], (n, 1))
+    colour = np.concatenate([np.full((n1, 3), colours[0]), np.full((n1, 3), colours[1])]).astype(np.float32)
+    view = np.repeat(np.arange(2, dtype=np.int32), n1)
+    S = Samples(xy, colour, np.zeros((n, 3, 2), np.float32), np.tile(np.eye(2), (n, 1, 1)), np.ones(n),
+                np.zeros((n, 2)), np.full(n, 0.05), view, np.zeros((n, 2), np.int32), X, (H, W))
+    return S, np.array([[0.1, 0.0, 0.0], [1.0, 0.0, 0.0]]), np.zeros(3)
+
+
+def test_angular_penalty_favours_the_nearer_angle_view():
+    S, Cs, Cu = _two_view_samples()
+    near, far = S.view == 0, S.view == 1
+    p = view_prior(S, Cs, Cu, k=4)
+    np.testing.assert_allclose(p[near], 1.0, rtol=1e-6)
+    # closed form: Buehler's (1 - p/thresh)/p with thresh = 1.01 · p_far (fewer than k+1 views)
+    # (angle + 0.1 × relative excess distance)
+    a0, a1 = (np.arctan(d / 5) + 0.1 * (np.hypot(d, 5) - 5) / 5 for d in (0.1, 1.0))
+    t = 1.01 * a1 + 1e-6
+    want = ((1 - a1 / t) / (a1 + 1e-6)) / ((1 - a0 / t) / (a0 + 1e-6))
+    np.testing.assert_allclose(p[far], want, rtol=1e-4)
+    assert p[far].max() < 0.01
+    # k = 1: the nearer view only
+    p1 = view_prior(S, Cs, Cu, k=1)
+    np.testing.assert_allclose(p1[near], 1.0, rtol=1e-6)
+    np.testing.assert_array_equal(p1[far], 0.0)
+    # the prior multiplies the weight (the one per-sample formula)
+    w = geometric_weights(S, np.zeros((6, 8, 3), np.float32), prior=p1)
+    assert np.all(w[near] == 1.0) and np.all(w[far] == 0.0)
+
+
+def test_variational_render_follows_the_nearer_view():
+    S, Cs, Cu = _two_view_samples()
+    plain = render_samples(S, "bvs", source_centres=Cs, target_centre=Cu).image
+    sel = render_samples(S, "bvs", source_centres=Cs, target_centre=Cu, view_k=1).image
+    assert abs(float(plain.mean()) - 0.5) < 0.02  # every view alike: their mean
+    assert abs(float(sel.mean()) - 0.3) < 0.02  # the nearer-angle view
+
+
+def test_fallback_plane_closed_form():
+    sc = make_scene("grid", 4, 24, 20)
+    views = []
+    for i, v in enumerate(sc.views):
+        z = v.depth.copy()
+        z[: 5 + i, :7] = np.nan  # unknown corner
+        views.append(v.replace(depth=z, sigma_z=None))
+    views[3] = views[3].replace(depth=np.full(views[3].depth.shape, np.nan, np.float32))  # no depth at all
+    src = sc.replace(views=views)
+    out = fallback_depth(src, factor=1.5, sigma_rel=0.2, percentile=99)
+    far = {}
+    for v, o in zip(src.views[:3], out.views[:3]):
+        known = np.isfinite(v.depth)
+        D = 1.5 * np.percentile(v.depth[known], 99)
+        far[v.name] = D
+        np.testing.assert_allclose(o.depth[~known], D, rtol=1e-6)
+        np.testing.assert_array_equal(o.depth[known], v.depth[known])
+        np.testing.assert_allclose(o.sigma_z[~known], 0.2 * D, rtol=1e-6)
+        np.testing.assert_allclose(o.sigma_z[known], 0.01 * np.median(v.depth[known]), rtol=1e-6)
+        assert out.meta["fallback"][v.name]["fraction"] == (~known).mean()
+    # a view without any known depth: the farthest plane of the others
+    np.testing.assert_allclose(out.views[3].depth, max(far.values()), rtol=1e-6)
+    # known geometry wins: the plane is behind every known depth of its view
+    for o in out.views[:3]:
+        assert o.depth.max() > 1.2 * np.nanmax(np.where(o.sigma_z < 0.1, o.depth, np.nan))
+
+
+def test_fallback_default_plane_just_behind_the_known_depth():
+    sc = make_scene("grid", 4, 24, 20)
+    views = []
+    for v in sc.views[:2]:
+        z = v.depth.copy()
+        z[:6, :6] = np.nan
+        views.append(v.replace(depth=z))
+    out = fallback_depth(sc.replace(views=views))
+    far = [1.03 * np.percentile(v.depth[np.isfinite(v.depth)], 99) for v in views]
+    for o, D in zip(out.views, far):
+        np.testing.assert_allclose(o.depth[:6, :6], D, rtol=1e-6)
+    common = fallback_depth(sc.replace(views=views), common=True)
+    for o in common.views:
+        np.testing.assert_allclose(o.depth[:6, :6], max(far), rtol=1e-6)
+
+
+def test_fallback_keeps_complete_depth():
+    sc = make_scene("grid", 4, 16, 16)
+    out = fallback_depth(sc)
+    for a, b in zip(sc.views, out.views):
+        assert a is b
+
+
+def test_prepare_applies_the_fallback_when_asked():
+    from vibr.pipeline import prepare
+
+    sc = make_scene("grid", 4, 16, 16)
+    views = []
+    for v in sc.views:
+        z = v.depth.copy()
+        z[:4, :4] = np.nan
+        views.append(v.replace(depth=z))
+    sc = sc.replace(views=views)
+    src, _ = prepare(sc, 0, depth="gt")
+    assert all(np.isnan(v.depth).any() for v in src.views)  # off by default
+    src, _ = prepare(sc, 0, depth="gt", fallback=True)
+    assert not any(np.isnan(v.depth).any() for v in src.views)
+    assert set(src.meta["fallback"]) == {v.name for v in src.views}
