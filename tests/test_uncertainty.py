@@ -216,7 +216,7 @@ def test_cli_eval_uncertainty_report_and_plot(tmp_path):
 
 
 def test_sample_statistics_one_pass_matches_separate_splats(grid):
-    """The one-pass kernel's three splats equal the residual spread, ``(Σ w B)² / Σ w² B``
+    """The one-pass kernel's splats equal the residual spread, ``(Σ w B)² / Σ w² B``
     and the weighted mean of ``sigma_z² ‖∂tau/∂z‖²`` computed by separate splats."""
     from vibr.geometry import compute_samples
     from vibr.render.operators import Splat
@@ -239,6 +239,10 @@ def test_sample_statistics_one_pass_matches_separate_splats(grid):
     assert np.all(st["n_eff"][~ok] == 0)
     pv = sp.adjoint(sz ** 2 * (S.dtau_dz ** 2).sum(1), w)
     assert np.allclose(st["pos_var"][ok], pv[ok] / ws[ok], rtol=1e-9)
+    # without wsum the kernel accumulates Σ w B itself: the same statistics
+    own = sample_statistics(sp, w, S.colour, u)
+    assert np.allclose(own["s2"], st["s2"], rtol=1e-9, atol=1e-12)
+    assert np.allclose(own["n_eff"], st["n_eff"], rtol=1e-9, atol=1e-12)
     # Cauchy–Schwarz: (Σ w B)² ≤ Σ w² B · Σ B, so n_eff ≤ Σ B, equal for equal weights
     nb = sp.adjoint(np.ones(sp.n))
     assert np.all(st["n_eff"][ok] <= nb[ok] * (1 + 1e-9))

@@ -146,18 +146,28 @@ def _residual_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, out):
                 out[y + 1, x + 1] += b3 * e
 
 
+@njit(cache=True, inline="always")
+def _add4(o, b, v0, v1, v2, v3, with_pos):
+    o[0] += b * v0
+    o[1] += b * v1
+    o[2] += b * v2
+    if with_pos:
+        o[3] += b * v3
+
+
 @njit(parallel=True, cache=True)
 def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dtau_dz, out):
-    """One pass over the samples, three splats into ``out`` (3, H, W):
-    ``out[0] = Σ_m w_m B_m· ‖colour_m − (B u)(m)‖² / C`` (the residual),
-    ``out[1] = Σ_m w_m² B_m·`` (for the effective number of samples) and
-    ``out[2] = Σ_m w_m B_m· sigma_z_m² ‖∂tau/∂z_m‖²`` (the position variance, target px²;
-    0 when ``sigma_z`` is empty).
-    Same buckets as :func:`_residual_splat` (threads never write the same row)."""
+    """One pass over the samples, splats into the interleaved ``out`` (H, W, K):
+    ``out[..., 0] = Σ_m w_m B_m· ‖colour_m − (B u)(m)‖² / C`` (the residual),
+    ``out[..., 1] = Σ_m w_m² B_m·`` (for the effective number of samples),
+    ``out[..., 2] = Σ_m w_m B_m·`` (the weight sum) and, when K = 4,
+    ``out[..., 3] = Σ_m w_m B_m· sigma_z_m² ‖∂tau/∂z_m‖²`` (the position variance, target px²).
+    Interleaved so that one sample's four corners write contiguous memory; same buckets as
+    :func:`_residual_splat` (threads never write the same row)."""
     C, H, W = u.shape
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == x0.shape[0] and x0.shape[0] > 0
-    with_pos = sigma_z.shape[0] == x0.shape[0]
+    with_pos = out.shape[2] == 4
     for parity in range(2):
         for r in prange(n_rows):
             if r % 2 != parity or starts[r] == starts[r + 1]:
@@ -176,40 +186,42 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dta
                     bu = b0 * uc[y, x] + b1 * uc[y, x + 1] + b2 * uc[y + 1, x] + b3 * uc[y + 1, x + 1]
                     d = np.float64(colour[i, c]) - bu
                     e += d * d
-                pv = 0.0
+                v0 = e * wi / C
+                v1 = wi * wi
+                v3 = 0.0
                 if with_pos:
-                    sz = sigma_z[i]
-                    pv = sz * sz * (dtau_dz[i, 0] * dtau_dz[i, 0] + dtau_dz[i, 1] * dtau_dz[i, 1])
-                vals = (e * wi / C, wi * wi, wi * pv)
-                for k in range(3):
-                    v = vals[k]
-                    o = out[k]
-                    o[y, x] += b0 * v
-                    o[y, x + 1] += b1 * v
-                    o[y + 1, x] += b2 * v
-                    o[y + 1, x + 1] += b3 * v
+                    sz = np.float64(sigma_z[i])
+                    tx = np.float64(dtau_dz[i, 0])
+                    ty = np.float64(dtau_dz[i, 1])
+                    v3 = wi * sz * sz * (tx * tx + ty * ty)
+                _add4(out[y, x], b0, v0, v1, wi, v3, with_pos)
+                _add4(out[y, x + 1], b1, v0, v1, wi, v3, with_pos)
+                _add4(out[y + 1, x], b2, v0, v1, wi, v3, with_pos)
+                _add4(out[y + 1, x + 1], b3, v0, v1, wi, v3, with_pos)
 
 
-def sample_statistics(splat, weight, colour, u, wsum, sigma_z=None, dtau_dz=None):
+def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz=None):
     """Per-pixel statistics of the samples around the rendered image ``u`` (planar (C, H, W),
-    units of ``colour``), from one pass (:func:`_sigma_splat`); ``wsum = Σ_m w_m B_mp``.
-
+    units of ``colour``), from one pass (:func:`_sigma_splat`); ``wsum = Σ_m w_m B_mp``
+    (None: accumulated in the same pass).
     Returns a dict of (H, W) float64 arrays (0 where ``wsum = 0``): ``s2`` the weighted
     variance of the samples around ``B u`` (units of ``colour`` squared), ``n_eff`` the
     effective number of samples ``(Σ w B)² / Σ w² B``, ``pos_var`` the weighted mean of the
     samples' position variance ``sigma_z² ‖∂tau/∂z‖²`` (target pixels²; 0 without ``sigma_z``)."""
-    if sigma_z is None:
-        sigma_z, dtau_dz = np.zeros(0), np.zeros((0, 2))
+    with_pos = sigma_z is not None
+    if not with_pos:
+        sigma_z, dtau_dz = np.zeros(0, np.float32), np.zeros((0, 2), np.float32)
     H, W = splat.shape
-    acc = np.zeros((3, H, W), np.float64)
+    acc = np.zeros((H, W, 4 if with_pos else 3), np.float64)
     _sigma_splat(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts,
                  np.ascontiguousarray(weight), np.ascontiguousarray(colour), np.ascontiguousarray(u, np.float32),
-                 np.ascontiguousarray(sigma_z, np.float64), np.ascontiguousarray(dtau_dz, np.float64), acc)
-    ws = np.asarray(wsum, np.float64)
+                 np.ascontiguousarray(sigma_z), np.ascontiguousarray(dtau_dz), acc)
+    ws = acc[..., 2] if wsum is None else np.asarray(wsum, np.float64)
     ok = ws > 0
     inv = np.where(ok, 1.0 / np.where(ok, ws, 1.0), 0.0)
-    return {"s2": acc[0] * inv, "n_eff": np.where(acc[1] > 0, ws * ws / np.where(acc[1] > 0, acc[1], 1.0), 0.0),
-            "pos_var": acc[2] * inv}
+    w2 = acc[..., 1]
+    return {"s2": acc[..., 0] * inv, "n_eff": np.where(w2 > 0, ws * ws / np.where(w2 > 0, w2, 1.0), 0.0),
+            "pos_var": acc[..., 3] * inv if with_pos else np.zeros((H, W))}
 
 
 def residual_spread(splat, weight, colour, u, wsum) -> np.ndarray:
@@ -295,7 +307,7 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
         up = np.asarray(u)
         if not (up.ndim == 3 and up.shape[0] == np.shape(colour)[1]):
             up = up.transpose(2, 0, 1)  # (H, W, C) → planar
-        st = sample_statistics(splat, weight, colour, up, model.A.sum(0, dtype=np.float64))
+        st = sample_statistics(splat, weight, colour, up)  # Σ w B: the row sums of A, same pass
         neff = st["n_eff"]
         inv_n = np.where(neff > 0, 1.0 / np.where(neff > 0, neff, 1.0), 0.0)
         var = var + st["s2"] * (1.0 + inv_n) * float(scale) ** 2
