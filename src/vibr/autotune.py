@@ -72,28 +72,12 @@ def probe_scale(sources: Scene, target: Camera, probes, n_renders: int, budget: 
     return float(min(1.0, max(s, MIN_SIDE / short)))
 
 
-def _scaled(scene: Scene, s: float) -> Scene:
-    """Every view resized by ``s`` (images anti-aliased, depth and sigma_z maps nearest)."""
-    from .io.images import resize_depth, resize_image
-
-    if s == 1.0:
-        return scene
-    views = []
-    for v in scene.views:
-        cam = v.camera.scaled(s)
-        sz = v.sigma_z
-        if sz is not None and np.ndim(sz) > 0:
-            sz = resize_depth(np.asarray(sz, np.float32), cam.shape)
-        views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
-                               depth=None if v.depth is None else resize_depth(v.depth, cam.shape), sigma_z=sz))
-    return scene.replace(views=views)
-
-
 def _probe_cases(sources: Scene, probes, s: float):
     """Per probe: (samples from the other sources, their centres, probe camera, probe image)."""
     from .geometry import compute_samples
+    from .io.images import scaled_scene
 
-    small = _scaled(sources, s)
+    small = scaled_scene(sources, s)
     out = []
     for i in probes:
         pv = small.views[i]

@@ -48,7 +48,7 @@ from .operators import _row_coef
 logger = logging.getLogger(__name__)
 
 __all__ = ["HOLE_SIGMA_FRACTION", "hole_sigma", "hessian_diagonal", "model_variance",
-           "sample_spread", "residual_spread", "sample_statistics", "hole_distance", "HOLE_RANGE", "TERMS",
+           "sample_spread", "sample_statistics", "hole_distance", "HOLE_RANGE", "TERMS",
            "variational_sigma", "ulr_sigma", "sample_spread_sigma",
            "view_count_sigma"]
 
@@ -112,40 +112,6 @@ def sample_spread(splat, weight, colour, centre_values=None):
     return np.maximum(s2, 0.0), wsum
 
 
-@njit(parallel=True, cache=True)
-def _residual_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, out):
-    """``out = Σ_m w_m B_m· ‖colour_m − (B u)(m)‖² / C`` (H, W), one pass over the samples:
-    row ``i`` of B (2×2 block at (x0, y0), bilinear from (fx, fy) or ``coef``) both reads
-    ``u`` (planar (C, H, W)) and receives the splat. Buckets of even then odd top rows, so
-    that threads never write the same row (as :func:`vibr.render.operators._assemble_kernel`)."""
-    C, H, W = u.shape
-    n_rows = starts.shape[0] - 1
-    use_coef = coef.shape[0] == x0.shape[0] and x0.shape[0] > 0
-    for parity in range(2):
-        for r in prange(n_rows):
-            if r % 2 != parity or starts[r] == starts[r + 1]:
-                continue
-            for q in range(starts[r], starts[r + 1]):
-                i = order[q]
-                wi = np.float64(w[i])
-                if wi == 0.0:
-                    continue
-                b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
-                x = x0[i]
-                y = y0[i]
-                e = 0.0
-                for c in range(C):
-                    uc = u[c]
-                    bu = b0 * uc[y, x] + b1 * uc[y, x + 1] + b2 * uc[y + 1, x] + b3 * uc[y + 1, x + 1]
-                    d = np.float64(colour[i, c]) - bu
-                    e += d * d
-                e *= wi / C
-                out[y, x] += b0 * e
-                out[y, x + 1] += b1 * e
-                out[y + 1, x] += b2 * e
-                out[y + 1, x + 1] += b3 * e
-
-
 @njit(cache=True, inline="always")
 def _add4(o, b, v0, v1, v2, v3, with_pos):
     o[0] += b * v0
@@ -163,7 +129,8 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dta
     ``out[..., 2] = Σ_m w_m B_m·`` (the weight sum) and, when K = 4,
     ``out[..., 3] = Σ_m w_m B_m· sigma_z_m² ‖∂tau/∂z_m‖²`` (the position variance, target px²).
     Interleaved so that one sample's four corners write contiguous memory; same buckets as
-    :func:`_residual_splat` (threads never write the same row)."""
+    buckets of even then odd top rows, so that threads never write the same row (as
+    :func:`vibr.render.operators._assemble_kernel`)."""
     C, H, W = u.shape
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == x0.shape[0] and x0.shape[0] > 0
@@ -222,19 +189,6 @@ def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz
     w2 = acc[..., 1]
     return {"s2": acc[..., 0] * inv, "n_eff": np.where(w2 > 0, ws * ws / np.where(w2 > 0, w2, 1.0), 0.0),
             "pos_var": acc[..., 3] * inv if with_pos else np.zeros((H, W))}
-
-
-def residual_spread(splat, weight, colour, u, wsum) -> np.ndarray:
-    """``s²(p) = Σ_m w_m B_mp ‖colour_m − (B u)(m)‖² / (C · wsum(p))`` (H, W) float64, in the
-    units of ``colour`` and ``u`` squared; ``wsum = Σ_m w_m B_mp`` (the row sums of the stencil
-    ``Σ BᵀWB``, since rows of B sum to one). 0 where ``wsum = 0``."""
-    H, W = splat.shape
-    acc = np.zeros((H, W), np.float64)
-    up = np.ascontiguousarray(u, np.float32)
-    _residual_splat(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts,
-                    np.ascontiguousarray(weight), np.ascontiguousarray(colour), up, acc)
-    ws = np.asarray(wsum, np.float64)
-    return np.where(ws > 0, acc / np.where(ws > 0, ws, 1.0), 0.0)
 
 
 def _finish(var, coverage, scale):

@@ -182,21 +182,11 @@ class ViewRenderer:
 
 
 def scaled_scene(scene: Scene, s: float) -> Scene:
-    """Every view resized by ``s`` as :func:`vibr.io.load_scene` does with ``scale``: images
-    by :func:`vibr.io.images.resize_image`, cameras by :meth:`Camera.scaled`, depth and
-    sigma_z maps by nearest neighbour (:func:`vibr.io.images.resize_depth`)."""
-    from ..io.images import resize_depth, resize_image
+    """Every view resized by ``s`` as :func:`vibr.io.load_scene` does with ``scale``
+    (:func:`vibr.io.images.scaled_scene`), the factor kept in ``meta["viewer_scale"]``."""
+    from ..io.images import scaled_scene as _scaled
 
-    views = []
-    for v in scene.views:
-        cam = v.camera.scaled(s)
-        sz = v.sigma_z
-        if sz is not None and np.ndim(sz) > 0:
-            sz = resize_depth(np.asarray(sz, np.float32), cam.shape)
-        views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
-                               depth=None if v.depth is None else resize_depth(v.depth, cam.shape),
-                               sigma_z=sz))
-    return scene.replace(views=views, meta=dict(scene.meta, viewer_scale=s))
+    return _scaled(scene, s).replace(meta=dict(scene.meta, viewer_scale=s))
 
 
 def scene_with_depth(scene: Scene, *, cache_dir=None) -> Scene:
