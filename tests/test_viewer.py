@@ -263,7 +263,7 @@ def test_kept_depth_preparation_gives_the_per_request_image(tiny_scene, monkeypa
     assert set(r._prepared) == {1.0, 0.5} and len(r._prepared[1.0]) >= 3
     for c, out in zip(cams + cams, kept):
         src = r.scene_for(c).subset(r.sources_for(c, 3))
-        assert np.array_equal(out.image, render(src, c, gamma=1.0, lam=0.1).image)  # ViewSettings()
+        assert np.array_equal(out.image, render(src, c).image)  # ViewSettings(): the renderer's defaults
     monkeypatch.setattr(R, "PREPARED_BUDGET_BYTES", 0)  # nothing kept: prepared per request
     r0 = R.ViewRenderer(tiny_scene)
     assert np.array_equal(r0.render(cams[0], ViewSettings(n_views=3)).image, kept[0].image)

@@ -183,6 +183,9 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     out.meta["cpu_times"] = cpu
     out.meta["vis_threshold"] = float(vis_threshold)
     out.meta["grad_scheme"] = grad_scheme
+    # where the views are: ULR and the view prior weigh the samples by the rays' angles
+    out.meta["source_centres"] = np.array([v.camera.centre for v in sources.views], np.float64)
+    out.meta["target_centre"] = np.asarray(cam.centre, np.float64)
     if return_zbuffer:
         out.meta["zbuffer"] = zbuf
     return out

@@ -23,7 +23,9 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
                    verbose: bool = False, uncertainty: bool = False, **params) -> RenderResult:
     """Render from precomputed :class:`~vibr.geometry.Samples` (see :func:`render` for the
     parameters) with the registered method (:mod:`vibr.render.methods`).
-    ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr."""
+    ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr and the view prior
+    (``view_k``); None takes those :func:`vibr.geometry.compute_samples` stored in
+    ``samples.meta``."""
     m = get_method(method)
     if "auto" in (params.get("gamma"), params.get("lam")):
         raise VibrInputError("gamma/lam 'auto' tunes on the source views: use vibr.render.render "
@@ -31,6 +33,10 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
     p = method_params(m.name, **params)
     if len(samples) == 0:
         raise VibrInputError("no source sample lands in the target view")
+    if source_centres is None:
+        source_centres = samples.meta.get("source_centres")
+    if target_centre is None:
+        target_centre = samples.meta.get("target_centre")
     return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
                     callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty)
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..render import render
-from ..render.methods import METHODS
+from ..render.methods import DEFAULTS, METHODS
 from ..scene import Scene
 from ..selection import select_views
 from .geometry import points_in_view
@@ -40,9 +40,10 @@ class ViewSettings:
     """What the GUI controls (paper names; see :mod:`vibr.render.methods`).
 
     method : one of :data:`vibr.render.methods.METHODS` (default "gradient")
-    gamma : gradient-term weight (eq. energy_final), method "gradient" only (default 1.0,
-        not :data:`vibr.render.methods.DEFAULTS`' 0.25: docs/VIEWER.md, "Where the time goes")
-    lam : TV weight, for intensities on [0, 255]
+    gamma : gradient-term weight (eq. energy_final), method "gradient" only (default
+        :data:`vibr.render.methods.DEFAULTS`' gamma, as ``vibr render``: a path composed in
+        the viewer renders to video with the same settings)
+    lam : TV weight, for intensities on [0, 255] (default: DEFAULTS' lam)
     n_views : number of source views (the best for the camera)
     preview_long_side : long side of the preview image while the camera moves (px)
     full_long_side : long side of the image once the camera is still (px); None: the
@@ -50,8 +51,8 @@ class ViewSettings:
     """
 
     method: str = "gradient"
-    gamma: float = 1.0
-    lam: float = 0.1
+    gamma: float = DEFAULTS["gamma"]
+    lam: float = DEFAULTS["lam"]
     n_views: int = 8
     preview_long_side: int = 256
     full_long_side: int | None = None
