@@ -61,8 +61,16 @@ BEGIN, END = "<!-- q23b:begin -->", "<!-- q23b:end -->"
 BORDER = 2
 
 
+#: every gradient setting pins what the library's defaults may change
+BASE = {"tv_weighting": "uniform", "view_k": 0, "precond": False, "grad_weighting": "visibility"}
+
+
 def settings():
     """(label, method, params) of the sweep, in table order."""
+    return [(lab, m, {**BASE, **kw} if m == "gradient" else kw) for lab, m, kw in _settings()]
+
+
+def _settings():
     out = [("ULR", "ulr", {}), ("BVS", "bvs", {"lam": 0.1})]  # BVS at the paper's light-field lam
     out += [(f"γ{g:g} λ{l:g}", "gradient", {"gamma": g, "lam": l, "tv_weighting": "uniform"})
             for g in GAMMAS for l in LAMS]

@@ -16,10 +16,12 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
 * ``gamma = 0.1`` gradient-term weight for ``gradient`` and ``lam = 0.3`` TV weight (grey
   levels of 255: a 1-grey-level step costs 0.3 per pixel of edge), with the uniform TV
   (eq. energy_final; vibr's units: forward differences, docs/RENDERER.md "One image
-  gradient"; the paper's γ is reached through ``preset="paper"``): chosen by
+  gradient"; the paper's γ is reached through ``preset="paper"``), the view prior
+  (``view_k = 4``) and the preconditioned solver (``precond = True``): chosen together by
   ``benchmarks/sweep_defaults.py`` (issue 23), the best mean all-pixel PSNR over the
   *choose* half of a sweep across cotton, fountain, temple and the synthetic scenes, reported
-  on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs.
+  on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs,
+  which keep their published form (``view_k = 0``, ``precond = False``) unless given.
   ``"auto"`` for either: chosen per scene by leave-one-source-out (:mod:`vibr.autotune`).
 * ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/METHOD.md §3, the authors' value).
 * ``sigma_z = None`` depth std. dev., scene units: the samples' own (the geometry stage's
@@ -38,10 +40,13 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (occluded, mismatched: speckles) stop pulling the render; ``"none"`` is least squares.
   Off by default: it wins on cotton and fountain but loses on the synthetic scenes
   (docs/RENDERER.md "Robust data term").
-* ``view_k = 0``: > 0 multiplies each sample's data weight by ULR's view prior
+* ``view_k = 4``: > 0 multiplies each sample's data weight by ULR's view prior
   (:func:`vibr.render.weights.view_prior`: Buehler's angle + ``ulr_beta_res`` × resolution
   penalty, the ``view_k`` best views per pixel; docs/RENDERER.md "What ULR knows"); 0 weighs
-  every view alike. Needs the camera centres (``render`` passes them).
+  every view alike. Needs the camera centres (stored by :func:`vibr.geometry.compute_samples`).
+* ``precond = True``: variable-metric FISTA (:func:`vibr.render.solver.fista`, the authors'
+  diagonal preconditioner, ``d_floor`` its floor); the same energy, reached in fewer
+  iterations where the sample density is uneven (docs/RENDERER.md "Preconditioned solver").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -62,9 +67,9 @@ __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS
 DEFAULTS = dict(
     alpha=1.0, gamma=0.1, lam=0.3, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, min_iter=3, tv_iter=2, coupled_tv=True,
-    grad_weighting="visibility", grad_max=64.0, precond=False, d_floor=0.05,
+    grad_weighting="visibility", grad_max=64.0, precond=True, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=0,
+    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4,
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
@@ -160,10 +165,12 @@ def register_method(method: Method) -> Method:
 
 register_method(Method("ulr", "Unstructured Lumigraph Rendering (direct blend, no solve)",
                        solve=False, reweight=False, overrides=dict(gamma=0.0, n_outer=0)))
+# the baselines keep their published form (no view prior, plain FISTA) unless asked
+_PUBLISHED = dict(view_k=0, precond=False)
 register_method(Method("savsr", "Wanner & Goldluecke 2012: deformation weights, one solve",
-                       reweight=False, geometric=False, overrides=dict(gamma=0.0, n_outer=1)))
+                       reweight=False, geometric=False, overrides=dict(gamma=0.0, n_outer=1, **_PUBLISHED)))
 register_method(Method("bvs", "Pujades et al. 2014: Bayesian weights re-estimated from u",
-                       overrides=dict(gamma=0.0)))
+                       overrides=dict(gamma=0.0, **_PUBLISHED)))
 register_method(Method("gradient", "Nieto et al. 2016: bvs + the gradient term (the default)",
                        gradient=True))
 
@@ -202,8 +209,8 @@ PAPER_LAM_FACTOR = 255.0
 def paper_params(params: dict) -> dict:
     """The paper's units → vibr's (docs/RENDERER.md, "The paper's units"): ``alpha`` kept,
     ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
-    weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``) and the spatially
-    varying TV (``tv_weighting="samples"``) unless given. ``params`` holds the paper's
+    weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``), the spatially
+    varying TV (``tv_weighting="samples"``), no view prior and plain FISTA unless given. ``params`` holds the paper's
     alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any other vibr parameter."""
     out = dict(params)
     paper = {k: PAPER_DEFAULTS[k] if params.get(k) is None else float(params[k]) for k in PAPER_DEFAULTS}
@@ -213,7 +220,7 @@ def paper_params(params: dict) -> dict:
         raise VibrInputError("preset 'paper' fixes the intensity scale to 255")
     out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
                lam=paper["lam"] * PAPER_LAM_FACTOR)
-    for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples")):
+    for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples"), ("view_k", 0), ("precond", False)):
         if out.get(k) is None:
             out[k] = v
     return out

@@ -49,8 +49,15 @@ class SplatCoverage:
     bw: np.ndarray | None = None     # (3, H, W) Bᵀ (w · colour)
 
 
+def make_splat(samples: Samples, footprint: bool) -> Splat:
+    """``B`` of the samples: the footprint PSF (paper §4.1) or the bilinear one."""
+    if footprint:
+        return Splat(samples.xy, samples.target_shape, jac=samples.jac, psf="footprint")
+    return Splat(samples.xy, samples.target_shape)
+
+
 def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool,
-                   blend_factor=None) -> SplatCoverage:
+                   blend_factor=None, splat=None) -> SplatCoverage:
     """B for ``samples`` and the coverage ``Bᵀ1 ≥ hole_threshold``.
 
     With ``footprint``, ``B_kmp = area(P_km ∩ p) / area(P_km)``, ``P_km`` the source pixel's
@@ -58,13 +65,10 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
     axis); otherwise the bilinear PSF. With ``gradient``, ``Bᵀ B`` and ``Bᵀ ∇v`` with unit
     weights: the gradient term's stencil up to its constant weight (grad_weighting
     visibility/none), and ``Σ_s (BᵀB)[s] = Bᵀ1`` is the coverage. ``blend_factor`` (N,)
-    multiplies the initial blend's weights (the view prior, :func:`vibr.render.weights.view_prior`).
+    multiplies the initial blend's weights (the view prior, :func:`vibr.render.weights.view_prior`);
+    ``splat``: ``B`` already built (:func:`make_splat` with the same ``footprint``).
     """
-    shape = samples.target_shape
-    if footprint:
-        sp = Splat(samples.xy, shape, jac=samples.jac, psf="footprint")
-    else:
-        sp = Splat(samples.xy, shape)
+    sp = splat if splat is not None else make_splat(samples, footprint)
     # one pass: the unit-weight stencils (the per-sample blend weight sw in [0, 1] of
     # vibr.flythrough, else 1) and the initial blend's deformation-weighted splat
     A0, rhs0, c0, wsum, bw = coverage_blend(samples, sp, p["sigma_s"], gradient, blend_factor)
@@ -129,13 +133,13 @@ def initial_image(cov: SplatCoverage) -> np.ndarray:
     return push_pull(blend * cov.acc[..., None], cov.acc)
 
 
-def _view_prior(samples, p, centres, times):
+def _view_prior(samples, p, centres, times, splat):
     """ULR's view prior per sample (:func:`vibr.render.weights.view_prior`) when
     ``p["view_k"]`` > 0 and the centres are known, else None; timed into ``times["weights"]``."""
     if not p.get("view_k", 0) or centres[0] is None or centres[1] is None:
         return None
     t0 = time.perf_counter()
-    prior = view_prior(samples, centres[0], centres[1], int(p["view_k"]), p["ulr_beta_res"])
+    prior = view_prior(samples, centres[0], centres[1], int(p["view_k"]), p["ulr_beta_res"], splat=splat)
     times["weights"] += time.perf_counter() - t0
     return prior
 
@@ -207,9 +211,13 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     times = {"weights": 0.0, "init": 0.0, "assembly": 0.0, "solve": 0.0}
     s = float(p["scale"])
     gamma = p["gamma"] if method.gradient else 0.0
-    prior = _view_prior(samples, p, centres, times)
     t0 = time.perf_counter()
-    cov = splat_coverage(samples, p, footprint=p["psf"] == "footprint", gradient=gamma > 0, blend_factor=prior)
+    sp = make_splat(samples, p["psf"] == "footprint")
+    times["assembly"] += time.perf_counter() - t0
+    prior = _view_prior(samples, p, centres, times, sp)
+    t0 = time.perf_counter()
+    cov = splat_coverage(samples, p, footprint=p["psf"] == "footprint", gradient=gamma > 0, blend_factor=prior,
+                         splat=sp)
     sp = cov.splat
     times["assembly"] += time.perf_counter() - t0
     rho = sample_density(cov.acc, cov.coverage, p["normalise"])

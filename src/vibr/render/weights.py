@@ -22,7 +22,7 @@ from numba import njit, prange
 
 from ..geometry.samples import Samples
 from ..geometry.gradient import _grad_row
-from .operators import _sum_in_order, accumulate_bucket
+from .operators import _row_coef, _sum_in_order, accumulate_bucket
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
            "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior"]
@@ -358,40 +358,128 @@ def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=No
     return A, b, float(c), (w_out if keep_weights else None)
 
 
+@njit(cache=True)
+def _ulr_penalty_one(X, c, cu, beta_res):
+    """Buehler's penalty of one sample (see :func:`vibr.render.ulr.ulr_penalty`)."""
+    ax = np.float64(X[0]) - c[0]
+    ay = np.float64(X[1]) - c[1]
+    az = np.float64(X[2]) - c[2]
+    bx = np.float64(X[0]) - cu[0]
+    by = np.float64(X[1]) - cu[1]
+    bz = np.float64(X[2]) - cu[2]
+    na = math.sqrt(ax * ax + ay * ay + az * az)
+    nb = math.sqrt(bx * bx + by * by + bz * bz)
+    cosang = min(1.0, max(-1.0, (ax * bx + ay * by + az * bz) / max(na * nb, 1e-300)))
+    return math.acos(cosang) + beta_res * max(0.0, na - nb) / max(nb, 1e-300)
+
+
+@njit(parallel=True, cache=True)
+def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_res, acc):
+    """``acc[y, x, v] += (B_m· pen_m, B_m·)`` per view: each view's penalty splat and
+    coverage, one pass over the samples (row buckets of even then odd rows: threads never
+    write the same row). The view is the fast axis: a pixel's views lie together."""
+    n = order.shape[0]
+    n_rows = starts.shape[0] - 1
+    use_coef = coef.shape[0] == n and n > 0
+    for parity in range(2):
+        for r in prange(n_rows):
+            if r % 2 != parity or starts[r] == starts[r + 1]:
+                continue
+            for q in range(starts[r], starts[r + 1]):
+                i = order[q]
+                v = view[i]
+                pen = _ulr_penalty_one(X[i], Cs[v], Cu, beta_res)
+                b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
+                x = bx0[i]
+                y = by0[i]
+                acc[y, x, v, 0] += b0 * pen
+                acc[y, x, v, 1] += b0
+                acc[y, x + 1, v, 0] += b1 * pen
+                acc[y, x + 1, v, 1] += b1
+                acc[y + 1, x, v, 0] += b2 * pen
+                acc[y + 1, x, v, 1] += b2
+                acc[y + 1, x + 1, v, 0] += b3 * pen
+                acc[y + 1, x + 1, v, 1] += b3
+
+
+@njit(parallel=True, cache=True)
+def _prior_pixels(acc, k, eps, wt):
+    """Per pixel: each view's mean penalty (where its coverage > 1e-3), Buehler's weights of
+    the ``k`` best views (:func:`vibr.render.ulr.ulr_view_weights`), divided by the largest.
+    ``acc`` (H, W, V, 2), ``wt`` (H, W, V)."""
+    H, W, V = wt.shape
+    kk = min(k, V - 1)
+    for y in prange(H):
+        p = np.empty(V, np.float64)
+        srt = np.empty(V, np.float64)
+        for x in range(W):
+            nfin = 0
+            for v in range(V):
+                c = acc[y, x, v, 1]
+                p[v] = acc[y, x, v, 0] / c if c > 1e-3 else np.inf
+                # insertion sort of the V penalties (V is small)
+                j = v
+                while j > 0 and srt[j - 1] > p[v]:
+                    srt[j] = srt[j - 1]
+                    j -= 1
+                srt[j] = p[v]
+                if c > 1e-3:
+                    nfin += 1
+            thresh = srt[kk] if V > k else np.inf
+            if not math.isfinite(thresh):  # fewer than k+1 views: the largest present, inflated
+                thresh = srt[max(nfin - 1, 0)] * 1.01 + eps
+            top = 0.0
+            for v in range(V):
+                w = 0.0
+                if math.isfinite(p[v]):
+                    w = max(0.0, 1.0 - p[v] / thresh) / (p[v] + eps)
+                wt[y, x, v] = w
+                top = max(top, w)
+            top = max(top, 1e-300)
+            for v in range(V):
+                wt[y, x, v] /= top
+
+
+@njit(parallel=True, cache=True)
+def _prior_gather(bx0, by0, fx, fy, coef, view, wt, out):
+    """``out_m = clip((B wt_{view_m})(m), 0, 1)``: each sample reads its view's map."""
+    n = bx0.shape[0]
+    use_coef = coef.shape[0] == n and n > 0
+    for i in prange(n):
+        b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
+        x = bx0[i]
+        y = by0[i]
+        v = view[i]
+        val = b0 * wt[y, x, v] + b1 * wt[y, x + 1, v] + b2 * wt[y + 1, x, v] + b3 * wt[y + 1, x + 1, v]
+        out[i] = np.float32(min(1.0, max(0.0, val)))
+
+
 def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta_res: float = 0.1,
-               eps: float = 1e-6) -> np.ndarray:
+               eps: float = 1e-6, splat=None) -> np.ndarray:
     """What ULR knows, as a per-sample factor of the data weight (N,) float32 in [0, 1].
 
     Buehler et al.'s penalty of each sample (:func:`vibr.render.ulr.ulr_penalty`: the angle
     between the target's and the source's rays to the sample's 3D point, plus ``beta_res``
     times the source's relative excess distance, a resolution penalty), averaged per view
-    and target pixel (bilinear splat); per pixel the ``k`` best views get Buehler's weight
-    ``(1 − p/p_(k+1)) / p`` (:func:`vibr.render.ulr.ulr_view_weights`), divided by the
-    pixel's largest, so the best view has 1, the (k+1)-th and worse 0. A sample reads its
-    view's map bilinearly at its landing point. Computed once per render (it does not
-    depend on u)."""
+    and target pixel (splat ``B``: ``splat``, else the bilinear one of ``samples.xy``); per
+    pixel the ``k`` best views get Buehler's weight ``(1 − p/p_(k+1)) / p``
+    (:func:`vibr.render.ulr.ulr_view_weights`), divided by the pixel's largest, so the best
+    view has 1, the (k+1)-th and worse 0. A sample reads its view's map through ``B`` at its
+    landing point. Computed once per render (it does not depend on u); three compiled
+    passes (penalty splat, per-pixel weights, gather)."""
     from .operators import Splat
-    from .ulr import ulr_penalty, ulr_view_weights
 
     H, W = samples.target_shape
-    n = len(samples)
-    pen = ulr_penalty(samples, source_centres, target_centre, beta_res)
-    V = len(np.asarray(source_centres))
-    pview = np.full((V, H, W), np.inf)
-    splats = []
-    for v in range(V):
-        sel = np.flatnonzero(samples.view == v)
-        sp = Splat(samples.xy[sel], (H, W)) if sel.size else None
-        splats.append((sel, sp))
-        if sp is None:
-            continue
-        s = sp.adjoint(np.stack([pen[sel], np.ones(sel.size)], 1))
-        ok = s[..., 1] > 1e-3
-        pview[v][ok] = s[ok, 0] / s[ok, 1]
-    wt = ulr_view_weights(pview, k, eps)
-    wt /= np.maximum(wt.max(0), 1e-300)[None]
-    out = np.zeros(n, np.float32)
-    for v, (sel, sp) in enumerate(splats):
-        if sp is not None:
-            out[sel] = np.clip(sp.apply(wt[v]), 0.0, 1.0)
+    Cs = np.ascontiguousarray(source_centres, np.float64).reshape(-1, 3)
+    Cu = np.ascontiguousarray(target_centre, np.float64).reshape(3)
+    sp = splat if splat is not None else Splat(samples.xy, (H, W))
+    view = np.ascontiguousarray(samples.view)
+    acc = np.zeros((H, W, len(Cs), 2), np.float64)
+    _prior_splat(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, sp.order, sp.starts, view, np.ascontiguousarray(samples.X),
+                 Cs, Cu, float(beta_res), acc)
+    wt = np.empty((H, W, len(Cs)), np.float64)
+    _prior_pixels(acc, int(k), float(eps), wt)
+    del acc
+    out = np.empty(len(samples), np.float32)
+    _prior_gather(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, view, wt, out)
     return out
