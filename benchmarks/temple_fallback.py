@@ -4,6 +4,10 @@ proxy"). Prints PSNR (dB) over all pixels and over the pixels the render without
 covered (2-px border), and writes the figure reference | without | with.
 
     python benchmarks/temple_fallback.py [--data DIR] [--figure docs/img/temple_fallback.png]
+    python benchmarks/temple_fallback.py --fountain     # also fountain 2/5/8 (scale 0.25, estimated)
+
+Each table row gives the views' unknown-depth fractions (min–max over the sources): what
+``fallback="auto"`` (vibr.geometry.proxy.FALLBACK_MIN_FRACTION) decides on.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
     ap.add_argument("--figure", default=str(ROOT / "docs" / "img" / "temple_fallback.png"))
+    ap.add_argument("--fountain", action="store_true", help="also fountain views 2, 5, 8 from the 10 others")
     args = ap.parse_args(argv)
     from vibr.geometry import compute_samples, fallback_depth
     from vibr.io import load_scene
@@ -42,12 +47,25 @@ def main(argv=None):
             if fb == "without":
                 cover = r.coverage if cover is None else cover & r.coverage
     print(f"templeSR0004 from {', '.join(v.name for v in raw.views)}; covered (without fallback): "
-          f"{cover.mean():.1%} of the pixels")
+          f"{cover.mean():.1%} of the pixels; unknown depth per source view {_fractions(raw)}")
     print("| method | fallback | PSNR all pixels | PSNR covered |")
     print("|---|---|---|---|")
     for (fb, m), img in images.items():
         print(f"| {m} | {fb} | {psnr(img, tv.image, border=2):.2f} | {psnr(img, tv.image, mask=cover, border=2):.2f} |")
     _figure(args.figure, [tv.image, images[("without", "gradient")], images[("with", "gradient")]])
+    if args.fountain:
+        print("\n| fountain view (scale 0.25) | unknown depth per source view | gradient without | with (all pixels) |")
+        print("|---|---|---|---|")
+        fountain = load_scene(data / "strecha_fountain-P11", scale=0.25)
+        for t in ("0002", "0005", "0008"):
+            raw, tv = prepare(fountain, t, depth="estimated", fallback=False)
+            p = [psnr(render(src, tv.camera, "gradient").image, tv.image, border=2) for src in (raw, fallback_depth(raw))]
+            print(f"| {t} | {_fractions(raw)} | {p[0]:.2f} | {p[1]:.2f} |")
+
+
+def _fractions(scene):
+    f = [float(np.mean(~np.isfinite(v.depth))) for v in scene.views]
+    return f"{min(f):.0%}–{max(f):.0%}"
 
 
 def _figure(path, panels):

@@ -116,7 +116,7 @@ def test_prepare_applies_the_fallback_when_asked():
         views.append(v.replace(depth=z))
     sc = sc.replace(views=views)
     src, _ = prepare(sc, 0, depth="gt")
-    assert all(np.isnan(v.depth).any() for v in src.views)  # off by default
+    assert all(np.isnan(v.depth).any() for v in src.views)  # auto: 6 % unknown is not a backdrop
     src, _ = prepare(sc, 0, depth="gt", fallback=True)
     assert not any(np.isnan(v.depth).any() for v in src.views)
     assert set(src.meta["fallback"]) == {v.name for v in src.views}
@@ -162,3 +162,54 @@ def test_compiled_view_prior_equals_ulr_functions_view_by_view():
         want = _reference_view_prior(S, Cs, Cu, k=k)
         assert 0.05 < float(np.mean(got > 0.999)) < 0.95  # a real selection: some best, some not
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+def test_cli_render_and_eval_take_the_fallback(tmp_path):
+    """``--fallback`` reaches prepare from ``vibr render`` and ``vibr eval``: with source depth
+    holes on a third of each view, "auto" leaves them (not a backdrop) and "always" fills
+    them, so the renders differ."""
+    import imageio.v3 as iio
+
+    from vibr.cli import main
+    from vibr.io import save_scene
+
+    sc = make_scene("grid", 4, 32, 32, seed=1)
+    views = []
+    for v in sc.views:
+        z = v.depth.copy()
+        z[:10, :] = np.nan  # a band of unknown depth in every view
+        views.append(v.replace(depth=z))
+    d = save_scene(sc.replace(views=views), tmp_path / "s")
+    out = {}
+    for flag in ([], ["--fallback", "always"]):
+        o = tmp_path / f"r{len(flag)}.png"
+        assert main(["-q", "render", str(d), "--target", "0", "--depth", "gt", "-o", str(o), *flag]) == 0
+        out[bool(flag)] = iio.imread(o)
+    assert np.abs(out[True].astype(int) - out[False].astype(int)).max() > 0
+    js = tmp_path / "e.json"
+    assert main(["-q", "eval", str(d), "--target", "0", "--depth", "gt", "--method", "ulr", "--fallback", "never",
+                 "--json", str(js)]) == 0
+    assert js.exists()
+
+
+def test_auto_fallback_only_for_mostly_unknown_views():
+    """``fallback="auto"``: a view at least FALLBACK_MIN_FRACTION unknown (a backdrop) gets the
+    plane, a view with a few unknown patches keeps them; "never" leaves both."""
+    from vibr.geometry import apply_fallback
+    from vibr.geometry.proxy import FALLBACK_MIN_FRACTION
+
+    sc = make_scene("grid", 4, 20, 20)
+    views = []
+    for i, v in enumerate(sc.views):
+        z = v.depth.copy()
+        rows = 16 if i % 2 == 0 else 2  # 80 % or 10 % unknown
+        z[:rows] = np.nan
+        views.append(v.replace(depth=z))
+    sc = sc.replace(views=views)
+    out = apply_fallback(sc, "auto")
+    for i, v in enumerate(out.views):
+        frac = np.isnan(sc.views[i].depth).mean()
+        assert (frac >= FALLBACK_MIN_FRACTION) == (not np.isnan(v.depth).any())
+    assert set(out.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
+    assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
+    assert not any(np.isnan(v.depth).any() for v in apply_fallback(sc, "always").views)

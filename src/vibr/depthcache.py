@@ -111,7 +111,7 @@ def _save(path: Path, scene: Scene) -> None:
 
 
 def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | None = None,
-                     cache_dir=None, exclude=()) -> Scene:
+                     cache_dir=None, exclude=(), fallback="auto") -> Scene:
     """The scene (minus ``exclude``) with a depth map on every view.
 
     Parameters
@@ -127,6 +127,9 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
         Cache folder (default :func:`default_cache_dir`); ``False`` disables the cache.
     exclude : views (names or indices) left out entirely: never sources, never inputs of
         the depth estimation (a held-out view).
+    fallback : {"auto", "always", "never"}
+        The fallback proxy for pixels of unknown depth (:func:`vibr.geometry.apply_fallback`,
+        as :func:`vibr.pipeline.prepare`); applied after the cache (not part of its key).
 
     Returns
     -------
@@ -135,6 +138,13 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
         ``meta["depth_cache"]`` the cache file (when used), ``meta["depth_time_s"]`` the
         time spent obtaining depth.
     """
+    from .geometry import apply_fallback
+
+    out = _scene_with_depth(scene, depth, estimate_kw, cache_dir, exclude)
+    return apply_fallback(out, fallback)
+
+
+def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude) -> Scene:
     t0 = time.perf_counter()
     if depth not in ("auto", "gt", "estimated"):
         raise VibrInputError(f"depth must be auto, gt or estimated for a camera path, got {depth!r}")

@@ -92,7 +92,8 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
                    border: int = METRIC_BORDER, estimate_kw: dict | None = None,
                    render_kw: dict | None = None, intensity_scale: float | None = None,
                    geometry_kw: dict | None = None, use_lpips: bool = True,
-                   view_split: int | None = None, uncertainty: bool = False) -> Evaluation:
+                   view_split: int | None = None, uncertainty: bool = False,
+                   fallback: str | bool = "auto") -> Evaluation:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
@@ -119,6 +120,8 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         Render with ``uncertainty=True`` and add entry ``uncertainty`` = {ause, spearman,
         fractions, curve, oracle, rmse} (:func:`vibr.metrics.uncertainty_metrics`, the same
         pixels as the other metrics; plot: :func:`vibr.uncertainty_figures.write_sparsification_figure`).
+    fallback : {"auto", "always", "never"}
+        The fallback proxy for source pixels of unknown depth (:func:`vibr.pipeline.prepare`).
 
     Returns an :class:`Evaluation` whose ``report`` is JSON-serialisable: ``scene``,
     ``target``, ``sources``, ``scale`` (the image scale the scene was loaded at),
@@ -133,7 +136,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     settings, intensity_scale = _checked_settings(settings, mask, intensity_scale)
     t0 = time.perf_counter()
     src, tview = prepare(scene, target, sources=sources, depth=depth, depth_files=depth_files,
-                         n_views=n_views, estimate_kw=estimate_kw)
+                         n_views=n_views, estimate_kw=estimate_kw, fallback=fallback)
     t_depth = time.perf_counter() - t0
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)

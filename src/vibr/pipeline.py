@@ -15,11 +15,12 @@ chosen geometry:
     which is the paper's "ground-truth geometry" protocol.
 ``estimated``
     estimated from the sources alone (:func:`vibr.stereo.estimate_depth`); the target never
-    takes part. With ``fallback=True``, source pixels that stereo leaves unknown (a black
-    backdrop, the sky) get the fallback proxy (:func:`vibr.geometry.fallback_depth`: a
-    plane of their view just behind its farthest known depth, with a large sigma_z), so
-    that they still take part where no known surface hides them (off by default: it wins
-    on the temple ring and loses on fountain, docs/RENDERER.md "Fallback proxy").
+    takes part. Source pixels that stereo leaves unknown (a black backdrop, the sky) get
+    the fallback proxy (:func:`vibr.geometry.fallback_depth`: a plane of their view just
+    behind its farthest known depth, with a large sigma_z), so that they still take part
+    where no known surface hides them: by default (``fallback="auto"``) in the views that
+    are mostly unknown (a backdrop: it wins on the temple ring), not where stereo missed a
+    few patches of the object (it loses on fountain); docs/RENDERER.md "Fallback proxy".
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
     paper's coarsest proxy, with a large depth uncertainty. Its depth and uncertainty come
@@ -68,7 +69,7 @@ def _depth_file_for(folder: Path, name: str) -> Path:
 
 def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int | str] | None = None,
             depth: str = "auto", depth_files: str | os.PathLike | None = None, n_views: int | None = None,
-            estimate_kw: dict | None = None, fallback: bool | None = None) -> tuple[Scene, View | Camera]:
+            estimate_kw: dict | None = None, fallback: str | bool = "auto") -> tuple[Scene, View | Camera]:
     """Choose the target and the sources, and give every source a depth map.
 
     Parameters
@@ -87,9 +88,11 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Keep only this many source views, the best for the target (:mod:`vibr.selection`).
     estimate_kw : dict, optional
         Extra arguments of :func:`vibr.stereo.estimate_depth`.
-    fallback : bool, optional
+    fallback : {"auto", "always", "never"} or bool
         Give source pixels of unknown depth the fallback proxy
-        (:func:`vibr.geometry.fallback_depth`); default off.
+        (:func:`vibr.geometry.apply_fallback`): "auto" (default) in the views at least
+        :data:`vibr.geometry.proxy.FALLBACK_MIN_FRACTION` unknown, "always" (True) in every
+        view with unknown pixels, "never" (False).
 
     Returns
     -------
@@ -115,11 +118,9 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         src = _planar_depth(scene, src, tcam)
     else:
         src = _files_depth(src, depth_files)
-    if fallback:
-        from .geometry import fallback_depth
+    from .geometry import apply_fallback
 
-        src = fallback_depth(src)
-    return src, tview
+    return apply_fallback(src, fallback), tview
 
 
 def _hold_out(scene: Scene, target, sources, n_views):

@@ -106,6 +106,13 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                         "(planar), NAME.npy/.pfm/.png files in --depth-files (files), or gt when the "
                         "scene has depth and estimated when it has none (auto, the default)")
     p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files")
+    from ..geometry.proxy import FALLBACK_MIN_FRACTION, FALLBACK_MODES
+
+    p.add_argument("--fallback", choices=FALLBACK_MODES, default="auto",
+                   help="source pixels of unknown depth (a black backdrop, the sky) get a plane "
+                        "behind the view's known depth with a large sigma_z instead of being dropped: "
+                        f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown (auto, the default), "
+                        "in every view (always), or never (docs/RENDERER.md \"Fallback proxy\")")
 
 
 def check_depth_args(args) -> None:

@@ -126,7 +126,7 @@ def run(args) -> int:
     if args.target.strip().lower() == "all" or "," in args.target:
         return _run_all(args, scene, settings, executor, estimate_kw)
     ev = run_evaluation(scene, args.target, settings, sources=args.sources, depth=args.depth,
-                        depth_files=args.depth_files, n_views=args.views, mask=args.mask,
+                        depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                         border=args.border, estimate_kw=estimate_kw or None,
                         intensity_scale=args.intensity_scale,
                         render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
@@ -156,7 +156,7 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
     views_dir = out.with_name(out.stem + "_views")
     report = evaluate_all(args.scene, targets, settings, views_dir=views_dir, scale=args.scale,
                           executor=executor, sources=args.sources, depth=args.depth,
-                          depth_files=args.depth_files, n_views=args.views, mask=args.mask,
+                          depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                           border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
                           intensity_scale=args.intensity_scale,
                           render_kw={"psf": args.psf} if args.psf else None)

@@ -113,7 +113,7 @@ def run(args) -> int:
     if args.views is not None and args.views < 1:
         raise VibrInputError(f"--views must be at least 1, got {args.views}")
     sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
-                              depth_files=args.depth_files, n_views=args.views)
+                              depth_files=args.depth_files, n_views=args.views, fallback=args.fallback)
     res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
                  **render_params(args))  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth)

@@ -18,7 +18,8 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
 
-__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "fallback_depth", "FALLBACK_FACTOR",
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "fallback_depth", "apply_fallback", "FALLBACK_MODES",
+           "FALLBACK_MIN_FRACTION", "FALLBACK_FACTOR",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
 #: Default proxy uncertainty: ``sigma_z = PROXY_SIGMA_Z_REL · D`` (ten times the default
@@ -111,11 +112,20 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
 FALLBACK_FACTOR = 1.03
 FALLBACK_PERCENTILE = 99.0
 FALLBACK_SIGMA_Z_REL = 0.25
+#: ``fallback="auto"``: the views of which at least this fraction has no depth get the proxy.
+#: A view that stereo leaves mostly unknown shows a backdrop (temple ring: 76–91 % of each
+#: view); a few unknown patches are stereo failures on the object, where the plane would be
+#: wrong (fountain: 7–25 %, and the proxy costs 0.6–5 dB there). docs/RENDERER.md "Fallback proxy".
+FALLBACK_MIN_FRACTION = 0.5
+#: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown), ``"always"`` (every view with
+#: unknown pixels), ``"never"``.
+FALLBACK_MODES = ("auto", "always", "never")
 
 
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
-                   percentile: float = FALLBACK_PERCENTILE, common: bool = False) -> Scene:
+                   percentile: float = FALLBACK_PERCENTILE, common: bool = False,
+                   min_fraction: float = 0.0) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -132,7 +142,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     map, or ``default_sigma_rel`` · median known depth, the geometry stage's default, made
     explicit because the median would otherwise include the plane). A view with no known
     depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
-    largest ``D_k``. The plane behind the known geometry lets the target z-buffer hide a
+    largest ``D_k``. Views with less than ``min_fraction`` of their pixels unknown are left
+    as they are. The plane behind the known geometry lets the target z-buffer hide a
     fallback sample wherever a known surface projects (known geometry wins); other
     placements measured in docs/RENDERER.md.
 
@@ -152,7 +163,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     for v in sources.views:
         z = np.full(v.camera.shape, np.nan, np.float32) if v.depth is None else np.asarray(v.depth, np.float32)
         unknown = ~np.isfinite(z)
-        if not unknown.any():
+        if not unknown.any() or unknown.mean() < min_fraction:
             views.append(v)
             continue
         D = max(far.values()) if common else far.get(v.name, max(far.values()))
@@ -165,3 +176,15 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         views.append(v.replace(depth=np.where(unknown, np.float32(D), z), sigma_z=s))
         info[v.name] = {"depth": D, "fraction": float(unknown.mean())}
     return sources.replace(views=views, meta=dict(sources.meta, fallback=info))
+
+
+def apply_fallback(sources: Scene, mode="auto") -> Scene:
+    """The fallback proxy by mode (:data:`FALLBACK_MODES`; True/False read as "always" /
+    "never"): the one place :func:`vibr.pipeline.prepare`, :func:`vibr.depthcache.scene_with_depth`
+    (fly-throughs, the viewer) and the benchmarks decide it."""
+    mode = {True: "always", False: "never", None: "auto"}.get(mode, mode)
+    if mode not in FALLBACK_MODES:
+        raise VibrInputError(f"fallback must be one of {', '.join(FALLBACK_MODES)}, got {mode!r}")
+    if mode == "never":
+        return sources
+    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION if mode == "auto" else 0.0)
