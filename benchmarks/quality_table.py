@@ -75,15 +75,20 @@ def fountain_cases(args):
 
     scene = load_scene(DATA / "strecha_fountain-P11", scale=args.fountain_scale)
     cache = Path(args.depth_cache)
-    if cache.exists():
+    if cache.exists():  # depth and sigma_z, as prepare gave them
         z = np.load(cache)
         names = [str(n) for n in z["names"]]
+        if not all(f"sz_{n}" in z for n in names):
+            raise SystemExit(f"{cache}: a cache without sigma_z (older script): delete it")
         src = scene.subset(names)
-        src = src.replace(views=[v.replace(depth=z[v.name]) for v in src.views])
+        sz = {n: None if z[f"sz_{n}"].ndim == 0 and np.isnan(z[f"sz_{n}"]) else z[f"sz_{n}"] for n in names}
+        src = src.replace(views=[v.replace(depth=z[v.name], sigma_z=sz[v.name]) for v in src.views])
         tgt = scene["0005"]
     else:
         src, tgt = prepare(scene, "0005", depth="estimated")
-        np.savez(cache, names=np.array([v.name for v in src.views]), **{v.name: v.depth for v in src.views})
+        np.savez(cache, names=np.array([v.name for v in src.views]), **{v.name: v.depth for v in src.views},
+                 **{f"sz_{v.name}": np.asarray(v.sigma_z if v.sigma_z is not None else np.nan, np.float32)
+                    for v in src.views})
     yield f"fountain 5 @{args.fountain_scale:g}", src, tgt
 
 
