@@ -128,8 +128,8 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dta
     ``out[..., 1] = Σ_m w_m² B_m·`` (for the effective number of samples),
     ``out[..., 2] = Σ_m w_m B_m·`` (the weight sum) and, when K = 4,
     ``out[..., 3] = Σ_m w_m B_m· sigma_z_m² ‖∂tau/∂z_m‖²`` (the position variance, target px²).
-    Interleaved so that one sample's four corners write contiguous memory; same buckets as
-    buckets of even then odd top rows, so that threads never write the same row (as
+    Interleaved so that one sample's four corners write contiguous memory; buckets of even
+    then odd top rows, so that threads never write the same row (as
     :func:`vibr.render.operators._assemble_kernel`)."""
     C, H, W = u.shape
     n_rows = starts.shape[0] - 1
