@@ -14,12 +14,14 @@ def setup_probe(folder):
     fd = os.open(os.path.join(folder, f"setup_{os.getpid()}"), os.O_CREAT | os.O_EXCL | os.O_WRONLY)
     os.close(fd)
     return {"pid": os.getpid(), "env": os.environ.get("NUMBA_NUM_THREADS"),
-            "numba_threads": int(numba.get_num_threads()), "folder": folder}
+            "numba_threads": int(numba.get_num_threads()), "folder": folder,
+            "malloc_trim": os.environ.get("MALLOC_TRIM_THRESHOLD_")}
 
 
 def square_probe(ctx, task):
     """A task: its result with the worker's pid and numba thread count."""
-    return {"value": task * task, "pid": ctx["pid"], "env": ctx["env"], "numba_threads": ctx["numba_threads"]}
+    return {"value": task * task, "pid": ctx["pid"], "env": ctx["env"], "numba_threads": ctx["numba_threads"],
+            "malloc_trim": ctx["malloc_trim"]}
 
 
 def write_or_die(ctx, task):

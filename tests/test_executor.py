@@ -76,6 +76,8 @@ def test_dask_round_trip_and_transient_errors_retried(tmp_path, client):
     open; a task that raises once is retried, one that keeps raising fails the run."""
     res = run_tasks(T.square_probe, range(8), setup=T.setup_probe, setup_args=(str(tmp_path),), executor=client)
     _check_workers(res, tmp_path, 2)
+    # without Dask's default MALLOC_TRIM_THRESHOLD_ (it slowed frames ~25 %, docs/SCALE.md)
+    assert {r["malloc_trim"] for r in res} == {None}
     out = run_tasks(T.fail_once, ["a", "b"], setup=str, setup_args=(str(tmp_path),), executor=client)
     assert out == ["a", "b"] and client.status == "running"
     with pytest.raises(RuntimeError, match="transient"):
@@ -104,6 +106,23 @@ def test_a_killed_worker_loses_nothing(tmp_path, engine, request):
 def test_a_task_that_always_kills_its_worker_fails_cleanly(tmp_path):
     with pytest.raises(RuntimeError, match="failed 2 times"):
         run_tasks(T.die_always, ["x"], executor=2, retries=1)
+
+
+def test_a_script_without_main_guard_fails_instead_of_hanging(tmp_path):
+    """Spawned children re-run an unguarded script and die while starting; with a large setup
+    argument (a scene) sent down the start pipe the driver used to block for ever."""
+    import subprocess
+
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "import sys\n"
+        f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
+        "import _scaleout_tasks as T\n"
+        "from vibr.executor import run_tasks\n"
+        "run_tasks(T.identity, [0, 1], setup=len, setup_args=(bytes(4_000_000),), executor=2, retries=0)\n")
+    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert p.returncode != 0
+    assert "__main__" in p.stderr and "worker process died" in p.stderr
 
 
 def test_missing_extra_gives_one_line(monkeypatch, capsys, tmp_path):

@@ -48,6 +48,8 @@ import contextlib
 import logging
 import multiprocessing
 import os
+import pickle
+import tempfile
 import threading
 import uuid
 from typing import Any, Callable, Sequence
@@ -182,12 +184,33 @@ def _run_serial(fn, tasks, setup, setup_args, desc):
 _PROCESS_CONTEXT: Any = None
 
 
-def _init_process(threads: int, setup, setup_args) -> None:
+def _init_process(threads: int, setup, args_file: str) -> None:
     """Pool initializer: check the numba thread count, then build this process's context once."""
     global _PROCESS_CONTEXT
     os.environ[_THREADS_VAR] = str(threads)  # already inherited; kept for what imports numba later
     _quiet_worker()
+    with open(args_file, "rb") as f:
+        setup_args = pickle.load(f)
     _PROCESS_CONTEXT = setup(*setup_args) if setup is not None else None
+
+
+@contextlib.contextmanager
+def _pickled(obj):
+    """``obj`` pickled to a temporary file, removed on exit; yields its path.
+
+    The pool sends its initializer's arguments down a pipe while the child starts; a child
+    that dies before reading them (a script without an ``if __name__ == "__main__":`` guard,
+    a failed import) would leave this process blocked for ever on a pipe full of a scene.
+    A path is a few bytes: the pool sees the dead child and reports a broken pool instead.
+    """
+    fd, path = tempfile.mkstemp(prefix="vibr-setup-", suffix=".pkl")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
+        yield path
+    finally:
+        with contextlib.suppress(OSError):
+            os.remove(path)
 
 
 def _quiet_worker() -> None:
@@ -233,12 +256,13 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
     pool = None
     # BLAS / OpenMP pools sized like numba's, as Dask's nanny does for its workers
     blas = {k: threads for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
-    with _environ(**{_THREADS_VAR: threads}, **blas), progress(total=len(tasks), desc=desc) as bar:
+    with _environ(**{_THREADS_VAR: threads}, **blas), _pickled(setup_args) as args_file, \
+            progress(total=len(tasks), desc=desc) as bar:
         try:
             while pending:
                 if pool is None:
                     pool = ProcessPoolExecutor(max_workers=min(n, len(pending)), mp_context=ctx,
-                                               initializer=_init_process, initargs=(threads, setup, setup_args))
+                                               initializer=_init_process, initargs=(threads, setup, args_file))
                 futs = {pool.submit(_call_in_process, fn, tasks[i]): i for i in pending}
                 pending = []
                 for f in as_completed(futs):
@@ -251,7 +275,8 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
                         raise
                     except BrokenProcessPool as exc:
                         err = exc
-                        why = "its worker process died"
+                        why = ("its worker process died; in a script, code that starts workers "
+                               "must be under `if __name__ == '__main__':`")
                     except Exception as exc:  # noqa: BLE001 - any task failure is retried
                         err = exc
                         why = f"{type(exc).__name__}: {exc}"
@@ -292,6 +317,9 @@ def _dask_forget(token) -> None:
         _WORKER_CONTEXTS.pop(token, None)
 
 
+_PRE_SPAWN = "distributed.nanny.pre-spawn-environ"
+
+
 def start_local_cluster(n_workers: int = 2):
     """A Dask ``LocalCluster`` of ``n_workers`` processes × 1 thread, each with
     ``NUMBA_NUM_THREADS = cores // n_workers`` set in its environment before it starts."""
@@ -299,9 +327,16 @@ def start_local_cluster(n_workers: int = 2):
 
     from distributed import LocalCluster
 
+    import dask
+
     threads = threads_per_worker(n_workers)
-    return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                        env={_THREADS_VAR: str(threads)}, silence_logs=_logging.ERROR)
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which turns off glibc's
+    # adaptive mmap threshold: every large numpy temporary is then a fresh mmap, page-faulted
+    # in and unmapped again, and a fly-through frame took ~25 % longer than in a plain process
+    # (docs/SCALE.md, "Dask's malloc setting"). None removes the key (distributed's rule).
+    with dask.config.set({f"{_PRE_SPAWN}.MALLOC_TRIM_THRESHOLD_": None}):
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                            env={_THREADS_VAR: str(threads)}, silence_logs=_logging.ERROR)
 
 
 def _run_dask(fn, tasks, setup, setup_args, kind, arg, desc, retries):
