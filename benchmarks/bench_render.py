@@ -217,6 +217,10 @@ def main(argv=None):
     a = ap.parse_args(argv)
     import numba
 
+    from vibr._malloc import tune_malloc
+
+    tune_malloc()  # as the vibr command does (VIBR_MALLOC=default: glibc's own settings)
+
     from vibr.metrics import dssim, psnr
 
     report = {"machine": {"cpu": platform.processor() or platform.machine(), "python": platform.python_version(),

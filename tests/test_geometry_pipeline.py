@@ -146,5 +146,7 @@ def test_samples_are_sorted_by_target_cell():
     assert len(s) > 1000 and np.all(np.diff(key) >= 0)
     pix = s.view.astype(np.int64) * (H * W) + s.src_xy[:, 1] * W + s.src_xy[:, 0]
     assert len(np.unique(pix)) == len(s)
+    # stable: within a cell, the sources' order (view, then row-major pixel)
+    assert np.array_equal(np.lexsort((pix, key)), np.arange(len(s)))
     for f in ("colour", "jac", "inv_det", "dtau_dz", "sigma_z", "X"):
         assert getattr(s, f).dtype == np.float32

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from vibr.render.fused import forward_step, hessian_power, hessian_terms, power_start
+from vibr.render.fused import forward_step, hessian_power, hessian_terms, power_start, row_sum_bound
 from vibr.render.operators import grad_image, grad_image_adj, stencil_apply, stencil_to_sparse
 from vibr.render.tv import tv_value
 
@@ -76,3 +76,25 @@ def test_power_iteration_finds_the_largest_eigenvalue():
     assert abs(model.lipschitz(n_iter=300) / 1.05 - lam_max) < 1e-3 * lam_max
     v = power_start((3, H, W))
     assert v.dtype == np.float32 and abs(v.mean()) < 0.05 and 0.2 < v.std() < 0.4
+
+
+@pytest.mark.parametrize("H,W", SHAPES)
+@pytest.mark.parametrize("with_grad", [True, False])
+def test_row_sum_bound_equals_numpy_and_scipy(H, W, with_grad):
+    """The compiled Gershgorin bound of the preconditioner is bit-identical to its numpy /
+    scipy statement: alpha·Σ|A| + gamma_k·maximum_filter(Σ|Ag|, 3, nearest)."""
+    from scipy.ndimage import maximum_filter
+
+    rng = np.random.default_rng(H * 7 + W)
+    A, Ag = (rng.standard_normal((9, H, W)).astype(np.float32) for _ in range(2))
+    def abs_sum(S):  # in stencil order (numpy's axis-0 sum, except on 1-pixel images)
+        out = np.abs(S[0])
+        for k in range(1, 9):
+            out = out + np.abs(S[k])
+        return out
+
+    want = 0.7 * abs_sum(A)
+    if with_grad:
+        want = want + 0.3 * 8.0 * maximum_filter(abs_sum(Ag), size=3, mode="nearest")
+    got = row_sum_bound(A, Ag if with_grad else None, 0.7, 0.3 * 8.0)
+    assert got.dtype == np.float32 and np.array_equal(got, want.astype(np.float32))

@@ -54,6 +54,7 @@ import threading
 import uuid
 from typing import Any, Callable, Sequence
 
+from ._malloc import tune_malloc
 from .errors import VibrInputError
 from .progress import progress
 
@@ -188,7 +189,7 @@ def _init_process(threads: int, setup, args_file: str) -> None:
     """Pool initializer: check the numba thread count, then build this process's context once."""
     global _PROCESS_CONTEXT
     os.environ[_THREADS_VAR] = str(threads)  # already inherited; kept for what imports numba later
-    _quiet_worker()
+    _prepare_worker()
     with open(args_file, "rb") as f:
         setup_args = pickle.load(f)
     _PROCESS_CONTEXT = setup(*setup_args) if setup is not None else None
@@ -213,10 +214,11 @@ def _pickled(obj):
             os.remove(path)
 
 
-def _quiet_worker() -> None:
+def _prepare_worker() -> None:
     """No progress bars or status lines from workers (warnings only): the driver's bar counts
-    their tasks."""
+    their tasks. The allocator as in the ``vibr`` command (:mod:`vibr._malloc`)."""
     logging.getLogger("vibr").setLevel(logging.WARNING)
+    tune_malloc()
 
 
 def _call_in_process(fn, task):
@@ -306,7 +308,7 @@ def _dask_call(fn, setup, setup_args, token, task):
     with _WORKER_LOCK:
         if token not in _WORKER_CONTEXTS:
             _WORKER_CONTEXTS.clear()  # keep only the current run's context in a long-lived worker
-            _quiet_worker()
+            _prepare_worker()
             _WORKER_CONTEXTS[token] = setup(*setup_args) if setup is not None else None
         context = _WORKER_CONTEXTS[token]
     return fn(context, task)

@@ -14,6 +14,7 @@ import importlib.util
 import sys
 
 from .. import __version__
+from .._malloc import tune_malloc
 from ..errors import VibrInputError
 from ..progress import configure_logging
 
@@ -97,6 +98,7 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     configure_logging(verbosity(args))
+    tune_malloc()
     from .. import io as vio
 
     vio.ALLOW_OUTSIDE_PATHS = bool(getattr(args, "allow_outside_paths", False))

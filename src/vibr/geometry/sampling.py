@@ -50,20 +50,64 @@ def prepare_depth(view: View, *, fill_holes: bool = False, edge_rel: float = DEF
     return z, zx, zy
 
 
+@njit(cache=True, inline="always")
+def _cell_key(x, y, H, W):
+    """Target cell of a landing point: the top-left pixel of its bilinear 2×2 block, clamped
+    as :class:`vibr.render.operators.Splat` clamps it, row-major."""
+    nr, nc = max(H - 1, 1), max(W - 1, 1)
+    x = min(max(x, 0.0), W - 1.0)
+    y = min(max(y, 0.0), H - 1.0)
+    return min(int(np.floor(y)), nr - 1) * nc + min(int(np.floor(x)), nc - 1)
+
+
 @njit(parallel=True, cache=True)
-def _fields_kernel(state, row_off, z, zx, zy, M, c, A, Ck, img, gimg, max_inv_det, sig_map, sig_scalar,
+def _keys_kernel(state, row_off, z, zx, zy, M, c, H_t, W_t, key):
+    """The target cell (:func:`_cell_key`) of every VISIBLE pixel of one view, at its place
+    in source order (row ``i``'s samples start at ``row_off[i]``)."""
+    H, W = z.shape
+    for i in prange(H):
+        buf = np.empty(10)
+        s = row_off[i]
+        for j in range(W):
+            if state[i, j] != VISIBLE:
+                continue
+            _warp_one(float(j), float(i), z[i, j], zx[i, j], zy[i, j], M, c, buf)
+            key[s] = _cell_key(buf[0], buf[1], H_t, W_t)
+            s += 1
+
+
+@njit(cache=True)
+def _cell_dest(key, n_cells):
+    """Where each sample goes when the samples are sorted by target cell: a stable counting
+    sort (ties keep source order), returned as destinations (int64)."""
+    counts = np.zeros(n_cells + 1, np.int64)
+    for i in range(key.shape[0]):
+        counts[key[i] + 1] += 1
+    for c in range(n_cells):
+        counts[c + 1] += counts[c]
+    dest = np.empty(key.shape[0], np.int64)
+    for i in range(key.shape[0]):
+        dest[i] = counts[key[i]]
+        counts[key[i]] += 1
+    return dest
+
+
+@njit(parallel=True, cache=True)
+def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, gimg, max_inv_det, sig_map, sig_scalar,
                    k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
-    """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples start at
-    ``row_off[i]`` (row-major order, as ``np.flatnonzero`` would give)."""
+    """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples are numbered
+    from ``row_off[i]`` in source order, and sample ``s`` is written at ``dest[s]``."""
     H, W = z.shape
     use_map = sig_map.shape[0] > 0
     for i in prange(H):
         buf = np.empty(10)
-        s = row_off[i]
+        n = row_off[i]
         y = float(i)
         for j in range(W):
             if state[i, j] != VISIBLE:
                 continue
+            s = dest[n]
+            n += 1
             x = float(j)
             zc = z[i, j]
             _warp_one(x, y, zc, zx[i, j], zy[i, j], M, c, buf)
@@ -89,7 +133,6 @@ def _fields_kernel(state, row_off, z, zx, zy, M, c, A, Ck, img, gimg, max_inv_de
                 colour[s, ch] = img[i, j, ch]
                 grad[s, ch, 0] = gimg[ch, 0, i, j]
                 grad[s, ch, 1] = gimg[ch, 1, i, j]
-            s += 1
 
 
 def _view_sigma(view: View, z: np.ndarray, sigma_z_default):
@@ -175,7 +218,6 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     with _Timer(times, cpu, "assembly"):
         out = _gather_samples(prepped, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme)
         del prepped, states
-        _sort_by_cell(out)
     if len(out) == 0:
         raise VibrInputError("no source view sees the target", tname)
     out.meta["counts"] = counts
@@ -189,53 +231,6 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     if return_zbuffer:
         out.meta["zbuffer"] = zbuf
     return out
-
-
-@njit(cache=True)
-def _cell_order(xy, H, W):
-    """Stable counting sort of the samples by the target cell of their landing point (the
-    top-left pixel of the bilinear 2×2 block, clamped as :class:`vibr.render.operators.Splat`
-    clamps it), row-major: the permutation (int32)."""
-    n = xy.shape[0]
-    nr, nc = max(H - 1, 1), max(W - 1, 1)
-    key = np.empty(n, np.int64)
-    counts = np.zeros(nr * nc + 1, np.int64)
-    for i in range(n):
-        x = min(max(xy[i, 0], 0.0), W - 1.0)
-        y = min(max(xy[i, 1], 0.0), H - 1.0)
-        k = min(int(np.floor(y)), nr - 1) * nc + min(int(np.floor(x)), nc - 1)
-        key[i] = k
-        counts[k + 1] += 1
-    for c in range(nr * nc):
-        counts[c + 1] += counts[c]
-    order = np.empty(n, np.int32)
-    for i in range(n):
-        order[counts[key[i]]] = i
-        counts[key[i]] += 1
-    return order
-
-
-def _sort_by_cell(S: Samples) -> None:
-    """Reorder the samples by target cell (:func:`_cell_order`), in place, one field at a
-    time: the renderer's passes over the samples, bucketed by target row, then stream
-    through memory instead of gathering from every view's stretch of the arrays."""
-    if len(S) == 0 or len(S) >= 2 ** 31:
-        return
-    order = _cell_order(S.xy, *S.target_shape)
-    for f in ("xy", "colour", "grad", "jac", "inv_det", "dtau_dz", "sigma_z", "view", "src_xy", "X"):
-        a = getattr(S, f)
-        out = np.empty_like(a)
-        _take_rows(a.reshape(len(a), -1), order, out.reshape(len(a), -1))
-        setattr(S, f, out)
-
-
-@njit(parallel=True, cache=True)
-def _take_rows(a, order, out):
-    """``out[i] = a[order[i]]`` for (N, k) arrays, in parallel."""
-    for i in prange(order.shape[0]):
-        o = order[i]
-        for c in range(a.shape[1]):
-            out[i, c] = a[o, c]
 
 
 class _Timer:
@@ -288,10 +283,25 @@ def _visibility(prepped, zbuf, vis_threshold):
 
 
 def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme) -> Samples:
-    """The fields of every visible pixel: one allocation for all samples, each view's
-    kernel writing its rows in place."""
+    """The fields of every visible pixel, sorted by target cell (:func:`_cell_dest`): one
+    allocation for all samples, each view's kernel writing its samples in place.
 
+    The order matters for speed only: the renderer's passes over the samples, bucketed by
+    target row, then stream through memory instead of gathering from every view's stretch
+    of the arrays. The cells are found first (one warp pass), so that the fields are written
+    once, at their sorted place, rather than written and then permuted."""
     N = int(sum(int(r.sum()) for _, r in states))
+    offsets = []
+    o = 0
+    for _, vis_rows in states:
+        offsets.append(o + np.concatenate([[0], np.cumsum(vis_rows)[:-1]]).astype(np.int64))
+        o += int(vis_rows.sum())
+    H_t, W_t = shape
+    key = np.empty(N, np.int64)
+    for (v, z, zx, zy, M, c), (state, _), row_off in zip(prepped, states, offsets):
+        _keys_kernel(state, row_off, z, zx, zy, M, c, H_t, W_t, key)
+    dest = _cell_dest(key, max(H_t - 1, 1) * max(W_t - 1, 1))
+    del key
     # positions in float64 (they set the splat coefficients); the other fields in float32:
     # 84 of the 152 bytes a sample took (the sample arrays are most of a render's memory)
     f4 = np.float32
@@ -305,12 +315,9 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
     src = np.empty((N, 2), np.int32)
     sig = np.empty(N, f4)
     view = np.empty(N, np.int32)
-    o = 0
-    for k, ((v, z, zx, zy, M, c), (state, vis_rows)) in enumerate(zip(prepped, states)):
-        n = int(vis_rows.sum())
-        if n == 0:
+    for k, ((v, z, zx, zy, M, c), (state, vis_rows), row_off) in enumerate(zip(prepped, states, offsets)):
+        if int(vis_rows.sum()) == 0:
             continue
-        row_off = o + np.concatenate([[0], np.cumsum(vis_rows)[:-1]]).astype(np.int64)
         A = np.ascontiguousarray(v.camera.R.T @ np.linalg.inv(v.camera.K))
         sz = _view_sigma(v, z, sigma_z_default)
         if np.ndim(sz) == 0:
@@ -318,8 +325,7 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
         else:
             sig_map, sig_scalar = np.ascontiguousarray(sz, dtype=np.float64), 0.0
         gimg = grad_image(np.ascontiguousarray(v.image.transpose(2, 0, 1)), grad_scheme)
-        _fields_kernel(state, row_off, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
+        _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
                        v.image, gimg, float(max_inv_det), sig_map, sig_scalar, np.int32(k),
                        xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
-        o += n
     return Samples(xy, colour, grad, jac, inv_det, dtau, sig, view, src, X, tuple(shape))

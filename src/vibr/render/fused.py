@@ -27,7 +27,7 @@ from .._jit import FASTMATH
 from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row
 from .tv import _sqrt_sum, _tv_row, _weight_arg
 
-__all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start"]
+__all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start", "row_sum_bound"]
 
 #: rows per band of :func:`hessian_terms` (halo work ≈ 3 / BAND of a pass)
 BAND = 24
@@ -241,4 +241,41 @@ def forward_step(x, hx, r, step, dinv=None, x_prev=None, h_prev=None, beta=0.0, 
     flat = lambda a: a.reshape(C, -1)  # noqa: E731
     _forward_kernel(flat(x), flat(x_prev), flat(hx), flat(h_prev), flat(r), np.float32(beta), d,
                     np.float32(step), flat(out))
+    return out
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _row_sum_bound(A, Ag, alpha, gk, use_grad, rg, out):
+    S, H, W = A.shape
+    if use_grad:
+        for i in prange(H):
+            for j in range(W):
+                s = abs(Ag[0, i, j])
+                for k in range(1, S):
+                    s += abs(Ag[k, i, j])
+                rg[i, j] = s
+    for i in prange(H):
+        for j in range(W):
+            s = abs(A[0, i, j])
+            for k in range(1, S):
+                s += abs(A[k, i, j])
+            d = alpha * s
+            if use_grad:
+                m = rg[i, j]
+                for ii in range(max(i - 1, 0), min(i + 2, H)):
+                    for jj in range(max(j - 1, 0), min(j + 2, W)):
+                        m = max(m, rg[ii, jj])
+                d = d + gk * m
+            out[i, j] = d
+
+
+def row_sum_bound(A, Ag, alpha, gamma_k):
+    """``alpha · Σ_s |A_s| + gamma_k · max₃ₓ₃(Σ_s |Ag_s|)`` (H, W) float32 in one pass each
+    (the 3×3 maximum with the border pixels repeated, scipy's ``mode="nearest"``; ``Ag``
+    None: the first term only). Sums in stencil order, float32, as numpy's axis-0 sum."""
+    use_grad = Ag is not None
+    S, H, W = A.shape
+    out = np.empty((H, W), np.float32)
+    rg = np.empty((H, W) if use_grad else (0, 0), np.float32)
+    _row_sum_bound(A, A if Ag is None else Ag, np.float32(alpha), np.float32(gamma_k), use_grad, rg, out)
     return out

@@ -38,7 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .fused import forward_step, hessian_power, hessian_terms, power_start
+from .fused import forward_step, hessian_power, hessian_terms, power_start, row_sum_bound
 from .operators import dot, grad_image_adj
 from .tv import TVProx
 
@@ -136,14 +136,8 @@ class QuadraticModel:
 
         The colour part is exact; for ``Dᵀ A_g D``, the row sums of |Dᵀ|·|D| are ≤ 2
         (central) or 8 (forward), bounded with the 3×3 max of the A_g row sums."""
-        d = self.alpha * np.abs(self.A).sum(0)
-        if self.use_grad:
-            from scipy.ndimage import maximum_filter
-
-            rg = np.abs(self.Ag).sum(0)
-            k = 8.0 if self.grad_scheme == "forward" else 2.0
-            d = d + self.gamma * k * maximum_filter(rg, size=3, mode="nearest")
-        return d.astype(np.float32)
+        k = 8.0 if self.grad_scheme == "forward" else 2.0
+        return row_sum_bound(self.A, self.Ag if self.use_grad else None, self.alpha, self.gamma * k)
 
     def lipschitz(self, n_iter: int = 15, d=None, v0=None, state=None) -> float:
         """Largest eigenvalue of ``H`` (or of ``d^{-½} H d^{-½}``) by power iteration, ×1.05
@@ -167,13 +161,17 @@ class QuadraticModel:
                 lam = (self.alpha * xAx + self.gamma * xGx) / max(nx, 1e-300)
                 x, buf, nx = h, x, hh
         else:
+            # the Hessian product alone (hessian_power: no energy terms), as hess_apply gives it
             s = (1.0 / np.sqrt(d))[None].astype(np.float32)
+            Ag = self.Ag if self.use_grad else None
+            xs, y = np.empty_like(x), np.empty_like(x)
             for _ in range(n_iter):
                 x /= math.sqrt(max(dot(x, x), 1e-300))
-                y = self.hess_apply(x * s)
+                np.multiply(x, s, out=xs)
+                y, _ = hessian_power(self.A, Ag, xs, self.alpha, self.gamma, out=y, scheme=self.grad_scheme)
                 y *= s
                 lam = dot(x, y)
-                x = y
+                x, y = y, x
         if state is not None:
             state["v"] = x
         return 1.05 * max(lam, 1e-12)
@@ -279,7 +277,7 @@ def fista(model: QuadraticModel, u0, *, max_iter: int = 100, tol: float = 1e-4,
     res.stopped = "max_iter"
     for k in range(1, max_iter + 1):
         model.forward(x, Px, 1.0 / L, None if dinv is None else dinv[0], x_prev, P_prev, beta, out=zin)
-        z = prox(zin, model.lam_int / L, d=d, out=zbuf)
+        z = prox(zin, model.lam_int / L, d=d, out=zbuf, dinv=None if dinv is None else dinv[0])
         Pz = model.products(z, out=hz)
         Tz = model.terms(z, Pz)
         Fz = model.energy(Tz)

@@ -289,12 +289,13 @@ class TVProx:
     def reset(self):
         self.p[:] = 0
 
-    def __call__(self, z, mu: float, d=None, out=None, n_iter=None) -> np.ndarray:
+    def __call__(self, z, mu: float, d=None, out=None, n_iter=None, dinv=None) -> np.ndarray:
         """``argmin_x ½ Σ d |x − z|² + mu TV(x)`` for planar (C, H, W) float32 ``z``;
-        ``d`` (H, W) or None."""
+        ``d`` (H, W) or None; ``dinv`` = ``1 / d`` (float32) when the caller has it (FISTA
+        calls the prox with the same metric every iteration)."""
         if out is not None and np.shares_memory(out, z):
             # the fused last step reads z a row beyond each band while writing out
-            out[:] = self(z.copy(), mu, d, None, n_iter)
+            out[:] = self(z.copy(), mu, d, None, n_iter, dinv)
             return out
         if out is None:
             out = np.empty_like(z)
@@ -302,7 +303,12 @@ class TVProx:
             out[:] = z
             return out
         use_d = d is not None
-        dinv = np.ascontiguousarray(1.0 / np.asarray(d, dtype=np.float32)) if use_d else self._one
+        if not use_d:
+            dinv = self._one
+        elif dinv is None:
+            dinv = np.ascontiguousarray(1.0 / np.asarray(d, dtype=np.float32))
+        else:
+            dinv = np.ascontiguousarray(dinv, dtype=np.float32)
         dmax = float(dinv.max()) if use_d else 1.0
         step = np.float32(1.0 / (8.0 * mu * dmax))
         mu32 = np.float32(mu)

@@ -1,0 +1,70 @@
+"""glibc malloc settings for the processes vibr owns (the CLI, its worker processes).
+
+A render allocates and frees tens of arrays of 1–200 MB (sample fields, stencils, image
+planes). glibc serves a block above its mmap threshold (adaptive: 128 KiB at start, raised
+to at most 32 MiB as blocks are freed) with a fresh ``mmap``, and unmaps it again at
+``free``: every page of every such array is then faulted in and zeroed by the kernel, once
+per use. Frame after frame of a fly-through this is the same work again; the system time of
+a 768² render benchmark was 4.1 s of its 15.6 s (docs/PERFORMANCE.md, "Memory allocator").
+Keeping those blocks in the heap (mmap threshold 256 MiB) and not returning the heap's free
+top to the kernel below 512 MiB (trim threshold) lets the next frame reuse the pages.
+
+Only for processes vibr starts (a library should not change its host's allocator): the
+``vibr`` command calls :func:`tune_malloc` first thing, and so do the worker processes of
+:mod:`vibr.executor`. It does nothing on a C library other than glibc, where the user set
+glibc's own variables (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``,
+``GLIBC_TUNABLES``: Dask's nanny sets the trim threshold in its workers), or with
+``VIBR_MALLOC=default``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+import platform
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["MMAP_THRESHOLD", "TRIM_THRESHOLD", "tune_malloc"]
+
+#: glibc's mallopt parameters (malloc.h)
+_M_TRIM_THRESHOLD = -1
+_M_MMAP_THRESHOLD = -3
+#: blocks below this come from the heap (bytes)
+MMAP_THRESHOLD = 256 * 2 ** 20
+#: free memory at the top of the heap kept below this (bytes)
+TRIM_THRESHOLD = 512 * 2 ** 20
+_USER_VARS = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES")
+
+_done: bool | None = None
+
+
+def tune_malloc() -> bool:
+    """Raise glibc's mmap and trim thresholds for this process (module doc); True if set.
+
+    Idempotent; a no-op (False) off glibc, with ``VIBR_MALLOC=default``, or where the
+    environment already sets glibc's malloc variables."""
+    global _done
+    if _done is not None:
+        return _done
+    _done = False
+    if os.environ.get("VIBR_MALLOC", "").strip().lower() in ("default", "0", "off", "no"):
+        logger.debug("malloc: left at glibc's defaults (VIBR_MALLOC)")
+        return False
+    user = [v for v in _USER_VARS if v in os.environ]
+    if user:
+        logger.debug("malloc: left as set by %s", ", ".join(user))
+        return False
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        ok = (libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
+              and libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD) == 1)
+    except (OSError, AttributeError):
+        return False
+    _done = bool(ok)
+    logger.debug("malloc: mmap threshold %d MiB, trim threshold %d MiB: %s", MMAP_THRESHOLD >> 20,
+                 TRIM_THRESHOLD >> 20, "set" if ok else "refused")
+    return _done

@@ -1,0 +1,64 @@
+"""vibr's glibc malloc settings (vibr._malloc): large blocks come from the heap, and the
+opt-outs leave glibc's defaults. Each case runs in a fresh interpreter (process-global)."""
+
+import os
+import platform
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc",
+                                reason="glibc's allocator only")
+
+# mallinfo2 (glibc ≥ 2.33): hblkhd = bytes in mmapped blocks, arena = bytes of the heap
+_PROBE = r"""
+import ctypes, json, sys
+import numpy as np
+from vibr._malloc import tune_malloc
+
+class MI(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd",
+                "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+libc = ctypes.CDLL("libc.so.6")
+libc.mallinfo2.restype = MI
+tuned = tune_malloc()
+a = np.ones(64 * 2 ** 20, np.uint8)
+m = libc.mallinfo2()
+print(json.dumps({"tuned": tuned, "mmapped": m.hblkhd, "heap": m.arena}))
+"""
+
+
+def _probe(**env):
+    e = {k: v for k, v in os.environ.items()
+         if k not in ("VIBR_MALLOC", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES")}
+    e.update(env)
+    out = subprocess.run([sys.executable, "-c", _PROBE], env=e, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    import json
+
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_tuned_process_keeps_large_arrays_in_the_heap():
+    r = _probe()
+    assert r["tuned"] is True
+    assert r["mmapped"] < 2 ** 20 and r["heap"] >= 64 * 2 ** 20
+
+
+@pytest.mark.parametrize("env", [{"VIBR_MALLOC": "default"}, {"MALLOC_TRIM_THRESHOLD_": "65536"}])
+def test_opt_outs_leave_glibc_defaults(env):
+    """VIBR_MALLOC=default, or glibc's own variables set by the user (Dask's nanny sets the
+    trim threshold): a 64 MiB array is then mmapped, as glibc does by default."""
+    r = _probe(**env)
+    assert r["tuned"] is False
+    assert r["mmapped"] >= 64 * 2 ** 20
+
+
+def test_the_vibr_command_tunes_its_process():
+    """The CLI sets the allocator before it does anything else (here: fails to load)."""
+    out = subprocess.run([sys.executable, "-m", "vibr", "-v", "info", "/nonexistent/scene"], capture_output=True,
+                         text=True, timeout=120, env={k: v for k, v in os.environ.items() if k != "VIBR_MALLOC"})
+    assert out.returncode == 2
+    assert "malloc: mmap threshold 256 MiB, trim threshold 512 MiB: set" in out.stderr
