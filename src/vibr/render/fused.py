@@ -20,12 +20,14 @@ Hessian products (f is quadratic, so ``H y`` is the same combination of ``H x`` 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
 from .._jit import FASTMATH
 from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row
-from .tv import _sqrt_sum, _tv_row, _weight_arg
+from .tv import _weight_arg
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start", "row_sum_bound"]
 
@@ -57,6 +59,38 @@ def _stencil_row_padded(A, k, um, u0, up, out):
                   + a6[j] * up[j] + a7[j] * up[j + 1] + a8[j] * up[j + 2])
 
 
+@njit(cache=True, fastmath=FASTMATH)
+def _tv_cols(ur, un, coupled, tvacc, wr, use_w, col):
+    """One channel's share of a row of TV into the per-column sums ``col`` (float64):
+    coupled, |∇u_c|² into ``tvacc`` (the caller adds w·√tvacc with :func:`_sqrt_cols`);
+    else w_j |∇u_c(j)| into col[j] (the terms of :func:`.tv._tv_row`)."""
+    W = ur.shape[0]
+    if coupled:
+        for j in range(W - 1):
+            gxv = ur[j + 1] - ur[j]
+            gyv = un[j] - ur[j]
+            tvacc[j] += gxv * gxv + gyv * gyv
+        gyv = un[W - 1] - ur[W - 1]
+        tvacc[W - 1] += gyv * gyv
+    else:
+        for j in range(W - 1):
+            gxv = ur[j + 1] - ur[j]
+            gyv = un[j] - ur[j]
+            col[j] += (wr[j] if use_w else 1.0) * math.sqrt(gxv * gxv + gyv * gyv)
+        col[W - 1] += (wr[W - 1] if use_w else 1.0) * abs(un[W - 1] - ur[W - 1])
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _sqrt_cols(tvacc, wr, use_w, col):
+    """col[j] += w_j √tvacc[j] (the coupled TV of a row, per column)."""
+    if use_w:
+        for j in range(tvacc.shape[0]):
+            col[j] += wr[j] * math.sqrt(tvacc[j])
+    else:
+        for j in range(tvacc.shape[0]):
+            col[j] += math.sqrt(tvacc[j])
+
+
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, wmap, use_w, with_terms, band,
                    h, parts):
@@ -65,12 +99,11 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
     for t in prange(n_bands):
         r0 = t * band
         r1 = min(H, r0 + band)
-        xAx = 0.0
-        bx = 0.0
-        xGx = 0.0
-        gx = 0.0
-        tv = 0.0
-        hh = 0.0
+        # the inner products are summed per column over the band's rows, then over the
+        # columns in order: every row loop stays free of a loop-carried sum (it vectorises
+        # without fast-math) and the result does not depend on the thread count
+        acc = np.zeros((6, W))
+        s_xAx, s_bx, s_xGx, s_gx, s_tv, s_hh = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
         ax = np.empty(W, np.float32)
         tvacc = np.empty(W, np.float32)
         # ring buffers (row mod 3): D x padded, A_g D x; tags = the row a slot holds
@@ -100,6 +133,7 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
             if coupled:
                 tvacc[:] = 0.0
             nxt = min(i + 1, H - 1)
+            wr = wmap[min(np.int64(i), wmap.shape[0] - 1)]
             for c in range(C):
                 _stencil_row(A, x, c, i, ax)
                 xr = x[c, i]
@@ -113,42 +147,40 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
                         gr = bgt[c, i]
                         for j in range(W):
                             xv = np.float64(xr[j])
-                            xAx += xv * ax[j]
-                            bx += xv * br[j]
-                            xGx += xv * gx_row[j]
-                            gx += xv * gr[j]
+                            s_xAx[j] += xv * ax[j]
+                            s_bx[j] += xv * br[j]
+                            s_xGx[j] += xv * gx_row[j]
+                            s_gx[j] += xv * gr[j]
                             hr[j] = alpha * ax[j] + gamma * gx_row[j]
                     else:
                         for j in range(W):
                             xv = np.float64(xr[j])
-                            xAx += xv * ax[j]
-                            xGx += xv * gx_row[j]
+                            s_xAx[j] += xv * ax[j]
+                            s_xGx[j] += xv * gx_row[j]
                             hv = alpha * ax[j] + gamma * gx_row[j]
                             hr[j] = hv
-                            hh += np.float64(hv) * hv
+                            s_hh[j] += np.float64(hv) * hv
                 elif with_terms:
                     for j in range(W):
                         xv = np.float64(xr[j])
-                        xAx += xv * ax[j]
-                        bx += xv * br[j]
+                        s_xAx[j] += xv * ax[j]
+                        s_bx[j] += xv * br[j]
                         hr[j] = alpha * ax[j]
                 else:
                     for j in range(W):
-                        xAx += np.float64(xr[j]) * ax[j]
+                        s_xAx[j] += np.float64(xr[j]) * ax[j]
                         hv = alpha * ax[j]
                         hr[j] = hv
-                        hh += np.float64(hv) * hv
-                if not with_terms:
-                    continue
-                tv += _tv_row(xr, x[c, nxt], coupled, tvacc, wmap[min(np.int64(i), wmap.shape[0] - 1)], use_w)
+                        s_hh[j] += np.float64(hv) * hv
+                if with_terms:
+                    _tv_cols(xr, x[c, nxt], coupled, tvacc, wr, use_w, s_tv)
             if coupled and with_terms:
-                tv += _sqrt_sum(tvacc, wmap[min(np.int64(i), wmap.shape[0] - 1)], use_w)
-        parts[t, 0] = xAx
-        parts[t, 1] = bx
-        parts[t, 2] = xGx
-        parts[t, 3] = gx
-        parts[t, 4] = tv
-        parts[t, 5] = hh
+                _sqrt_cols(tvacc, wr, use_w, s_tv)
+        for q in range(6):
+            tot = 0.0
+            for j in range(W):
+                tot += acc[q, j]
+            parts[t, q] = tot
 
 
 def hessian_terms(A, Ag, x, b, bgt, alpha, gamma, coupled=True, out=None, scheme="forward", tv_weight=None):
