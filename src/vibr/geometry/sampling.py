@@ -27,7 +27,7 @@ from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
 from .samples import Samples
 from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
                          reduce_zbuffers, splat_zbuffer, visibility_mask)
-from .warp import DEFAULT_MAX_INV_DET, _warp_one, warp_constants
+from .warp import DEFAULT_MAX_INV_DET, _project_one, _warp_one, warp_constants
 
 __all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL"]
 
@@ -61,18 +61,17 @@ def _cell_key(x, y, H, W):
 
 
 @njit(parallel=True, cache=True)
-def _keys_kernel(state, row_off, z, zx, zy, M, c, H_t, W_t, key):
+def _keys_kernel(state, row_off, z, M, c, H_t, W_t, key):
     """The target cell (:func:`_cell_key`) of every VISIBLE pixel of one view, at its place
     in source order (row ``i``'s samples start at ``row_off[i]``)."""
     H, W = z.shape
     for i in prange(H):
-        buf = np.empty(10)
         s = row_off[i]
         for j in range(W):
             if state[i, j] != VISIBLE:
                 continue
-            _warp_one(float(j), float(i), z[i, j], zx[i, j], zy[i, j], M, c, buf)
-            key[s] = _cell_key(buf[0], buf[1], H_t, W_t)
+            u, v = _project_one(float(j), float(i), z[i, j], M, c)
+            key[s] = _cell_key(u, v, H_t, W_t)
             s += 1
 
 
@@ -299,7 +298,7 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
     H_t, W_t = shape
     key = np.empty(N, np.int64)
     for (v, z, zx, zy, M, c), (state, _), row_off in zip(prepped, states, offsets):
-        _keys_kernel(state, row_off, z, zx, zy, M, c, H_t, W_t, key)
+        _keys_kernel(state, row_off, z, M, c, H_t, W_t, key)
     dest = _cell_dest(key, max(H_t - 1, 1) * max(W_t - 1, 1))
     del key
     # positions in float64 (they set the splat coefficients); the other fields in float32:

@@ -91,6 +91,16 @@ def _warp_one(x, y, z, zx, zy, M, c, out):
     return w
 
 
+@njit(cache=True, inline="always")
+def _project_one(x, y, z, M, c):
+    """``(u, v)`` of :func:`_warp_one`, with the same arithmetic (bit-identical), alone."""
+    q0 = M[0, 0] * x + M[0, 1] * y + M[0, 2]
+    q1 = M[1, 0] * x + M[1, 1] * y + M[1, 2]
+    q2 = M[2, 0] * x + M[2, 1] * y + M[2, 2]
+    iw = 1.0 / (z * q2 + c[2])
+    return (z * q0 + c[0]) * iw, (z * q1 + c[1]) * iw
+
+
 @njit(parallel=True, cache=True)
 def _warp_field_kernel(xs, ys, z, zx, zy, M, c, out):
     n = xs.shape[0]
