@@ -10,7 +10,9 @@ user gets; ``--paper-settings``: cotton alpha, gamma, lam = 1, 1, 0.1 and founta
 paper's 0.1, 1, 0.002, in vibr's units, as before this release) with
 ``uncertainty=TERMS`` for each candidate combination of terms (``model``: Jacobi
 ``1/diag(H)``; ``spread``: the W-weighted spread of the samples around u times
-``1 + 1/n_eff``; ``hole``: their sum times ``1 + 4 px / distance to a push–pull pixel``), and
+``1 + 1/n_eff``; ``views``: the spread taken with each source view's photometric offset
+removed, plus the offsets' bias and variance; ``hole``: their sum times
+``1 + 4 px / distance to a push–pull pixel``), and
 ULR with its own σ. Scored against the per-pixel error (RMS over channels, grey levels):
 AUSE (normalised sparsification curves, 50 fractions; lower is better) and Spearman's rho
 between σ and the error, over every pixel of the image (2-pixel border excluded; pixels
@@ -41,8 +43,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
-VARIANTS = ("model", "spread", "model+spread", "model+spread+hole")
-CHOSEN = "model+spread+hole"  # vibr.render.uncertainty.TERMS
+VARIANTS = ("model", "spread", "model+spread", "model+spread+hole", "model+spread+views+hole")
+CHOSEN = "model+spread+views+hole"  # vibr.render.uncertainty.TERMS
 COTTON_PARAMS = dict(alpha=1.0, gamma=1.0, lam=0.1)
 FOUNTAIN_PARAMS = dict(alpha=0.1, gamma=1.0, lam=0.002)
 PAPER_SETTINGS = [False]  # --paper-settings: the two dicts above instead of the defaults
@@ -346,7 +348,8 @@ def main(argv=None):
     print(targets(reports))
     if a.write_docs:
         cmd = "python benchmarks/uncertainty_table.py --write-docs" + (
-            "" if a.cases == ",".join(all_cases()) else f" --cases {shlex.quote(a.cases)}")
+            "" if a.cases == ",".join(all_cases()) else f" --cases {shlex.quote(a.cases)}") + (
+            " --cache CACHE" if a.cache and not a.from_json else "")
         if a.from_json:
             cmd = (f"python benchmarks/uncertainty_table.py --cache CACHE --out {a.from_json} --cases …` "
                    "(processes in parallel, one per group of cases; CACHE keeps the prepared scenes), then `"

@@ -18,12 +18,17 @@ around the rendered image,
 
 The spread is the variance of one sample; the weighted mean of ``n_eff = (Σ W B)² / Σ W² B``
 samples has the variance ``s²/n_eff`` on top (the standard error), so the spread term is
-``s²·(1 + 1/n_eff)``. Pixels next to a push–pull filled region border a disocclusion, where
-the depth is least reliable: they get ``(σ_hole / (1 + d))²`` with ``d`` the distance in
-pixels to the nearest filled pixel (:func:`hole_distance`). The rendered view's standard
-deviation is
+``s²·(1 + 1/n_eff)``. The views' exposures differ: view k's samples share an offset ``b_k``
+(their mean residual, :func:`view_offsets`), the target has its own, drawn from the same
+distribution. The spread is taken around ``B u + b_k`` and the render's mix of offsets
+``mix(p) = Σ W B b_k / Σ W B`` adds ``v_views = ‖mix − β̂‖²/3 + σ_β²(1 + π/(2V))`` (``β̂``,
+``σ_β``: median and 1.4826·MAD of the V views' offsets, :func:`view_offset_prior`); where
+one view dominates the sources agree but the render carries its offset. Pixels near a
+push–pull filled region border a disocclusion, where the depth is least reliable: the sum
+is multiplied by ``1 + HOLE_RANGE/d``, ``d`` the distance in pixels to the nearest filled
+pixel (:func:`hole_distance`). The rendered view's standard deviation is
 
-    σ(p) = min(σ_hole, sqrt(1/diag(H)_p + s²(p)·(1 + 1/n_eff(p)) + (σ_hole/(1 + d(p)))²))
+    σ(p) = min(σ_hole, sqrt((1/diag(H)_p + s²(p)·(1 + 1/n_eff(p)) + v_views(p)) · (1 + HOLE_RANGE/d(p))))
                                                      where the samples cover p,
     σ(p) = σ_hole                                   where push–pull filled it,
 
@@ -48,7 +53,8 @@ from .operators import _row_coef
 logger = logging.getLogger(__name__)
 
 __all__ = ["HOLE_SIGMA_FRACTION", "hole_sigma", "hessian_diagonal", "model_variance",
-           "sample_spread", "sample_statistics", "hole_distance", "HOLE_RANGE", "TERMS",
+           "sample_spread", "sample_statistics", "view_offsets", "view_offset_prior",
+           "hole_distance", "HOLE_RANGE", "TERMS",
            "variational_sigma", "ulr_sigma", "sample_spread_sigma",
            "view_count_sigma"]
 
@@ -112,29 +118,78 @@ def sample_spread(splat, weight, colour, centre_values=None):
     return np.maximum(s2, 0.0), wsum
 
 
-@njit(cache=True, inline="always")
-def _add4(o, b, v0, v1, v2, v3, with_pos):
-    o[0] += b * v0
-    o[1] += b * v1
-    o[2] += b * v2
-    if with_pos:
-        o[3] += b * v3
+#: Fixed number of chunks of :func:`_view_offsets` (its partial sums are added in chunk
+#: order, so the offsets do not depend on the number of threads).
+_OFFSET_CHUNKS = 64
+#: :func:`view_offsets` reads every ``max(1, N // OFFSET_SAMPLES)``-th sample: a mean over
+#: hundreds of thousands of samples per view is exact enough, at a fraction of a pass.
+OFFSET_SAMPLES = 1 << 19
 
 
 @njit(parallel=True, cache=True)
-def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dtau_dz, out):
+def _view_offsets(x0, y0, fx, fy, coef, view, colour, u, stride, part):
+    """``part[j, k, c]`` = Σ of ``colour_m,c − (B u)(m)_c`` and ``part[j, k, C]`` the count,
+    over every ``stride``-th sample m of view k in chunk j of the samples
+    (``part.shape[0]`` chunks)."""
+    C = u.shape[0]
+    n = x0.shape[0]
+    use_coef = coef.shape[0] == n and n > 0
+    J = part.shape[0]
+    n_s = (n + stride - 1) // stride
+    for j in prange(J):
+        for t in range(j * n_s // J, (j + 1) * n_s // J):
+            i = t * stride
+            b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
+            x = x0[i]
+            y = y0[i]
+            k = view[i]
+            for c in range(C):
+                uc = u[c]
+                bu = b0 * uc[y, x] + b1 * uc[y, x + 1] + b2 * uc[y + 1, x] + b3 * uc[y + 1, x + 1]
+                part[j, k, c] += np.float64(colour[i, c]) - bu
+            part[j, k, C] += 1.0
+
+
+def view_offsets(splat, colour, u, view, n_views=None, stride=None):
+    """Per-view photometric offset: the mean residual ``b_k = mean_m∈k (v_k(m) − (B u)(m))``
+    (n_views, C) float64 over the samples of view k (all of them, whatever their weight:
+    an exposure / view-dependent brightness is shared by the view's samples, and the
+    render's trust in a sample, W, does not change what it says about its view's offset),
+    in the units of ``colour``; and the number of samples used per view (n_views,).
+    ``u`` planar (C, H, W). ``stride``: every stride-th sample (default
+    ``max(1, N // OFFSET_SAMPLES)``)."""
+    view = np.ascontiguousarray(view)
+    n = len(view)
+    V = int(n_views) if n_views is not None else (int(view.max()) + 1 if n else 0)
+    C = np.shape(u)[0]
+    stride = max(1, n // OFFSET_SAMPLES) if stride is None else max(1, int(stride))
+    part = np.zeros((_OFFSET_CHUNKS, V, C + 1))
+    _view_offsets(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, view,
+                  np.ascontiguousarray(colour), np.ascontiguousarray(u, np.float32), stride, part)
+    tot = part.sum(0)  # in chunk order
+    counts = tot[:, C]
+    return tot[:, :C] / np.maximum(counts, 1.0)[:, None], counts
+
+
+@njit(parallel=True, cache=True)
+def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, view, offs, sigma_z, dtau_dz, out):
     """One pass over the samples, splats into the interleaved ``out`` (H, W, K):
-    ``out[..., 0] = Σ_m w_m B_m· ‖colour_m − (B u)(m)‖² / C`` (the residual),
+    ``out[..., 0] = Σ_m w_m B_m· ‖colour_m − (B u)(m) − b_k(m)‖² / C`` (the residual, less its
+    view's offset ``b_k = offs[view_m]`` when ``offs`` has rows, else none),
     ``out[..., 1] = Σ_m w_m² B_m·`` (for the effective number of samples),
-    ``out[..., 2] = Σ_m w_m B_m·`` (the weight sum) and, when K = 4,
-    ``out[..., 3] = Σ_m w_m B_m· sigma_z_m² ‖∂tau/∂z_m‖²`` (the position variance, target px²).
-    Interleaved so that one sample's four corners write contiguous memory; buckets of even
+    ``out[..., 2] = Σ_m w_m B_m·`` (the weight sum), then with offsets
+    ``out[..., 3:3+C] = Σ_m w_m B_m· b_k(m)`` (the render's mix of view offsets) and, when
+    ``sigma_z`` has rows, last ``Σ_m w_m B_m· sigma_z_m² ‖∂tau/∂z_m‖²`` (the position
+    variance, target px²).
+    Interleaved so that one sample's corners write contiguous memory; buckets of even
     then odd top rows, so that threads never write the same row (as
     :func:`vibr.render.operators._assemble_kernel`)."""
     C, H, W = u.shape
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == x0.shape[0] and x0.shape[0] > 0
-    with_pos = out.shape[2] == 4
+    with_views = offs.shape[0] > 0
+    with_pos = sigma_z.shape[0] > 0
+    kp = out.shape[2] - 1
     for parity in range(2):
         for r in prange(n_rows):
             if r % 2 != parity or starts[r] == starts[r + 1]:
@@ -147,11 +202,14 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dta
                 b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
                 x = x0[i]
                 y = y0[i]
+                k = view[i] if with_views else 0
                 e = 0.0
                 for c in range(C):
                     uc = u[c]
                     bu = b0 * uc[y, x] + b1 * uc[y, x + 1] + b2 * uc[y + 1, x] + b3 * uc[y + 1, x + 1]
                     d = np.float64(colour[i, c]) - bu
+                    if with_views:
+                        d -= offs[k, c]
                     e += d * d
                 v0 = e * wi / C
                 v1 = wi * wi
@@ -161,34 +219,94 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, sigma_z, dta
                     tx = np.float64(dtau_dz[i, 0])
                     ty = np.float64(dtau_dz[i, 1])
                     v3 = wi * sz * sz * (tx * tx + ty * ty)
-                _add4(out[y, x], b0, v0, v1, wi, v3, with_pos)
-                _add4(out[y, x + 1], b1, v0, v1, wi, v3, with_pos)
-                _add4(out[y + 1, x], b2, v0, v1, wi, v3, with_pos)
-                _add4(out[y + 1, x + 1], b3, v0, v1, wi, v3, with_pos)
+                for corner in range(4):
+                    if corner == 0:
+                        bc, o = b0, out[y, x]
+                    elif corner == 1:
+                        bc, o = b1, out[y, x + 1]
+                    elif corner == 2:
+                        bc, o = b2, out[y + 1, x]
+                    else:
+                        bc, o = b3, out[y + 1, x + 1]
+                    o[0] += bc * v0
+                    o[1] += bc * v1
+                    o[2] += bc * wi
+                    if with_views:
+                        for c in range(C):
+                            o[3 + c] += bc * wi * offs[k, c]
+                    if with_pos:
+                        o[kp] += bc * v3
 
 
-def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz=None):
+@njit(parallel=True, cache=True)
+def _finish_stats(acc, wsum, own_wsum, centre, with_views, with_pos, s2, neff, bias2, pos):
+    """Per pixel from :func:`_sigma_splat`'s ``acc``: ``s2``, ``n_eff``, ``bias2`` =
+    ``‖Σ w B b_k / Σ w B − centre‖² / C`` (with offsets) and ``pos`` (with positions); all
+    0 where ``Σ w B = 0`` (``wsum``, or ``acc[..., 2]`` when ``own_wsum``)."""
+    H, W, K = acc.shape
+    C = centre.shape[0]
+    for y in prange(H):
+        for x in range(W):
+            a = acc[y, x]
+            ws = a[2] if own_wsum else wsum[y, x]
+            if ws > 0:
+                inv = 1.0 / ws
+                s2[y, x] = a[0] * inv
+                neff[y, x] = ws * ws / a[1] if a[1] > 0 else 0.0
+                if with_views:
+                    e = 0.0
+                    for c in range(C):
+                        d = a[3 + c] * inv - centre[c]
+                        e += d * d
+                    bias2[y, x] = e / C
+                if with_pos:
+                    pos[y, x] = a[K - 1] * inv
+            else:
+                s2[y, x] = 0.0
+                neff[y, x] = ws * ws / a[1] if a[1] > 0 else 0.0
+                if with_views:
+                    bias2[y, x] = 0.0
+                if with_pos:
+                    pos[y, x] = 0.0
+
+
+def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz=None, view=None, offsets=None,
+                      centre=None):
     """Per-pixel statistics of the samples around the rendered image ``u`` (planar (C, H, W),
     units of ``colour``), from one pass (:func:`_sigma_splat`); ``wsum = Σ_m w_m B_mp``
     (None: accumulated in the same pass).
     Returns a dict of (H, W) float64 arrays (0 where ``wsum = 0``): ``s2`` the weighted
-    variance of the samples around ``B u`` (units of ``colour`` squared), ``n_eff`` the
-    effective number of samples ``(Σ w B)² / Σ w² B``, ``pos_var`` the weighted mean of the
-    samples' position variance ``sigma_z² ‖∂tau/∂z‖²`` (target pixels²; 0 without ``sigma_z``)."""
+    variance of the samples around ``B u`` (units of ``colour`` squared; with ``view`` (N,)
+    and ``offsets`` (V, C), :func:`view_offsets`, around ``B u + b_k``: the offset of the
+    sample's view removed), ``n_eff`` the effective number of samples ``(Σ w B)² / Σ w² B``,
+    ``pos_var`` the weighted mean of the samples' position variance ``sigma_z² ‖∂tau/∂z‖²``
+    (target pixels²; 0 without ``sigma_z``); with offsets also ``bias2``
+    ``‖mix − centre‖² / C``, ``mix = Σ w B b_k / Σ w B`` the W-weighted mean of the offsets
+    of the views the render blends at p (``centre`` (C,), default 0)."""
     with_pos = sigma_z is not None
+    with_views = view is not None and offsets is not None
     if not with_pos:
         sigma_z, dtau_dz = np.zeros(0, np.float32), np.zeros((0, 2), np.float32)
+    C = np.shape(u)[0]
+    if with_views:
+        view, offs = np.ascontiguousarray(view), np.ascontiguousarray(offsets, np.float64).reshape(-1, C)
+    else:
+        view, offs = np.zeros(0, np.int32), np.zeros((0, C))
     H, W = splat.shape
-    acc = np.zeros((H, W, 4 if with_pos else 3), np.float64)
+    acc = np.zeros((H, W, 3 + (C if with_views else 0) + (1 if with_pos else 0)), np.float64)
     _sigma_splat(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts,
                  np.ascontiguousarray(weight), np.ascontiguousarray(colour), np.ascontiguousarray(u, np.float32),
-                 np.ascontiguousarray(sigma_z), np.ascontiguousarray(dtau_dz), acc)
-    ws = acc[..., 2] if wsum is None else np.asarray(wsum, np.float64)
-    ok = ws > 0
-    inv = np.where(ok, 1.0 / np.where(ok, ws, 1.0), 0.0)
-    w2 = acc[..., 1]
-    return {"s2": acc[..., 0] * inv, "n_eff": np.where(w2 > 0, ws * ws / np.where(w2 > 0, w2, 1.0), 0.0),
-            "pos_var": acc[..., 3] * inv if with_pos else np.zeros((H, W))}
+                 view, offs, np.ascontiguousarray(sigma_z), np.ascontiguousarray(dtau_dz), acc)
+    out = {k: np.empty((H, W)) for k in ("s2", "n_eff")}
+    out["pos_var"] = np.empty((H, W)) if with_pos else np.zeros((H, W))
+    bias2 = np.empty((H, W)) if with_views else np.zeros((1, 1))
+    cen = np.zeros(C) if centre is None else np.ascontiguousarray(centre, np.float64).reshape(C)
+    ws = np.zeros((1, 1)) if wsum is None else np.ascontiguousarray(wsum, np.float64)
+    _finish_stats(acc, ws, wsum is None, cen, with_views, with_pos, out["s2"], out["n_eff"], bias2,
+                  out["pos_var"] if with_pos else np.zeros((1, 1)))
+    if with_views:
+        out["bias2"] = bias2
+    return out
 
 
 def _finish(var, coverage, scale):
@@ -200,7 +318,7 @@ def _finish(var, coverage, scale):
 
 
 #: The terms of σ² (docs/RENDERER.md "Uncertainty": chosen by measurement).
-TERMS = ("model", "spread", "hole")
+TERMS = ("model", "spread", "views", "hole")
 
 
 #: Range (pixels) of the variance inflation next to push–pull filled pixels:
@@ -220,7 +338,7 @@ def hole_distance(coverage) -> np.ndarray:
 
 
 def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float = 255.0,
-                      density: float = 1.0, terms=TERMS) -> np.ndarray:
+                      density: float = 1.0, terms=TERMS, view=None) -> np.ndarray:
     """σ per pixel (H, W) float32, grey levels of ``scale``, of a variational render.
 
     Parameters
@@ -241,10 +359,15 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
         The density normalisation rho the data terms were divided by
         (``RenderResult.params["density"]``): the model's variance is that of the
         unnormalised energy (the paper's), ``1 / (rho · diag(H))``.
-    terms : sequence of {"model", "spread", "hole"} or a "+"-joined string
-        The variances added: the model's ``1/diag(H)`` and the disagreement of the sources
-        ``s²·(1 + 1/n_eff)``; ``hole`` multiplies their sum by ``1 + HOLE_RANGE / d`` near
-        push–pull filled pixels (module docstring); default all three.
+    terms : sequence of {"model", "spread", "views", "hole"} or a "+"-joined string
+        The variances added: the model's ``1/diag(H)``, the disagreement of the sources
+        ``s²·(1 + 1/n_eff)`` and the view offsets (``views``: the spread is then taken with
+        each view's offset removed, and the offsets' bias and variance are added; needs
+        ``view``); ``hole`` multiplies their sum by ``1 + HOLE_RANGE / d`` near push–pull
+        filled pixels (module docstring); default all four.
+    view : (N,) int array, optional
+        The source view of each sample (``Samples.view``), for the ``views`` term (without
+        it the term is left out).
     """
     if terms is True:
         terms = TERMS
@@ -254,21 +377,54 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     if bad or not terms:
         raise ValueError(f"uncertainty terms must be among {TERMS}, got {terms!r}")
     var = np.zeros(np.shape(coverage))
+    s2_scale = float(scale) ** 2
     if "model" in terms:
         var = var + model_variance(model.A, model.Ag if model.use_grad else None, model.alpha,
                                    model.gamma if model.use_grad else 0.0) / float(density)
-    if "spread" in terms:
+    with_views = "views" in terms and view is not None and len(view) > 0
+    if "spread" in terms or with_views:
         up = np.asarray(u)
         if not (up.ndim == 3 and up.shape[0] == np.shape(colour)[1]):
             up = up.transpose(2, 0, 1)  # (H, W, C) → planar
-        st = sample_statistics(splat, weight, colour, up)  # Σ w B: the row sums of A, same pass
-        neff = st["n_eff"]
-        inv_n = np.where(neff > 0, 1.0 / np.where(neff > 0, neff, 1.0), 0.0)
-        var = var + st["s2"] * (1.0 + inv_n) * float(scale) ** 2
+        offs = centre = None
+        if with_views:
+            offs, counts = view_offsets(splat, colour, up, view)
+            centre, v_off = view_offset_prior(offs, counts)
+        st = sample_statistics(splat, weight, colour, up, view=view if with_views else None, offsets=offs,
+                               centre=centre)
+        if "spread" in terms:
+            neff = st["n_eff"]
+            inv_n = np.where(neff > 0, 1.0 / np.where(neff > 0, neff, 1.0), 0.0)
+            var = var + st["s2"] * (1.0 + inv_n) * s2_scale
+        if with_views:
+            var = var + (st["bias2"] + v_off) * s2_scale
     if "hole" in terms:
         with np.errstate(divide="ignore", invalid="ignore"):  # holes: σ_hole below
             var = var * (1.0 + HOLE_RANGE / hole_distance(coverage))
     return _finish(var, coverage, scale)
+
+
+def view_offset_prior(offsets, counts):
+    """Where the target's photometric offset is expected and how far from it (docs/RENDERER.md
+    "Uncertainty", *View offsets*): ``(centre (C,), var)``.
+
+    Model: view k's samples carry an offset ``β_k`` (exposure, view-dependent brightness),
+    the target's ``β_t`` drawn from the same distribution as the V sources'. The render
+    blends the views' offsets with its own weights, ``mix(p) = Σ w B b_k / Σ w B``; its
+    error ``mix(p) − β_t`` has the mean square ``‖mix(p) − centre‖²/C + var``, with
+    ``centre`` the median of the V sources' offsets per channel (``b_k``,
+    :func:`view_offsets`, known up to a constant that cancels; the median, as a view with an
+    odd exposure is common) and ``var = σ_β²(1 + π/(2V))``, ``σ_β = 1.4826 · MAD`` their
+    robust spread (``π/(2V)``: the variance of the median of V samples in units of σ_β²).
+    Views without samples (``counts`` 0) are left out; one view: ``var = 0``."""
+    offs = np.asarray(offsets, np.float64)
+    b = offs[np.asarray(counts) > 0]
+    V, C = b.shape
+    if V == 0:
+        return np.zeros(C), 0.0
+    med = np.median(b, 0)
+    sb2 = float(np.mean((1.4826 * np.median(np.abs(b - med), 0)) ** 2)) if V > 1 else 0.0
+    return med, sb2 * (1.0 + math.pi / (2.0 * V))
 
 
 def ulr_sigma(spread_var, coverage, *, scale: float = 255.0) -> np.ndarray:

@@ -284,7 +284,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
 
         t0 = time.perf_counter()
         sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho,
-                                terms=uncertainty)
+                                terms=uncertainty, view=samples.view)
         times["uncertainty"] = time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
