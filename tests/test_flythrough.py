@@ -297,6 +297,16 @@ def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     assert "rendered 1 frames (4 already there)" in capsys.readouterr().out
     assert frames[0].stat().st_mtime_ns == mtime and frames[2].exists()
     assert read_video_info(out)[:3] == (5, 48, 34)
+    # the video is the one the PNGs on disk give (the resumed run's included)
+    import imageio_ffmpeg
+
+    from vibr.io import read_image
+    from vibr.io.video import write_video
+
+    ref = tmp_path / "ref.mp4"
+    write_video(ref, (read_image(f) for f in frames), fps=24)
+    for a, b in zip(imageio_ffmpeg.read_frames(str(out)), imageio_ffmpeg.read_frames(str(ref))):
+        assert a == b
 
 
 def test_view_weights_soft_and_continuous(arc_scene):
