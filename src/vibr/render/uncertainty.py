@@ -220,22 +220,18 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, view, offs, 
                     ty = np.float64(dtau_dz[i, 1])
                     v3 = wi * sz * sz * (tx * tx + ty * ty)
                 for corner in range(4):
-                    if corner == 0:
-                        bc, o = b0, out[y, x]
-                    elif corner == 1:
-                        bc, o = b1, out[y, x + 1]
-                    elif corner == 2:
-                        bc, o = b2, out[y + 1, x]
-                    else:
-                        bc, o = b3, out[y + 1, x + 1]
-                    o[0] += bc * v0
-                    o[1] += bc * v1
-                    o[2] += bc * wi
+                    # plain indices (no per-corner view of out): the loop stays in registers
+                    yy = y + (corner >> 1)
+                    xx = x + (corner & 1)
+                    bc = b0 if corner == 0 else b1 if corner == 1 else b2 if corner == 2 else b3
+                    out[yy, xx, 0] += bc * v0
+                    out[yy, xx, 1] += bc * v1
+                    out[yy, xx, 2] += bc * wi
                     if with_views:
                         for c in range(C):
-                            o[3 + c] += bc * wi * offs[k, c]
+                            out[yy, xx, 3 + c] += bc * wi * offs[k, c]
                     if with_pos:
-                        o[kp] += bc * v3
+                        out[yy, xx, kp] += bc * v3
 
 
 @njit(parallel=True, cache=True)
