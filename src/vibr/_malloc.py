@@ -4,10 +4,10 @@ A render allocates and frees tens of arrays of 1–200 MB (sample fields, stenci
 planes). glibc serves a block above its mmap threshold (adaptive: 128 KiB at start, raised
 to at most 32 MiB as blocks are freed) with a fresh ``mmap``, and unmaps it again at
 ``free``: every page of every such array is then faulted in and zeroed by the kernel, once
-per use. Frame after frame of a fly-through this is the same work again; the system time of
-a 768² render benchmark was 4.1 s of its 15.6 s (docs/PERFORMANCE.md, "Memory allocator").
-Keeping those blocks in the heap (mmap threshold 256 MiB) and not returning the heap's free
-top to the kernel below 512 MiB (trim threshold) lets the next frame reuse the pages.
+per use. Frame after frame of a fly-through this is the same work again. Keeping those
+blocks in the heap (mmap threshold 256 MiB) and not returning the heap's free top to the
+kernel below 512 MiB (trim threshold) lets the next frame reuse the pages (measured with
+``benchmarks/bench_malloc.py``: README, "Performance").
 
 Only for processes vibr starts (a library should not change its host's allocator): the
 ``vibr`` command calls :func:`tune_malloc` first thing, and so do the worker processes of
