@@ -372,6 +372,9 @@ def main(argv=None) -> int:
     ap.add_argument("--ab-prepared", action="store_true", help="only kept against per-request depth preparation")
     ap.add_argument("--browser-cpu", action="store_true", help="only the CPU an idle viewer page takes")
     a = ap.parse_args(argv)
+    from vibr._malloc import tune_malloc
+
+    tune_malloc()  # as `vibr view` does (VIBR_MALLOC=default: glibc's own settings)
     if a.browser_cpu:
         browser_cpu()
         return 0
