@@ -1,7 +1,7 @@
 """Fly-through benchmark (issue 21): `vibr path interpolate` then `vibr render --path` on fountain.
 
     python3 benchmarks/bench_path.py [--data ../shared/data] [--scale 0.25] [--frames 60]
-                                     [--views 8] [--out /tmp/bench_path] [--hard]
+                                     [--views 8] [--out /tmp/bench_path] [--hard] [--workers N]
 
 Steps (the depth cache is a fresh folder under --out, so the first render estimates depth):
 1. `vibr path interpolate SCENE -o path.json --frames N --scale S` (all 11 cameras);
@@ -9,7 +9,7 @@ Steps (the depth cache is a fresh folder under --out, so the first render estima
    estimated once, cached): total time, depth time, seconds per frame after the depth;
 3. the MP4 decoded back: frame count and size;
 4. run 2: the same command on the first 3 frames of the path with --overwrite: time from the
-   process start to the start of the first frame (depth loaded from the cache);
+   process start to the start of the frames (depth loaded from the cache);
 5. popping: mean absolute change between consecutive frames (grey levels of 255) of run 1,
    max / median, and the change at the frames where the selected set changes;
 6. with --hard, the same path rendered with hard view selection (blend 0), for comparison.
@@ -38,12 +38,11 @@ import sys, time, json
 t0 = time.perf_counter()
 import vibr.flythrough as F
 first = []
-_orig = F.render_frame
-def _rf(ctx, i):
-    if not first:
-        first.append(time.perf_counter() - t0)
-    return _orig(ctx, i)
-F.render_frame = _rf
+_orig = F._run_frames  # wrapped, not render_frame: that one is pickled to worker processes
+def _rf(*a, **k):
+    first.append(time.perf_counter() - t0)
+    return _orig(*a, **k)
+F._run_frames = _rf
 from vibr.cli import main
 rc = main(sys.argv[1:])
 print("BENCH " + json.dumps({"first_frame_s": first[0] if first else None, "rc": rc}), flush=True)
@@ -65,10 +64,13 @@ def parse(out):
     m = re.search(r"depth: (\w+) \(([\d.]+) s\)", out)
     if m:
         info["depth_source"], info["depth_s"] = m.group(1), float(m.group(2))
-    m = re.search(r"rendered (\d+) frames .* in ([\d.]+) s, ([\d.]+) s per frame; total ([\d.]+) s", out)
+    m = re.search(r"rendered (\d+) frames .* in ([\d.]+) s on (.+?), ([\d.]+) s per frame; total ([\d.]+) s", out)
     if m:
-        info.update(frames=int(m.group(1)), frames_s=float(m.group(2)), per_frame_s=float(m.group(3)),
-                    render_total_s=float(m.group(4)))
+        info.update(frames=int(m.group(1)), frames_s=float(m.group(2)), engine=m.group(3),
+                    per_frame_s=float(m.group(4)), render_total_s=float(m.group(5)))
+    m = re.search(r"video ([\d.]+) s\)", out)
+    if m:
+        info["video_s"] = float(m.group(1))
     m = re.search(r"BENCH (\{.*\})", out)
     if m:
         info.update(json.loads(m.group(1)))
@@ -95,6 +97,8 @@ def main():
     ap.add_argument("--views", type=int, default=8)
     ap.add_argument("--out", default="/tmp/bench_path")
     ap.add_argument("--hard", action="store_true", help="also render with hard view selection (blend 0)")
+    ap.add_argument("--workers", type=int, default=None,
+                    help="passed to vibr render --path (default: none, i.e. its executor auto)")
     ap.add_argument("--ttff-only", metavar="CACHE",
                     help="only step 4, twice, with this cache folder (from an earlier run; the first "
                          "repetition fills the cache of resized views if it is empty)")
@@ -119,7 +123,7 @@ def main():
                            str(out / "run2_frames"), "--overwrite", "--scale", str(a.scale), "--views",
                            str(a.views), "--cache-dir", a.ttff_only, "-q"], env)
             i2 = parse(o2)
-            print(f"| run 2.{rep} (cached depth): process start to first frame | "
+            print(f"| run 2.{rep} (cached depth): process start to frames start | "
                   f"{i2.get('first_frame_s', float('nan')):.1f} s (depth: {i2.get('depth_source')}, "
                   f"{i2.get('depth_s', float('nan')):.2f} s; whole run {dt2:.1f} s) |")
         return
@@ -130,6 +134,7 @@ def main():
     rows.append(("vibr path interpolate (11 cameras, %d frames)" % a.frames, f"{dt:.1f} s"))
 
     common = ["--scale", str(a.scale), "--views", str(a.views), "--cache-dir", str(cache), "-q"]
+    common += [] if a.workers is None else ["--workers", str(a.workers)]
     v1 = out / "run1.mp4"
     dt1, o1 = run([py, "-c", _DRIVER, "render", scene, "--path", str(path), "-o", str(v1),
                    "--frames-dir", str(out / "run1_frames"), "--overwrite"] + common, env)
@@ -137,9 +142,10 @@ def main():
     amort = (dt1 - i1.get("depth_s", 0.0)) / a.frames
     rows += [("run 1: vibr render --path, total (process)", f"{dt1:.1f} s"),
              ("run 1: one-off depth estimation", f"{i1.get('depth_s', float('nan')):.1f} s ({i1.get('depth_source')})"),
-             ("run 1: frames only, per frame", f"{i1.get('per_frame_s', float('nan')):.2f} s"),
+             ("run 1: frames only, per frame", f"{i1.get('per_frame_s', float('nan')):.2f} s (on {i1.get('engine')})"),
+             ("run 1: video encoding (PNGs read back, H.264)", f"{i1.get('video_s', float('nan')):.1f} s"),
              ("run 1: (total - depth) / frames, amortised", f"{amort:.2f} s"),
-             ("run 1: process start to first frame", f"{i1.get('first_frame_s', float('nan')):.1f} s")]
+             ("run 1: process start to frames start", f"{i1.get('first_frame_s', float('nan')):.1f} s")]
 
     sys.path.insert(0, str(REPO / "src"))
     from vibr.io.video import read_video_info
@@ -154,7 +160,7 @@ def main():
     dt2, o2 = run([py, "-c", _DRIVER, "render", scene, "--path", str(short), "-o", str(out / "run2_frames"),
                    "--overwrite"] + common, env)
     i2 = parse(o2)
-    rows.append(("run 2 (cached depth): process start to first frame",
+    rows.append(("run 2 (cached depth): process start to frames start",
                  f"{i2.get('first_frame_s', float('nan')):.1f} s (depth: {i2.get('depth_source')}, "
                  f"{i2.get('depth_s', float('nan')):.2f} s)"))
 
@@ -194,7 +200,8 @@ def main():
                          f"{chh[np.array(at) - 1].max():.2f} ({chh[np.array(at) - 1].max() / medh:.2f})"))
     np.savetxt(out / "changes.txt", ch, fmt="%.4f")
     print(f"\nfountain-P11 at scale {a.scale} ({w}x{h}), {a.frames} frames, --views {a.views}, "
-          f"{os.cpu_count()} cores (shared machine: other jobs were running)\n")
+          f"{os.cpu_count()} cores, --workers {a.workers or 'auto'}, load average at the end "
+          f"{os.getloadavg()[0]:.2f}\n")
     print("| measure | value |\n|---|---|")
     for k, v in rows:
         print(f"| {k} | {v} |")

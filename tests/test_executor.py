@@ -16,7 +16,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 import _scaleout_tasks as T  # noqa: E402
 
 from vibr.errors import VibrInputError  # noqa: E402
-from vibr.executor import parse_executor, run_tasks, threads_per_worker  # noqa: E402
+from vibr.executor import (AUTO_MIN_TASK_PIXELS, AUTO_MIN_TASKS_PER_WORKER, auto_workers,  # noqa: E402
+                           parse_executor, run_tasks, threads_per_worker)
 
 import distributed
 
@@ -34,6 +35,36 @@ def test_parse_executor():
             parse_executor(bad)
     assert threads_per_worker(2, cores=2) == 1 and threads_per_worker(3, cores=8) == 2
     assert threads_per_worker(4, cores=2) == 1
+
+
+def test_auto_workers_only_where_processes_pay():
+    big, many, gb = 768 * 512, 60, 2**30
+    assert auto_workers(many, big, gb, cores=2, memory=16 * gb) == 2
+    assert auto_workers(many, big, gb, cores=16, memory=64 * gb) == many // AUTO_MIN_TASKS_PER_WORKER
+    assert auto_workers(many, big, gb, cores=16, memory=3.5 * gb) == 3  # what memory holds
+    assert auto_workers(many, big, gb, cores=1, memory=16 * gb) == 1  # one core: threads do it
+    assert auto_workers(many, AUTO_MIN_TASK_PIXELS - 1, gb, cores=2, memory=16 * gb) == 1  # small frames
+    assert auto_workers(2 * AUTO_MIN_TASKS_PER_WORKER - 1, big, gb, cores=2, memory=16 * gb) == 1  # short path
+    assert auto_workers(many, big, gb, cores=2, memory=gb // 2) == 1  # not even one worker's memory
+
+
+def test_flythrough_auto_executor(tmp_path, monkeypatch):
+    """render_path's "auto": processes for a long path of large frames, here for the rest."""
+    import vibr.executor as E
+    from vibr.flythrough import FrameContext, auto_executor
+    from vibr.synthetic import make_scene
+
+    scene = make_scene("grid", n_views=9, width=48, height=40, seed=1)
+    cam = scene.views[0].camera.scaled(16.0)  # 768x640: a large frame
+    ctx = FrameContext(scene, [cam] * 40, str(tmp_path))
+    monkeypatch.setattr(E, "available_cores", lambda: 2)
+    monkeypatch.setattr("vibr.validate.available_memory", lambda: 16 * 2**30)
+    assert auto_executor(ctx, 40) == 2
+    assert auto_executor(ctx, 15) is None
+    small = FrameContext(scene, [scene.views[0].camera] * 40, str(tmp_path))
+    assert auto_executor(small, 40) is None
+    monkeypatch.setattr("vibr.validate.available_memory", lambda: 2**20)
+    assert auto_executor(ctx, 40) is None
 
 
 def _check_workers(res, tmp_path, n_workers):

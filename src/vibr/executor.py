@@ -78,6 +78,49 @@ def threads_per_worker(n_workers: int, cores: int | None = None) -> int:
     return max(1, (cores or available_cores()) // max(1, int(n_workers)))
 
 
+#: ``auto`` starts a process only for at least this many tasks: a process costs its start
+#: (imports, the context unpickled, numba's kernels loaded), about 2–4 s on the 2-core machine.
+AUTO_MIN_TASKS_PER_WORKER = 8
+#: ``auto`` splits only tasks of at least this many target pixels: smaller renders take a
+#: fraction of a second each, which the processes' start would not repay.
+AUTO_MIN_TASK_PIXELS = 1 << 18
+
+
+def auto_workers(n_tasks: int, task_pixels: int, worker_bytes: int, *, cores: int | None = None,
+                 memory: int | None = None) -> int:
+    """How many local processes ``n_tasks`` independent renders should run on (1: here).
+
+    Two processes of one numba thread render more frames per second than one process of
+    two threads: the single-threaded parts of a render (Python, numpy's reductions, PNG
+    encoding) and each parallel loop's tail use one core (docs/SCALE.md, "Fly-through
+    frames", measures it). So ``n = min(cores, n_tasks // AUTO_MIN_TASKS_PER_WORKER,
+    memory // worker_bytes)`` processes, each with ``cores // n`` threads, when the tasks
+    are big enough (``task_pixels ≥ AUTO_MIN_TASK_PIXELS``); else 1.
+
+    Parameters
+    ----------
+    n_tasks : int
+        Tasks left to run.
+    task_pixels : int
+        Target pixels of one task (a frame's width × height).
+    worker_bytes : int
+        Peak memory of one worker: its context plus one render
+        (:func:`vibr.validate.render_memory`).
+    cores, memory : int, optional
+        Default :func:`available_cores` and :func:`vibr.validate.available_memory`.
+    """
+    from .validate import available_memory
+
+    cores = available_cores() if cores is None else int(cores)
+    if cores < 2 or task_pixels < AUTO_MIN_TASK_PIXELS:
+        return 1
+    n = min(cores, int(n_tasks) // AUTO_MIN_TASKS_PER_WORKER)
+    avail = available_memory() if memory is None else memory
+    if avail is not None and worker_bytes > 0:
+        n = min(n, int(avail // worker_bytes))
+    return max(1, n)
+
+
 def parse_executor(executor) -> tuple[str, Any]:
     """``(kind, arg)`` for an ``executor`` argument of :func:`run_tasks`.
 

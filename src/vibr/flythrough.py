@@ -45,7 +45,7 @@ from .scene import Scene
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FrameContext", "FlyResult", "render_path", "render_frame", "view_weights",
+__all__ = ["FrameContext", "FlyResult", "render_path", "render_frame", "view_weights", "auto_executor",
            "frame_name", "check_path_sees_scene"]
 
 FRAME_PATTERN = "frame_{:05d}.png"
@@ -209,6 +209,7 @@ class FlyResult:
     depth_source: str = ""
     times: dict = field(default_factory=dict)
     frames: list = field(default_factory=list)
+    engine: str = "here"  # where the frames ran: "here", "N processes", or a Dask address
 
     @property
     def seconds_per_frame(self) -> float:
@@ -252,7 +253,7 @@ def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
 
 
 def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_views: int | None = 8,
-                params: dict | None = None, overwrite: bool = False, executor=None,
+                params: dict | None = None, overwrite: bool = False, executor="auto",
                 depth: str = "auto", estimate_kw: dict | None = None, cache_dir=None,
                 exclude=(), frames_dir=None, crf: int = 18, fps: float | None = None,
                 blend: float = 0.25, geometry_kw: dict | None = None, progress: bool = True,
@@ -271,8 +272,10 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         K best sources per frame (soft weights, module docstring); None: all.
     overwrite : bool
         Render frames already written again (default: skip them: resumable).
-    executor : None, "processes:N", int or a Dask address
-        Passed to :func:`vibr.executor.run_tasks` when that module exists; None: serial.
+    executor : "auto", None, "processes:N", int or a Dask address
+        Passed to :func:`vibr.executor.run_tasks`; None: serial, here. "auto" (default):
+        frames on :func:`vibr.executor.auto_workers` local processes (serial for a short
+        path or small frames, :func:`auto_executor`).
     depth, estimate_kw, cache_dir, exclude : see :func:`vibr.depthcache.scene_with_depth`.
     crf, fps : video quality and frame rate (default the path's).
     blend : width of the weight transition (relative to the penalty threshold).
@@ -302,11 +305,11 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     prepare_sources(ctx)
     t_first = time.perf_counter() - t_start
     t0 = time.perf_counter()
-    frames = _run_frames(ctx, len(cams), executor, progress)
+    frames, engine = _run_frames(ctx, len(cams), executor, progress)
     t_frames = time.perf_counter() - t0
     rendered = sum(not f["skipped"] for f in frames)
     res = FlyResult(len(cams), rendered, len(cams) - rendered, str(fdir), None,
-                    depth_source=sources.meta.get("depth_source", ""), frames=frames)
+                    depth_source=sources.meta.get("depth_source", ""), frames=frames, engine=engine)
     t_video = 0.0
     if video is not None:
         from .io import read_image
@@ -322,18 +325,50 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     return res
 
 
-def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> list:
+def _context_bytes(ctx: FrameContext) -> int:
+    """Bytes of the arrays a worker holds for the whole path (the sources and their slopes)."""
+    n = 0
+    for v in ctx.sources.views:
+        n += sum(a.nbytes for a in (v.image, v.depth) if isinstance(a, np.ndarray))
+    for arrs in ctx.prepared.values():
+        n += sum(a.nbytes for a in arrs if isinstance(a, np.ndarray))
+    return n
+
+
+def auto_executor(ctx: FrameContext, n_todo: int):
+    """``executor="auto"``: the number of processes :func:`vibr.executor.auto_workers` gives
+    for ``n_todo`` frames of the path's size, each worker holding the context and one
+    render from ``n_views`` + 2 sources (the soft selection's extra views); None for 1."""
+    from .executor import auto_workers
+    from .validate import render_memory
+
+    cam = ctx.cameras[0]
+    k = len(ctx.sources) if ctx.n_views is None else min(len(ctx.sources), ctx.n_views + 2)
+    shapes = sorted((v.camera.shape for v in ctx.sources.views), key=lambda s: -s[0] * s[1])[:k]
+    need = _context_bytes(ctx) + render_memory(shapes, cam.shape)
+    n = auto_workers(n_todo, cam.width * cam.height, need)
+    return n if n > 1 else None
+
+
+def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[list, str]:
+    """The frames' summaries, and where they ran (:attr:`FlyResult.engine`)."""
+    if executor == "auto":
+        todo = n if ctx.overwrite else sum(not os.path.isfile(os.path.join(ctx.frames_dir, frame_name(i)))
+                                           for i in range(n))
+        executor = auto_executor(ctx, todo)
     if executor is not None:
-        try:
-            from .executor import run_tasks
-        except ImportError:
-            raise VibrInputError("parallel frames need vibr.executor, which this install lacks") from None
+        from .executor import parse_executor, run_tasks
+
+        kind, arg = parse_executor(executor)
+        engine = {"serial": "here", "processes": f"{arg} processes", "dask-local": f"a local Dask cluster "
+                  f"of {arg} workers"}.get(kind, f"Dask ({arg})")
+        logger.info("frames: %d on %s", n, engine)
         return run_tasks(render_frame, list(range(n)), setup=_same, setup_args=(ctx,),
-                         executor=executor, desc="frames")
+                         executor=executor, desc="frames"), engine
     from .progress import progress as bar
 
     out = []
     it = bar(range(n), desc="frames", total=n) if progress else range(n)
     for i in it:
         out.append(render_frame(ctx, i))
-    return out
+    return out, "here"

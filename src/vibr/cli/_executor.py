@@ -5,20 +5,22 @@ from __future__ import annotations
 import argparse
 
 
-def add_executor_args(p: argparse.ArgumentParser) -> None:
-    """Add ``--workers`` and ``--dask`` (mutually exclusive) to a subcommand's parser."""
+def add_executor_args(p: argparse.ArgumentParser, default: str = "one after the other here") -> None:
+    """Add ``--workers`` and ``--dask`` (mutually exclusive) to a subcommand's parser;
+    ``default`` says what happens without either."""
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=int, metavar="N", default=None,
                    help="run the independent tasks on N local processes, each with "
-                        "NUMBA_NUM_THREADS = cores // N (default: one after the other here)")
+                        f"NUMBA_NUM_THREADS = cores // N; 1: here (default: {default})")
     g.add_argument("--dask", metavar="ADDRESS|local", default=None,
                    help="run the tasks on the Dask scheduler at ADDRESS (e.g. tcp://host:8786), or "
                         "'local' for a LocalCluster of 2 workers x 1 thread started for this command; "
                         "needs the dask extra: pip install 'vibr[dask]'")
 
 
-def executor_from_args(args):
-    """The ``executor`` argument of :func:`vibr.executor.run_tasks` for parsed flags."""
+def executor_from_args(args, default=None):
+    """The ``executor`` argument of :func:`vibr.executor.run_tasks` for parsed flags
+    (``default`` when neither flag is given)."""
     from ..errors import VibrInputError
     from ..executor import parse_executor, require_distributed
 
@@ -33,4 +35,4 @@ def executor_from_args(args):
         if workers < 1:
             raise VibrInputError(f"--workers must be >= 1, got {workers}")
         return workers
-    return None
+    return default

@@ -72,7 +72,9 @@ def _add_path_options(p) -> None:
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
     g.add_argument("--cache-dir", metavar="DIR",
                    help="cache of estimated depth and resized views (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
-    add_executor_args(g)  # frames on local processes or Dask (vibr.executor, docs/SCALE.md)
+    # frames on local processes or Dask (vibr.executor, docs/SCALE.md)
+    add_executor_args(g, default="auto: one process per core for a long path of large frames, "
+                                  "else here (vibr.executor.auto_workers)")
 
 
 def run(args) -> int:
@@ -157,11 +159,11 @@ def _run_path(args) -> int:
                       n_views=8 if args.views is None else args.views, params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=args.cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
-                      crf=args.crf, fps=args.fps, executor=executor_from_args(args))
+                      crf=args.crf, fps=args.fps, executor=executor_from_args(args, default="auto"))
     t = res.times
     what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
-    print(f"rendered {res.rendered} frames ({res.skipped} already there) in {t['frames']:.1f} s, "
+    print(f"rendered {res.rendered} frames ({res.skipped} already there) in {t['frames']:.1f} s on {res.engine}, "
           f"{res.seconds_per_frame:.2f} s per frame; total {t['total']:.1f} s (depth: {res.depth_source} "
-          f"({t['depth']:.1f} s)); wrote {what}")
+          f"({t['depth']:.1f} s); video {t['video']:.1f} s); wrote {what}")
     return 0
