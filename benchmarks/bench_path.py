@@ -64,7 +64,7 @@ def parse(out):
     m = re.search(r"depth: (\w+) \(([\d.]+) s\)", out)
     if m:
         info["depth_source"], info["depth_s"] = m.group(1), float(m.group(2))
-    m = re.search(r"rendered (\d+) frames .* in ([\d.]+) s on (.+?), ([\d.]+) s per frame; total ([\d.]+) s", out)
+    m = re.search(r"rendered (\d+) frames .* in ([\d.]+) s (.+?), ([\d.]+) s per frame; total ([\d.]+) s", out)
     if m:
         info.update(frames=int(m.group(1)), frames_s=float(m.group(2)), engine=m.group(3),
                     per_frame_s=float(m.group(4)), render_total_s=float(m.group(5)))
@@ -142,7 +142,7 @@ def main():
     amort = (dt1 - i1.get("depth_s", 0.0)) / a.frames
     rows += [("run 1: vibr render --path, total (process)", f"{dt1:.1f} s"),
              ("run 1: one-off depth estimation", f"{i1.get('depth_s', float('nan')):.1f} s ({i1.get('depth_source')})"),
-             ("run 1: frames only, per frame", f"{i1.get('per_frame_s', float('nan')):.2f} s (on {i1.get('engine')})"),
+             ("run 1: frames only, per frame", f"{i1.get('per_frame_s', float('nan')):.2f} s ({i1.get('engine')})"),
              ("run 1: video encoding (PNGs read back, H.264)", f"{i1.get('video_s', float('nan')):.1f} s"),
              ("run 1: (total - depth) / frames, amortised", f"{amort:.2f} s"),
              ("run 1: process start to frames start", f"{i1.get('first_frame_s', float('nan')):.1f} s")]

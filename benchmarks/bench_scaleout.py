@@ -43,7 +43,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _engines(workers: int) -> dict:
-    return {"serial": [], f"--workers {workers}": ["--workers", str(workers)], "--dask local": ["--dask", "local"]}
+    # serial is --workers 1: without a flag `vibr render --path` picks its engine itself (auto)
+    return {"serial": ["--workers", "1"], f"--workers {workers}": ["--workers", str(workers)],
+            "--dask local": ["--dask", "local"]}
 
 
 def _rotated(names: list, r: int) -> list:

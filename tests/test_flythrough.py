@@ -288,6 +288,7 @@ def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(out), "--views", "4", "-q"]) == 0
     txt = capsys.readouterr().out
     assert "rendered 5 frames (0 already there)" in txt
+    assert "in this process" in txt  # executor auto: 5 small frames are not worth a process
     assert read_video_info(out)[:3] == (5, 48, 34)
     frames = sorted((tmp_path / "o_frames").glob("frame_*.png"))
     assert len(frames) == 5

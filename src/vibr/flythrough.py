@@ -209,7 +209,7 @@ class FlyResult:
     depth_source: str = ""
     times: dict = field(default_factory=dict)
     frames: list = field(default_factory=list)
-    engine: str = "here"  # where the frames ran: "here", "N processes", or a Dask address
+    engine: str = "in this process"  # where the frames ran: "on N processes", "on Dask (ADDRESS)", ...
 
     @property
     def seconds_per_frame(self) -> float:
@@ -360,9 +360,9 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
         from .executor import parse_executor, run_tasks
 
         kind, arg = parse_executor(executor)
-        engine = {"serial": "here", "processes": f"{arg} processes", "dask-local": f"a local Dask cluster "
-                  f"of {arg} workers"}.get(kind, f"Dask ({arg})")
-        logger.info("frames: %d on %s", n, engine)
+        engine = {"serial": "in this process", "processes": f"on {arg} processes",
+                  "dask-local": f"on a local Dask cluster of {arg} workers"}.get(kind, f"on Dask ({arg})")
+        logger.info("frames: %d %s", n, engine)
         return run_tasks(render_frame, list(range(n)), setup=_same, setup_args=(ctx,),
                          executor=executor, desc="frames"), engine
     from .progress import progress as bar
@@ -371,4 +371,4 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
     it = bar(range(n), desc="frames", total=n) if progress else range(n)
     for i in it:
         out.append(render_frame(ctx, i))
-    return out, "here"
+    return out, "in this process"
