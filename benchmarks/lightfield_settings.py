@@ -1,0 +1,163 @@
+"""Light-field depth: plane step and refinement iterations against time and accuracy (issue 25).
+
+The light-field estimator (:func:`vibr.stereo.lightfield.lightfield_depth`) sweeps planes
+``step`` px of disparity apart and refines the winners with ``pm_iter`` slanted-plane
+iterations; the refinement is ~70 % of its time and the sweep ~27 % (docs/DEPTH.md, "Where
+the light-field time goes"). For each setting, on every light field we have:
+
+* **cotton, 3×3 block** (``../shared/data/hci2016_cotton``, 512²): the 8 neighbours of the
+  centre, each from the other 7 with the centre held out (``estimate_depth``'s timing case of
+  bench_depth.py), wall time; the centre view from its 8 neighbours against
+  ``gt_disp_lowres.pfm``: BadPix(0.07) % and MSE×100 (15-px border excluded); and the render
+  that depth is for: the centre rendered from the 8 neighbours with their estimated depths
+  (default method), PSNR against the centre photograph;
+* **synthetic 3×3 grids** (exact depth, 512×409; baselines 0.3 (seeds 0 and 1), 0.2, 0.1):
+  the centre view's share of textured pixels within 1 % of the exact depth (the measure of
+  ``bench_depth.py synthetic``).
+
+The settings run one after the other within each case (one run each: the times are indicative).
+
+    python3 benchmarks/lightfield_settings.py [--settings 0.03:2 0.1:2 0.1:1] [--size 512]
+    python3 benchmarks/lightfield_settings.py --strides   # cotton renders at strides 2, 4; 9×9 centre
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_depth import _centre_disparity_model, _textured, data_dir, hci_metrics  # noqa: E402
+
+
+def _parse(s: str) -> tuple[float, int]:
+    step, it = s.split(":")
+    return float(step), int(it)
+
+
+def cotton_strides(settings, strides):
+    """Render PSNR of the centre from its 8 neighbours at grid ``stride`` (neighbours 4±s in
+    row and column, as benchmarks/paper_tables.py), their depths estimated with each setting;
+    and the centre of the 9×9 grid from its 80 neighbours (BadPix / MSE×100)."""
+    from vibr.io import load_scene, read_pfm
+    from vibr.render import render
+    from vibr.stereo import estimate_depth
+    from vibr.stereo.lightfield import lightfield_depth
+
+    root = data_dir() / "hci2016_cotton"
+    scene = load_scene(root)
+    gt = np.asarray(read_pfm(root / "gt_disp_lowres.pfm"), np.float64)
+    ref = scene.index("input_Cam040")
+    pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
+    r0, c0 = pos[ref]
+    out = {}
+    for st in strides:
+        block = [ref] + [i for i, (r, c) in pos.items()
+                         if (r - r0) in (-st, 0, st) and (c - c0) in (-st, 0, st) and (r, c) != (r0, c0)]
+        sub = scene.subset([scene.views[i].name for i in block])
+        centre = scene.views[ref].name
+        nbs = [scene.views[i].name for i in block if i != ref]
+        for step, it in settings:
+            est8 = estimate_depth(sub, views=nbs, exclude=[centre], step=step, refine_iter=it)
+            res = render(est8.subset(nbs), sub[centre])
+            out[(st, step, it)] = res.metrics["psnr"]
+            print(f"  cotton stride {st}, step {step} iter {it}: render PSNR {res.metrics['psnr']:.2f} dB", flush=True)
+    cams = [v.camera for v in scene.views]
+    for step, it in settings:
+        t = time.perf_counter()
+        _, _, _, d = lightfield_depth(scene, ref, cams, lambda i: scene.views[i].image, list(range(len(scene))),
+                                      step=step, pm_iter=it, return_disparity=True)
+        t = time.perf_counter() - t
+        bp, mse = hci_metrics(d, gt, 15)
+        out[("9x9", step, it)] = (bp, mse, t)
+        print(f"  cotton 9x9 centre, step {step} iter {it}: BadPix {bp:.2f} MSE*100 {mse:.3f}, {t:.1f} s", flush=True)
+    return out
+
+
+def cotton_case(settings):
+    from vibr.io import load_scene, read_pfm
+    from vibr.render import render
+    from vibr.stereo import estimate_depth
+
+    root = data_dir() / "hci2016_cotton"
+    scene = load_scene(root)
+    gt = np.asarray(read_pfm(root / "gt_disp_lowres.pfm"), np.float64)
+    ref = scene.index("input_Cam040")
+    pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
+    r0, c0 = pos[ref]
+    block = [ref] + [i for i, (r, c) in pos.items() if max(abs(r - r0), abs(c - c0)) == 1]
+    sub = scene.subset([scene.views[i].name for i in block])
+    centre = scene.views[ref].name
+    nbs = [scene.views[i].name for i in block if i != ref]
+    rows = {}
+    for step, it in settings:
+        kw = dict(step=step, refine_iter=it)
+        t = time.perf_counter()
+        est8 = estimate_depth(sub, views=nbs, exclude=[centre], **kw)
+        t8 = time.perf_counter() - t
+        est1 = estimate_depth(sub, views=[centre], **kw)
+        a, b = _centre_disparity_model(sub, centre)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = -(a + b / est1[centre].depth.astype(np.float64))
+        bp, mse = hci_metrics(d, gt, 15)
+        res = render(est8.subset(nbs), sub[centre])
+        rows[(step, it)] = dict(t8=t8, badpix=bp, mse=mse, psnr=res.metrics["psnr"])
+        print(f"  cotton step {step} iter {it}: 8 views {t8:.1f} s, centre BadPix {bp:.2f} MSE*100 {mse:.3f}, "
+              f"render PSNR {res.metrics['psnr']:.2f} dB", flush=True)
+    return rows
+
+
+def synthetic_cases(settings, W: int):
+    from vibr.stereo import estimate_depth
+    from vibr.synthetic import make_scene
+
+    H = W * 4 // 5
+    out = {}
+    for seed, bl in ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1)):
+        scene = make_scene("grid", n_views=9, width=W, height=H, seed=seed, baseline=bl)
+        gt = scene[4].depth
+        tex = _textured(scene[4].image) & np.isfinite(gt)
+        for step, it in settings:
+            t = time.perf_counter()
+            est = estimate_depth(scene, views=[4], method="lightfield", step=step, refine_iter=it)
+            t = time.perf_counter() - t
+            with np.errstate(invalid="ignore"):
+                ok = np.abs(est[4].depth - gt) / gt < 0.01
+            out[(seed, bl, step, it)] = (100 * ok[tex].mean(), t)
+            print(f"  synthetic grid baseline {bl} seed {seed}, step {step} iter {it}: "
+                  f"{100 * ok[tex].mean():.1f} % within 1 %, {t:.1f} s", flush=True)
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--settings", nargs="+", default=["0.03:2", "0.1:2", "0.1:1"],
+                    help="STEP:REFINE_ITER pairs (the first is the current default)")
+    ap.add_argument("--size", type=int, default=512, help="width of the synthetic grids")
+    ap.add_argument("--strides", action="store_true",
+                    help="only the cotton renders at strides 2 and 4 and the 9×9 grid's centre")
+    a = ap.parse_args()
+    settings = [_parse(s) for s in a.settings]
+    if a.strides:
+        cotton_strides(settings, (2, 4))
+        return
+    print(f"load average {os.getloadavg()[0]:.2f}", flush=True)
+    cot = cotton_case(settings)
+    syn = synthetic_cases(settings, a.size)
+    print("\n| setting (step px, refinement iterations) | cotton 3×3: 8 views s | centre BadPix / MSE×100 "
+          "| render PSNR dB | synthetic 3×3, % within 1 %: bl 0.3 s0 / 0.3 s1 / 0.2 / 0.1 |")
+    print("|---|---|---|---|---|")
+    for step, it in settings:
+        c = cot[(step, it)]
+        s = " / ".join(f"{syn[(seed, bl, step, it)][0]:.1f}" for seed, bl in ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1)))
+        print(f"| {step} px, {it} | {c['t8']:.1f} | {c['badpix']:.2f} / {c['mse']:.3f} | {c['psnr']:.2f} | {s} |")
+    print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
