@@ -19,6 +19,7 @@ The settings run one after the other within each case (one run each: the times a
 
     python3 benchmarks/lightfield_settings.py [--settings 0.03:2 0.1:2 0.1:1] [--size 512]
     python3 benchmarks/lightfield_settings.py --strides   # cotton renders at strides 2, 4; 9×9 centre
+    python3 benchmarks/lightfield_settings.py --ab-block 2   # block timing, former default vs default
 """
 
 from __future__ import annotations
@@ -35,9 +36,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_depth import _centre_disparity_model, _textured, data_dir, hci_metrics  # noqa: E402
 
 
-def _parse(s: str) -> tuple[float, int]:
+def _parse(s: str) -> tuple:
+    """``STEP:ITER``; STEP ``auto`` is lightfield_depth's default (None: from the parallax)."""
     step, it = s.split(":")
-    return float(step), int(it)
+    return (None if step == "auto" else float(step)), int(it)
 
 
 def cotton_strides(settings, strides):
@@ -134,15 +136,48 @@ def synthetic_cases(settings, W: int):
     return out
 
 
+def ab_block(rounds: int) -> None:
+    """The cotton block's 8-view estimate with ``step=0.03`` (the former default) and with
+    the default, alternating (the order flips every round), in this process."""
+    import statistics
+
+    from vibr.io import load_scene
+    from vibr.stereo import estimate_depth
+
+    scene = load_scene(data_dir() / "hci2016_cotton")
+    ref = scene.index("input_Cam040")
+    pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
+    r0, c0 = pos[ref]
+    block = [ref] + [i for i, (r, c) in pos.items() if max(abs(r - r0), abs(c - c0)) == 1]
+    sub = scene.subset([scene.views[i].name for i in block])
+    centre = scene.views[ref].name
+    nbs = [scene.views[i].name for i in block if i != ref]
+    T = {"step 0.03 (former default)": [], "default (parallax 0.1 px)": []}
+    for r in range(rounds):
+        for k in (list(T) if r % 2 == 0 else list(T)[::-1]):
+            kw = {"step": 0.03} if k.startswith("step") else {}
+            t = time.perf_counter()
+            estimate_depth(sub, views=nbs, exclude=[centre], **kw)
+            T[k].append(time.perf_counter() - t)
+            print(f"{k}: {T[k][-1]:.1f} s (load {os.getloadavg()[0]:.1f})", flush=True)
+    for k, v in T.items():
+        print(f"{k}: median {statistics.median(v):.1f} s ({min(v):.1f}-{max(v):.1f}, n={len(v)})")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--settings", nargs="+", default=["0.03:2", "0.1:2", "0.1:1"],
-                    help="STEP:REFINE_ITER pairs (the first is the current default)")
+                    help="STEP:REFINE_ITER pairs; STEP 'auto': lightfield_depth's default")
     ap.add_argument("--size", type=int, default=512, help="width of the synthetic grids")
     ap.add_argument("--strides", action="store_true",
                     help="only the cotton renders at strides 2 and 4 and the 9×9 grid's centre")
+    ap.add_argument("--ab-block", type=int, metavar="ROUNDS",
+                    help="only the block's 8-view estimate, former default against the default, alternating")
     a = ap.parse_args()
     settings = [_parse(s) for s in a.settings]
+    if a.ab_block:
+        ab_block(a.ab_block)
+        return
     if a.strides:
         cotton_strides(settings, (2, 4))
         return
@@ -155,7 +190,7 @@ def main():
     for step, it in settings:
         c = cot[(step, it)]
         s = " / ".join(f"{syn[(seed, bl, step, it)][0]:.1f}" for seed, bl in ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1)))
-        print(f"| {step} px, {it} | {c['t8']:.1f} | {c['badpix']:.2f} / {c['mse']:.3f} | {c['psnr']:.2f} | {s} |")
+        print(f"| {'auto' if step is None else f'{step} px'}, {it} | {c['t8']:.1f} | {c['badpix']:.2f} / {c['mse']:.3f} | {c['psnr']:.2f} | {s} |")
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
 
 

@@ -357,4 +357,10 @@ def test_depth_cache_estimates_once(tmp_path, monkeypatch):
         assert np.array_equal(u.depth, v.depth, equal_nan=True)
     scene_with_depth(bare, cache_dir=tmp_path)  # other views: another key
     assert len(calls) == 2
+    # a newer estimator (its results changed) does not take an older one's maps
+    import vibr.stereo.api as api
+
+    monkeypatch.setattr(api, "ESTIMATOR_VERSION", api.ESTIMATOR_VERSION + 1)
+    c = scene_with_depth(bare, cache_dir=tmp_path, exclude=[s.names[0]])
+    assert c.meta["depth_source"] == "estimated" and len(calls) == 3
     assert scene_with_depth(s, cache_dir=tmp_path).meta["depth_source"] == "scene"

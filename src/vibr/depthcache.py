@@ -67,9 +67,12 @@ def _view_fingerprint(v, h) -> None:
 
 def depth_cache_key(scene: Scene, estimate_kw: dict | None = None, exclude=()) -> str:
     """SHA-256 (hex) of the scene root, views (names, sizes, images, cameras), the
-    excluded views and the estimation parameters."""
+    excluded views, the estimation parameters and the estimator's version
+    (:data:`vibr.stereo.api.ESTIMATOR_VERSION`)."""
+    from .stereo.api import ESTIMATOR_VERSION
+
     h = hashlib.sha256()
-    h.update(f"vibr-depth-cache v{_CACHE_VERSION}|".encode())
+    h.update(f"vibr-depth-cache v{_CACHE_VERSION} estimator {ESTIMATOR_VERSION}|".encode())
     h.update(str(os.path.abspath(scene.root)).encode() if scene.root else b"<memory>")
     for v in scene.views:
         _view_fingerprint(v, h)

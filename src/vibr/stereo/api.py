@@ -46,6 +46,12 @@ logger = logging.getLogger(__name__)
 #: :func:`estimate_depth` and docs/DEPTH.md for the measurements behind it).
 REFINE_ITER = 2
 
+#: Changes whenever :func:`estimate_depth` gives other depths for the same inputs and
+#: options (a new default, a changed algorithm): the on-disk depth cache
+#: (:mod:`vibr.depthcache`) keys on it, so a cache written by an older estimator is not
+#: served. 2: the light-field sweep's plane step from the parallax (docs/DEPTH.md).
+ESTIMATOR_VERSION = 2
+
 
 # --------------------------------------------------------------------------- helpers
 def _resized(img: np.ndarray, camera: Camera) -> np.ndarray:

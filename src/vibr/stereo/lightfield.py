@@ -26,6 +26,7 @@ followed by the weighted TV-L1 of :func:`vibr.stereo._kernels.tv_l1` (edge-aware
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -36,6 +37,11 @@ from ..errors import VibrInputError
 from ..scene import Scene
 from . import _kernels as kern
 from .planesweep import median_planes, plane_sweep, refine_planes, to_grey
+
+#: Default spacing of the sweep's planes as parallax on the nearest view swept, in pixels
+#: (``step`` of :func:`lightfield_depth`; the measurements behind it: docs/DEPTH.md, "Light
+#: fields", step 2).
+PARALLAX_STEP = 0.1
 
 
 def disparity_model(ref: Camera, right: Camera) -> tuple[float, float]:
@@ -106,7 +112,7 @@ def epi_disparity(stack: np.ndarray, offsets: np.ndarray, axis: str = "x", *,
 
 def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: list[int], *,
                      depth_range=None, radius: int | None = None, max_cost: float = 0.6,
-                     mem_bytes: float = 2e9, max_views: int = 32, step: float = 0.03,
+                     mem_bytes: float = 2e9, max_views: int = 32, step: float | None = None,
                      refine: str = "sweep+tv", tv_lambda: float = 2.0, tv_iter: int = 200,
                      st_min_coherence: float = 0.7, margin_px: float = 0.3,
                      return_disparity: bool = False, eps: float = 0.001,
@@ -124,7 +130,9 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     radius : ZNCC window half-size of the sweep and the refinement. Default 3 (7×7) with up
         to 8 views, 2 (5×5) with more: the matching noise falls with window area × views,
         and a smaller window fattens depth edges less.
-    step : disparity step between planes (pixels per grid step).
+    step : disparity step between planes, in px per grid step. Default: planes
+        :data:`PARALLAX_STEP` px of parallax apart on the nearest view swept, whatever the
+        spacing of the views (:func:`_plane_step`).
     refine : "st" (local estimate only), "sweep" or "sweep+tv".
     tv_lambda, tv_iter : data weight and iterations of the TV-L1 refinement.
     st_min_coherence : coherence above which a local estimate is trusted (range, st mode).
@@ -186,8 +194,8 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         dr = _sweep_range(scene, ref, cams, img, others, pos, best_d, st_conf, d_to_w, depth_range,
                           st_max_disp, margin_px, stats)
         dspan = abs(b) * (1.0 / dr[0] - 1.0 / dr[1])
-        D = int(np.clip(np.ceil(dspan / step) + 1, 16, 512))
         nb = _star_neighbours(others, pos, r0, c0)[:max_views]
+        step, D = _plane_step(dspan, step, [pos[k] for k in nb], (r0, c0))
         if n_best is None:
             # Occlusions: next to a depth edge only the views whose baseline runs along the
             # edge match cleanly, one of the star's 4 directions, a quarter of its views
@@ -204,7 +212,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                             median_radius=median_radius)
         disp = -(a + b * res.inv_depth)
         conf = res.confident
-        stats.update({"depth_range": dr, "n_planes": D, "n_views": len(nb), "n_best": n_best,
+        stats.update({"depth_range": dr, "n_planes": D, "step": step, "n_views": len(nb), "n_best": n_best,
                       "pm_iter": int(pm_iter),
                       "confident": float(conf.mean()), "sweep_s": res.meta["time_s"]})
         sigma_d = res.sigma_z / np.maximum(res.depth, 1e-12) ** 2 * abs(b)
@@ -316,6 +324,15 @@ def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max
     if median_radius:
         res = median_planes(img(ref), res, radius=median_radius)
     return res
+
+
+def _plane_step(dspan: float, step, nb_pos, ref_pos) -> tuple[float, int]:
+    """``(step, number of planes)`` of a sweep over ``dspan`` px of disparity per grid step:
+    ``step`` as given, or :data:`PARALLAX_STEP` px of parallax on the nearest view swept
+    (grid positions ``nb_pos``) divided by its grid distance; 16 to 512 planes."""
+    if step is None:
+        step = PARALLAX_STEP / min(math.hypot(r - ref_pos[0], c - ref_pos[1]) for r, c in nb_pos)
+    return step, int(np.clip(np.ceil(dspan / step) + 1, 16, 512))
 
 
 def _star_neighbours(others: list[int], pos: dict, r0: int, c0: int) -> list[int]:
