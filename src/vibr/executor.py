@@ -90,10 +90,9 @@ def auto_workers(n_tasks: int, task_pixels: int, worker_bytes: int, *, cores: in
                  memory: int | None = None) -> int:
     """How many local processes ``n_tasks`` independent renders should run on (1: here).
 
-    Two processes of one numba thread render more frames per second than one process of
-    two threads: the single-threaded parts of a render (Python, numpy's reductions, PNG
-    encoding) and each parallel loop's tail use one core (docs/SCALE.md, "Fly-through
-    frames", measures it). So ``n = min(cores, n_tasks // AUTO_MIN_TASKS_PER_WORKER,
+    On the 2-core machine two processes of one numba thread rendered the fountain path's
+    frames in 0.86–0.94 of the wall time of one process of two threads, with less CPU time
+    in all (docs/SCALE.md, "Fly-through frames"). So ``n = min(cores, n_tasks // AUTO_MIN_TASKS_PER_WORKER,
     memory // worker_bytes)`` processes, each with ``cores // n`` threads, when the tasks
     are big enough (``task_pixels ≥ AUTO_MIN_TASK_PIXELS``); else 1.
 

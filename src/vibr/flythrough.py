@@ -362,7 +362,6 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
         kind, arg = parse_executor(executor)
         engine = {"serial": "in this process", "processes": f"on {arg} processes",
                   "dask-local": f"on a local Dask cluster of {arg} workers"}.get(kind, f"on Dask ({arg})")
-        logger.info("frames: %d %s", n, engine)
         return run_tasks(render_frame, list(range(n)), setup=_same, setup_args=(ctx,),
                          executor=executor, desc="frames"), engine
     from .progress import progress as bar
