@@ -42,28 +42,41 @@ def _parse(s: str) -> tuple:
     return (None if step == "auto" else float(step)), int(it)
 
 
-def cotton_strides(settings, strides):
-    """Render PSNR of the centre from its 8 neighbours at grid ``stride`` (neighbours 4±s in
-    row and column, as benchmarks/paper_tables.py), their depths estimated with each setting;
-    and the centre of the 9×9 grid from its 80 neighbours (BadPix / MSE×100)."""
+def _cotton():
+    """Cotton (all 81 views), its centre-view disparity ground truth, the centre's index and
+    every view's grid position."""
     from vibr.io import load_scene, read_pfm
-    from vibr.render import render
-    from vibr.stereo import estimate_depth
-    from vibr.stereo.lightfield import lightfield_depth
 
     root = data_dir() / "hci2016_cotton"
     scene = load_scene(root)
     gt = np.asarray(read_pfm(root / "gt_disp_lowres.pfm"), np.float64)
     ref = scene.index("input_Cam040")
     pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
+    return scene, gt, ref, pos
+
+
+def _block(scene, ref, pos, stride: int = 1):
+    """The 3×3 block around the centre at grid ``stride`` (neighbours 4±s in row and column,
+    as benchmarks/paper_tables.py): the sub-scene, the centre's name and the 8 neighbours'."""
     r0, c0 = pos[ref]
+    block = [ref] + [i for i, (r, c) in pos.items()
+                     if (r - r0) in (-stride, 0, stride) and (c - c0) in (-stride, 0, stride) and (r, c) != (r0, c0)]
+    sub = scene.subset([scene.views[i].name for i in block])
+    return sub, scene.views[ref].name, [scene.views[i].name for i in block if i != ref]
+
+
+def cotton_strides(settings, strides):
+    """Render PSNR of the centre from its 8 neighbours at grid ``stride`` (neighbours 4±s in
+    row and column, as benchmarks/paper_tables.py), their depths estimated with each setting;
+    and the centre of the 9×9 grid from its 80 neighbours (BadPix / MSE×100)."""
+    from vibr.render import render
+    from vibr.stereo import estimate_depth
+    from vibr.stereo.lightfield import lightfield_depth
+
+    scene, gt, ref, pos = _cotton()
     out = {}
     for st in strides:
-        block = [ref] + [i for i, (r, c) in pos.items()
-                         if (r - r0) in (-st, 0, st) and (c - c0) in (-st, 0, st) and (r, c) != (r0, c0)]
-        sub = scene.subset([scene.views[i].name for i in block])
-        centre = scene.views[ref].name
-        nbs = [scene.views[i].name for i in block if i != ref]
+        sub, centre, nbs = _block(scene, ref, pos, st)
         for step, it in settings:
             est8 = estimate_depth(sub, views=nbs, exclude=[centre], step=step, refine_iter=it)
             res = render(est8.subset(nbs), sub[centre])
@@ -82,20 +95,11 @@ def cotton_strides(settings, strides):
 
 
 def cotton_case(settings):
-    from vibr.io import load_scene, read_pfm
     from vibr.render import render
     from vibr.stereo import estimate_depth
 
-    root = data_dir() / "hci2016_cotton"
-    scene = load_scene(root)
-    gt = np.asarray(read_pfm(root / "gt_disp_lowres.pfm"), np.float64)
-    ref = scene.index("input_Cam040")
-    pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
-    r0, c0 = pos[ref]
-    block = [ref] + [i for i, (r, c) in pos.items() if max(abs(r - r0), abs(c - c0)) == 1]
-    sub = scene.subset([scene.views[i].name for i in block])
-    centre = scene.views[ref].name
-    nbs = [scene.views[i].name for i in block if i != ref]
+    scene, gt, ref, pos = _cotton()
+    sub, centre, nbs = _block(scene, ref, pos)
     rows = {}
     for step, it in settings:
         kw = dict(step=step, refine_iter=it)
@@ -141,17 +145,10 @@ def ab_block(rounds: int) -> None:
     the default, alternating (the order flips every round), in this process."""
     import statistics
 
-    from vibr.io import load_scene
     from vibr.stereo import estimate_depth
 
-    scene = load_scene(data_dir() / "hci2016_cotton")
-    ref = scene.index("input_Cam040")
-    pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
-    r0, c0 = pos[ref]
-    block = [ref] + [i for i, (r, c) in pos.items() if max(abs(r - r0), abs(c - c0)) == 1]
-    sub = scene.subset([scene.views[i].name for i in block])
-    centre = scene.views[ref].name
-    nbs = [scene.views[i].name for i in block if i != ref]
+    scene, _, ref, pos = _cotton()
+    sub, centre, nbs = _block(scene, ref, pos)
     T = {"step 0.03 (former default)": [], "default (parallax 0.1 px)": []}
     for r in range(rounds):
         for k in (list(T) if r % 2 == 0 else list(T)[::-1]):
