@@ -48,6 +48,23 @@ def test_auto_workers_only_where_processes_pay():
     assert auto_workers(many, big, gb, cores=2, memory=gb // 2) == 1  # not even one worker's memory
 
 
+def _auto_in_child(q):
+    q.put(auto_workers(60, 768 * 512, 2**30, cores=2, memory=16 * 2**30))
+
+
+def test_auto_workers_is_one_inside_a_daemonic_process():
+    """A Dask or Pool worker may not start processes: auto keeps the frames there."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=_auto_in_child, args=(q,), daemon=True)
+    p.start()
+    got = q.get(timeout=120)
+    p.join(30)
+    assert got == 1
+
+
 def test_flythrough_auto_executor(tmp_path, monkeypatch):
     """render_path's "auto": processes for a long path of large frames, here for the rest."""
     import vibr.executor as E

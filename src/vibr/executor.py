@@ -94,7 +94,9 @@ def auto_workers(n_tasks: int, task_pixels: int, worker_bytes: int, *, cores: in
     frames in 0.86–0.94 of the wall time of one process of two threads, with less CPU time
     in all (docs/SCALE.md, "Fly-through frames"). So ``n = min(cores, n_tasks // AUTO_MIN_TASKS_PER_WORKER,
     memory // worker_bytes)`` processes, each with ``cores // n`` threads, when the tasks
-    are big enough (``task_pixels ≥ AUTO_MIN_TASK_PIXELS``); else 1.
+    are big enough (``task_pixels ≥ AUTO_MIN_TASK_PIXELS``); else 1. Always 1 inside a
+    daemonic process (a Dask worker, a ``multiprocessing.Pool`` worker), which may not start
+    processes of its own.
 
     Parameters
     ----------
@@ -111,7 +113,7 @@ def auto_workers(n_tasks: int, task_pixels: int, worker_bytes: int, *, cores: in
     from .validate import available_memory
 
     cores = available_cores() if cores is None else int(cores)
-    if cores < 2 or task_pixels < AUTO_MIN_TASK_PIXELS:
+    if cores < 2 or task_pixels < AUTO_MIN_TASK_PIXELS or multiprocessing.current_process().daemon:
         return 1
     n = min(cores, int(n_tasks) // AUTO_MIN_TASKS_PER_WORKER)
     avail = available_memory() if memory is None else memory
