@@ -56,9 +56,11 @@ def _triad(a, b, c, s):
 def bandwidth(n_bytes: int = 128 * 2 ** 20, repeat: int = 7) -> float:
     """STREAM triad bandwidth in bytes/s (counts 2 reads + 1 write per element)."""
     n = n_bytes // 4
-    a = np.zeros(n, np.float32)
-    b = np.ones(n, np.float32)
-    c = np.ones(n, np.float32)
+    # one block above glibc's mmap threshold (vibr._malloc): mapped and unmapped again, so
+    # that the measurement leaves nothing in the heap the renders then use (peak memory)
+    buf = np.ones(3 * n, np.float32)
+    a, b, c = buf[:n], buf[n:2 * n], buf[2 * n:]
+    a[:] = 0.0
     _triad(a, b, c, np.float32(0.5))
     ts = []
     for _ in range(repeat):
@@ -130,39 +132,43 @@ def stage_traffic(S, sources, shape, n_outer):
     """Bytes each stage must read and write at least once (its floor's traffic).
 
     n_src source pixels, N samples, P target pixels, ``b(S)`` the bytes of one sample
-    (every field of :class:`vibr.geometry.Samples`):
+    (the fields of :class:`vibr.geometry.Samples` computed):
 
     * depth preparation: read the depth, write z, z_x, z_y (float64): n_src (d + 24);
     * z-buffer: read z, z_x, z_y, write the target z-buffer (float64): 24 n_src + 8 P;
     * visibility: read z, z_x, z_y and the z-buffer, write the state (1 byte): 25 n_src + 8 P;
     * sample fields: read z, z_x, z_y, state, colour (12), its gradient (24, written
       first), write the samples: n_src (24 + 1 + 12 + 48) + N b(S);
-    * splat set-up + coverage: read xy, write the cell (x0, y0 int32, fx, fy float64) and
-      the row order (int64), read them back with ∇v, colour, 1/|det|, write 19 planes:
-      N (16 + 32 + 32 + 24 + 12 + 8) + 76 P;
+    * splat set-up + coverage: read xy, write the cell (x0, y0 int32, fx, fy float32; no
+      row order: the samples come in block order), read it back with ∇v, colour, 1/|det|,
+      write 19 planes: N (16 + 16 + 16 + 24 + 12 + 8) + 76 P;
     * initial blend: read the 4 blend planes and the coverage (float64), write 3 planes, the
       pyramid a third more: 4/3 · 40 P;
-    * weights + colour stencils, per outer pass: read the cell and order (32), 1/|det|,
-      sigma_z, ∂tau/∂z, colour, write 12 planes: N (32 + b(inv_det) + b(sigma_z) + b(dtau) + 12) + 48 P.
+    * weights + colour stencils, per outer pass: read the cell (16), 1/|det|,
+      sigma_z, ∂tau/∂z, colour, write 12 planes: N (16 + b(inv_det) + b(sigma_z) + b(dtau) + 12) + 48 P.
     """
     P = int(shape[0]) * int(shape[1])
     N = len(S)
     n_src = sum(v.depth.size for v in sources.views)
     d = sources.views[0].depth.itemsize
     bS = sum(getattr(S, f).nbytes for f in ("xy", "colour", "grad", "jac", "inv_det", "dtau_dz", "sigma_z",
-                                             "view", "src_xy", "X")) / max(N, 1)
+                                             "view", "src_xy", "X") if getattr(S, f) is not None) / max(N, 1)
     per = lambda f: getattr(S, f).nbytes / max(N, 1)  # noqa: E731
     return {
         STAGES[0]: n_src * (d + 24), STAGES[1]: 24 * n_src + 8 * P, STAGES[2]: 25 * n_src + 8 * P,
-        STAGES[3]: n_src * (24 + 1 + 12 + 48) + N * bS, STAGES[4]: N * (16 + 32 + 32 + 24 + 12 + 8) + 76 * P,
+        STAGES[3]: n_src * (24 + 1 + 12 + 48) + N * bS, STAGES[4]: N * (16 + 16 + 16 + 24 + 12 + 8) + 76 * P,
         STAGES[5]: 4 / 3 * 40 * P,
-        STAGES[6]: n_outer * (N * (32 + per("inv_det") + per("sigma_z") + per("dtau_dz") + 12) + 48 * P),
+        STAGES[6]: n_outer * (N * (16 + per("inv_det") + per("sigma_z") + per("dtau_dz") + 12) + 48 * P),
     }
 
 
 def median_runs(sources, target, repeat, measure_bw=False, all_runs=False, **params):
     run_once(sources, target, **params)  # warm-up: loads the compiled kernels
-    runs = [run_once(sources, target, measure_bw, **params) for _ in range(repeat)]
+    runs = []
+    for _ in range(repeat):
+        if runs:  # only the last run's image is measured: the others' are not kept (peak memory)
+            runs[-1] = {k: v for k, v in runs[-1].items() if k not in ("image", "coverage")}
+        runs.append(run_once(sources, target, measure_bw, **params))
     keys = [k for k in runs[0] if k not in ("image", "coverage")]
     med = {k: float(np.median([r[k] for r in runs])) for k in keys}
     last = runs[-1]

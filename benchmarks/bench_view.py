@@ -61,7 +61,7 @@ def _midway(a, b):
     return Camera.from_centre(a.K, R, 0.5 * (a.centre + b.centre), a.width, a.height)
 
 
-def synthetic(updates: int) -> dict:
+def synthetic(updates: int, points: str = "while moving") -> dict:
     from playwright.sync_api import sync_playwright
 
     from vibr.synthetic import make_scene
@@ -72,7 +72,7 @@ def synthetic(updates: int) -> dict:
     scene = make_scene("handheld", n_views=9, width=768, height=768)
     print(f"synthetic scene: {len(scene)} views of 768x768 built in {time.perf_counter() - t0:.1f} s", flush=True)
     settings = ViewSettings(n_views=8, preview_long_side=256, full_long_side=768)
-    viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=settings))
+    viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=settings, points=points))
     targets = [_midway(scene.views[0].camera, scene.views[1 + k % (len(scene) - 1)].camera)
                for k in range(updates + 1)]  # the first one warms up
     prev, prev_render, full, full_render = [], [], [], []
@@ -315,19 +315,20 @@ def ab_prepared(size: int = 768, cameras: int = 4) -> None:
     print(f"identical images: {all(same)}; load average {os.getloadavg()[0]:.1f}")
 
 
-def browser_cpu(seconds: float = 20.0) -> None:
-    """CPU used by headless Chromium showing an idle viewer page (its WebGL scene drawn by
-    software on this machine) while nothing is rendered: the share of the 2 cores the
-    viewer's renders do not get while the browser runs on the same machine."""
+def browser_cpu(seconds: float = 10.0) -> None:
+    """CPU used by headless Chromium showing a still viewer page (its WebGL scene drawn by
+    software on this machine: viser redraws on demand and once a second) while nothing is
+    rendered: the share of the 2 cores the viewer's renders do not get while the browser
+    runs on the same machine. The synthetic 768² scene of the latency measurement (its
+    point cloud: 300 000 points), for each point-cloud mode."""
     import psutil
     from playwright.sync_api import sync_playwright
 
     from vibr.synthetic import make_scene
-    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer import POINT_MODES, Viewer, ViewerOptions, ViewSettings
     from vibr.viewer.browser import launch_chromium
 
-    scene = make_scene("handheld", n_views=6, width=128, height=96)
-    v = Viewer(scene, ViewerOptions(port=free_port(), settings=ViewSettings(n_views=4)))
+    scene = make_scene("handheld", n_views=9, width=768, height=768)
     me = psutil.Process()
 
     def children_cpu():
@@ -340,28 +341,35 @@ def browser_cpu(seconds: float = 20.0) -> None:
                 pass
         return t
 
-    url = v.start()
-    try:
-        with sync_playwright() as pw:
-            b = launch_chromium(pw)
-            page = b.new_page(viewport={"width": 800, "height": 800})
-            page.goto(url, timeout=60_000)
-            v.wait_for_image(kind="full", timeout=300)
-            time.sleep(3)
-            c0, w0, s0 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
-            time.sleep(seconds)
-            c1, w1, s1 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
-            b.close()
-    finally:
-        v.stop()
-    print(f"idle viewer page for {w1 - w0:.0f} s: browser processes {c1 - c0:.1f} CPU s "
-          f"({(c1 - c0) / (w1 - w0):.2f} cores), viewer process {s1 - s0:.1f} CPU s; "
-          f"load average {os.getloadavg()[0]:.1f}")
+    for mode in POINT_MODES:
+        v = Viewer(scene, ViewerOptions(port=free_port(), points=mode,
+                                        settings=ViewSettings(n_views=8, full_long_side=768)))
+        url = v.start()
+        try:
+            with sync_playwright() as pw:
+                b = launch_chromium(pw)
+                page = b.new_page(viewport={"width": 800, "height": 800})
+                page.goto(url, timeout=60_000)
+                v.wait_for_image(kind="full", timeout=300)
+                time.sleep(3)
+                c0, w0, s0 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
+                time.sleep(seconds)
+                c1, w1, s1 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
+                b.close()
+        finally:
+            v.stop()
+        print(f"points {mode!r}: still viewer page for {w1 - w0:.0f} s: browser processes {c1 - c0:.1f} CPU s "
+              f"({(c1 - c0) / (w1 - w0):.2f} cores), viewer process {s1 - s0:.1f} CPU s; "
+              f"load average {os.getloadavg()[0]:.1f}", flush=True)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--updates", type=int, default=7, help="camera updates measured (default 7)")
+    ap.add_argument("--points", default="while moving",
+                    help="the viewer's point-cloud mode (vibr.viewer.POINT_MODES; default 'while moving', "
+                         "vibr view's): 'never' shows the server's latency without the browser "
+                         "drawing 300 000 points in software on the same cores")
     ap.add_argument("--skip-fountain", action="store_true")
     ap.add_argument("--skip-synthetic", action="store_true")
     ap.add_argument("--data", default=os.environ.get("VIBR_DATA", str(_REPO.parent / "shared" / "data")))
@@ -396,7 +404,8 @@ def main(argv=None) -> int:
     print(f"cpus: {os.cpu_count()}, load average: {os.getloadavg()[0]:.1f} (shared machine)", flush=True)
     rows = []
     if not a.skip_synthetic:
-        s = synthetic(a.updates)
+        s = synthetic(a.updates, a.points)
+        print(f"point cloud: {a.points}", flush=True)
         rows += [("synthetic 768², 8 sources: preview (256²), update → sent", _stats(s["preview"]), "≤ 0.3 s"),
                  ("  the preview's render itself (vibr.render + source choice)", _stats(s["preview_render"]), ""),
                  ("synthetic 768², 8 sources: full (768²), update → sent", _stats(s["full"]), "≤ 1.5 s"),

@@ -24,7 +24,7 @@ def test_translation_plane_samples():
     img = _img()
     src = View("s", img, _cam([0, 0, 0]), np.full((H, W), z), sigma_z=0.05)
     tgt = _cam([b, 0, 0])
-    s = compute_samples(Scene([src]), tgt)
+    s = compute_samples(Scene([src]), tgt, keep=("jac", "src_xy"))
     assert isinstance(s, Samples) and s.target_shape == (H, W)
     shift = F * b / z  # 4 px
     np.testing.assert_allclose(s.xy[:, 0], s.src_xy[:, 0] - shift, atol=1e-9)
@@ -59,7 +59,7 @@ def test_unknown_depth_is_skipped_or_filled():
     d[10:13, 10:13] = np.nan
     sc = Scene([View("s", img, _cam([0, 0, 0]), d)])
     tgt = _cam([0, 0, 0])
-    s = compute_samples(sc, tgt)
+    s = compute_samples(sc, tgt, keep="src_xy")
     assert len(s) == H * W - 9 and s.meta["counts"]["s"]["unknown"] == 9
     assert not np.any((s.src_xy[:, 0] == 11) & (s.src_xy[:, 1] == 11))
     s2 = compute_samples(sc, tgt, fill_holes=True)
@@ -73,7 +73,7 @@ def test_default_sigma_z_and_map():
     np.testing.assert_allclose(s.sigma_z, 0.01 * 4.0)  # DEFAULT_SIGMA_Z_REL · median depth
     smap = np.arange(H * W, dtype=np.float32).reshape(H, W) * 1e-3
     sc2 = Scene([View("s", _img(), _cam([0, 0, 0]), d, sigma_z=smap)])
-    s2 = compute_samples(sc2, _cam([0, 0, 0]))
+    s2 = compute_samples(sc2, _cam([0, 0, 0]), keep="src_xy")
     np.testing.assert_allclose(s2.sigma_z, smap[s2.src_xy[:, 1], s2.src_xy[:, 0]], rtol=1e-6)
 
 
@@ -120,7 +120,7 @@ def test_occluder_hides_the_background():
     d = np.full((H, W), 4.0)
     d[10:20, 15:25] = 2.0
     sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
-    s = compute_samples(sc, _cam([0.1, 0, 0]))  # foreground moves 2.5 px, background 1.25 px
+    s = compute_samples(sc, _cam([0.1, 0, 0]), keep="src_xy")  # foreground moves 2.5 px, background 1.25 px
     c = s.meta["counts"]["s"]
     assert c["occluded"] > 0
     # the occluded background pixels are just left of the square (covered by its shift)
@@ -138,7 +138,7 @@ def test_samples_are_sorted_by_target_cell():
 
     sc = make_scene("grid", width=48, height=40, seed=0, grid=(2, 2))
     src, tg = sc.split(0)
-    s = compute_samples(src, tg.camera)
+    s = compute_samples(src, tg.camera, keep=("jac", "src_xy"))
     H, W = s.target_shape
     x = np.minimum(np.floor(s.xy[:, 0]), W - 2)
     y = np.minimum(np.floor(s.xy[:, 1]), H - 2)
@@ -150,3 +150,33 @@ def test_samples_are_sorted_by_target_cell():
     assert np.array_equal(np.lexsort((pix, key)), np.arange(len(s)))
     for f in ("colour", "jac", "inv_det", "dtau_dz", "sigma_z", "X"):
         assert getattr(s, f).dtype == np.float32
+
+
+def test_optional_fields_are_computed_only_when_kept():
+    """jac and src_xy (no default render reads them) are None unless kept; the other fields
+    are the same either way, and the footprint PSF asks for what it needs."""
+    from vibr.errors import VibrInputError
+    from vibr.render import render
+    from vibr.render.api import render_samples
+    from vibr.render.methods import sample_fields
+
+    d = np.full((H, W), 4.0)
+    d[10:20, 15:25] = 2.0
+    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
+    lean = compute_samples(sc, _cam([0.1, 0, 0]))
+    full = compute_samples(sc, _cam([0.1, 0, 0]), keep=("jac", "src_xy"))
+    assert lean.jac is None and lean.src_xy is None
+    assert full.jac.shape == (len(full), 2, 2) and full.src_xy.shape == (len(full), 2)
+    for f in ("xy", "colour", "grad", "inv_det", "dtau_dz", "sigma_z", "view", "X"):
+        np.testing.assert_array_equal(getattr(lean, f), getattr(full, f))
+    assert lean.select(lean.view == 0).jac is None
+    assert sample_fields("gradient") == () and sample_fields("gradient", psf="footprint") == ("jac",)
+    with pytest.raises(VibrInputError, match="keep"):
+        compute_samples(sc, _cam([0.1, 0, 0]), keep=("normals",))
+    with pytest.raises(VibrInputError, match="Jacobians"):
+        render_samples(lean, "bvs", psf="footprint")
+    # render() computes what its PSF reads
+    a = render(sc, _cam([0.1, 0, 0]), "bvs", psf="footprint").image
+    b = render_samples(full, "bvs", psf="footprint", source_centres=np.zeros((1, 3)),
+                       target_centre=np.array([0.1, 0, 0])).image
+    np.testing.assert_array_equal(a, b)

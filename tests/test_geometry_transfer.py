@@ -41,7 +41,7 @@ def test_transferred_depth_reproduces_the_grid_relation(cotton_block):
     block, disp, gp = cotton_block
     sources, centre = block.split("input_Cam040")
     assert all(v.depth is not None for v in sources.views)
-    s = compute_samples(sources, centre.camera)
+    s = compute_samples(sources, centre.camera, keep="src_xy")
     worst = 0.0
     for k, v in enumerate(sources.views):
         r, c = gp[v.name]
@@ -103,7 +103,7 @@ def test_planar_proxy_is_fronto_parallel_in_the_target():
     for v in px.views:
         X = v.camera.backproject(v.camera.pixel_grid(), v.depth)
         np.testing.assert_allclose(tgt.project(X)[1], D, rtol=1e-5)
-    s = compute_samples(px, tgt)
+    s = compute_samples(px, tgt, keep="src_xy")
     assert np.allclose(s.sigma_z, px["a"].sigma_z)
     # a fronto-parallel plane seen by parallel cameras: a pure translation, det = 1
     sel = s.view == 0

@@ -59,12 +59,13 @@ def test_identity_jacobian_gives_bilinear_coefficients():
     bil = Splat(xy, (H, W))
     fp = Splat(xy, (H, W), jac=np.broadcast_to(np.eye(2), (n, 2, 2)), psf="footprint")
     assert fp.n_shrunk == 0 and fp.n_degenerate == 0
-    assert abs(explicit_B(fp) - explicit_B(bil)).max() < 1e-12
+    # the bilinear PSF keeps its fractions in float32 (error < 1e-7), the footprint's in float64
+    assert abs(explicit_B(fp) - explicit_B(bil)).max() < 1e-7
     # far from the origin of a large image (the areas are computed in local coordinates)
     xy = np.c_[rng.uniform(4000, 4999, n), rng.uniform(0, 7, n)]
     bil = Splat(xy, (8, 5000))
     fp = Splat(xy, (8, 5000), jac=np.broadcast_to(np.eye(2), (n, 2, 2)), psf="footprint")
-    assert abs(explicit_B(fp) - explicit_B(bil)).max() < 1e-12
+    assert abs(explicit_B(fp) - explicit_B(bil)).max() < 1e-7
 
 
 def test_closed_form_cases():
@@ -159,7 +160,7 @@ def test_big_footprints_are_shrunk_per_axis():
     # uniformly coarser source: the unit square, i.e. bilinear
     two = Splat(xy, (H, W), jac=np.broadcast_to(2.0 * np.eye(2), (n, 2, 2)), psf="footprint")
     assert two.n_shrunk == n and two.shrunk_fraction == 1.0
-    assert abs(explicit_B(two) - bil).max() < 1e-12
+    assert abs(explicit_B(two) - bil).max() < 1e-7  # the bilinear fractions are float32
     # coarser along x only: x shrunk to 1 px, y kept (½ px)
     a = Splat(xy, (H, W), jac=np.broadcast_to(np.diag([2.0, 0.5]), (n, 2, 2)), psf="footprint")
     b = Splat(xy, (H, W), jac=np.broadcast_to(np.diag([1.0, 0.5]), (n, 2, 2)), psf="footprint")
@@ -184,7 +185,7 @@ def test_degenerate_jacobians_fall_back_to_bilinear():
     J = np.stack([np.full((2, 2), np.nan), np.zeros((2, 2)), np.array([[1.0, 1.0], [0.5, 0.5]])])
     s = Splat(xy, (H, W), jac=J, psf="footprint")
     assert s.n_degenerate == 3
-    assert abs(explicit_B(s) - explicit_B(Splat(xy, (H, W)))).max() < 1e-12
+    assert abs(explicit_B(s) - explicit_B(Splat(xy, (H, W)))).max() < 1e-7  # float32 fractions
 
 
 def test_bad_psf_arguments():
@@ -206,7 +207,7 @@ def test_render_samples_psf_parameter():
     sc = make_scene("grid", width=48, height=48)
     tgt = sc.views[4]
     src = sc.subset([v.name for v in sc.views if v.name != tgt.name])
-    S = compute_samples(src, tgt.camera)
+    S = compute_samples(src, tgt.camera, keep="jac")
     kw = dict(max_iter=8, n_outer=1)
     fp = render_samples(S, "bvs", psf="footprint", **kw)
     assert fp.params["psf"] == "footprint" and 0.0 <= fp.params["psf_shrunk"] <= 1.0
@@ -266,7 +267,7 @@ def test_footprint_psf_accuracy_on_a_finer_source():
     tgt = sc.views[4]
     src = sc.subset([v.name for v in sc.views if v.name != tgt.name])
     ref = downscale_local_mean(tgt.image, (2, 2, 1)).astype(np.float32)
-    S = compute_samples(src, tgt.camera.scaled(0.5))
+    S = compute_samples(src, tgt.camera.scaled(0.5), keep="jac")
     bl = render_samples(S, "bvs", psf="bilinear")
     fp = render_samples(S, "bvs", psf="footprint")
     m = bl.coverage & fp.coverage

@@ -39,7 +39,8 @@ def test_source_gradient_is_the_operator(scheme):
     img = np.random.default_rng(1).random((H, W, 3)).astype(np.float32)
     K = Camera.intrinsics(f, W, H)
     src = View("s", img, Camera.from_centre(K, np.eye(3), np.zeros(3), W, H), np.full((H, W), 3.0))
-    s = compute_samples(Scene([src]), Camera.from_centre(K, np.eye(3), np.zeros(3), W, H), grad_scheme=scheme)
+    s = compute_samples(Scene([src]), Camera.from_centre(K, np.eye(3), np.zeros(3), W, H), grad_scheme=scheme,
+                        keep="src_xy")
     assert s.meta["grad_scheme"] == scheme and len(s) == H * W
     g = grad_image(np.ascontiguousarray(img.transpose(2, 0, 1)), scheme)  # (3, 2, H, W)
     x, y = s.src_xy[:, 0], s.src_xy[:, 1]

@@ -298,3 +298,45 @@ def test_identical_camera_echo_is_not_a_new_request(tiny_scene):
     assert len(got) == 1
     v._on_camera(SimpleNamespace(**dict(vars(cam), position=(0.0, 0.0, 0.1))))
     assert len(got) == 2
+
+
+@pytest.mark.parametrize("mode", ["while moving", "always", "never"])
+def test_point_cloud_shown_while_the_camera_moves(tiny_scene, monkeypatch, mode):
+    """Default "while moving": the points appear with a camera move and go when the camera
+    has settled and the full-size render starts (the render is then seen whole); one
+    visibility message per change; "always" / "never" do not follow the camera."""
+    from types import SimpleNamespace
+
+    from vibr.viewer import app
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.errors import VibrInputError
+    from vibr.viewer.worker import Request
+
+    monkeypatch.setattr(app, "send_background", lambda client, img, kind: None)
+    v = Viewer(tiny_scene, ViewerOptions(warm_up=False, points=mode, settings=ViewSettings(full_long_side=32)))
+    changes = []
+
+    class Points:
+        def __setattr__(self, name, value):
+            changes.append(value)
+
+    v._points = Points()
+    v.gui = {"points": SimpleNamespace(value=mode), "status": SimpleNamespace(content=""),
+             "show_sources": SimpleNamespace(value=False)}
+    v._set_visible("points")
+    v._workers[7] = SimpleNamespace(submit=lambda payload, t_update=None: 1, is_stale=lambda req: False)
+    v._hide_frustums_at = lambda pos: None
+    client = SimpleNamespace(client_id=7, flush=lambda: None)
+    wxyz, pos, fov, aspect = app.viser_pose_from_camera(tiny_scene.views[0].camera)
+    cam = SimpleNamespace(wxyz=tuple(wxyz), position=tuple(pos), fov=fov, aspect=aspect, client=client)
+    v._on_camera(cam)
+    v._on_camera(SimpleNamespace(**dict(vars(cam), position=tuple(np.add(pos, 1e-3)))))
+    moving = v._points_shown
+    v._render_for(client, Request(1, 0.0, (app.CameraState.of(cam), v.settings)), "full")
+    still = v._points_shown
+    want = {"while moving": (False, True, False), "always": (True, True, True), "never": (False, False, False)}[mode]
+    assert (changes[0], moving, still) == want
+    assert all(a != b for a, b in zip(changes, changes[1:]))  # a message only when it changes
+    assert v.sent[7][-1].kind == "full"
+    with pytest.raises(VibrInputError, match="points"):
+        Viewer(tiny_scene, ViewerOptions(points="sometimes"))

@@ -111,8 +111,8 @@ def test_viewer_in_chromium(small_scene, tmp_path):
                 page.screenshot(path=str(tmp_path / "viewer_scene.png"), timeout=30_000)
                 # hide what is drawn over the background; screenshots until the browser
                 # repainted (software GL: up to seconds)
-                for key in ("show_points", "show_cameras"):
-                    viewer.gui[key].value = False
+                viewer.gui["points"].value = "never"
+                viewer.gui["show_cameras"].value = False
                 viewer._set_visible("points")
                 viewer._set_visible("cameras")
                 shot = tmp_path / "viewer.png"

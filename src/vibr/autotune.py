@@ -72,7 +72,7 @@ def probe_scale(sources: Scene, target: Camera, probes, n_renders: int, budget: 
     return float(min(1.0, max(s, MIN_SIDE / short)))
 
 
-def _probe_cases(sources: Scene, probes, s: float):
+def _probe_cases(sources: Scene, probes, s: float, keep=()):
     """Per probe: (samples from the other sources, their centres, probe camera, probe image)."""
     from .geometry import compute_samples
     from .io.images import scaled_scene
@@ -82,7 +82,7 @@ def _probe_cases(sources: Scene, probes, s: float):
     for i in probes:
         pv = small.views[i]
         rest = small.replace(views=[v for j, v in enumerate(small.views) if j != i])
-        samples = compute_samples(rest, pv.camera)
+        samples = compute_samples(rest, pv.camera, keep=keep)
         if len(samples):
             out.append((samples, np.array([v.camera.centre for v in rest.views]), pv.camera, pv.image))
     return out
@@ -123,7 +123,9 @@ def tune(sources: Scene, target: Camera, method: str = "gradient", *, gamma=AUTO
     n_renders = (len(gammas) if tune_g else 0) + (len(lams) - 1 if tune_l else 0)
     probes = probe_views(sources, target, n_probe)
     s = probe_scale(sources, target, probes, max(n_renders, 1), budget)
-    cases = _probe_cases(sources, probes, s)
+    from .render.methods import sample_fields
+
+    cases = _probe_cases(sources, probes, s, sample_fields(method, **params))
     scores: dict = {}
 
     def run(g, l):

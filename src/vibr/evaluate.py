@@ -141,7 +141,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)
     t0 = time.perf_counter()
-    samples = compute_samples(src, tview.camera, **(geometry_kw or {}))
+    samples = compute_samples(src, tview.camera, **_geometry_kw(geometry_kw, settings, render_kw))
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
@@ -209,6 +209,17 @@ def _checked_settings(settings, mask: str, intensity_scale):
     if not intensity_scale > 0:
         raise VibrInputError(f"the intensity scale must be > 0, got {intensity_scale}")
     return settings, intensity_scale
+
+
+def _geometry_kw(geometry_kw, settings, render_kw) -> dict:
+    """``geometry_kw`` keeping the sample fields any of the settings reads
+    (:func:`vibr.render.methods.sample_fields`)."""
+    from .render.methods import sample_fields
+
+    keep = set((geometry_kw or {}).get("keep", ()))
+    for s in settings:
+        keep |= set(sample_fields(s.method, **{**(render_kw or {}), **s.params}))
+    return {**(geometry_kw or {}), "keep": tuple(sorted(keep))}
 
 
 def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False):

@@ -41,6 +41,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import VibrInputError
+from .render.methods import sample_fields
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -172,7 +173,9 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     tm["view weights"] = -t0 + (t := time.perf_counter())
     try:
-        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
+        gkw = dict(ctx.geometry_kw)
+        gkw["keep"] = tuple(set(gkw.get("keep", ())) | set(sample_fields(ctx.method, **ctx.params)))
+        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **gkw)
     except VibrInputError as exc:
         raise VibrInputError(f"frame {i}: {exc.problem}") from None
     tm["geometry"] = -t + (t := time.perf_counter())

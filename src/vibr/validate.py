@@ -142,13 +142,16 @@ def check_memory(need: float, what: str, way_out: str, source=None) -> None:
                              f"{avail / 2**30:.1f} GB available: {way_out}", source)
 
 
-def sample_bytes() -> int:
-    """Bytes of one :class:`vibr.geometry.Samples` entry, from its arrays' dtypes."""
+def sample_bytes(keep=()) -> int:
+    """Bytes of one :class:`vibr.geometry.Samples` entry, from its arrays' dtypes: the
+    optional fields (:data:`vibr.geometry.sampling.OPTIONAL_FIELDS`) only when in ``keep``."""
     from .geometry.samples import Samples
+    from .geometry.sampling import OPTIONAL_FIELDS
 
     e = Samples.concatenate([], (1, 1))
     return sum(int(a.dtype.itemsize * np.prod(a.shape[1:], dtype=np.int64))
-               for a in vars(e).values() if isinstance(a, np.ndarray))
+               for name, a in vars(e).items()
+               if isinstance(a, np.ndarray) and (name not in OPTIONAL_FIELDS or name in keep))
 
 
 def render_memory(source_shapes, target_shape) -> int:

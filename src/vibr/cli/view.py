@@ -39,6 +39,11 @@ def register(sub) -> None:
     add_method_option(p)
     p.add_argument("--views", type=int, default=8, metavar="K", help="initial number of source views (default 8)")
     p.add_argument("--max-points", type=int, default=300_000, help="points in the point cloud (default 300000)")
+    from ..viewer.app import POINT_MODES
+
+    p.add_argument("--points", choices=POINT_MODES, default=POINT_MODES[0],
+                   help=f"when the point cloud is drawn over the render (default '{POINT_MODES[0]}': hidden "
+                        "once the camera is still and the full-size render starts)")
     p.add_argument("--cache-dir", metavar="DIR",
                    help="cache of the loaded scene and of estimated depth (default $VIBR_CACHE_DIR or "
                         "~/.cache/vibr; the same cache as 'vibr render --path')")
@@ -68,7 +73,7 @@ def run(args) -> int:
     # a browser's aborted preconnect is logged with a traceback by websockets: not an error here
     logging.getLogger("websockets.server").setLevel(logging.CRITICAL)
     viewer = Viewer(scene, ViewerOptions(host=args.host, port=args.port, max_points=args.max_points,
-                                         path_out=args.path_out, settings=settings))
+                                         points=args.points, path_out=args.path_out, settings=settings))
     url = viewer.start()
     try:
         print(f"vibr view: {scene.name} ({len(scene)} views) at {url}  (Ctrl-C to stop)", flush=True)

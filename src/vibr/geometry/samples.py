@@ -33,9 +33,10 @@ class Samples:
         Source colour gradient ``∇v_k(m)`` (per channel, d/dx then d/dy), in source
         pixels: :func:`vibr.geometry.gradient.grad_image` of the source image with the
         scheme of ``meta["grad_scheme"]``.
-    jac : (N, 2, 2) float32
+    jac : (N, 2, 2) float32 or None
         ``∂tau_k/∂x_m`` (docs/METHOD.md §2 eq. deformation); rows are target x, y; columns source
-        x, y.
+        x, y. Only the footprint PSF reads it: None unless asked for
+        (:func:`vibr.geometry.compute_samples`'s ``keep``).
     inv_det : (N,) float32
         Deformation weight ``1 / |det ∂tau_k/∂x_m|``.
     dtau_dz : (N, 2) float32
@@ -44,8 +45,9 @@ class Samples:
         Depth standard deviation of the sample, scene units.
     view : (N,) int32
         Index of the source view (into the list of sources).
-    src_xy : (N, 2) int32
-        The sample's source pixel (x = column, y = row).
+    src_xy : (N, 2) int32 or None
+        The sample's source pixel (x = column, y = row); no render reads it: None unless
+        asked for (``keep``).
     X : (N, 3) float32
         The sample's 3D point in world coordinates (for view-dependent blending, ULR).
     target_shape : (H, W)
@@ -71,10 +73,11 @@ class Samples:
 
     def select(self, mask) -> "Samples":
         """The samples where boolean ``mask`` (N,) is true."""
+        opt = lambda a: None if a is None else a[mask]  # noqa: E731
         return Samples(
-            self.xy[mask], self.colour[mask], self.grad[mask], self.jac[mask],
+            self.xy[mask], self.colour[mask], self.grad[mask], opt(self.jac),
             self.inv_det[mask], self.dtau_dz[mask], self.sigma_z[mask], self.view[mask],
-            self.src_xy[mask], self.X[mask], self.target_shape, dict(self.meta),
+            opt(self.src_xy), self.X[mask], self.target_shape, dict(self.meta),
         )
 
     @staticmethod
@@ -85,7 +88,12 @@ class Samples:
             return Samples(z2, np.zeros((0, 3), f4), np.zeros((0, 3, 2), f4), np.zeros((0, 2, 2), f4),
                            np.zeros(0, f4), np.zeros((0, 2), f4), np.zeros(0, f4), np.zeros(0, np.int32),
                            np.zeros((0, 2), np.int32), np.zeros((0, 3), f4), tuple(target_shape))
-        cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+        def cat(name):
+            arrays = [getattr(p, name) for p in parts]
+            if any(a is None for a in arrays):  # an optional field (jac, src_xy) some part lacks
+                return None
+            return np.concatenate(arrays)
+
         return Samples(cat("xy"), cat("colour"), cat("grad"), cat("jac"), cat("inv_det"),
                        cat("dtau_dz"), cat("sigma_z"), cat("view"), cat("src_xy"),
                        cat("X"), tuple(target_shape), {})

@@ -29,7 +29,12 @@ from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, ne
                          reduce_zbuffers, splat_zbuffer, visibility_mask)
 from .warp import DEFAULT_MAX_INV_DET, _project_one, _warp_one, warp_constants
 
-__all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL"]
+__all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL", "OPTIONAL_FIELDS"]
+
+#: Sample fields no default render reads, computed only when asked for (``keep``): the
+#: warp's Jacobian (the footprint PSF) and the source pixel (diagnostics, tests); 16 + 8 of
+#: the 108 bytes a sample takes.
+OPTIONAL_FIELDS = ("jac", "src_xy")
 
 #: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
 #: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
@@ -95,9 +100,12 @@ def _cell_dest(key, n_cells):
 def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, gimg, max_inv_det, sig_map, sig_scalar,
                    k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
     """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples are numbered
-    from ``row_off[i]`` in source order, and sample ``s`` is written at ``dest[s]``."""
+    from ``row_off[i]`` in source order, and sample ``s`` is written at ``dest[s]``
+    (``jac``, ``src`` only when they have a row per sample)."""
     H, W = z.shape
     use_map = sig_map.shape[0] > 0
+    keep_jac = jac.shape[0] == xy.shape[0]
+    keep_src = src.shape[0] == xy.shape[0]
     for i in prange(H):
         buf = np.empty(10)
         n = row_off[i]
@@ -112,10 +120,11 @@ def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, gimg, max_
             _warp_one(x, y, zc, zx[i, j], zy[i, j], M, c, buf)
             xy[s, 0] = buf[0]
             xy[s, 1] = buf[1]
-            jac[s, 0, 0] = buf[3]
-            jac[s, 0, 1] = buf[4]
-            jac[s, 1, 0] = buf[5]
-            jac[s, 1, 1] = buf[6]
+            if keep_jac:
+                jac[s, 0, 0] = buf[3]
+                jac[s, 0, 1] = buf[4]
+                jac[s, 1, 0] = buf[5]
+                jac[s, 1, 1] = buf[6]
             dtau[s, 0] = buf[7]
             dtau[s, 1] = buf[8]
             ad = abs(buf[9])
@@ -124,8 +133,9 @@ def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, gimg, max_
             # world point X = z (R_kᵀ K_k⁻¹) x̄ + C_k
             for r in range(3):
                 X[s, r] = zc * (A[r, 0] * x + A[r, 1] * y + A[r, 2]) + Ck[r]
-            src[s, 0] = j
-            src[s, 1] = i
+            if keep_src:
+                src[s, 0] = j
+                src[s, 1] = i
             view[s] = k_view
             sig[s] = sig_map[i, j] if use_map else sig_scalar
             for ch in range(3):
@@ -149,7 +159,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
                     edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
                     sigma_z_default: float | None = None, splat_mode: str = "affine",
                     return_zbuffer: bool = False, prepared: dict | None = None,
-                    grad_scheme: str | None = None) -> Samples:
+                    grad_scheme: str | None = None, keep=()) -> Samples:
     """Visible warped source samples for a target camera (paper §5).
 
     Parameters
@@ -186,6 +196,10 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         Discretisation of the sources' ``∇v`` (:data:`vibr.geometry.gradient.GRAD_SCHEMES`;
         default :data:`vibr.geometry.gradient.DEFAULT_GRAD_SCHEME`), recorded in
         ``meta["grad_scheme"]``: the renderer applies the same ``D`` to the target.
+    keep : iterable of str
+        Optional fields to compute (:data:`OPTIONAL_FIELDS`): ``"jac"`` (the footprint PSF
+        reads it; :func:`vibr.render.methods.sample_fields` says what a render needs),
+        ``"src_xy"``; the others are None.
 
     Returns
     -------
@@ -200,6 +214,10 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         A source without depth, or no source sample landing in the target.
     """
     grad_scheme = DEFAULT_GRAD_SCHEME if grad_scheme is None else grad_scheme
+    keep = (keep,) if isinstance(keep, str) else tuple(keep)
+    if set(keep) - set(OPTIONAL_FIELDS):
+        raise VibrInputError(f"keep: unknown field(s) {sorted(set(keep) - set(OPTIONAL_FIELDS))} "
+                             f"(choose from {', '.join(OPTIONAL_FIELDS)})")
     if grad_scheme not in GRAD_SCHEMES:
         raise VibrInputError(f"grad_scheme must be one of {GRAD_SCHEMES}, got {grad_scheme!r}")
     cam = target.camera if isinstance(target, View) else target
@@ -215,7 +233,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     with _Timer(times, cpu, "visibility"):
         states, counts = _visibility(prepped, zbuf, vis_threshold)
     with _Timer(times, cpu, "assembly"):
-        out = _gather_samples(prepped, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme)
+        out = _gather_samples(prepped, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme, keep)
         del prepped, states
     if len(out) == 0:
         raise VibrInputError("no source view sees the target", tname)
@@ -281,7 +299,7 @@ def _visibility(prepped, zbuf, vis_threshold):
     return states, counts
 
 
-def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme) -> Samples:
+def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep=OPTIONAL_FIELDS) -> Samples:
     """The fields of every visible pixel, sorted by target cell (:func:`_cell_dest`): one
     allocation for all samples, each view's kernel writing its samples in place.
 
@@ -301,17 +319,17 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
         _keys_kernel(state, row_off, z, M, c, H_t, W_t, key)
     dest = _cell_dest(key, max(H_t - 1, 1) * max(W_t - 1, 1))
     del key
-    # positions in float64 (they set the splat coefficients); the other fields in float32:
-    # 84 of the 152 bytes a sample took (the sample arrays are most of a render's memory)
+    # positions in float64 (they set the splat coefficients); the other fields in float32,
+    # the optional ones only when kept (the sample arrays are most of a render's memory)
     f4 = np.float32
     xy = np.empty((N, 2))
-    jac = np.empty((N, 2, 2), f4)
+    jac = np.empty((N if "jac" in keep else 0, 2, 2), f4)
     inv_det = np.empty(N, f4)
     dtau = np.empty((N, 2), f4)
     X = np.empty((N, 3), f4)
     colour = np.empty((N, 3), np.float32)
     grad = np.empty((N, 3, 2), np.float32)
-    src = np.empty((N, 2), np.int32)
+    src = np.empty((N if "src_xy" in keep else 0, 2), np.int32)
     sig = np.empty(N, f4)
     view = np.empty(N, np.int32)
     for k, ((v, z, zx, zy, M, c), (state, vis_rows), row_off) in enumerate(zip(prepped, states, offsets)):
@@ -327,4 +345,5 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
         _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
                        v.image, gimg, float(max_inv_det), sig_map, sig_scalar, np.int32(k),
                        xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
-    return Samples(xy, colour, grad, jac, inv_det, dtau, sig, view, src, X, tuple(shape))
+    return Samples(xy, colour, grad, jac if "jac" in keep else None, inv_det, dtau, sig, view,
+                   src if "src_xy" in keep else None, X, tuple(shape))

@@ -146,7 +146,11 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
 
         src = _ready_sources(sources, target)
         check_render_memory([v.camera.shape for v in src.views], cam.shape)  # before allocating
-        samples = compute_samples(src, cam, **(geometry_kw or {}))
+        from .methods import sample_fields
+
+        gkw = dict(geometry_kw or {})
+        gkw["keep"] = tuple(set(gkw.get("keep", ())) | set(sample_fields(m, **params)))
+        samples = compute_samples(src, cam, **gkw)
     t_geo = time.perf_counter() - t0
     params = _resolve_auto(src, cam, m, params)
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),

@@ -61,7 +61,7 @@ import numpy as np
 from .operators import PSFS as _PSFS
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "get_method",
-           "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params"]
+           "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
@@ -267,3 +267,12 @@ def method_params(method: str, preset: str | None = None, **params) -> dict:
     from ..validate import check_render_params
 
     return check_render_params(p)
+
+
+def sample_fields(method="gradient", **params) -> tuple:
+    """The optional sample fields (:data:`vibr.geometry.sampling.OPTIONAL_FIELDS`) a render
+    of ``method`` with ``params`` reads, for :func:`vibr.geometry.compute_samples`'s
+    ``keep``: ``("jac",)`` with the footprint PSF, else none. ``params`` as
+    :func:`method_params` takes them ("auto" values allowed)."""
+    p = method_params(method, **{k: v for k, v in params.items() if not isinstance(v, str) or v != "auto"})
+    return ("jac",) if p["psf"] == "footprint" else ()

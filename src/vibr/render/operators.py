@@ -41,26 +41,44 @@ __all__ = [
 
 
 # ----------------------------------------------------------------------------- helpers
+@njit(cache=True, inline="always")
+def sample_at(order, q):
+    """The sample at place ``q`` of the bucketed order: ``order[q]``, or ``q`` itself when
+    ``order`` is empty (the samples were already in block order)."""
+    return order[q] if order.shape[0] > 0 else q
+
+
 @njit(cache=True)
 def _bucket_by_cell(x0, y0, n_rows, W):
     """Counting sort of samples by their 2×2 block (top row, then left column):
     ``(order, starts)``, ``starts[r]`` the first sample whose top row is r (so the
-    samples of a row are contiguous, and within it those of one block)."""
+    samples of a row are contiguous, and within it those of one block). ``order`` is
+    empty when the samples are in that order already (as
+    :func:`vibr.geometry.compute_samples` returns them for the bilinear PSF): the
+    identity, which :func:`sample_at` reads without an (N,) array."""
     n = y0.shape[0]
     counts = np.zeros(n_rows * W + 1, np.int64)
+    ordered = True
+    prev = -1
     for i in range(n):
-        counts[y0[i] * W + x0[i] + 1] += 1
+        c = y0[i] * W + x0[i]
+        counts[c + 1] += 1
+        if c < prev:
+            ordered = False
+        prev = c
     for c in range(n_rows * W):
         counts[c + 1] += counts[c]
+    starts = np.empty(n_rows + 1, np.int64)
+    for r in range(n_rows + 1):
+        starts[r] = counts[r * W]
+    if ordered:
+        return np.empty(0, np.int32), starts
     fill = counts[:-1].copy()
     order = np.empty(n, np.int32)  # (Splat refuses 2³¹ samples or more)
     for i in range(n):
         c = y0[i] * W + x0[i]
         order[fill[c]] = i
         fill[c] += 1
-    starts = np.empty(n_rows + 1, np.int64)
-    for r in range(n_rows + 1):
-        starts[r] = counts[r * W]
     return order, starts
 
 
@@ -69,8 +87,10 @@ def _bilinear_setup(xy, H, W):
     n = xy.shape[0]
     x0 = np.empty(n, np.int32)
     y0 = np.empty(n, np.int32)
-    fx = np.empty(n, np.float64)
-    fy = np.empty(n, np.float64)
+    # the fractions in float32 (error below 1e-7 px; 8 bytes a sample less): every reader
+    # computes the coefficients in float64 (_row_coef)
+    fx = np.empty(n, np.float32)
+    fy = np.empty(n, np.float32)
     for i in prange(n):
         x = min(max(xy[i, 0], 0.0), W - 1.0)
         y = min(max(xy[i, 1], 0.0), H - 1.0)
@@ -315,7 +335,7 @@ def accumulate_bucket(r, q0, q1, order, wb, x0, fx, fy, coef, use_coef, vals, S,
     cur = -1
     s00 = s01 = s02 = s03 = s11 = s12 = s13 = s22 = s23 = s33 = 0.0
     for q in range(q0, q1):
-        i = order[q]
+        i = sample_at(order, q)
         wi = np.float64(wb[q - q0])
         if wi == 0.0:
             continue
@@ -390,7 +410,7 @@ def _assemble_kernel(x0, y0, fx, fy, coef, order, starts, w, vals, A, rhs, with_
             q0, q1 = starts[r], starts[r + 1]
             wb = np.empty(q1 - q0, w.dtype)
             for q in range(q0, q1):
-                wb[q - q0] = w[order[q]]
+                wb[q - q0] = w[sample_at(order, q)]
             la = np.empty((2, W, S + vals.shape[1]), np.float64)
             cpart[r] = accumulate_bucket(r, q0, q1, order, wb, x0, fx, fy, coef, use_coef, vals, S, la, A, rhs)
     return _sum_in_order(cpart)
@@ -557,7 +577,7 @@ class Splat:
         top-right, bottom-left, bottom-right), for either PSF."""
         if self.psf == "footprint":
             return self.bx0, self.by0, self.coef
-        a, b = self.fx, self.fy
+        a, b = self.fx.astype(np.float64), self.fy.astype(np.float64)
         return self.x0, self.y0, np.stack([(1 - a) * (1 - b), a * (1 - b), (1 - a) * b, a * b], 1)
 
     def apply(self, u) -> np.ndarray:

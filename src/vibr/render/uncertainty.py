@@ -48,7 +48,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .operators import _row_coef
+from .operators import _row_coef, sample_at
 
 logger = logging.getLogger(__name__)
 
@@ -195,7 +195,7 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, view, offs, 
             if r % 2 != parity or starts[r] == starts[r + 1]:
                 continue
             for q in range(starts[r], starts[r + 1]):
-                i = order[q]
+                i = sample_at(order, q)
                 wi = np.float64(w[i])
                 if wi == 0.0:
                     continue

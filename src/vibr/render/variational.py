@@ -52,6 +52,9 @@ class SplatCoverage:
 def make_splat(samples: Samples, footprint: bool) -> Splat:
     """``B`` of the samples: the footprint PSF (paper §4.1) or the bilinear one."""
     if footprint:
+        if samples.jac is None:
+            raise VibrInputError("the footprint PSF needs the samples' Jacobians: compute them with "
+                                 "compute_samples(..., keep=('jac',)) (vibr.render.methods.sample_fields)")
         return Splat(samples.xy, samples.target_shape, jac=samples.jac, psf="footprint")
     return Splat(samples.xy, samples.target_shape)
 

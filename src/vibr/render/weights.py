@@ -22,7 +22,7 @@ from numba import njit, prange
 
 from ..geometry.samples import Samples
 from ..geometry.gradient import _grad_row
-from .operators import _row_coef, _sum_in_order, accumulate_bucket
+from .operators import _row_coef, _sum_in_order, accumulate_bucket, sample_at
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
            "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior"]
@@ -232,7 +232,7 @@ def _coverage_kernel(bx0, fx, fy, coef, order, starts, sw, bf, gvals, inv_det, s
     A0) or ``Bᵀ sw`` (S0 = 1, into A0[0]), ``Bᵀ (sw·gvals)`` (into rhs0), and ``Bᵀ w``
     (into wsum[0]), ``Bᵀ (w·colour)`` (into bw) with the deformation-only weight
     ``w = sw · bf · sample_weight(u unknown)`` (``bf`` empty: 1); returns ``½ Σ sw |gvals|²``."""
-    n = order.shape[0]
+    n = fx.shape[0]
     W = bw.shape[2]
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == n and n > 0
@@ -247,11 +247,11 @@ def _coverage_kernel(bx0, fx, fy, coef, order, starts, sw, bf, gvals, inv_det, s
             la = np.empty((2, W, max(S0 + gvals.shape[1], 4)), np.float64)
             wb = np.empty(q1 - q0, np.float32)
             for q in range(q0, q1):
-                wb[q - q0] = sw[order[q]] if use_sw else np.float32(1.0)
+                wb[q - q0] = sw[sample_at(order, q)] if use_sw else np.float32(1.0)
             cpart[r] = accumulate_bucket(r, q0, q1, order, wb, bx0, fx, fy, coef, use_coef, gvals, S0, la,
                                          A0, rhs0)
             for q in range(q0, q1):
-                i = order[q]
+                i = sample_at(order, q)
                 w = np.float32(sample_weight(np.float64(inv_det[i]), np.inf, 0.0, 0.0, 0.0, 0.0, 0.0, sigma_s2))
                 wb[q - q0] = w * sw[i] if use_sw else w
                 if use_bf:
@@ -267,7 +267,7 @@ def _weighted_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_s
     ``W = float32(sample_weight) · wscale · sw · rf`` computed on the fly (∇u from ``g``
     when ``use_g``, else u unknown: deformation only; ``sw``, ``rf`` empty: 1); the weights
     go to ``w_out`` too when it has N entries."""
-    n = order.shape[0]
+    n = fx.shape[0]
     W = rhs.shape[2]
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == n and n > 0
@@ -283,7 +283,7 @@ def _weighted_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_s
                 continue
             wb = np.empty(q1 - q0, np.float32)
             for q in range(q0, q1):
-                i = order[q]
+                i = sample_at(order, q)
                 gx = gy = 0.0
                 if use_g:
                     gx, gy = grad_at(g, x0[i], y0[i], np.float64(fx[i]), np.float64(fy[i]))
@@ -378,7 +378,7 @@ def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_re
     """``acc[y, x, v] += (B_m· pen_m, B_m·)`` per view: each view's penalty splat and
     coverage, one pass over the samples (row buckets of even then odd rows: threads never
     write the same row). The view is the fast axis: a pixel's views lie together."""
-    n = order.shape[0]
+    n = fx.shape[0]
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == n and n > 0
     for parity in range(2):
@@ -386,7 +386,7 @@ def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_re
             if r % 2 != parity or starts[r] == starts[r + 1]:
                 continue
             for q in range(starts[r], starts[r + 1]):
-                i = order[q]
+                i = sample_at(order, q)
                 v = view[i]
                 pen = _ulr_penalty_one(X[i], Cs[v], Cu, beta_res)
                 b0, b1, b2, b3 = _row_coef(fx, fy, coef, use_coef, i)
@@ -406,7 +406,8 @@ def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_re
 def _prior_pixels(acc, k, eps, wt):
     """Per pixel: each view's mean penalty (where its coverage > 1e-3), Buehler's weights of
     the ``k`` best views (:func:`vibr.render.ulr.ulr_view_weights`), divided by the largest.
-    ``acc`` (H, W, V, 2), ``wt`` (H, W, V)."""
+    ``acc`` (H, W, V, 2), ``wt`` (H, W, V); ``wt`` may be ``acc[..., 0]`` (a pixel's sums
+    are read before its weights are written)."""
     H, W, V = wt.shape
     kk = min(k, V - 1)
     for y in prange(H):
@@ -429,15 +430,15 @@ def _prior_pixels(acc, k, eps, wt):
             if not math.isfinite(thresh):  # fewer than k+1 views: the largest present, inflated
                 thresh = srt[max(nfin - 1, 0)] * 1.01 + eps
             top = 0.0
-            for v in range(V):
+            for v in range(V):  # the weights in p (float64), normalised as they are stored
                 w = 0.0
                 if math.isfinite(p[v]):
                     w = max(0.0, 1.0 - p[v] / thresh) / (p[v] + eps)
-                wt[y, x, v] = w
+                p[v] = w
                 top = max(top, w)
             top = max(top, 1e-300)
             for v in range(V):
-                wt[y, x, v] /= top
+                wt[y, x, v] = p[v] / top
 
 
 @njit(parallel=True, cache=True)
@@ -474,12 +475,13 @@ def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta
     Cu = np.ascontiguousarray(target_centre, np.float64).reshape(3)
     sp = splat if splat is not None else Splat(samples.xy, (H, W))
     view = np.ascontiguousarray(samples.view)
-    acc = np.zeros((H, W, len(Cs), 2), np.float64)
+    # float32 sums of a few samples' penalties (radians), and each pixel's weights written
+    # over its penalty sums once read: the maps are (H, W, V), the largest of a render's
+    acc = np.zeros((H, W, len(Cs), 2), np.float32)
     _prior_splat(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, sp.order, sp.starts, view, np.ascontiguousarray(samples.X),
                  Cs, Cu, float(beta_res), acc)
-    wt = np.empty((H, W, len(Cs)), np.float64)
+    wt = acc[..., 0]
     _prior_pixels(acc, int(k), float(eps), wt)
-    del acc
     out = np.empty(len(samples), np.float32)
     _prior_gather(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, view, wt, out)
     return out

@@ -7,11 +7,11 @@ preview while the camera moves, full size once it is still. Keyframes compose a
 ``camera_path.json`` (nerfstudio's schema) that ``vibr render --path`` renders.
 """
 
-from .app import CameraState, SentImage, Viewer, ViewerOptions, check_port_free
+from .app import POINT_MODES, CameraState, SentImage, Viewer, ViewerOptions, check_port_free
 from .convert import camera_from_viser, image_size, viser_pose_from_camera
 from .renderer import ViewImage, ViewRenderer, ViewSettings, scene_with_depth
 from .worker import LatestRequestWorker
 
 __all__ = ["Viewer", "ViewerOptions", "ViewSettings", "ViewRenderer", "ViewImage", "SentImage",
            "CameraState", "LatestRequestWorker", "camera_from_viser", "viser_pose_from_camera",
-           "image_size", "scene_with_depth", "check_port_free"]
+           "image_size", "scene_with_depth", "check_port_free", "POINT_MODES"]

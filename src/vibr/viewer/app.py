@@ -30,8 +30,13 @@ from .worker import LatestRequestWorker, Request
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "check_port_free", "encode_png",
+__all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "POINT_MODES", "check_port_free", "encode_png",
            "send_background"]
+
+#: When the point cloud is drawn: while the camera moves (hidden once it has been still for
+#: ``settle_s``, when the full-size render starts: the render is then seen whole, and a
+#: browser drawing the points without a GPU leaves the server's cores to it), always, never.
+POINT_MODES = ("while moving", "always", "never")
 
 _SOURCE_COLOUR = (255, 96, 0)
 _FRUSTUM_COLOUR = (60, 60, 60)
@@ -43,6 +48,8 @@ class ViewerOptions:
 
     host, port : where to bind (127.0.0.1 by default: the viewer is not exposed)
     max_points : points in the point cloud (subsampled from the depth maps)
+    points : when the point cloud is shown, one of :data:`POINT_MODES` (default "while
+        moving")
     settle_s : seconds the camera must be still before the full-size render
     path_out : where "export path" writes camera_path.json
     fps, seconds_per_keyframe : timing of the exported path (nerfstudio's fps / seconds)
@@ -54,6 +61,7 @@ class ViewerOptions:
     host: str = "127.0.0.1"
     port: int = 8080
     max_points: int = 300_000
+    points: str = "while moving"
     settle_s: float = 0.3
     path_out: str = "camera_path.json"
     fps: float = 24.0
@@ -152,6 +160,8 @@ class Viewer:
     def __init__(self, scene: Scene, options: ViewerOptions | None = None):
         self.scene = scene
         options = options or ViewerOptions()
+        if options.points not in POINT_MODES:
+            raise VibrInputError(f"points must be one of {', '.join(POINT_MODES)}, not {options.points!r}")
         s = options.settings
         if s.full_long_side is None:  # the scene's own resolution
             s = s.replace(full_long_side=max(max(v.shape) for v in scene.views))
@@ -166,6 +176,8 @@ class Viewer:
         self._lock = threading.Lock()
         self._frustums: dict[str, object] = {}
         self._points = None
+        self._moving: set[int] = set()  # clients whose camera moved since their last full render
+        self._points_shown: bool | None = None
         self._hidden: set[str] = set()  # frustums hidden because the viewport is inside them
         self._scale = 1.0
         self._frustum_size = 0.1
@@ -192,6 +204,7 @@ class Viewer:
         try:
             self._draw_scene()
             self._add_gui()
+            self._set_visible("points")
             server.on_client_connect(self._on_connect)
             server.on_client_disconnect(self._on_disconnect)
         except Exception:
@@ -299,8 +312,9 @@ class Viewer:
             g[key].on_update(lambda _e: self._settings_changed())
         g["show_sources"] = gui.add_checkbox("show sources used", True)
         g["show_sources"].on_update(lambda _e: self._colour_sources(None))
-        g["show_points"] = gui.add_checkbox("show points", True)
-        g["show_points"].on_update(lambda _e: self._set_visible("points"))
+        g["points"] = gui.add_dropdown("points", POINT_MODES, initial_value=self.options.points,
+                                       hint="when the point cloud is drawn over the render")
+        g["points"].on_update(lambda _e: self._set_visible("points"))
         g["show_cameras"] = gui.add_checkbox("show cameras", True)
         g["show_cameras"].on_update(lambda _e: self._set_visible("cameras"))
         g["status"] = gui.add_markdown("waiting for a camera")
@@ -329,7 +343,13 @@ class Viewer:
 
     def _set_visible(self, what: str) -> None:
         if what == "points" and self._points is not None:
-            self._points.visible = bool(self.gui["show_points"].value)
+            with self._lock:
+                mode = str(self.gui["points"].value) if "points" in self.gui else self.options.points
+                on = mode == "always" or (mode == "while moving" and bool(self._moving))
+                changed = on != self._points_shown
+                self._points_shown = on
+            if changed:  # one message per change, not per camera update
+                self._points.visible = on
         if what == "cameras":
             on = bool(self.gui["show_cameras"].value)
             for name, h in self._frustums.items():
@@ -418,6 +438,7 @@ class Viewer:
         with self._lock:
             w = self._workers.pop(client.client_id, None)
             self._states.pop(client.client_id, None)
+            self._moving.discard(client.client_id)
         if w is not None:
             w.stop(timeout=0.1)
 
@@ -433,6 +454,9 @@ class Viewer:
         # abandon or repeat the render of the request already made for it
         if w is not None and not same:
             w.submit((st, self.settings), t_update=t)
+            with self._lock:
+                self._moving.add(cid)
+            self._set_visible("points")
         self._hide_frustums_at(st.position)
 
     def request(self, client_id: int, state: CameraState, t_update: float | None = None) -> int:
@@ -448,6 +472,10 @@ class Viewer:
         if kind == "preview" and long_side >= settings.full_long_side:
             return  # the full render follows; a preview as large would only delay it
         cam = st.camera(long_side)
+        if kind == "full":  # the camera has been still for settle_s
+            with self._lock:
+                self._moving.discard(client.client_id)
+            self._set_visible("points")
         worker = self._workers.get(client.client_id)
         stale = (lambda: worker.is_stale(req)) if worker is not None else None
         try:
