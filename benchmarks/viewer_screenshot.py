@@ -38,8 +38,8 @@ def main(argv=None) -> int:
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()
-    viewer = Viewer(scene, ViewerOptions(port=port, points="never",
-                                         settings=ViewSettings(n_views=6, full_long_side=640)))
+    # the default point-cloud mode ("while moving"): hidden once the camera is still
+    viewer = Viewer(scene, ViewerOptions(port=port, settings=ViewSettings(n_views=6, full_long_side=640)))
     c0 = scene.views[0].camera
     back = Camera.from_centre(c0.K, c0.R, c0.centre - 1.6 * c0.optical_axis - 0.5 * c0.R[1], c0.width, c0.height)
     url = viewer.start()
