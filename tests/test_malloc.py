@@ -59,6 +59,54 @@ def test_opt_outs_leave_glibc_defaults(env):
 def test_the_vibr_command_tunes_its_process():
     """The CLI sets the allocator before it does anything else (here: fails to load)."""
     out = subprocess.run([sys.executable, "-m", "vibr", "-v", "info", "/nonexistent/scene"], capture_output=True,
-                         text=True, timeout=120, env={k: v for k, v in os.environ.items() if k != "VIBR_MALLOC"})
+                         text=True, timeout=120, env={k: v for k, v in os.environ.items()
+                                                   if k not in ("VIBR_MALLOC", "MALLOC_ARENA_MAX")})
     assert out.returncode == 2
-    assert "malloc: mmap threshold 256 MiB, trim threshold 512 MiB: set" in out.stderr
+    assert "malloc: mmap threshold 256 MiB, trim threshold 512 MiB, arenas 1: set" in out.stderr
+
+
+_THREAD_PROBE = r"""
+import ctypes, json, threading
+import numpy as np
+from vibr._malloc import tune_malloc
+
+class MI(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd",
+                "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+libc = ctypes.CDLL("libc.so.6")
+libc.mallinfo2.restype = MI
+tuned = tune_malloc()
+out = {}
+
+def work():  # as the viewer's render thread: an array larger than a thread arena's heap
+    a = np.ones(96 * 2 ** 20, np.uint8)
+    out["mmapped"] = libc.mallinfo2().hblkhd
+
+t = threading.Thread(target=work)
+t.start()
+t.join()
+print(json.dumps({"tuned": tuned, **out}))
+"""
+
+
+@pytest.mark.parametrize("arena_max", [None, "8"])
+def test_a_thread_allocates_from_the_tuned_heap(arena_max):
+    """With one arena (vibr's setting) a thread's 96 MiB array comes from the main heap;
+    with the user's MALLOC_ARENA_MAX (kept) glibc gives the thread an arena of its own,
+    whose heaps cannot hold it: mapped (and unmapped at free, every time)."""
+    e = {k: v for k, v in os.environ.items()
+         if k not in ("VIBR_MALLOC", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES",
+                      "MALLOC_ARENA_MAX")}
+    if arena_max is not None:
+        e["MALLOC_ARENA_MAX"] = arena_max
+    out = subprocess.run([sys.executable, "-c", _THREAD_PROBE], env=e, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    import json
+
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert r["tuned"] is True
+    if arena_max is None:
+        assert r["mmapped"] < 2 ** 20
+    else:
+        assert r["mmapped"] >= 96 * 2 ** 20

@@ -9,6 +9,14 @@ blocks in the heap (mmap threshold 256 MiB) and not returning the heap's free to
 kernel below 512 MiB (trim threshold) lets the next frame reuse the pages (measured with
 ``benchmarks/bench_malloc.py``: README, "Performance").
 
+Those settings hold for glibc's main heap only. A thread other than the main one (the
+viewer's render worker) gets an arena of its own, whose heaps are at most 64 MiB: a larger
+array is mapped and unmapped on every use whatever the threshold (about 20 000 page faults
+and 0.2–0.3 s of system time per 768² render, ``benchmarks/bench_view.py --ab-arena``).
+One arena (``M_ARENA_MAX`` 1) gives every thread the main heap; the few allocations numba's
+threads make inside kernels then share its lock (no cost measured on bench_render). The
+user's ``MALLOC_ARENA_MAX`` is kept when set.
+
 Only for processes vibr starts (a library should not change its host's allocator): the
 ``vibr`` command calls :func:`tune_malloc` first thing, and so do the worker processes of
 :mod:`vibr.executor`. It does nothing on a C library other than glibc, where the user set
@@ -26,15 +34,18 @@ import platform
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["MMAP_THRESHOLD", "TRIM_THRESHOLD", "tune_malloc"]
+__all__ = ["ARENA_MAX", "MMAP_THRESHOLD", "TRIM_THRESHOLD", "tune_malloc"]
 
 #: glibc's mallopt parameters (malloc.h)
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
+_M_ARENA_MAX = -8
 #: blocks below this come from the heap (bytes)
 MMAP_THRESHOLD = 256 * 2 ** 20
 #: free memory at the top of the heap kept below this (bytes)
 TRIM_THRESHOLD = 512 * 2 ** 20
+#: malloc arenas: one, so that every thread allocates from the heap the thresholds govern
+ARENA_MAX = 1
 _USER_VARS = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES")
 
 _done: bool | None = None
@@ -62,9 +73,11 @@ def tune_malloc() -> bool:
         libc = ctypes.CDLL("libc.so.6")
         ok = (libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
               and libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD) == 1)
+        if ok and "MALLOC_ARENA_MAX" not in os.environ:
+            ok = libc.mallopt(_M_ARENA_MAX, ARENA_MAX) == 1
     except (OSError, AttributeError):
         return False
     _done = bool(ok)
-    logger.debug("malloc: mmap threshold %d MiB, trim threshold %d MiB: %s", MMAP_THRESHOLD >> 20,
-                 TRIM_THRESHOLD >> 20, "set" if ok else "refused")
+    logger.debug("malloc: mmap threshold %d MiB, trim threshold %d MiB, arenas %s: %s", MMAP_THRESHOLD >> 20,
+                 TRIM_THRESHOLD >> 20, os.environ.get("MALLOC_ARENA_MAX", ARENA_MAX), "set" if ok else "refused")
     return _done
