@@ -118,7 +118,10 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
 def _renice_children(nice: int) -> None:
     """Set the scheduling priority of this process's children (the benchmark's Chromium;
     its GPU process raises its own to -8): with 19 the browser takes only the CPU the
-    viewer leaves, as a browser on another machine or drawing on a GPU would."""
+    viewer leaves, as a browser on another machine or drawing on a GPU would. Linux
+    schedules by session first when autogroup is on (``/proc/sys/kernel/sched_autogroup_enabled``)
+    and Chromium runs in sessions of its own: their group's nice is set too, else the
+    browser gets its group's fair share whatever its threads' nice."""
     import psutil
 
     for p in psutil.Process().children(recursive=True):
@@ -126,6 +129,11 @@ def _renice_children(nice: int) -> None:
             for t in p.threads():  # Linux's priority is per thread
                 os.setpriority(os.PRIO_PROCESS, t.id, nice)
         except (psutil.Error, OSError):
+            pass
+        try:
+            with open(f"/proc/{p.pid}/autogroup", "w") as f:
+                f.write(str(nice))
+        except OSError:
             pass
 
 
