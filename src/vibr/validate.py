@@ -154,22 +154,22 @@ def sample_bytes(keep=()) -> int:
                if isinstance(a, np.ndarray) and (name not in OPTIONAL_FIELDS or name in keep))
 
 
-def render_memory(source_shapes, target_shape) -> int:
+def render_memory(source_shapes, target_shape, keep=()) -> int:
     """Estimated peak bytes of a render of ``target_shape`` (H, W) from sources of the
     given shapes: samples (at most one per source pixel landing in the target, ×1.5 for
-    the geometry's temporaries) plus the per-pixel buffers of the solve and the geometry
-    (docs/ERRORS.md)."""
+    the geometry's temporaries; with the optional fields ``keep``, :func:`sample_bytes`)
+    plus the per-pixel buffers of the solve and the geometry (docs/ERRORS.md)."""
     th, tw = target_shape
     tpx = float(th) * float(tw)
     n_samples = sum(min(float(h) * float(w), 4.0 * tpx) for h, w in source_shapes)
-    return int(1.5 * n_samples * sample_bytes() + tpx * RENDER_BYTES_PER_TARGET_PIXEL
+    return int(1.5 * n_samples * sample_bytes(keep) + tpx * RENDER_BYTES_PER_TARGET_PIXEL
                + tpx * len(source_shapes) * GEOMETRY_BYTES_PER_TARGET_PIXEL_VIEW)
 
 
-def check_render_memory(source_shapes, target_shape, source=None) -> None:
+def check_render_memory(source_shapes, target_shape, source=None, keep=()) -> None:
     """Refuse a render whose :func:`render_memory` exceeds the available memory."""
     th, tw = target_shape
-    check_memory(render_memory(source_shapes, target_shape),
+    check_memory(render_memory(source_shapes, target_shape, keep),
                  f"rendering {tw}x{th} from {len(source_shapes)} views",
                  "render at a lower resolution (--scale 0.5, or a smaller camera) or from fewer "
                  "views (--views K)", source)

@@ -144,12 +144,12 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
 
         from ..validate import check_render_memory
 
-        src = _ready_sources(sources, target)
-        check_render_memory([v.camera.shape for v in src.views], cam.shape)  # before allocating
         from .methods import sample_fields
 
+        src = _ready_sources(sources, target)
         gkw = dict(geometry_kw or {})
         gkw["keep"] = tuple(set(gkw.get("keep", ())) | set(sample_fields(m, **params)))
+        check_render_memory([v.camera.shape for v in src.views], cam.shape, keep=gkw["keep"])  # before allocating
         samples = compute_samples(src, cam, **gkw)
     t_geo = time.perf_counter() - t0
     params = _resolve_auto(src, cam, m, params)
