@@ -175,3 +175,28 @@ def test_tv_prox_banded_kernels_match_plain_fgp(coupled, weighted):
         got = prox(out if out is not None else z, 0.05, d=d, out=out, n_iter=n)
         np.testing.assert_allclose(got, want, atol=2e-5)
         np.testing.assert_allclose(prox.p, p, atol=2e-5)
+
+
+def test_samples_in_block_order_need_no_row_order():
+    """Samples already in block order (as compute_samples returns them) get an empty row
+    order, read as the identity; the operator and its normal equations are those of the
+    same samples in any order, permuted."""
+    rng = np.random.default_rng(5)
+    s, xy = _random_splat(rng)
+    H, W = s.shape
+    assert s.order.size == s.n  # random order: the counting sort's permutation
+    key = s.by0.astype(np.int64) * W + s.bx0
+    perm = np.argsort(key, kind="stable")
+    t = Splat(xy[perm], (H, W))
+    assert t.order.size == 0
+    np.testing.assert_array_equal(t.starts, s.starts)
+    u = rng.standard_normal((H, W, 3))
+    np.testing.assert_allclose(t.apply(u), s.apply(u)[perm], atol=1e-12)
+    w = rng.uniform(0.1, 2.0, s.n)
+    v = rng.standard_normal((s.n, 3))
+    A1, b1, c1 = s.normal(w, v)
+    A2, b2, c2 = t.normal(w[perm], v[perm])
+    np.testing.assert_allclose(A2, A1, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(b2, b1, rtol=1e-12, atol=1e-12)
+    assert c2 == pytest.approx(c1, rel=1e-12)
+    dottest(t.apply, t.adjoint, (H, W, 3), (t.n, 3), rng=rng)
