@@ -171,6 +171,10 @@ def test_optional_fields_are_computed_only_when_kept():
         np.testing.assert_array_equal(getattr(lean, f), getattr(full, f))
     assert lean.select(lean.view == 0).jac is None
     assert sample_fields("gradient") == () and sample_fields("gradient", psf="footprint") == ("jac",)
+    from vibr.flythrough import FrameContext  # a fly-through's frames keep what their method reads
+
+    assert FrameContext(sc, [], "x", params={"psf": "footprint"}).geometry_kw["keep"] == ("jac",)
+    assert FrameContext(sc, [], "x", geometry_kw={"keep": ("src_xy",)}).geometry_kw["keep"] == ("src_xy",)
     with pytest.raises(VibrInputError, match="keep"):
         compute_samples(sc, _cam([0.1, 0, 0]), keep=("normals",))
     with pytest.raises(VibrInputError, match="Jacobians"):

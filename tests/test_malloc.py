@@ -12,8 +12,8 @@ pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ve
                                 reason="glibc's allocator only")
 
 # mallinfo2 (glibc ≥ 2.33): hblkhd = bytes in mmapped blocks, arena = bytes of the heap
-_PROBE = r"""
-import ctypes, json, sys
+_MALLINFO = r"""
+import ctypes, json, threading
 import numpy as np
 from vibr._malloc import tune_malloc
 
@@ -24,17 +24,35 @@ class MI(ctypes.Structure):
 libc = ctypes.CDLL("libc.so.6")
 libc.mallinfo2.restype = MI
 tuned = tune_malloc()
+"""
+
+_PROBE = _MALLINFO + r"""
 a = np.ones(64 * 2 ** 20, np.uint8)
 m = libc.mallinfo2()
 print(json.dumps({"tuned": tuned, "mmapped": m.hblkhd, "heap": m.arena}))
 """
 
+# as the viewer's render thread: an array larger than a thread arena's heap (64 MiB)
+_THREAD_PROBE = _MALLINFO + r"""
+out = {}
 
-def _probe(**env):
+def work():
+    a = np.ones(96 * 2 ** 20, np.uint8)
+    out["mmapped"] = libc.mallinfo2().hblkhd
+
+t = threading.Thread(target=work)
+t.start()
+t.join()
+print(json.dumps({"tuned": tuned, **out}))
+"""
+
+
+def _probe(script=_PROBE, **env):
     e = {k: v for k, v in os.environ.items()
-         if k not in ("VIBR_MALLOC", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES")}
+         if k not in ("VIBR_MALLOC", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES",
+                      "MALLOC_ARENA_MAX")}
     e.update(env)
-    out = subprocess.run([sys.executable, "-c", _PROBE], env=e, capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", script], env=e, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     import json
 
@@ -65,46 +83,12 @@ def test_the_vibr_command_tunes_its_process():
     assert "malloc: mmap threshold 256 MiB, trim threshold 512 MiB, arenas 1: set" in out.stderr
 
 
-_THREAD_PROBE = r"""
-import ctypes, json, threading
-import numpy as np
-from vibr._malloc import tune_malloc
-
-class MI(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd",
-                "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
-
-libc = ctypes.CDLL("libc.so.6")
-libc.mallinfo2.restype = MI
-tuned = tune_malloc()
-out = {}
-
-def work():  # as the viewer's render thread: an array larger than a thread arena's heap
-    a = np.ones(96 * 2 ** 20, np.uint8)
-    out["mmapped"] = libc.mallinfo2().hblkhd
-
-t = threading.Thread(target=work)
-t.start()
-t.join()
-print(json.dumps({"tuned": tuned, **out}))
-"""
-
-
 @pytest.mark.parametrize("arena_max", [None, "8"])
 def test_a_thread_allocates_from_the_tuned_heap(arena_max):
     """With one arena (vibr's setting) a thread's 96 MiB array comes from the main heap;
     with the user's MALLOC_ARENA_MAX (kept) glibc gives the thread an arena of its own,
     whose heaps cannot hold it: mapped (and unmapped at free, every time)."""
-    e = {k: v for k, v in os.environ.items()
-         if k not in ("VIBR_MALLOC", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES",
-                      "MALLOC_ARENA_MAX")}
-    if arena_max is not None:
-        e["MALLOC_ARENA_MAX"] = arena_max
-    out = subprocess.run([sys.executable, "-c", _THREAD_PROBE], env=e, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    import json
-
-    r = json.loads(out.stdout.strip().splitlines()[-1])
+    r = _probe(_THREAD_PROBE, **({} if arena_max is None else {"MALLOC_ARENA_MAX": arena_max}))
     assert r["tuned"] is True
     if arena_max is None:
         assert r["mmapped"] < 2 ** 20

@@ -72,6 +72,12 @@ class FrameContext:
     view_points: list = field(default_factory=list)  # per source: (N_k, 3) world points
     prepared: dict = field(default_factory=dict)  # per source: prepare_depth's (z, z_x, z_y)
 
+    def __post_init__(self):
+        # the optional sample fields the method reads (the footprint PSF's Jacobians), once
+        # for every frame
+        keep = set(self.geometry_kw.get("keep", ())) | set(sample_fields(self.method, **self.params))
+        self.geometry_kw = {**self.geometry_kw, "keep": tuple(sorted(keep))}
+
 
 def _source_points(sources: Scene, max_points: int = 1024) -> list:
     """Per source, the strided subsample of its depth map backprojected to the world
@@ -173,9 +179,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     tm["view weights"] = -t0 + (t := time.perf_counter())
     try:
-        gkw = dict(ctx.geometry_kw)
-        gkw["keep"] = tuple(set(gkw.get("keep", ())) | set(sample_fields(ctx.method, **ctx.params)))
-        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **gkw)
+        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
     except VibrInputError as exc:
         raise VibrInputError(f"frame {i}: {exc.problem}") from None
     tm["geometry"] = -t + (t := time.perf_counter())

@@ -299,7 +299,7 @@ def _visibility(prepped, zbuf, vis_threshold):
     return states, counts
 
 
-def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep=OPTIONAL_FIELDS) -> Samples:
+def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep) -> Samples:
     """The fields of every visible pixel, sorted by target cell (:func:`_cell_dest`): one
     allocation for all samples, each view's kernel writing its samples in place.
 

@@ -148,7 +148,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
 
         src = _ready_sources(sources, target)
         gkw = dict(geometry_kw or {})
-        gkw["keep"] = tuple(set(gkw.get("keep", ())) | set(sample_fields(m, **params)))
+        gkw["keep"] = tuple(sorted(set(gkw.get("keep", ())) | set(sample_fields(m, **params))))
         check_render_memory([v.camera.shape for v in src.views], cam.shape, keep=gkw["keep"])  # before allocating
         samples = compute_samples(src, cam, **gkw)
     t_geo = time.perf_counter() - t0
