@@ -22,7 +22,7 @@ time is taken when the rendered image has been encoded and queued to the client
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
     python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic]
-    python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu | --ab-arena
+    python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu | --browser-timeline | --ab-arena
                                            (A/B comparisons, alternating in one process)
 """
 
@@ -387,6 +387,81 @@ def browser_cpu(seconds: float = 10.0) -> None:
               f"load average {os.getloadavg()[0]:.1f}", flush=True)
 
 
+def browser_timeline(updates: int = 4, points_modes=("while moving", "never")) -> None:
+    """When the browser takes the CPU during an update: the CPU of Chromium's GPU process
+    (where it draws the WebGL scene, in software here) per 0.1 s from the camera move to
+    1 s after the full image is sent, and when the preview and the full image were sent,
+    for the synthetic 768² scene, per point-cloud mode. viser draws frames on demand, each
+    message opening a 0.25 s window of continuous frames; a frame with the points drawn
+    takes long in software, so the window stretches. The overlap of that busy time with
+    the full render is the render's slowdown in the latency table against
+    ``--ab-overhead``."""
+    import threading
+
+    import psutil
+    from playwright.sync_api import sync_playwright
+
+    from vibr.synthetic import make_scene
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer.browser import launch_chromium
+
+    scene = make_scene("handheld", n_views=9, width=768, height=768)
+    targets = [_midway(scene.views[0].camera, scene.views[1 + k % 8].camera) for k in range(updates + 1)]
+    print("| points | update | preview sent s | full sent s | full render s | GPU process busy until s "
+          "(≥ 0.3 core from the move on) | its CPU s before the full image |")
+    print("|---|---|---|---|---|---|---|")
+    for mode in points_modes:
+        v = Viewer(scene, ViewerOptions(port=free_port(), points=mode,
+                                        settings=ViewSettings(n_views=8, full_long_side=768)))
+        url = v.start()
+        try:
+            with sync_playwright() as pw:
+                b = launch_chromium(pw)
+                page = b.new_page(viewport={"width": 800, "height": 800})
+                page.goto(url, timeout=60_000)
+                first = v.wait_for_image(kind="full", timeout=300)
+                client = next(iter(v.clients().values()))
+                gpu = next(p for p in psutil.Process().children(recursive=True)
+                           if "--type=gpu-process" in p.cmdline())
+                seq = first.seq
+                time.sleep(1.0)
+                for k, cam in enumerate(targets):
+                    samples, stop = [], threading.Event()
+
+                    def sample():
+                        while not stop.is_set():
+                            c = gpu.cpu_times()
+                            samples.append((time.perf_counter(), c.user + c.system))
+                            time.sleep(0.1)
+
+                    th = threading.Thread(target=sample)
+                    th.start()
+                    t0 = time.perf_counter()
+                    v.move_client(client, cam)
+                    pre = v.wait_for_image(kind="preview", after_seq=seq, timeout=120)
+                    full = v.wait_for_image(kind="full", after_seq=seq, timeout=120)
+                    time.sleep(1.0)
+                    stop.set()
+                    th.join()
+                    seq = full.seq
+                    if k == 0:
+                        continue  # warm-up
+                    busy_until, cpu_before, busy = 0.0, 0.0, True
+                    for (ta, ca), (tb, cb) in zip(samples, samples[1:]):
+                        if tb - t0 <= full.seconds:
+                            cpu_before += cb - ca
+                        # the first busy run from the move (not the once-a-second redraws)
+                        busy = busy and (cb - ca) / (tb - ta) >= 0.3
+                        if busy:
+                            busy_until = tb - t0
+                    print(f"| {mode} | {k} | {pre.seconds:.2f} | {full.seconds:.2f} | {full.render_seconds:.2f} | "
+                          f"{busy_until:.1f} | {cpu_before:.2f} |", flush=True)
+                b.close()
+        finally:
+            v.stop()
+    print(f"\nload average {os.getloadavg()[0]:.1f}")
+
+
 def _arena_child() -> None:
     """In a fresh process (tuned allocator): 6 renders of the viewer's 768² cameras on a
     thread, as the viewer's worker does; JSON: seconds, page faults and system CPU per render."""
@@ -463,6 +538,8 @@ def main(argv=None) -> int:
     ap.add_argument("--ab-overhead", action="store_true", help="only the viewer against the bare render")
     ap.add_argument("--ab-prepared", action="store_true", help="only kept against per-request depth preparation")
     ap.add_argument("--browser-cpu", action="store_true", help="only the CPU an idle viewer page takes")
+    ap.add_argument("--browser-timeline", action="store_true",
+                    help="only the browser's CPU from a camera move to the full image, per point-cloud mode")
     ap.add_argument("--ab-arena", action="store_true",
                     help="only renders on a thread: one malloc arena against per-thread arenas")
     ap.add_argument("--_arena-child", action="store_true", help=argparse.SUPPRESS)
@@ -470,6 +547,9 @@ def main(argv=None) -> int:
     from vibr._malloc import tune_malloc
 
     tune_malloc()  # as `vibr view` does (VIBR_MALLOC=default: glibc's own settings)
+    if a.browser_timeline:
+        browser_timeline()
+        return 0
     if a.browser_cpu:
         browser_cpu()
         return 0

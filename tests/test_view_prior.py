@@ -213,3 +213,19 @@ def test_auto_fallback_only_for_mostly_unknown_views():
     assert set(out.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
     assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
     assert not any(np.isnan(v.depth).any() for v in apply_fallback(sc, "always").views)
+
+
+def test_fast_acos_within_its_stated_error():
+    """The prior's arccosine (Abramowitz & Stegun 4.4.46) is within 2.2e-8 rad of
+    ``np.arccos`` on [−1, 1], ends and small angles included, and in range."""
+    from numba import njit
+
+    from vibr.render.weights import fast_acos
+
+    f = njit(lambda xs: np.array([fast_acos(x) for x in xs]))
+    xs = np.concatenate([np.linspace(-1.0, 1.0, 200_001), 1.0 - np.logspace(-16, -1, 200),
+                         -1.0 + np.logspace(-16, -1, 200), [0.0, -0.0]])
+    got = f(xs)
+    err = np.abs(got - np.arccos(xs))
+    assert err.max() <= 2.2e-8, err.max()
+    assert got.min() >= 0.0 and got.max() <= np.pi + 1e-12
