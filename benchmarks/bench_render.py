@@ -32,6 +32,7 @@ and 2, 4, 8, 16 source views (the k nearest of a 5×5 grid, chosen by
 from its k = 8 best views for the centre target against an 8-view scene (3×3 grid).
 
     python benchmarks/bench_render.py [--size 768] [--repeat 5] [--scaling] [--json out.json]
+    python benchmarks/bench_render.py --kernels [--repeat 5]   # the time of each compiled kernel
 """
 
 from __future__ import annotations
@@ -233,6 +234,66 @@ def many_views(repeat):
     return res
 
 
+def kernel_profile(sources, target, repeat: int) -> list:
+    """Where a render's time goes, kernel by kernel: every compiled kernel of vibr
+    (numba dispatchers at module level) wrapped with a timer, ``repeat`` renders after a
+    warm-up; rows (kernel, ms per render, calls per render), slowest first. Kernels called
+    from other kernels count in their caller."""
+    import collections
+    import importlib
+    import pkgutil
+
+    import vibr
+    from numba.core.registry import CPUDispatcher
+
+    from vibr.render import render
+
+    tot, calls = collections.Counter(), collections.Counter()
+    patched = []
+
+    def timed(f, key):
+        def g(*a, **kw):
+            t = time.perf_counter()
+            try:
+                return f(*a, **kw)
+            finally:
+                tot[key] += time.perf_counter() - t
+                calls[key] += 1
+        return g
+
+    wrappers = {}
+    for info in pkgutil.walk_packages(vibr.__path__, "vibr."):
+        if info.name.endswith("__main__") or ".cli" in info.name or ".viewer" in info.name:
+            continue
+        mod = importlib.import_module(info.name)
+        for name, obj in list(vars(mod).items()):
+            if isinstance(obj, CPUDispatcher):
+                key = f"{obj.py_func.__module__}.{obj.__name__}"
+                wrappers.setdefault(id(obj), timed(obj, key))
+                patched.append((mod, name, obj))
+                setattr(mod, name, wrappers[id(obj)])
+    try:
+        render(sources, target)  # warm-up
+        tot.clear()
+        calls.clear()
+        t0 = time.perf_counter()
+        for _ in range(repeat):
+            render(sources, target)
+        wall = (time.perf_counter() - t0) / repeat
+    finally:
+        for mod, name, obj in patched:
+            setattr(mod, name, obj)
+    rows = [(k, 1e3 * v / repeat, calls[k] / repeat) for k, v in tot.most_common()]
+    print(f"\n| kernel | ms per render | calls per render |  (medians not taken: means of {repeat} renders)")
+    print("|---|---|---|")
+    for k, ms, n in rows:
+        if ms >= 1.0:
+            print(f"| {k} | {ms:.1f} | {n:.0f} |")
+    print(f"| all kernels | {sum(r[1] for r in rows):.1f} | |")
+    print(f"| the renders' wall time | {1e3 * wall:.1f} | |")
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", type=int, default=768)
@@ -241,6 +302,8 @@ def main(argv=None):
     ap.add_argument("--many-views-only", action="store_true",
                     help="only the 100-view (k = 8) against 8-view comparison")
     ap.add_argument("--json", help="write all results here")
+    ap.add_argument("--kernels", action="store_true",
+                    help="only the time of each compiled kernel in a render (--repeat renders)")
     a = ap.parse_args(argv)
     import numba
 
@@ -259,6 +322,11 @@ def main(argv=None):
 
     if a.many_views_only:
         report["many_views"] = many_views(a.repeat)
+        return
+    if a.kernels:
+        scene = grid_scene(3, 3, a.size)
+        sources, target = scene.split(centre_index(scene))
+        kernel_profile(sources, target.camera, a.repeat)  # a camera: no image metrics
         return
     t0 = time.perf_counter()
     scene = grid_scene(3, 3, a.size)

@@ -124,12 +124,24 @@ def _renice_children(nice: int) -> None:
     browser gets its group's fair share whatever its threads' nice."""
     import psutil
 
+    def group(pid):
+        try:
+            with open(f"/proc/{pid}/autogroup") as f:
+                return f.read().split()[0]
+        except OSError:
+            return None
+
+    ours = group(os.getpid())
     for p in psutil.Process().children(recursive=True):
         try:
             for t in p.threads():  # Linux's priority is per thread
                 os.setpriority(os.PRIO_PROCESS, t.id, nice)
         except (psutil.Error, OSError):
             pass
+        # playwright's driver (node) shares this process's session: setting its group's
+        # nice would demote the viewer as well
+        if group(p.pid) in (None, ours):
+            continue
         try:
             with open(f"/proc/{p.pid}/autogroup", "w") as f:
                 f.write(str(nice))
