@@ -17,9 +17,9 @@ the light-field time goes"). For each setting, on every light field we have:
 
 The settings run one after the other within each case (one run each: the times are indicative).
 
-    python3 benchmarks/lightfield_settings.py [--settings 0.03:2 0.1:2 0.1:1] [--size 512]
+    python3 benchmarks/lightfield_settings.py [--settings auto:2:1 auto:2 auto:3] [--size 512]
     python3 benchmarks/lightfield_settings.py --strides   # cotton renders at strides 2, 4; 9×9 centre
-    python3 benchmarks/lightfield_settings.py --ab-block 2   # block timing, former default vs default
+    python3 benchmarks/lightfield_settings.py --ab-block 2   # block timing, without the coarse level vs default
 """
 
 from __future__ import annotations
@@ -37,9 +37,26 @@ from bench_depth import _centre_disparity_model, _textured, data_dir, hci_metric
 
 
 def _parse(s: str) -> tuple:
-    """``STEP:ITER``; STEP ``auto`` is lightfield_depth's default (None: from the parallax)."""
-    step, it = s.split(":")
-    return (None if step == "auto" else float(step)), int(it)
+    """``STEP:ITER[:SCALE]``; STEP ``auto`` is lightfield_depth's default (None: from the
+    parallax); SCALE its ``pm_coarse_scale`` (default 1: no coarse level)."""
+    parts = s.split(":")
+    step, it = parts[0], parts[1]
+    scale = float(parts[2]) if len(parts) > 2 else None
+    return (None if step == "auto" else float(step)), int(it), scale
+
+
+def _kw(setting) -> dict:
+    """estimate_depth's keywords for a setting (no SCALE: lightfield_depth's default)."""
+    step, it, scale = setting
+    kw = dict(step=step, refine_iter=it)
+    if scale is not None:
+        kw["pm_coarse_scale"] = scale
+    return kw
+
+
+def _name(setting) -> str:
+    step, it, scale = setting
+    return f"step {step} iter {it}" + (f" coarse {scale}" if scale is not None else "")
 
 
 def _cotton():
@@ -77,20 +94,22 @@ def cotton_strides(settings, strides):
     out = {}
     for st in strides:
         sub, centre, nbs = _block(scene, ref, pos, st)
-        for step, it in settings:
-            est8 = estimate_depth(sub, views=nbs, exclude=[centre], step=step, refine_iter=it)
+        for se in settings:
+            est8 = estimate_depth(sub, views=nbs, exclude=[centre], **_kw(se))
             res = render(est8.subset(nbs), sub[centre])
-            out[(st, step, it)] = res.metrics["psnr"]
-            print(f"  cotton stride {st}, step {step} iter {it}: render PSNR {res.metrics['psnr']:.2f} dB", flush=True)
+            out[(st,) + se] = res.metrics["psnr"]
+            print(f"  cotton stride {st}, {_name(se)}: render PSNR {res.metrics['psnr']:.2f} dB", flush=True)
     cams = [v.camera for v in scene.views]
-    for step, it in settings:
+    for se in settings:
+        step, it, scale = se
         t = time.perf_counter()
+        extra = {} if scale is None else {"pm_coarse_scale": scale}
         _, _, _, d = lightfield_depth(scene, ref, cams, lambda i: scene.views[i].image, list(range(len(scene))),
-                                      step=step, pm_iter=it, return_disparity=True)
+                                      step=step, pm_iter=it, return_disparity=True, **extra)
         t = time.perf_counter() - t
         bp, mse = hci_metrics(d, gt, 15)
-        out[("9x9", step, it)] = (bp, mse, t)
-        print(f"  cotton 9x9 centre, step {step} iter {it}: BadPix {bp:.2f} MSE*100 {mse:.3f}, {t:.1f} s", flush=True)
+        out[("9x9",) + se] = (bp, mse, t)
+        print(f"  cotton 9x9 centre, {_name(se)}: BadPix {bp:.2f} MSE*100 {mse:.3f}, {t:.1f} s", flush=True)
     return out
 
 
@@ -101,8 +120,8 @@ def cotton_case(settings):
     scene, gt, ref, pos = _cotton()
     sub, centre, nbs = _block(scene, ref, pos)
     rows = {}
-    for step, it in settings:
-        kw = dict(step=step, refine_iter=it)
+    for se in settings:
+        kw = _kw(se)
         t = time.perf_counter()
         est8 = estimate_depth(sub, views=nbs, exclude=[centre], **kw)
         t8 = time.perf_counter() - t
@@ -112,8 +131,8 @@ def cotton_case(settings):
             d = -(a + b / est1[centre].depth.astype(np.float64))
         bp, mse = hci_metrics(d, gt, 15)
         res = render(est8.subset(nbs), sub[centre])
-        rows[(step, it)] = dict(t8=t8, badpix=bp, mse=mse, psnr=res.metrics["psnr"])
-        print(f"  cotton step {step} iter {it}: 8 views {t8:.1f} s, centre BadPix {bp:.2f} MSE*100 {mse:.3f}, "
+        rows[se] = dict(t8=t8, badpix=bp, mse=mse, psnr=res.metrics["psnr"])
+        print(f"  cotton {_name(se)}: 8 views {t8:.1f} s, centre BadPix {bp:.2f} MSE*100 {mse:.3f}, "
               f"render PSNR {res.metrics['psnr']:.2f} dB", flush=True)
     return rows
 
@@ -128,31 +147,32 @@ def synthetic_cases(settings, W: int):
         scene = make_scene("grid", n_views=9, width=W, height=H, seed=seed, baseline=bl)
         gt = scene[4].depth
         tex = _textured(scene[4].image) & np.isfinite(gt)
-        for step, it in settings:
+        for se in settings:
             t = time.perf_counter()
-            est = estimate_depth(scene, views=[4], method="lightfield", step=step, refine_iter=it)
+            est = estimate_depth(scene, views=[4], method="lightfield", **_kw(se))
             t = time.perf_counter() - t
             with np.errstate(invalid="ignore"):
                 ok = np.abs(est[4].depth - gt) / gt < 0.01
-            out[(seed, bl, step, it)] = (100 * ok[tex].mean(), t)
-            print(f"  synthetic grid baseline {bl} seed {seed}, step {step} iter {it}: "
+            out[(seed, bl) + se] = (100 * ok[tex].mean(), t)
+            print(f"  synthetic grid baseline {bl} seed {seed}, {_name(se)}: "
                   f"{100 * ok[tex].mean():.1f} % within 1 %, {t:.1f} s", flush=True)
     return out
 
 
 def ab_block(rounds: int) -> None:
-    """The cotton block's 8-view estimate with ``step=0.03`` (the former default) and with
-    the default, alternating (the order flips every round), in this process."""
+    """The cotton block's 8-view estimate without the coarse level (``pm_coarse_scale=1``,
+    the former default) and with the default, alternating (the order flips every round), in
+    this process."""
     import statistics
 
     from vibr.stereo import estimate_depth
 
     scene, _, ref, pos = _cotton()
     sub, centre, nbs = _block(scene, ref, pos)
-    T = {"step 0.03 (former default)": [], "default (parallax 0.1 px)": []}
+    T = {"no coarse level (former default)": [], "default (coarse level at 0.5)": []}
     for r in range(rounds):
         for k in (list(T) if r % 2 == 0 else list(T)[::-1]):
-            kw = {"step": 0.03} if k.startswith("step") else {}
+            kw = {"pm_coarse_scale": 1.0} if k.startswith("no coarse") else {}
             t = time.perf_counter()
             estimate_depth(sub, views=nbs, exclude=[centre], **kw)
             T[k].append(time.perf_counter() - t)
@@ -163,13 +183,14 @@ def ab_block(rounds: int) -> None:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--settings", nargs="+", default=["0.03:2", "0.1:2", "0.1:1"],
-                    help="STEP:REFINE_ITER pairs; STEP 'auto': lightfield_depth's default")
+    ap.add_argument("--settings", nargs="+", default=["auto:2:1", "auto:2"],
+                    help="STEP:REFINE_ITER[:COARSE_SCALE]; STEP 'auto': lightfield_depth's default; "
+                         "COARSE_SCALE: its pm_coarse_scale (1: no coarse level; default lightfield_depth's)")
     ap.add_argument("--size", type=int, default=512, help="width of the synthetic grids")
     ap.add_argument("--strides", action="store_true",
                     help="only the cotton renders at strides 2 and 4 and the 9×9 grid's centre")
     ap.add_argument("--ab-block", type=int, metavar="ROUNDS",
-                    help="only the block's 8-view estimate, former default against the default, alternating")
+                    help="only the block's 8-view estimate, without the coarse level against the default, alternating")
     a = ap.parse_args()
     settings = [_parse(s) for s in a.settings]
     if a.ab_block:
@@ -184,10 +205,12 @@ def main():
     print("\n| setting (step px, refinement iterations) | cotton 3×3: 8 views s | centre BadPix / MSE×100 "
           "| render PSNR dB | synthetic 3×3, % within 1 %: bl 0.3 s0 / 0.3 s1 / 0.2 / 0.1 |")
     print("|---|---|---|---|---|")
-    for step, it in settings:
-        c = cot[(step, it)]
-        s = " / ".join(f"{syn[(seed, bl, step, it)][0]:.1f}" for seed, bl in ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1)))
-        print(f"| {'auto' if step is None else f'{step} px'}, {it} | {c['t8']:.1f} | {c['badpix']:.2f} / {c['mse']:.3f} | {c['psnr']:.2f} | {s} |")
+    for se in settings:
+        step, it, scale = se
+        c = cot[se]
+        s = " / ".join(f"{syn[(seed, bl) + se][0]:.1f}" for seed, bl in ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1)))
+        label = f"{'auto' if step is None else f'{step} px'}, {it}" + (f", coarse {scale}" if scale is not None else "")
+        print(f"| {label} | {c['t8']:.1f} | {c['badpix']:.2f} / {c['mse']:.3f} | {c['psnr']:.2f} | {s} |")
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
 
 

@@ -49,8 +49,9 @@ REFINE_ITER = 2
 #: Changes whenever :func:`estimate_depth` gives other depths for the same inputs and
 #: options (a new default, a changed algorithm): the on-disk depth cache
 #: (:mod:`vibr.depthcache`) keys on it, so a cache written by an older estimator is not
-#: served. 2: the light-field sweep's plane step from the parallax (docs/DEPTH.md).
-ESTIMATOR_VERSION = 2
+#: served. 2: the light-field sweep's plane step from the parallax (docs/DEPTH.md). 3: the
+#: light field's coarse level (sweep and first refinement iteration at half size).
+ESTIMATOR_VERSION = 3
 
 
 # --------------------------------------------------------------------------- helpers

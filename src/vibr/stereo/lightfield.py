@@ -44,6 +44,12 @@ from .planesweep import median_planes, plane_sweep, refine_planes, to_grey
 PARALLAX_STEP = 0.1
 
 
+#: Image scale of the light-field estimate's coarse level (sweep and first refinement
+#: iteration; :func:`lightfield_depth`'s ``pm_coarse_scale``): measured in docs/DEPTH.md
+#: ("Coarse to fine").
+COARSE_SCALE = 0.5
+
+
 def disparity_model(ref: Camera, right: Camera) -> tuple[float, float]:
     """``(a, b)`` with ``d = −(a + b w)``: disparity in pixels per grid step of a point of
     inverse depth ``w`` in ``ref``, ``right`` being the next view of the same grid row.
@@ -118,7 +124,8 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                      return_disparity: bool = False, eps: float = 0.001,
                      st_max_disp: float = 2.5, pm_iter: int = 2, pm_views: int | None = None,
                      pm_stride: int = 1, n_best: int | None = None, pm_sigma_c: float = 0.03,
-                     pm_sigma_s: float = 2.0, median_radius: int = 0):
+                     pm_sigma_s: float = 2.0, median_radius: int = 0, pm_coarse_scale: float = COARSE_SCALE,
+                     pm_coarse_iter: int = 1):
     """Depth and sigma_z for grid view ``ref`` from the other (non-excluded) grid views.
 
     Parameters
@@ -147,14 +154,14 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     pm_sigma_c, pm_sigma_s : grey-level and spatial scales of the refinement's
         adaptive-support weights on the colour image; tighter than the MVS defaults
         (0.05, the radius), since the dense window has samples next to the centre to weigh.
+    pm_coarse_scale, pm_coarse_iter : coarse to fine (default :data:`COARSE_SCALE`; 1: none),
+        :func:`_sweep_planes`.
     median_radius : window half-size of the joint weighted median of the refined planes
-        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none). It removes the
-        outliers the TV-L1 otherwise spreads, yet renders from the estimated depths lose
-        with it, so it is not the default.
+        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none; renders lose
+        with it).
     n_best : views whose costs are averaged per pixel and plane (the lowest ones), in the
         sweep and the refinement. Default: a quarter of the views, at least 2: next to an
-        occlusion edge only the views whose baseline runs along the edge (one of the
-        star's four directions) match the background cleanly.
+        occlusion edge only the views along the edge (a quarter of the star) match cleanly.
 
     The measurements behind these defaults are in docs/DEPTH.md ("Defaults of
     estimate_depth").
@@ -209,7 +216,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                             n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
                             mem_bytes=mem_bytes, eps=eps, pm_iter=pm_iter, pm_views=pm_views,
                             pm_stride=pm_stride, pm_sigma_c=pm_sigma_c, pm_sigma_s=pm_sigma_s,
-                            median_radius=median_radius)
+                            median_radius=median_radius, coarse=(float(pm_coarse_scale), int(pm_coarse_iter)))
         disp = -(a + b * res.inv_depth)
         conf = res.confident
         stats.update({"depth_range": dr, "n_planes": D, "step": step, "n_views": len(nb), "n_best": n_best,
@@ -307,20 +314,60 @@ def _sweep_range(scene: Scene, ref: int, cams, img, others, pos, best_d, st_conf
     return (1.0 / w_b, 1.0 / w_a)
 
 
+def _small(img, k: int, camera: Camera) -> np.ndarray:
+    """View ``k``'s image at ``camera``'s (smaller) size: the estimator's cached resize when
+    ``img`` has one, else :func:`vibr.stereo.api._resized`."""
+    small = getattr(img, "small", None)
+    if small is not None:
+        return small(k, camera)
+    from .api import _resized
+
+    return _resized(img(k), camera)
+
+
 def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max_cost, mem_bytes,
-                  eps, pm_iter, pm_views, pm_stride, pm_sigma_c, pm_sigma_s, median_radius):
+                  eps, pm_iter, pm_views, pm_stride, pm_sigma_c, pm_sigma_s, median_radius, coarse=(1.0, 0)):
     """The fine plane sweep of ``ref`` over the grid views ``nb``, its slanted-plane
-    refinement over the first ``pm_views`` of them and the optional weighted median."""
+    refinement over the first ``pm_views`` of them and the optional weighted median.
+
+    ``coarse`` = (scale, iterations): with scale < 1 the sweep runs on the images resized
+    by it, with planes the same parallax apart at that size (fewer), then the first
+    ``min(iterations, pm_iter − 1)`` of the ``pm_iter`` refinement iterations at that size,
+    the others at full size from the upsampled planes, without the fronto-parallel start
+    and the joint perturbation once a coarse iteration was made: the MVS method's
+    ``sweep_scale`` and ``coarse_iter`` (:func:`vibr.stereo.api.estimate_depth`), except
+    that there the coarse iterations come on top of ``refine_iter``."""
     cam = cams[ref]
-    res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
-                      n_planes=n_planes, radius=radius, n_best=n_best,
-                      max_cost=max_cost, mem_bytes=mem_bytes, eps=eps, desc=desc)
+    nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
+    refine_kw = dict(n_best=min(n_best, len(nbr)), eps=eps, max_cost=max_cost, radius=radius, stride=pm_stride,
+                     sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
+    scale, coarse_iter = coarse
+    coarse_done = False
+    if pm_iter > 0 and scale < 1.0:
+        # pm_iter iterations in all: the coarse ones first, at least one at full size
+        coarse_iter = max(0, min(int(coarse_iter), pm_iter - 1))
+        pm_iter -= coarse_iter
+        from .api import upsample_sweep
+
+        cs = {k: cams[k].scaled(scale) for k in [ref] + list(nb)}
+        # disparities shrink with the images: planes the same parallax apart are fewer
+        res = plane_sweep(_small(img, ref, cs[ref]), cs[ref], [_small(img, k, cs[k]) for k in nb],
+                          [cs[k] for k in nb], dr, n_planes=max(16, int(np.ceil(n_planes * scale))),
+                          radius=radius, n_best=n_best, max_cost=max_cost, mem_bytes=mem_bytes, eps=eps,
+                          desc=desc)
+        if coarse_iter > 0:
+            res = refine_planes(_small(img, ref, cs[ref]), cs[ref], [_small(img, k, cs[k]) for k in nbr],
+                                [cs[k] for k in nbr], res, n_iter=coarse_iter, **refine_kw)
+            coarse_done = True
+        res = upsample_sweep(res, cs[ref], cam)
+    else:
+        res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
+                          n_planes=n_planes, radius=radius, n_best=n_best,
+                          max_cost=max_cost, mem_bytes=mem_bytes, eps=eps, desc=desc)
     if pm_iter > 0:
-        nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
         res = refine_planes(img(ref), cam, [img(k) for k in nbr], [cams[k] for k in nbr], res,
-                            n_iter=pm_iter, n_best=min(n_best, len(nbr)), eps=eps,
-                            max_cost=max_cost, radius=radius, stride=pm_stride,
-                            sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
+                            n_iter=pm_iter, fronto_init=not coarse_done, joint_perturbation=not coarse_done,
+                            **refine_kw)
     if median_radius:
         res = median_planes(img(ref), res, radius=median_radius)
     return res
