@@ -74,7 +74,8 @@ def test_lightfield_synthetic_grid_within_1pct():
 def test_lightfield_coarse_level_within_1pct_and_used_by_default():
     """The coarse level (sweep and first refinement iteration at half size, the default)
     and the full-size path both put the textured pixels of a synthetic grid within 1 % of
-    the exact depth; the default differs from the full-size path (the coarse level runs)."""
+    the exact depth; the default differs from the full-size path (the coarse level runs),
+    and ``sweep_scale=1`` is the full-size path, as for MVS."""
     from scipy.ndimage import uniform_filter
 
     from vibr.stereo import estimate_depth
@@ -96,6 +97,9 @@ def test_lightfield_coarse_level_within_1pct_and_used_by_default():
         assert frac > 0.8, (scale, frac)
         depths[scale] = d
     assert not np.array_equal(depths[None], depths[1.0], equal_nan=True)
+    # the coarse level is the one of DepthOptions (and of `vibr depth --sweep-scale`)
+    d = estimate_depth(s, views=[4], method="lightfield", sweep_scale=1.0)[4].depth
+    np.testing.assert_array_equal(d, depths[1.0])
 
 
 def test_cotton_centre_from_3x3_block(cotton_dir):

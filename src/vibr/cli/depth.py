@@ -68,10 +68,10 @@ def register(sub) -> None:
     p.add_argument("--sweep-scale", type=float, default=None,
                    help="image scale of the coarse level (the plane sweep and --coarse-iter "
                    "refinement iterations), in (0, 1]; 1: sweep at full size, no coarse level "
-                   "(MVS; default that of estimate_depth, 0.5: docs/DEPTH.md)")
+                   "(default that of estimate_depth, 0.5: docs/DEPTH.md)")
     p.add_argument("--coarse-iter", type=int, default=None,
                    help="refinement iterations at the coarse level before the full-size ones "
-                   "(MVS; default that of estimate_depth, 1)")
+                   "(default that of estimate_depth, 1; light fields: the first of --refine-iter)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
     p.add_argument("--fill-segments", action="store_true",
                    help="dense output (MVS): fill unknown pixels from the planes of their colour "

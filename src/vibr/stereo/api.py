@@ -374,12 +374,14 @@ class DepthOptions:
         none). Default: 9 for MVS (19×19, about three times the matching window), none for
         light fields.
     sweep_scale : float
-        Image scale of the coarse level (MVS, with ``refine_iter > 0``): the sweep and the
+        Image scale of the coarse level (with ``refine_iter > 0``): the sweep and the
         first ``coarse_iter`` refinement iterations run on images resized by it, their
         planes are upsampled (:func:`upsample_sweep`), and the last ``refine_iter``
         iterations, the median and the check run at full size (coarse to fine). After the
         coarse iterations the full-size ones start from the upsampled slopes alone and
-        leave out the joint random perturbation. 1: the sweep at full size.
+        leave out the joint random perturbation. 1: the sweep at full size. Light fields:
+        the same, except that the coarse iterations are the first of the ``refine_iter``
+        (at least one stays at full size; ``lightfield_depth``'s ``pm_coarse_scale``).
     coarse_iter : int
         Slanted-plane refinement iterations at ``sweep_scale`` before the upsampling
         (ignored when ``sweep_scale`` is 1): a plane refined at the coarse level lands more
@@ -395,8 +397,9 @@ class DepthOptions:
         Further keyword arguments of :func:`~vibr.stereo.lightfield.lightfield_depth`
         (``step``, ``max_views``, ``refine``, ``tv_lambda``, ...); checked by
         :func:`depth_options`. The light-field method also uses ``depth_range``,
-        ``radius``, ``n_best``, ``max_cost``, ``mem_bytes``, ``refine_iter`` and
-        ``median_radius``; it ignores the MVS-only fields.
+        ``radius``, ``n_best``, ``max_cost``, ``mem_bytes``, ``refine_iter``,
+        ``median_radius``, ``sweep_scale`` and ``coarse_iter``; it ignores the MVS-only
+        fields.
     """
 
     scale: float = 1.0
@@ -582,6 +585,10 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
     for i in targets:
         lf = dict(opt.lightfield)
         lf.setdefault("pm_iter", opt.refine_iter)
+        # one coarse level for both methods (for light fields its iterations are part of
+        # refine_iter: lightfield_depth's pm_coarse_iter)
+        lf.setdefault("pm_coarse_scale", opt.sweep_scale)
+        lf.setdefault("pm_coarse_iter", int(opt.coarse_iter))
         if opt.median_radius is not None:
             lf.setdefault("median_radius", opt.median_radius)
         z, s, st = lightfield_depth(scene, i, cams, imgs, inputs, depth_range=opt.depth_range,
