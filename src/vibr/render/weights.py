@@ -362,9 +362,9 @@ def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=No
 def fast_acos(x):
     """arccos(x) for x in [−1, 1], absolute error ≤ 2.2e-8 rad (tested): Abramowitz &
     Stegun 4.4.46, ``arccos|x| = √(1 − |x|) · Σ_k a_k |x|^k`` (k ≤ 7), and
-    ``arccos x = π − arccos(−x)`` for x < 0. Why: ``math.acos`` took a third of the view
-    prior's splat (one call per sample); this error is below the float32 sums the prior
-    accumulates (docs/RENDERER.md, "Speed")."""
+    ``arccos x = π − arccos(−x)`` for x < 0. Why: ``math.acos``, one call per sample, was
+    the costliest step of the view prior's splat; this error is below the float32 sums the
+    prior accumulates (docs/RENDERER.md, "Speed round 2")."""
     ax = abs(x)
     p = -0.0012624911
     p = p * ax + 0.0066700901
