@@ -29,6 +29,7 @@ Medians with min and max; the machine is shared and noisy (say so when reporting
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -61,57 +62,68 @@ def _midway(a, b):
     return Camera.from_centre(a.K, R, 0.5 * (a.centre + b.centre), a.width, a.height)
 
 
-def synthetic(updates: int, points: str = "while moving", browser_nice: int | None = None) -> dict:
+@contextlib.contextmanager
+def _viewer_page(scene, points: str, on_load=None):
+    """A viewer of ``scene`` (8 sources, full size 768, point-cloud mode ``points``) shown
+    in headless Chromium (800×800) until its first full image: yields the viewer and that
+    first image; closes both. ``on_load()`` runs once the page has loaded."""
     from playwright.sync_api import sync_playwright
 
-    from vibr.synthetic import make_scene
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings
     from vibr.viewer.browser import launch_chromium
+
+    v = Viewer(scene, ViewerOptions(port=free_port(), points=points,
+                                    settings=ViewSettings(n_views=8, full_long_side=768)))
+    url = v.start()
+    try:
+        with sync_playwright() as pw:
+            b = launch_chromium(pw)
+            try:
+                page = b.new_page(viewport={"width": 800, "height": 800})
+                page.goto(url, timeout=60_000)
+                if on_load is not None:
+                    on_load()
+                first = v.wait_for_image(kind="full", timeout=300)
+                assert first is not None, "no first image"
+                yield v, first
+            finally:
+                b.close()
+    finally:
+        v.stop()
+
+
+def synthetic(updates: int, points: str = "while moving", browser_nice: int | None = None) -> dict:
+    from vibr.synthetic import make_scene
 
     t0 = time.perf_counter()
     scene = make_scene("handheld", n_views=9, width=768, height=768)
     print(f"synthetic scene: {len(scene)} views of 768x768 built in {time.perf_counter() - t0:.1f} s", flush=True)
-    settings = ViewSettings(n_views=8, preview_long_side=256, full_long_side=768)
-    viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=settings, points=points))
     targets = [_midway(scene.views[0].camera, scene.views[1 + k % (len(scene) - 1)].camera)
                for k in range(updates + 1)]  # the first one warms up
     prev, prev_render, full, full_render = [], [], [], []
-    url = viewer.start()
-    try:
-        with sync_playwright() as pw:
-            browser = launch_chromium(pw)
-            try:
-                page = browser.new_page(viewport={"width": 800, "height": 800})
-                page.goto(url, timeout=60_000)
-                if browser_nice is not None:
-                    _renice_children(browser_nice)
-                first = viewer.wait_for_image(kind="full", timeout=300)
-                assert first is not None, "no first image"
-                client = next(iter(viewer.clients().values()))
-                seq = first.seq
-                for k, cam in enumerate(targets):
-                    viewer.move_client(client, cam)
-                    p = viewer.wait_for_image(kind="preview", after_seq=seq, timeout=120)
-                    f = viewer.wait_for_image(kind="full", after_seq=seq, timeout=120)
-                    assert p is not None and f is not None, "no image for an update"
-                    # settle: the browser's echoes of one move are several updates
-                    time.sleep(0.5)
-                    last = viewer.wait_for_image(kind="full", after_seq=f.seq, timeout=0.1)
-                    seq = (last or f).seq
-                    if k == 0:
-                        continue
-                    prev.append(p.seconds)
-                    prev_render.append(p.render_seconds)
-                    full.append(f.seconds)
-                    full_render.append(f.render_seconds)
-                    print(f"  update {k}: preview {p.camera.width}x{p.camera.height} {p.seconds:.2f} s "
-                          f"(render {p.render_seconds:.2f} s), "
-                          f"full {f.camera.width}x{f.camera.height} {f.seconds:.2f} s "
-                          f"(render {f.render_seconds:.2f} s)", flush=True)
-            finally:
-                browser.close()
-    finally:
-        viewer.stop()
+    renice = None if browser_nice is None else (lambda: _renice_children(browser_nice))
+    with _viewer_page(scene, points, on_load=renice) as (viewer, first):
+        client = next(iter(viewer.clients().values()))
+        seq = first.seq
+        for k, cam in enumerate(targets):
+            viewer.move_client(client, cam)
+            p = viewer.wait_for_image(kind="preview", after_seq=seq, timeout=120)
+            f = viewer.wait_for_image(kind="full", after_seq=seq, timeout=120)
+            assert p is not None and f is not None, "no image for an update"
+            # settle: the browser's echoes of one move are several updates
+            time.sleep(0.5)
+            last = viewer.wait_for_image(kind="full", after_seq=f.seq, timeout=0.1)
+            seq = (last or f).seq
+            if k == 0:
+                continue
+            prev.append(p.seconds)
+            prev_render.append(p.render_seconds)
+            full.append(f.seconds)
+            full_render.append(f.render_seconds)
+            print(f"  update {k}: preview {p.camera.width}x{p.camera.height} {p.seconds:.2f} s "
+                  f"(render {p.render_seconds:.2f} s), "
+                  f"full {f.camera.width}x{f.camera.height} {f.seconds:.2f} s "
+                  f"(render {f.render_seconds:.2f} s)", flush=True)
     return {"preview": prev, "preview_render": prev_render, "full": full, "full_render": full_render}
 
 
@@ -358,11 +370,9 @@ def browser_cpu(seconds: float = 10.0) -> None:
     runs on the same machine. The synthetic 768² scene of the latency measurement (its
     point cloud: 300 000 points), for each point-cloud mode."""
     import psutil
-    from playwright.sync_api import sync_playwright
 
     from vibr.synthetic import make_scene
-    from vibr.viewer import POINT_MODES, Viewer, ViewerOptions, ViewSettings
-    from vibr.viewer.browser import launch_chromium
+    from vibr.viewer import POINT_MODES
 
     scene = make_scene("handheld", n_views=9, width=768, height=768)
     me = psutil.Process()
@@ -378,25 +388,51 @@ def browser_cpu(seconds: float = 10.0) -> None:
         return t
 
     for mode in POINT_MODES:
-        v = Viewer(scene, ViewerOptions(port=free_port(), points=mode,
-                                        settings=ViewSettings(n_views=8, full_long_side=768)))
-        url = v.start()
-        try:
-            with sync_playwright() as pw:
-                b = launch_chromium(pw)
-                page = b.new_page(viewport={"width": 800, "height": 800})
-                page.goto(url, timeout=60_000)
-                v.wait_for_image(kind="full", timeout=300)
-                time.sleep(3)
-                c0, w0, s0 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
-                time.sleep(seconds)
-                c1, w1, s1 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
-                b.close()
-        finally:
-            v.stop()
+        with _viewer_page(scene, mode):
+            time.sleep(3)
+            c0, w0, s0 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
+            time.sleep(seconds)
+            c1, w1, s1 = children_cpu(), time.perf_counter(), sum(me.cpu_times()[:2])
         print(f"points {mode!r}: still viewer page for {w1 - w0:.0f} s: browser processes {c1 - c0:.1f} CPU s "
               f"({(c1 - c0) / (w1 - w0):.2f} cores), viewer process {s1 - s0:.1f} CPU s; "
               f"load average {os.getloadavg()[0]:.1f}", flush=True)
+
+
+class _sample_cpu:
+    """Samples ``proc``'s CPU seconds every 0.1 s on a thread, from just before ``start()``
+    is called (``t0``) until :meth:`stop`; ``rows`` = [(time, CPU seconds)]."""
+
+    def __init__(self, proc, start):
+        import threading
+
+        self.rows, self._stop = [], threading.Event()
+        self._th = threading.Thread(target=self._run, args=(proc,))
+        self._th.start()
+        self.t0 = time.perf_counter()
+        start()
+
+    def _run(self, proc):
+        while not self._stop.is_set():
+            c = proc.cpu_times()
+            self.rows.append((time.perf_counter(), c.user + c.system))
+            time.sleep(0.1)
+
+    def stop(self):
+        self._stop.set()
+        self._th.join()
+
+
+def _busy(rows, t0: float, until: float) -> tuple[float, float]:
+    """(end of the first run of ≥ 0.3 core from ``t0`` on, seconds after t0; CPU seconds
+    taken before ``until`` s after t0): the once-a-second redraws later do not count."""
+    busy_until, cpu_before, busy = 0.0, 0.0, True
+    for (ta, ca), (tb, cb) in zip(rows, rows[1:]):
+        if tb - t0 <= until:
+            cpu_before += cb - ca
+        busy = busy and (cb - ca) / (tb - ta) >= 0.3
+        if busy:
+            busy_until = tb - t0
+    return busy_until, cpu_before
 
 
 def browser_timeline(updates: int = 4, points_modes=("while moving", "never")) -> None:
@@ -408,14 +444,9 @@ def browser_timeline(updates: int = 4, points_modes=("while moving", "never")) -
     takes long in software, so the window stretches. The overlap of that busy time with
     the full render is the render's slowdown in the latency table against
     ``--ab-overhead``."""
-    import threading
-
     import psutil
-    from playwright.sync_api import sync_playwright
 
     from vibr.synthetic import make_scene
-    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
-    from vibr.viewer.browser import launch_chromium
 
     scene = make_scene("handheld", n_views=9, width=768, height=768)
     targets = [_midway(scene.views[0].camera, scene.views[1 + k % 8].camera) for k in range(updates + 1)]
@@ -423,54 +454,23 @@ def browser_timeline(updates: int = 4, points_modes=("while moving", "never")) -
           "(≥ 0.3 core from the move on) | its CPU s before the full image |")
     print("|---|---|---|---|---|---|---|")
     for mode in points_modes:
-        v = Viewer(scene, ViewerOptions(port=free_port(), points=mode,
-                                        settings=ViewSettings(n_views=8, full_long_side=768)))
-        url = v.start()
-        try:
-            with sync_playwright() as pw:
-                b = launch_chromium(pw)
-                page = b.new_page(viewport={"width": 800, "height": 800})
-                page.goto(url, timeout=60_000)
-                first = v.wait_for_image(kind="full", timeout=300)
-                client = next(iter(v.clients().values()))
-                gpu = next(p for p in psutil.Process().children(recursive=True)
-                           if "--type=gpu-process" in p.cmdline())
-                seq = first.seq
+        with _viewer_page(scene, mode) as (v, first):
+            client = next(iter(v.clients().values()))
+            gpu = next(p for p in psutil.Process().children(recursive=True) if "--type=gpu-process" in p.cmdline())
+            seq = first.seq
+            time.sleep(1.0)
+            for k, cam in enumerate(targets):
+                samples = _sample_cpu(gpu, lambda: v.move_client(client, cam))
+                t0, pre = samples.t0, v.wait_for_image(kind="preview", after_seq=seq, timeout=120)
+                full = v.wait_for_image(kind="full", after_seq=seq, timeout=120)
                 time.sleep(1.0)
-                for k, cam in enumerate(targets):
-                    samples, stop = [], threading.Event()
-
-                    def sample():
-                        while not stop.is_set():
-                            c = gpu.cpu_times()
-                            samples.append((time.perf_counter(), c.user + c.system))
-                            time.sleep(0.1)
-
-                    th = threading.Thread(target=sample)
-                    th.start()
-                    t0 = time.perf_counter()
-                    v.move_client(client, cam)
-                    pre = v.wait_for_image(kind="preview", after_seq=seq, timeout=120)
-                    full = v.wait_for_image(kind="full", after_seq=seq, timeout=120)
-                    time.sleep(1.0)
-                    stop.set()
-                    th.join()
-                    seq = full.seq
-                    if k == 0:
-                        continue  # warm-up
-                    busy_until, cpu_before, busy = 0.0, 0.0, True
-                    for (ta, ca), (tb, cb) in zip(samples, samples[1:]):
-                        if tb - t0 <= full.seconds:
-                            cpu_before += cb - ca
-                        # the first busy run from the move (not the once-a-second redraws)
-                        busy = busy and (cb - ca) / (tb - ta) >= 0.3
-                        if busy:
-                            busy_until = tb - t0
-                    print(f"| {mode} | {k} | {pre.seconds:.2f} | {full.seconds:.2f} | {full.render_seconds:.2f} | "
-                          f"{busy_until:.1f} | {cpu_before:.2f} |", flush=True)
-                b.close()
-        finally:
-            v.stop()
+                samples.stop()
+                seq = full.seq
+                if k == 0:
+                    continue  # warm-up
+                busy_until, cpu_before = _busy(samples.rows, t0, full.seconds)
+                print(f"| {mode} | {k} | {pre.seconds:.2f} | {full.seconds:.2f} | {full.render_seconds:.2f} | "
+                      f"{busy_until:.1f} | {cpu_before:.2f} |", flush=True)
     print(f"\nload average {os.getloadavg()[0]:.1f}")
 
 

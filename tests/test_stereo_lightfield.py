@@ -79,11 +79,9 @@ def test_lightfield_coarse_level_within_1pct_and_used_by_default():
     from scipy.ndimage import uniform_filter
 
     from vibr.stereo import estimate_depth
-    from vibr.stereo.lightfield import COARSE_SCALE
     from vibr.stereo.planesweep import to_grey
     from vibr.synthetic import make_scene
 
-    assert COARSE_SCALE == 0.5
     s = make_scene("grid", n_views=9, width=128, height=96, seed=0, baseline=0.3)
     gt = s[4].depth
     g = to_grey(s[4].image).astype(float)

@@ -11,10 +11,10 @@ kernel below 512 MiB (trim threshold) lets the next frame reuse the pages (measu
 
 Those settings hold for glibc's main heap only. A thread other than the main one (the
 viewer's render worker) gets an arena of its own, whose heaps are at most 64 MiB: a larger
-array is mapped and unmapped on every use whatever the threshold (about 20 000 page faults
-and 0.2–0.3 s of system time per 768² render, ``benchmarks/bench_view.py --ab-arena``).
-One arena (``M_ARENA_MAX`` 1) gives every thread the main heap; the few allocations numba's
-threads make inside kernels then share its lock (no cost measured on bench_render). The
+array is mapped and unmapped on every use whatever the threshold. One arena
+(``M_ARENA_MAX`` 1) gives every thread the main heap; the few allocations numba's threads
+make inside kernels then share its lock. Both measured with
+``benchmarks/bench_view.py --ab-arena`` and bench_render (README, "Performance"). The
 user's ``MALLOC_ARENA_MAX`` is kept when set.
 
 Only for processes vibr starts (a library should not change its host's allocator): the

@@ -212,14 +212,10 @@ def _checked_settings(settings, mask: str, intensity_scale):
 
 
 def _geometry_kw(geometry_kw, settings, render_kw) -> dict:
-    """``geometry_kw`` keeping the sample fields any of the settings reads
-    (:func:`vibr.render.methods.sample_fields`)."""
-    from .render.methods import sample_fields
+    """``geometry_kw`` keeping the sample fields any of the settings reads."""
+    from .render.methods import with_sample_fields
 
-    keep = set((geometry_kw or {}).get("keep", ()))
-    for s in settings:
-        keep |= set(sample_fields(s.method, **{**(render_kw or {}), **s.params}))
-    return {**(geometry_kw or {}), "keep": tuple(sorted(keep))}
+    return with_sample_fields(geometry_kw, *((s.method, {**(render_kw or {}), **s.params}) for s in settings))
 
 
 def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False):

@@ -41,7 +41,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import VibrInputError
-from .render.methods import sample_fields
+from .render.methods import with_sample_fields
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -75,8 +75,7 @@ class FrameContext:
     def __post_init__(self):
         # the optional sample fields the method reads (the footprint PSF's Jacobians), once
         # for every frame
-        keep = set(self.geometry_kw.get("keep", ())) | set(sample_fields(self.method, **self.params))
-        self.geometry_kw = {**self.geometry_kw, "keep": tuple(sorted(keep))}
+        self.geometry_kw = with_sample_fields(self.geometry_kw, (self.method, self.params))
 
 
 def _source_points(sources: Scene, max_points: int = 1024) -> list:

@@ -144,11 +144,10 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
 
         from ..validate import check_render_memory
 
-        from .methods import sample_fields
+        from .methods import with_sample_fields
 
         src = _ready_sources(sources, target)
-        gkw = dict(geometry_kw or {})
-        gkw["keep"] = tuple(sorted(set(gkw.get("keep", ())) | set(sample_fields(m, **params))))
+        gkw = with_sample_fields(geometry_kw, (m, params))
         check_render_memory([v.camera.shape for v in src.views], cam.shape, keep=gkw["keep"])  # before allocating
         samples = compute_samples(src, cam, **gkw)
     t_geo = time.perf_counter() - t0

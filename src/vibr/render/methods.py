@@ -61,7 +61,8 @@ import numpy as np
 from .operators import PSFS as _PSFS
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "get_method",
-           "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields"]
+           "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields",
+           "with_sample_fields"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
@@ -276,3 +277,13 @@ def sample_fields(method="gradient", **params) -> tuple:
     :func:`method_params` takes them ("auto" values allowed)."""
     p = method_params(method, **{k: v for k, v in params.items() if not isinstance(v, str) or v != "auto"})
     return ("jac",) if p["psf"] == "footprint" else ()
+
+
+def with_sample_fields(geometry_kw: dict | None, *renders) -> dict:
+    """``geometry_kw`` (arguments of :func:`vibr.geometry.compute_samples`) with its
+    ``keep`` extended by the :func:`sample_fields` of every render ``(method, params)`` the
+    samples are for: the one place that decides what the geometry computes."""
+    keep = set((geometry_kw or {}).get("keep", ()))
+    for method, params in renders:
+        keep |= set(sample_fields(method, **params))
+    return {**(geometry_kw or {}), "keep": tuple(sorted(keep))}
