@@ -20,6 +20,8 @@ The settings run one after the other within each case (one run each: the times a
     python3 benchmarks/lightfield_settings.py [--settings auto:2:1 auto:2 auto:3] [--size 512]
     python3 benchmarks/lightfield_settings.py --strides   # cotton renders at strides 2, 4; 9×9 centre
     python3 benchmarks/lightfield_settings.py --ab-block 2   # block timing, without the coarse level vs default
+    python3 benchmarks/lightfield_settings.py --synthetic-renders all --settings auto:2::2 auto:2
+        # renders of the synthetic grids' centres from estimated depths, tuning and held-out grids
 """
 
 from __future__ import annotations
@@ -37,26 +39,32 @@ from bench_depth import _centre_disparity_model, _textured, data_dir, hci_metric
 
 
 def _parse(s: str) -> tuple:
-    """``STEP:ITER[:SCALE]``; STEP ``auto`` is lightfield_depth's default (None: from the
-    parallax); SCALE its ``pm_coarse_scale`` (default 1: no coarse level)."""
-    parts = s.split(":")
+    """``STEP:ITER[:SCALE[:PM_RADIUS]]``; STEP ``auto`` is lightfield_depth's default (None:
+    from the parallax); SCALE its ``pm_coarse_scale``, PM_RADIUS its ``pm_radius`` (empty or
+    absent: lightfield_depth's default)."""
+    parts = s.split(":") + ["", ""]
     step, it = parts[0], parts[1]
-    scale = float(parts[2]) if len(parts) > 2 else None
-    return (None if step == "auto" else float(step)), int(it), scale
+    scale = float(parts[2]) if parts[2] else None
+    pm_radius = int(parts[3]) if parts[3] else None
+    return (None if step == "auto" else float(step)), int(it), scale, pm_radius
 
 
 def _kw(setting) -> dict:
-    """estimate_depth's keywords for a setting (no SCALE: lightfield_depth's default)."""
-    step, it, scale = setting
+    """estimate_depth's keywords for a setting (no SCALE, PM_RADIUS: lightfield_depth's
+    defaults)."""
+    step, it, scale, pm_radius = setting
     kw = dict(step=step, refine_iter=it)
     if scale is not None:
         kw["pm_coarse_scale"] = scale
+    if pm_radius is not None:
+        kw["pm_radius"] = pm_radius
     return kw
 
 
 def _name(setting) -> str:
-    step, it, scale = setting
-    return f"step {step} iter {it}" + (f" coarse {scale}" if scale is not None else "")
+    step, it, scale, pm_radius = setting
+    return (f"step {step} iter {it}" + (f" coarse {scale}" if scale is not None else "")
+            + (f" pm_radius {pm_radius}" if pm_radius is not None else ""))
 
 
 def _cotton():
@@ -101,11 +109,11 @@ def cotton_strides(settings, strides):
             print(f"  cotton stride {st}, {_name(se)}: render PSNR {res.metrics['psnr']:.2f} dB", flush=True)
     cams = [v.camera for v in scene.views]
     for se in settings:
-        step, it, scale = se
+        kw = _kw(se)
+        kw["pm_iter"] = kw.pop("refine_iter")  # lightfield_depth's name
         t = time.perf_counter()
-        extra = {} if scale is None else {"pm_coarse_scale": scale}
         _, _, _, d = lightfield_depth(scene, ref, cams, lambda i: scene.views[i].image, list(range(len(scene))),
-                                      step=step, pm_iter=it, return_disparity=True, **extra)
+                                      return_disparity=True, **kw)
         t = time.perf_counter() - t
         bp, mse = hci_metrics(d, gt, 15)
         out[("9x9",) + se] = (bp, mse, t)
@@ -137,13 +145,54 @@ def cotton_case(settings):
     return rows
 
 
+#: The synthetic grids (seed, baseline) the defaults were chosen on, and held-out ones.
+GRIDS = ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1))
+HELD_OUT_GRIDS = ((2, 0.25), (3, 0.15), (4, 0.3), (5, 0.1))
+
+
+def synthetic_renders(settings, W: int, grids):
+    """Per grid and setting: the centre view rendered (default method) from its 8
+    neighbours with their depths estimated without it, PSNR against the exact image; and
+    the centre's share of textured pixels within 1 % of the exact depth."""
+    from vibr.render import render
+    from vibr.stereo import estimate_depth
+    from vibr.synthetic import make_scene
+
+    H = W * 4 // 5
+    out = {}
+    for seed, bl in grids:
+        scene = make_scene("grid", n_views=9, width=W, height=H, seed=seed, baseline=bl)
+        names = [v.name for v in scene.views]
+        centre, nbs = names[4], names[:4] + names[5:]
+        gt = scene[4].depth
+        tex = _textured(scene[4].image) & np.isfinite(gt)
+        for se in settings:
+            kw = _kw(se)
+            t = time.perf_counter()
+            est8 = estimate_depth(scene, views=nbs, exclude=[centre], method="lightfield", **kw)
+            t8 = time.perf_counter() - t
+            est1 = estimate_depth(scene, views=[centre], method="lightfield", **kw)
+            with np.errstate(invalid="ignore"):
+                within = 100 * (np.abs(est1[4].depth - gt) / gt < 0.01)[tex].mean()
+            psnr = render(est8.subset(nbs), scene[4]).metrics["psnr"]
+            out[(seed, bl) + se] = (psnr, within, t8)
+            print(f"  synthetic grid baseline {bl} seed {seed}, {_name(se)}: render PSNR {psnr:.2f} dB, "
+                  f"centre {within:.2f} % within 1 %, 8 views {t8:.1f} s", flush=True)
+    print("\n| grid (seed, baseline) | " + " | ".join(_name(se) for se in settings) + " |")
+    print("|---|" + "---|" * len(settings))
+    for seed, bl in grids:
+        cells = [f"{out[(seed, bl) + se][0]:.2f} dB, {out[(seed, bl) + se][1]:.2f} %" for se in settings]
+        print(f"| {seed}, {bl} | " + " | ".join(cells) + " |")
+    return out
+
+
 def synthetic_cases(settings, W: int):
     from vibr.stereo import estimate_depth
     from vibr.synthetic import make_scene
 
     H = W * 4 // 5
     out = {}
-    for seed, bl in ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1)):
+    for seed, bl in GRIDS:
         scene = make_scene("grid", n_views=9, width=W, height=H, seed=seed, baseline=bl)
         gt = scene[4].depth
         tex = _textured(scene[4].image) & np.isfinite(gt)
@@ -184,15 +233,23 @@ def ab_block(rounds: int) -> None:
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--settings", nargs="+", default=["auto:2:1", "auto:2"],
-                    help="STEP:REFINE_ITER[:COARSE_SCALE]; STEP 'auto': lightfield_depth's default; "
-                         "COARSE_SCALE: its pm_coarse_scale (1: no coarse level; default lightfield_depth's)")
+                    help="STEP:REFINE_ITER[:COARSE_SCALE[:PM_RADIUS]]; STEP 'auto': lightfield_depth's "
+                         "default; COARSE_SCALE: its pm_coarse_scale (1: no coarse level), PM_RADIUS its "
+                         "pm_radius (empty or absent: lightfield_depth's defaults)")
     ap.add_argument("--size", type=int, default=512, help="width of the synthetic grids")
     ap.add_argument("--strides", action="store_true",
                     help="only the cotton renders at strides 2 and 4 and the 9×9 grid's centre")
     ap.add_argument("--ab-block", type=int, metavar="ROUNDS",
                     help="only the block's 8-view estimate, without the coarse level against the default, alternating")
+    ap.add_argument("--synthetic-renders", choices=("tuning", "held-out", "all"),
+                    help="only the synthetic grids' centre renders from estimated depths (and depth "
+                         "within 1 %%): the grids the defaults were chosen on, held-out grids, or both")
     a = ap.parse_args()
     settings = [_parse(s) for s in a.settings]
+    if a.synthetic_renders:
+        grids = {"tuning": GRIDS, "held-out": HELD_OUT_GRIDS, "all": GRIDS + HELD_OUT_GRIDS}[a.synthetic_renders]
+        synthetic_renders(settings, a.size, grids)
+        return
     if a.ab_block:
         ab_block(a.ab_block)
         return
@@ -206,10 +263,11 @@ def main():
           "| render PSNR dB | synthetic 3×3, % within 1 %: bl 0.3 s0 / 0.3 s1 / 0.2 / 0.1 |")
     print("|---|---|---|---|---|")
     for se in settings:
-        step, it, scale = se
+        step, it, scale, pm_radius = se
         c = cot[se]
-        s = " / ".join(f"{syn[(seed, bl) + se][0]:.1f}" for seed, bl in ((0, 0.3), (1, 0.3), (0, 0.2), (0, 0.1)))
-        label = f"{'auto' if step is None else f'{step} px'}, {it}" + (f", coarse {scale}" if scale is not None else "")
+        s = " / ".join(f"{syn[(seed, bl) + se][0]:.1f}" for seed, bl in GRIDS)
+        label = (f"{'auto' if step is None else f'{step} px'}, {it}" + (f", coarse {scale}" if scale is not None else "")
+                 + (f", pm_radius {pm_radius}" if pm_radius is not None else ""))
         print(f"| {label} | {c['t8']:.1f} | {c['badpix']:.2f} / {c['mse']:.3f} | {c['psnr']:.2f} | {s} |")
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
 

@@ -361,12 +361,15 @@ def test_upsample_sweep_is_exact_for_an_affine_inverse_depth():
     assert up.winv is res.winv
 
 
-@pytest.mark.parametrize("coarse_iter", [0, 1])
-def test_half_size_sweep_then_refinement_within_1pct(coarse_iter):
+@pytest.mark.parametrize("coarse_iter,lean", [(0, {}), (1, {"joint_perturbation": False}),
+                                              (1, {"joint_perturbation": False, "normal_perturbation": False})])
+def test_half_size_sweep_then_refinement_within_1pct(coarse_iter, lean):
     """Coarse to fine as in estimate_depth (sweep_scale 0.5): the sweep, and ``coarse_iter``
     refinement iterations, at half size, upsampled, then refined at full size, recover a
     strongly slanted textured plane as well as from the full-size sweep: ≥ 95 % of the
-    pixels within 1 %."""
+    pixels within 1 %; also with the leaner full-size random search of the MVS method
+    (no joint perturbation) and of the light-field method (the depth alone), each with
+    fewer cost evaluations."""
     from vibr.stereo.api import _resized, upsample_sweep
     from vibr.stereo.planesweep import refine_planes
 
@@ -380,16 +383,19 @@ def test_half_size_sweep_then_refinement_within_1pct(coarse_iter):
     init = upsample_sweep(coarse, small[0], ref)
     # the coarse slopes (on the coarse grid) do not travel with the upsampled result
     assert init.inv_depth.shape == ref.shape and "plane_gradient" not in init.meta
-    # as estimate_depth: after a refined coarse level, no fronto-parallel start and no
-    # joint random perturbation at full size
-    lean = dict(fronto_init=False, joint_perturbation=False) if coarse_iter else {}
+    # after a refined coarse level, no fronto-parallel start at full size
+    lean = dict(lean, fronto_init=False) if coarse_iter else lean
     out = refine_planes(views[0][0], ref, [v[0] for v in views[1:]], cams[1:], init, n_iter=2, **lean)
     gt = views[0][1]
     inner = (slice(5, -5), slice(5, -5))
     assert np.mean((np.abs(out.depth - gt) / gt)[inner] < 0.01) >= 0.95
     if coarse_iter:
+        # four random candidates per pixel and iteration in all; each one left out saves
+        # its evaluations (propagation's count varies a little with the planes found)
         full = refine_planes(views[0][0], ref, [v[0] for v in views[1:]], cams[1:], init, n_iter=2)
-        assert out.meta["refine_evals"] < 0.9 * full.meta["refine_evals"]
+        n_left_out = 1 + 2 * (not lean.get("normal_perturbation", True))
+        saved = 1 - out.meta["refine_evals"] / full.meta["refine_evals"]
+        assert saved > 0.1 * n_left_out, saved
 
 
 def test_support_weights_closed_form_and_colour_guide():

@@ -755,7 +755,7 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A
 @njit(parallel=True, cache=True)
 def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                       w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed, lam1,
-                      r_first=0, memo=True):
+                      r_first=0, memo=True, r_last=4):
     """Slanted-plane PatchMatch refinement (Bleyer et al. 2011) of per-pixel planes
     ``(w, gx, gy)`` (inverse depth at the pixel and its derivatives along x and y, per
     pixel), in place, with their costs ``cost`` (:func:`_plane_cost`).
@@ -770,8 +770,9 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
     candidate replaces the plane when its cost is lower; ``w`` stays in [wmin, wmax].
     Random numbers come from a hash of (seed, iteration, pixel): deterministic.
 
-    ``r_first``: the first of the four random candidates tried (1 leaves out the joint
-    perturbation of w and the normal).
+    ``r_first``, ``r_last``: the random candidates tried are those numbered r_first to
+    r_last − 1 in the order above (r_first 1 leaves out the joint perturbation of w and the
+    normal; r_last 2 the two candidates that change the normal alone).
     ``memo``: a propagation candidate whose source pixel has not changed since this pixel
     last tried it, in the same direction, is skipped (:func:`_try_plane`; the same planes
     and costs as without, fewer propagation evaluations from the second iteration on;
@@ -818,7 +819,7 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                 r2 = Kinv[2, 0] * j + Kinv[2, 1] * i + Kinv[2, 2]
                 rn = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
                 key = ((seed * 64 + it) * H + i) * W + j
-                for r in range(r_first, 4):
+                for r in range(r_first, r_last):
                     u1 = 2.0 * _hash01(key * 16 + 3 * r) - 1.0
                     u2 = 2.0 * _hash01(key * 16 + 3 * r + 1) - 1.0
                     u3 = 2.0 * _hash01(key * 16 + 3 * r + 2) - 1.0

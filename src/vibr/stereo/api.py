@@ -50,8 +50,9 @@ REFINE_ITER = 2
 #: options (a new default, a changed algorithm): the on-disk depth cache
 #: (:mod:`vibr.depthcache`) keys on it, so a cache written by an older estimator is not
 #: served. 2: the light-field sweep's plane step from the parallax (docs/DEPTH.md). 3: the
-#: light field's coarse level (sweep and first refinement iteration at half size).
-ESTIMATOR_VERSION = 3
+#: light field's coarse level (sweep and first refinement iteration at half size). 4: the
+#: light field's full-size refinement with a random search of the depth alone.
+ESTIMATOR_VERSION = 4
 
 
 # --------------------------------------------------------------------------- helpers

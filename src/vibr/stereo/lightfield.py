@@ -125,7 +125,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
                      st_max_disp: float = 2.5, pm_iter: int = 2, pm_views: int | None = None,
                      pm_stride: int = 1, n_best: int | None = None, pm_sigma_c: float = 0.03,
                      pm_sigma_s: float = 2.0, median_radius: int = 0, pm_coarse_scale: float = COARSE_SCALE,
-                     pm_coarse_iter: int = 1):
+                     pm_coarse_iter: int = 1, pm_radius: int | None = None):
     """Depth and sigma_z for grid view ``ref`` from the other (non-excluded) grid views.
 
     Parameters
@@ -134,9 +134,13 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     inputs : indices usable as inputs (``ref`` itself is the reference).
     max_views : at most this many neighbours in the sweep: the nearest in grid distance,
         preferring the reference's row, column and diagonals (the star of the grid).
-    radius : ZNCC window half-size of the sweep and the refinement. Default 3 (7×7) with up
-        to 8 views, 2 (5×5) with more: the matching noise falls with window area × views,
-        and a smaller window fattens depth edges less.
+    radius : ZNCC window half-size of the sweep. Default 3 (7×7) with up to 8 views, 2
+        (5×5) with more: the matching noise falls with window area × views, and a smaller
+        window fattens depth edges less.
+    pm_radius : window half-size of the slanted-plane refinement (default: the sweep's
+        ``radius``). 2 with the default 3 is 0.7× the time, with a lower MSE on cotton but
+        less precise depths on the synthetic grids and renders that gain on some scenes and
+        lose on others (docs/DEPTH.md, "Coarse to fine").
     step : disparity step between planes, in px per grid step. Default: planes
         :data:`PARALLAX_STEP` px of parallax apart on the nearest view swept, whatever the
         spacing of the views (:func:`_plane_step`).
@@ -214,7 +218,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         n_best = max(1, min(int(n_best), len(nb)))
         res = _sweep_planes(img, cams, ref, nb, dr, desc=f"light-field sweep {scene.views[ref].name}",
                             n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
-                            mem_bytes=mem_bytes, eps=eps, pm_iter=pm_iter, pm_views=pm_views,
+                            mem_bytes=mem_bytes, eps=eps, pm_iter=pm_iter, pm_views=pm_views, pm_radius=pm_radius,
                             pm_stride=pm_stride, pm_sigma_c=pm_sigma_c, pm_sigma_s=pm_sigma_s,
                             median_radius=median_radius, coarse=(float(pm_coarse_scale), int(pm_coarse_iter)))
         disp = -(a + b * res.inv_depth)
@@ -326,7 +330,8 @@ def _small(img, k: int, camera: Camera) -> np.ndarray:
 
 
 def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max_cost, mem_bytes,
-                  eps, pm_iter, pm_views, pm_stride, pm_sigma_c, pm_sigma_s, median_radius, coarse=(1.0, 0)):
+                  eps, pm_iter, pm_views, pm_stride, pm_sigma_c, pm_sigma_s, median_radius, pm_radius=None,
+                  coarse=(1.0, 0)):
     """The fine plane sweep of ``ref`` over the grid views ``nb``, its slanted-plane
     refinement over the first ``pm_views`` of them and the optional weighted median.
 
@@ -334,14 +339,17 @@ def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max
     by it, with planes the same parallax apart at that size (fewer), then the first
     ``min(iterations, pm_iter − 1)`` of the ``pm_iter`` refinement iterations at that size,
     the others at full size from the upsampled planes, without the fronto-parallel start
-    and the joint perturbation once a coarse iteration was made: the MVS method's
+    and with a random search of the depth alone once a coarse iteration was made (the
+    normals were refined at the coarse level); the refinement's window has half-size
+    ``pm_radius`` (default: ``radius``). The MVS method's
     ``sweep_scale`` and ``coarse_iter`` (:func:`vibr.stereo.api.estimate_depth`), except
     that there the coarse iterations come on top of ``refine_iter``."""
     cam = cams[ref]
     nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
-    refine_kw = dict(n_best=min(n_best, len(nbr)), eps=eps, max_cost=max_cost, radius=radius, stride=pm_stride,
-                     sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
     scale, coarse_iter = coarse
+    refine_kw = dict(n_best=min(n_best, len(nbr)), eps=eps, max_cost=max_cost,
+                     radius=radius if pm_radius is None else pm_radius, stride=pm_stride,
+                     sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
     coarse_done = False
     if pm_iter > 0 and scale < 1.0:
         # pm_iter iterations in all: the coarse ones first, at least one at full size
@@ -367,7 +375,7 @@ def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max
     if pm_iter > 0:
         res = refine_planes(img(ref), cam, [img(k) for k in nbr], [cams[k] for k in nbr], res,
                             n_iter=pm_iter, fronto_init=not coarse_done, joint_perturbation=not coarse_done,
-                            **refine_kw)
+                            normal_perturbation=not coarse_done, **refine_kw)
     if median_radius:
         res = median_planes(img(ref), res, radius=median_radius)
     return res

@@ -192,7 +192,8 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
                   sigma_s: float | None = None,
                   n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
                   dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1,
-                  fronto_init: bool = True, joint_perturbation: bool = True) -> SweepResult:
+                  fronto_init: bool = True, joint_perturbation: bool = True,
+                  normal_perturbation: bool = True) -> SweepResult:
     """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
 
     The sweep is winner-take-all over fronto-parallel planes: its depth is quantised (the
@@ -223,6 +224,13 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     in turn from the best plane so far, also move both). Without it, one evaluation in
     eight fewer per iteration, for a refinement that starts from a refined plane (the
     full-size iterations after the coarse level).
+
+    ``normal_perturbation``: whether the random search tries the normal alone and a random
+    normal. Without it (and without the joint perturbation) the random search only moves
+    the depth, and propagation alone spreads orientations: for full-size iterations whose
+    planes, normals included, were refined at the coarse level, where the normal
+    candidates no longer win often enough to be worth their cost (the light-field method;
+    docs/DEPTH.md, "Coarse to fine").
 
     Returns a :class:`SweepResult` with the refined depth and cost (``meta["plane_gradient"]``
     holds the planes' ``(gx, gy)``, inverse depth per pixel); ``confident`` = the
@@ -258,7 +266,8 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
         cost = np.where(fronto, c0, cost)
     n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
                            cost, int(n_iter), 2.0 * step, float(dn), np.linalg.inv(ref_camera.K),
-                           wmin, wmax, int(seed), lam1, 0 if joint_perturbation else 1)
+                           wmin, wmax, int(seed), lam1, 0 if joint_perturbation else 1, True,
+                           4 if normal_perturbation else 2)
     z = 1.0 / w
     sigma_w = init.sigma_z.astype(np.float64) / np.asarray(init.depth, np.float64) ** 2
     sigma_z = (z * z * sigma_w).astype(np.float32)
