@@ -667,3 +667,32 @@ def test_estimate_depth_options_and_unknown_keywords():
     with pytest.raises(TypeError):
         lightfield_depth(g, 4, [v.camera for v in g.views], lambda i: g.views[i].image, list(range(9)),
                          stepp=0.05)
+
+
+def test_views_side_by_side_bit_identical_to_serial(monkeypatch):
+    """The light-field estimate runs VIEW_THREADS views at a time (map_views): the depths
+    and sigma_z are those of the one-view-at-a-time loop, bit for bit."""
+    import numba
+
+    from vibr.stereo import api
+    from vibr.synthetic import make_scene
+
+    if numba.get_num_threads() < 2:
+        pytest.skip("numba has one thread here: map_views runs the serial loop")
+    s = make_scene("grid", n_views=9, width=96, height=80, seed=2, baseline=0.2)
+    kw = dict(method="lightfield", views=[0, 1, 3, 4], exclude=[8])
+    calls = []
+    real = api.ThreadPoolExecutor
+
+    def spy(*a, **k):
+        calls.append(a)
+        return real(*a, **k)
+
+    monkeypatch.setattr(api, "ThreadPoolExecutor", spy)
+    par = api.estimate_depth(s, **kw)
+    assert calls, "the views did not run side by side"
+    monkeypatch.setattr(api, "VIEW_THREADS", 1)
+    ser = api.estimate_depth(s, **kw)
+    for i in kw["views"]:
+        assert np.array_equal(par[i].depth, ser[i].depth, equal_nan=True)
+        assert np.array_equal(par[i].sigma_z, ser[i].sigma_z, equal_nan=True)

@@ -14,7 +14,7 @@ from numba import njit, prange
 
 
 # --------------------------------------------------------------------------- windows
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def box_mean_std(img, radius, eps2):
     """Mean and regularised standard deviation of ``img`` (H×W) in (2r+1)² windows.
 
@@ -256,7 +256,7 @@ def _aggregate_band(C, OK, costs, nv, n_best, ib0, ib1, lab, best_c, best_l, c_m
             prev[i, j] = c
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, block,
                best_c, best_l, c_minus, c_plus, prev):
     """Process a slab of fronto-parallel planes of the reference camera (streaming WTA).
@@ -316,7 +316,7 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
                             c_plus, prev)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def subpixel(best_c, best_l, c_minus, c_plus):
     """Parabolic sub-label refinement around the winning label.
 
@@ -348,7 +348,7 @@ def subpixel(best_c, best_l, c_minus, c_plus):
 
 
 # --------------------------------------------------------------------------- consistency
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def consistency(depth_r, Kr_inv, Rr, tr, depths, sizes, Ks, Rs, ts, rel_tol, px_tol):
     """Geometric consistency of a reference depth map with its neighbours' depth maps.
 
@@ -439,7 +439,7 @@ def consistency(depth_r, Kr_inv, Rr, tr, depths, sizes, Ks, Rs, ts, rel_tol, px_
 
 
 # --------------------------------------------------------------------------- TV-L1
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def tv_l1(f, conf, g, lam, n_iter):
     """Weighted TV-L1 smoothing (primal-dual, Chambolle & Pock 2011, Alg. 1):
 
@@ -506,7 +506,7 @@ def _hash01(k):
     return float(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def support_weights(I, offs, sigma_c, sigma_s, guide):
     """Adaptive-support (bilateral) window weights of the reference image (Yoon & Kweon
     2006; the bilateral NCC of Schönberger et al. 2016 §4.2):
@@ -705,7 +705,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
     return c
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1):
     """:func:`_plane_cost` of every pixel's plane (w, gx, gy) (H,W) → (H,W) float64."""
     H, W = w.shape
@@ -752,7 +752,7 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A
     return 1
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                       w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed, lam1,
                       r_first=0, memo=True, r_last=4):
@@ -861,7 +861,7 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
 
 
 # --------------------------------------------------------------------------- plane-vote median
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def plane_median(w, gx, gy, known, guide, offs, sigma_c, sigma_s):
     """Joint weighted median of per-pixel planes in inverse depth (Ma et al. 2013's
     weighted median filter for stereo, with plane votes).

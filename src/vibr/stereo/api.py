@@ -26,6 +26,7 @@ from __future__ import annotations
 import inspect
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -55,7 +56,40 @@ REFINE_ITER = 2
 ESTIMATOR_VERSION = 4
 
 
+#: At most this many light-field views are estimated side by side (threads,
+#: :func:`map_views`): each holds its own working arrays, so the peak memory grows with
+#: it. The MVS method estimates one view at a time: side by side it was no faster on
+#: fountain (docs/DEPTH.md, "Views side by side").
+VIEW_THREADS = 2
+
+
 # --------------------------------------------------------------------------- helpers
+def map_views(fn, items: list) -> list:
+    """``[fn(i) for i in items]``, with up to :data:`VIEW_THREADS` views side by side.
+
+    With ``w`` views at a time on numba's ``n`` threads, each view's kernels run on
+    ``max(1, n // w)`` of them (``numba.set_num_threads`` is per thread). The kernels release
+    the GIL, and their results do not depend on the thread count (every ``prange`` iteration
+    writes its own pixels: tested bit for bit against the serial loop), so the depths are
+    the serial loop's. Why: the Python and SciPy work between one view's kernels (EPI
+    structure tensor, resizing, upsampling) runs on one core; side by side, the other view
+    keeps the second one busy (docs/DEPTH.md, "Views side by side")."""
+    import numba
+
+    n = numba.get_num_threads()
+    w = min(len(items), n, VIEW_THREADS)
+    if w < 2:
+        return [fn(i) for i in items]
+    per = max(1, n // w)
+
+    def run(i):
+        numba.set_num_threads(per)
+        return fn(i)
+
+    with ThreadPoolExecutor(w, thread_name_prefix="vibr-depth") as ex:
+        return list(ex.map(run, items))
+
+
 def _resized(img: np.ndarray, camera: Camera) -> np.ndarray:
     """``img`` at ``camera``'s size (:func:`vibr.io.images.resize_image`: Gaussian
     anti-aliasing only, reflected border, float32 not quantised)."""
@@ -582,8 +616,7 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
     """Light-field depth of each requested view (:func:`lightfield_depth`)."""
     from .lightfield import lightfield_depth
 
-    depths, sigmas, stats = {}, {}, {}
-    for i in targets:
+    def one(i):
         lf = dict(opt.lightfield)
         lf.setdefault("pm_iter", opt.refine_iter)
         # one coarse level for both methods (for light fields its iterations are part of
@@ -592,9 +625,12 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
         lf.setdefault("pm_coarse_iter", int(opt.coarse_iter))
         if opt.median_radius is not None:
             lf.setdefault("median_radius", opt.median_radius)
-        z, s, st = lightfield_depth(scene, i, cams, imgs, inputs, depth_range=opt.depth_range,
-                                    radius=opt.radius, max_cost=opt.max_cost, mem_bytes=opt.mem_bytes,
-                                    n_best=opt.n_best, **lf)[:3]
+        return lightfield_depth(scene, i, cams, imgs, inputs, depth_range=opt.depth_range,
+                                radius=opt.radius, max_cost=opt.max_cost, mem_bytes=opt.mem_bytes,
+                                n_best=opt.n_best, **lf)[:3]
+
+    depths, sigmas, stats = {}, {}, {}
+    for i, (z, s, st) in zip(targets, map_views(one, list(targets))):
         depths[i], sigmas[i] = z, s
         stats[scene.views[i].name] = dict(st, role="target")
     return depths, sigmas, stats
