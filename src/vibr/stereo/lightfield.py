@@ -138,9 +138,7 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         (5×5) with more: the matching noise falls with window area × views, and a smaller
         window fattens depth edges less.
     pm_radius : window half-size of the slanted-plane refinement (default: the sweep's
-        ``radius``). 2 with the default 3 is 0.7× the time, with a lower MSE on cotton but
-        less precise depths on the synthetic grids and renders that gain on some scenes and
-        lose on others (docs/DEPTH.md, "Coarse to fine").
+        ``radius``; 2 is faster, measured in docs/DEPTH.md, "The depth alone at full size").
     step : disparity step between planes, in px per grid step. Default: planes
         :data:`PARALLAX_STEP` px of parallax apart on the nearest view swept, whatever the
         spacing of the views (:func:`_plane_step`).
@@ -160,15 +158,13 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         (0.05, the radius), since the dense window has samples next to the centre to weigh.
     pm_coarse_scale, pm_coarse_iter : coarse to fine (default :data:`COARSE_SCALE`; 1: none),
         :func:`_sweep_planes`.
-    median_radius : window half-size of the joint weighted median of the refined planes
-        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none; renders lose
-        with it).
+    median_radius : half-size of the planes' joint weighted median
+        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none, renders lose).
     n_best : views whose costs are averaged per pixel and plane (the lowest ones), in the
         sweep and the refinement. Default: a quarter of the views, at least 2: next to an
         occlusion edge only the views along the edge (a quarter of the star) match cleanly.
 
-    The measurements behind these defaults are in docs/DEPTH.md ("Defaults of
-    estimate_depth").
+    The measurements behind these defaults: docs/DEPTH.md, "Defaults of estimate_depth".
 
     Returns
     -------
