@@ -696,3 +696,18 @@ def test_views_side_by_side_bit_identical_to_serial(monkeypatch):
     for i in kw["views"]:
         assert np.array_equal(par[i].depth, ser[i].depth, equal_nan=True)
         assert np.array_equal(par[i].sigma_z, ser[i].sigma_z, equal_nan=True)
+
+
+def test_views_one_at_a_time_on_the_workqueue_layer(monkeypatch):
+    """numba's workqueue layer aborts on parallel kernels launched from two threads at once:
+    map_views then runs the serial loop."""
+    import numba
+
+    from vibr.stereo import api
+
+    started = []
+    monkeypatch.setattr(api, "ThreadPoolExecutor", lambda *a, **k: started.append(a))
+    monkeypatch.setattr(numba, "threading_layer", lambda: "workqueue")
+    monkeypatch.setattr(numba, "get_num_threads", lambda: 4)
+    assert api.map_views(lambda i: i * i, [1, 2, 3]) == [1, 4, 9]
+    assert not started

@@ -78,7 +78,7 @@ def map_views(fn, items: list) -> list:
 
     n = numba.get_num_threads()
     w = min(len(items), n, VIEW_THREADS)
-    if w < 2:
+    if w < 2 or not _threadsafe_layer():
         return [fn(i) for i in items]
     per = max(1, n // w)
 
@@ -88,6 +88,22 @@ def map_views(fn, items: list) -> list:
 
     with ThreadPoolExecutor(w, thread_name_prefix="vibr-depth") as ex:
         return list(ex.map(run, items))
+
+
+def _threadsafe_layer() -> bool:
+    """Whether numba's threading layer takes parallel kernels launched from several threads
+    at once: ``omp`` and ``tbb`` do; ``workqueue``, the fallback where neither library is
+    found, aborts the process."""
+    import numba
+
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # chosen at the first parallel launch: make one
+        from . import _kernels as kern
+
+        kern.box_mean_std(np.zeros((2, 2)), 1, 1.0)
+        layer = numba.threading_layer()
+    return layer in ("omp", "tbb")
 
 
 def _resized(img: np.ndarray, camera: Camera) -> np.ndarray:
