@@ -181,6 +181,8 @@ def test_estimate_depth_excluded_views_never_used():
         estimate_depth(s, views=[0], sweep_scale=0.0)
     with pytest.raises(VibrInputError, match="coarse_iter"):
         estimate_depth(s, views=[0], coarse_iter=-1)
+    with pytest.raises(VibrInputError, match="pm_radius"):
+        estimate_depth(s, views=[0], pm_radius=0)
     # the coarse-level path (the default) and the full-size sweep both return maps at the
     # scene's size
     for kw in ({}, {"sweep_scale": 1.0}):

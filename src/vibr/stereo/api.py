@@ -594,6 +594,9 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
         raise VibrInputError(f"sweep_scale must be in (0, 1], got {opt.sweep_scale}", scene.root)
     if int(opt.coarse_iter) != opt.coarse_iter or opt.coarse_iter < 0:
         raise VibrInputError(f"coarse_iter must be an integer >= 0, got {opt.coarse_iter}", scene.root)
+    r = opt.lightfield.get("pm_radius")  # lightfield_depth's refinement window half-size
+    if r is not None and (int(r) != r or r < 1):
+        raise VibrInputError(f"pm_radius must be an integer >= 1, got {r}", scene.root)
     method = opt.method
     if method == "auto":
         method = "lightfield" if scene.grid is not None else "mvs"
