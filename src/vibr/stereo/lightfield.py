@@ -214,8 +214,8 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
         n_best = max(1, min(int(n_best), len(nb)))
         res = _sweep_planes(img, cams, ref, nb, dr, desc=f"light-field sweep {scene.views[ref].name}",
                             n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
-                            mem_bytes=mem_bytes, eps=eps, pm_iter=pm_iter, pm_views=pm_views, pm_radius=pm_radius,
-                            pm_stride=pm_stride, pm_sigma_c=pm_sigma_c, pm_sigma_s=pm_sigma_s,
+                            mem_bytes=mem_bytes, eps=eps, pm_iter=pm_iter, pm_views=pm_views,
+                            pm_radius=pm_radius, pm_stride=pm_stride, pm_sigma_c=pm_sigma_c, pm_sigma_s=pm_sigma_s,
                             median_radius=median_radius, coarse=(float(pm_coarse_scale), int(pm_coarse_iter)))
         disp = -(a + b * res.inv_depth)
         conf = res.confident
