@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from vibr.errors import VibrInputError
 from vibr.render.operators import Splat
 from vibr.render.solver import QuadraticModel, fista
 
@@ -78,6 +79,36 @@ def test_synthetic_exact_depth_40db(synthetic_grid, method):
     assert set(r.times) >= {"geometry", "weights", "init", "assembly", "solve", "total"}
     if method != "savsr":
         assert len(r.outer) == r.params["n_outer"]
+
+
+def _pass_iterations(r):
+    ends = r.outer[1:] + [len(r.energy)]
+    return [b - a - 1 for a, b in zip(r.outer, ends)]  # each pass records its start energy too
+
+
+def test_tol_outer_stops_the_passes_before_the_last(synthetic_grid):
+    """``tol_outer`` governs the passes before the last, ``tol`` the last one: a loose
+    ``tol_outer`` ends the first pass at ``min_iter``, the last pass still runs to ``tol``,
+    every pass's energy never increases; the paper preset stops every pass at ``tol``."""
+    from vibr.render import render
+    from vibr.render.methods import method_params, paper_params
+
+    tgt = synthetic_grid.views[4]
+    tight = render(synthetic_grid, tgt, "gradient", tol_outer=1e-4)
+    loose = render(synthetic_grid, tgt, "gradient", tol_outer=0.5)
+    it_tight, it_loose = _pass_iterations(tight), _pass_iterations(loose)
+    assert it_loose[0] == loose.params["min_iter"] < it_tight[0]
+    assert it_loose[1] > it_tight[1]  # the last pass makes up for it, stopping at tol
+    for r in (tight, loose):
+        for a, b in zip(r.outer, r.outer[1:] + [len(r.energy)]):
+            e = np.asarray(r.energy[a:b])
+            assert np.all(np.diff(e) <= 1e-9 * np.abs(e[:-1]))
+    assert abs(loose.metrics["psnr"] - tight.metrics["psnr"]) < 0.5
+    assert method_params("gradient")["tol_outer"] == 3e-4
+    assert method_params("gradient", **paper_params({}))["tol_outer"] == method_params("gradient")["tol"]
+    assert paper_params({"tol": 1e-6})["tol_outer"] == 1e-6
+    with pytest.raises(VibrInputError, match="tol_outer"):
+        method_params("gradient", tol_outer=-1.0)
 
 
 def test_vibr_render_function_and_package(synthetic_grid):
