@@ -159,8 +159,8 @@ def stage_traffic(S, sources, shape, n_outer):
     * depth preparation: read the depth, write z, z_x, z_y (float64): n_src (d + 24);
     * z-buffer: read z, z_x, z_y, write the target z-buffer (float64): 24 n_src + 8 P;
     * visibility: read z, z_x, z_y and the z-buffer, write the state (1 byte): 25 n_src + 8 P;
-    * sample fields: read z, z_x, z_y, state, colour (12), its gradient (24, written
-      first), write the samples: n_src (24 + 1 + 12 + 48) + N b(S);
+    * sample fields: read z, z_x, z_y, state, colour (12; its gradient is formed from it in
+      cache), write the samples: n_src (24 + 1 + 12) + N b(S);
     * splat set-up + coverage: read xy, write the cell (x0, y0 int32, fx, fy float32; no
       row order: the samples come in block order), read it back with ∇v, colour, 1/|det|,
       write 19 planes: N (16 + 16 + 16 + 24 + 12 + 8) + 76 P;
@@ -178,7 +178,7 @@ def stage_traffic(S, sources, shape, n_outer):
     per = lambda f: getattr(S, f).nbytes / max(N, 1)  # noqa: E731
     return {
         STAGES[0]: n_src * (d + 24), STAGES[1]: 24 * n_src + 8 * P, STAGES[2]: 25 * n_src + 8 * P,
-        STAGES[3]: n_src * (24 + 1 + 12 + 48) + N * bS, STAGES[4]: N * (16 + 16 + 16 + 24 + 12 + 8) + 76 * P,
+        STAGES[3]: n_src * (24 + 1 + 12) + N * bS, STAGES[4]: N * (16 + 16 + 16 + 24 + 12 + 8) + 76 * P,
         STAGES[5]: 4 / 3 * 40 * P,
         STAGES[6]: n_outer * (N * (16 + per("inv_det") + per("sigma_z") + per("dtau_dz") + 12) + 48 * P),
     }

@@ -7,9 +7,9 @@ Steps (paper §5, docs/METHOD.md §2), per source view k:
 2. splat every pixel's quad into the target z-buffer (all views into one buffer);
 3. per pixel: warp ``tau_k``, in-target test, visibility against the z-buffer;
 4. per visible sample: ``tau``, ``∂tau/∂x_m``, ``1/|det|`` (capped), ``∂tau/∂z``, world
-   point, colour, colour gradient ``∇v`` (the renderer's own ``D``,
-   :func:`vibr.geometry.gradient.grad_image`: one discretisation for both sides of the
-   gradient term), ``sigma_z``.
+   point, colour, colour gradient ``∇v`` (the renderer's own ``D``, the rows of
+   :mod:`vibr.geometry.gradient` formed in the same pass: one discretisation for both sides
+   of the gradient term), ``sigma_z``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from numba import njit, prange
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
-from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, grad_image
+from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_row
 from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
 from .samples import Samples
 from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
@@ -97,17 +97,25 @@ def _cell_dest(key, n_cells):
 
 
 @njit(parallel=True, cache=True)
-def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, gimg, max_inv_det, sig_map, sig_scalar,
+def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, forward, max_inv_det, sig_map, sig_scalar,
                    k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
     """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples are numbered
     from ``row_off[i]`` in source order, and sample ``s`` is written at ``dest[s]``
-    (``jac``, ``src`` only when they have a row per sample)."""
+    (``jac``, ``src`` only when they have a row per sample). The image gradient ``∇v`` is
+    formed row by row from ``img`` (H, W, C) by the one gradient
+    (:func:`vibr.geometry.gradient._grad_row`, ``forward`` or central), in cache: no planar
+    copy of the image and no gradient image in memory."""
     H, W = z.shape
+    C = img.shape[2]
     use_map = sig_map.shape[0] > 0
     keep_jac = jac.shape[0] == xy.shape[0]
     keep_src = src.shape[0] == xy.shape[0]
     for i in prange(H):
         buf = np.empty(10)
+        gx = np.empty((C, W), img.dtype)
+        gy = np.empty((C, W), img.dtype)
+        for ch in range(C):
+            _grad_row(img[:, :, ch], i, forward, gx[ch], gy[ch])
         n = row_off[i]
         y = float(i)
         for j in range(W):
@@ -140,8 +148,8 @@ def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, gimg, max_
             sig[s] = sig_map[i, j] if use_map else sig_scalar
             for ch in range(3):
                 colour[s, ch] = img[i, j, ch]
-                grad[s, ch, 0] = gimg[ch, 0, i, j]
-                grad[s, ch, 1] = gimg[ch, 1, i, j]
+                grad[s, ch, 0] = gx[ch, j]
+                grad[s, ch, 1] = gy[ch, j]
 
 
 def _view_sigma(view: View, z: np.ndarray, sigma_z_default):
@@ -341,9 +349,8 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
             sig_map, sig_scalar = np.zeros((0, 0)), float(sz)
         else:
             sig_map, sig_scalar = np.ascontiguousarray(sz, dtype=np.float64), 0.0
-        gimg = grad_image(np.ascontiguousarray(v.image.transpose(2, 0, 1)), grad_scheme)
         _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
-                       v.image, gimg, float(max_inv_det), sig_map, sig_scalar, np.int32(k),
+                       v.image, grad_scheme == "forward", float(max_inv_det), sig_map, sig_scalar, np.int32(k),
                        xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
     return Samples(xy, colour, grad, jac if "jac" in keep else None, inv_det, dtau, sig, view,
                    src if "src_xy" in keep else None, X, tuple(shape))
