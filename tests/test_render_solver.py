@@ -193,3 +193,17 @@ def test_energy_gradient_matches_finite_differences(gamma):
     assert abs(fd - an) <= 1e-3 * abs(an)
     step = 0.37
     np.testing.assert_allclose(model.forward(x, model.products(x), step), x - step * g, atol=1e-5)
+
+
+def test_median_equals_numpy():
+    """The preconditioner floor's median (one partition) is np.median bit for bit: odd and
+    even sizes, ties, float32 and float64."""
+    from vibr.render.solver import median
+
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        n = int(rng.integers(1, 500))
+        x = (rng.random(n) * rng.choice([1e-3, 1.0, 1e5])).astype(rng.choice([np.float32, np.float64]))
+        if rng.random() < 0.3:
+            x = np.round(x, 1)
+        assert median(x) == float(np.median(x))

@@ -42,7 +42,7 @@ from .fused import forward_step, hessian_power, hessian_terms, power_start, row_
 from .operators import dot, grad_image_adj
 from .tv import TVProx
 
-__all__ = ["QuadraticModel", "Products", "SolveResult", "fista"]
+__all__ = ["QuadraticModel", "Products", "SolveResult", "fista", "median"]
 
 
 class Products(NamedTuple):
@@ -198,6 +198,18 @@ def _step_size(model, state, d):
     return model.lipschitz(n_iter=4, d=d, state=state), 4
 
 
+def median(x) -> float:
+    """``np.median`` of a 1-d array without NaN, from one partition (np.median partitions at
+    both middle places and checks for NaN: 10× slower at a render's 590 000 pixels); equal
+    to it bit for bit (tested)."""
+    n = x.size
+    k = n // 2
+    p = np.partition(x, k)
+    if n % 2:
+        return float(p[k])
+    return float((p[:k].max() + p[k]) / 2)  # as np.mean of the two: in x's dtype, halved exactly
+
+
 def _metric_and_step(model, precond: bool, d_floor: float, power_state):
     """(d, d⁻¹, L, power iterations): the diagonal metric of the variable-metric variant
     (``d ≥ row-sum|H|`` floored at ``d_floor · median(d)``; None without ``precond``) and the
@@ -206,7 +218,7 @@ def _metric_and_step(model, precond: bool, d_floor: float, power_state):
         return (None, None) + _step_size(model, power_state, None)
     d = model.gershgorin()
     pos = d[d > 0]
-    floor = d_floor * (float(np.median(pos)) if pos.size else 1.0)
+    floor = d_floor * (median(pos) if pos.size else 1.0)
     d = np.maximum(d, floor).astype(np.float32)
     return (d, (1.0 / d)[None]) + _step_size(model, power_state, d)
 

@@ -211,9 +211,11 @@ def robust_factor(samples: Samples, u, splat, c: float = 3.0, loss: str = "cauch
     n = len(samples)
     if loss == "none" or u is None or n == 0:
         return np.ones(n, np.float32)
+    from .solver import median
+
     bu = splat.apply(np.ascontiguousarray(u, dtype=np.float32))
     r2 = ((bu - samples.colour) ** 2).sum(1) / 3.0
-    s = c * 1.4826 * float(np.sqrt(np.median(r2)))
+    s = c * 1.4826 * float(np.sqrt(median(r2)))
     s2 = max(s * s, 1e-12)
     return (1.0 / (1.0 + r2 / s2)).astype(np.float32)
 
