@@ -50,8 +50,8 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
 * ``tol = 1e-4``: FISTA stops when an accepted step lowers the energy by less than this
   fraction (the authors' rule), in the last outer pass; ``tol_outer = 3e-4`` in the passes
   before it, which only supply the image the weights are re-estimated from: fewer
-  iterations in every case measured, PSNR within −0.003 dB or better (docs/RENDERER.md,
-  "Solver settings"). The paper preset stops every pass at ``tol``.
+  iterations at no loss in the cases measured (docs/RENDERER.md, "Solver settings"). The
+  paper preset stops every pass at ``tol``.
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -216,9 +216,9 @@ def paper_params(params: dict) -> dict:
     """The paper's units → vibr's (docs/RENDERER.md, "The paper's units"): ``alpha`` kept,
     ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
     weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``), the spatially
-    varying TV (``tv_weighting="samples"``), no view prior and plain FISTA, every outer pass run to
-    ``tol``, unless given. ``params`` holds the paper's
-    alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any other vibr parameter."""
+    varying TV (``tv_weighting="samples"``), no view prior and plain FISTA with every outer
+    pass run to ``tol``, unless given. ``params`` holds the paper's alpha / gamma / lam
+    (None: :data:`PAPER_DEFAULTS`) and any other vibr parameter."""
     out = dict(params)
     paper = {k: PAPER_DEFAULTS[k] if params.get(k) is None else float(params[k]) for k in PAPER_DEFAULTS}
     if params.get("scale") not in (None, 255.0):

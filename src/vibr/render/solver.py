@@ -200,8 +200,8 @@ def _step_size(model, state, d):
 
 def median(x) -> float:
     """``np.median`` of a 1-d array without NaN, from one partition (np.median partitions at
-    both middle places and checks for NaN: 10× slower at a render's 590 000 pixels); equal
-    to it bit for bit (tested)."""
+    both middle places and checks for NaN, several times slower); equal to it bit for bit
+    (tested)."""
     n = x.size
     k = n // 2
     p = np.partition(x, k)
