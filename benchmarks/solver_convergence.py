@@ -38,8 +38,8 @@ def main(argv=None):
         sys.exit(f"unknown case among {names} (known: {', '.join(c['name'] for c in SD.case_list())})")
     cache = SceneCache(data_dir(a.data))
     variants = [("plain, default stop", dict(precond=False)), ("preconditioned, default stop", dict(precond=True)),
-                ("plain, converged", dict(precond=False, max_iter=600, tol=1e-7, tol_outer=1e-7)),
-                ("preconditioned, converged", dict(precond=True, max_iter=600, tol=1e-7, tol_outer=1e-7))]
+                ("plain, converged", dict(precond=False, max_iter=600, tol=1e-7)),
+                ("preconditioned, converged", dict(precond=True, max_iter=600, tol=1e-7))]
     print("| case | solver | PSNR dB | iterations (per pass) | energy after pass 1 | s |\n|---|---|---|---|---|---|")
     for case in cases:
         src, tv = SD._sources(cache, case)

@@ -5,7 +5,7 @@ ground-truth and planar geometry: PSNR (dB, covered pixels, 2-pixel border), DSS
 power iterations and solve time for ``n_outer`` 2 vs 3 and ``tv_iter`` 1, 2, 5 (bvs and
 gradient gamma = 1), and at a 20× larger lambda (2.0) where the TV prox matters more.
 With ``--tol-outer``: the stopping tolerance of the outer passes before the last,
-``tol_outer`` 1e-4 (every pass at ``tol``), 3e-4 (the default) and 1e-3, with each method's
+``tol_outer`` 1e-4 (every pass at ``tol``, the default), 3e-4 and 1e-3, with each method's
 defaults; the FISTA iterations are given per pass.
 
     python benchmarks/solver_settings.py

@@ -52,12 +52,14 @@ def _int(name: str, v, *, lo: int, none_ok: bool = False) -> None:
 
 def check_render_params(p: dict) -> dict:
     """Check a filled render-parameter dict (see the module docstring); returns it."""
-    for k in ("alpha", "gamma", "lam", "d_floor", "ulr_beta_res", "tol", "tol_outer"):
+    for k in ("alpha", "gamma", "lam", "d_floor", "ulr_beta_res", "tol"):
         if k in p:
             _real(k, p[k], lo=0.0)
     for k in ("sigma_s", "scale", "grad_max"):
         if k in p:
             _real("intensity_scale (scale)" if k == "scale" else k, p[k], lo=0.0, lo_open=True)
+    if "tol_outer" in p:
+        _real("tol_outer", p["tol_outer"], lo=0.0, none_ok=True)
     if "sigma_z" in p:
         _real("sigma_z", p["sigma_z"], lo=0.0, lo_open=True, none_ok=True)
     if "hole_threshold" in p:

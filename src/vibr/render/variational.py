@@ -268,7 +268,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
                 callback(_o, k, e, tr)
 
         # a pass before the last only supplies the image the weights are re-estimated from
-        tol = p["tol"] if o == n_outer - 1 else p.get("tol_outer", p["tol"])
+        tol = p["tol"] if o == n_outer - 1 or p.get("tol_outer") is None else p["tol_outer"]
         res = fista(model, u, max_iter=p["max_iter"], tol=tol, min_iter=p["min_iter"],
                     tv_iter=p["tv_iter"], precond=p["precond"], d_floor=p["d_floor"], prox=prox,
                     callback=cb, power_state=power_state)
