@@ -49,9 +49,8 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   iterations where the sample density is uneven (docs/RENDERER.md "Preconditioned solver").
 * ``tol = 1e-4``: FISTA stops when an accepted step lowers the energy by less than this
   fraction (the authors' rule); ``tol_outer = None``: the passes before the last stop at
-  ``tol`` too. A looser ``tol_outer`` (3e-4) saves iterations at the same mean PSNR, but moves
-  single cases by up to ±0.1 dB, so it is not the default (docs/RENDERER.md, "Solver
-  settings").
+  ``tol`` too. A looser ``tol_outer`` saves iterations at the same mean PSNR but moves single
+  scenes' results, so it is not the default (docs/RENDERER.md, "Solver settings").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
