@@ -92,3 +92,22 @@ def print_render_digest():
     _, terms = hessian_terms(A, None, a, b, None, 1.0, 0.0)
     res["kernels"] = [float(v).hex() for v in (dot(a, b), tv_value(a), tv_value(a, False), *terms)]
     print(json.dumps({"threads": numba.get_num_threads(), "results": res}), flush=True)
+
+
+def write_and_hang(ctx, task):
+    """Write ``TASK.txt`` atomically; the first time, announce the temporary path (and this
+    process) in ``TASK.tmp`` and hang inside the write: for a test that terminates the worker
+    mid-write (the run then reruns the task, which completes)."""
+    import time
+
+    from vibr.io.atomic import atomic_path
+
+    folder = Path(ctx)
+    marker = folder / f"{task}.tmp"
+    first = not marker.exists()
+    with atomic_path(folder / f"{task}.txt") as tmp:
+        Path(tmp).write_text("partial" if first else f"result of {task}\n")
+        if first:
+            marker.write_text(f"{tmp}\n{os.getpid()}")
+            time.sleep(120)
+    return task

@@ -133,6 +133,37 @@ def test_dask_round_trip_and_transient_errors_retried(tmp_path, client):
     assert run_tasks(T.fail_once, ["d", "e"], setup=str, setup_args=(str(tmp_path),), executor=2) == ["d", "e"]
 
 
+def test_a_terminated_pool_worker_leaves_no_partial_file(tmp_path):
+    """A broken pool terminates its other workers (SIGTERM) while they may be writing: the
+    worker removes its half-written file (vibr.io.atomic) and exits, instead of leaving a
+    ``.part`` file behind (a race the killed-worker test below hit now and then); the run
+    reruns the task and completes."""
+    import signal
+    import threading
+    import time
+
+    out = {}
+
+    def run():
+        out["res"] = run_tasks(T.write_and_hang, ["a"], setup=str, setup_args=(str(tmp_path),), executor=2)
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    marker = tmp_path / "a.tmp"
+    deadline = time.monotonic() + 120
+    while not marker.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.2)  # the marker is written: the worker now sleeps inside the write
+    tmp, pid = marker.read_text().split("\n")
+    assert Path(tmp).exists()
+    os.kill(int(pid), signal.SIGTERM)
+    t.join(90)
+    assert not t.is_alive(), "the run waits on a terminated worker"
+    assert out["res"] == ["a"]
+    assert (tmp_path / "a.txt").read_text() == "result of a\n"
+    assert not list(tmp_path.glob(".*.part*"))  # the first attempt's file removed
+
+
 @pytest.mark.parametrize("engine", ["processes", "dask"])
 def test_a_killed_worker_loses_nothing(tmp_path, engine, request):
     """A task kills its own worker process the first time: the run still completes with every

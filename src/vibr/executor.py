@@ -49,6 +49,7 @@ import logging
 import multiprocessing
 import os
 import pickle
+import signal
 import tempfile
 import threading
 import uuid
@@ -229,10 +230,22 @@ def _run_serial(fn, tasks, setup, setup_args, desc):
 _PROCESS_CONTEXT: Any = None
 
 
+def _on_sigterm(signum, frame) -> None:
+    """A pool whose worker died terminates the others (SIGTERM): their half-written outputs
+    (:func:`vibr.io.atomic.atomic_path`) are removed before the process ends. Through
+    ``os._exit``: an exception raised here would be caught as the running task's error and
+    leave the process alive, for the pool to wait on."""
+    from .io.atomic import remove_partial
+
+    remove_partial()
+    os._exit(128 + signum)
+
+
 def _init_process(threads: int, setup, args_file: str) -> None:
     """Pool initializer: check the numba thread count, then build this process's context once."""
     global _PROCESS_CONTEXT
     os.environ[_THREADS_VAR] = str(threads)  # already inherited; kept for what imports numba later
+    signal.signal(signal.SIGTERM, _on_sigterm)
     _prepare_worker()
     with open(args_file, "rb") as f:
         setup_args = pickle.load(f)

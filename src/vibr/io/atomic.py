@@ -6,6 +6,9 @@ import contextlib
 import os
 import tempfile
 
+#: temporary files of the writes in progress in this process (:func:`remove_partial`)
+_ACTIVE: set = set()
+
 
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None):
@@ -22,6 +25,7 @@ def atomic_path(path, suffix: str | None = None):
         suffix = os.path.splitext(path)[1]
     fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".part" + suffix, dir=folder)
     os.close(fd)
+    _ACTIVE.add(tmp)
     try:
         yield tmp
         # mkstemp makes the file private (0600); give it the mode a plain open() would
@@ -33,3 +37,13 @@ def atomic_path(path, suffix: str | None = None):
         with contextlib.suppress(OSError):
             os.remove(tmp)
         raise
+    finally:
+        _ACTIVE.discard(tmp)
+
+
+def remove_partial() -> None:
+    """Remove the temporary files of this process's writes in progress: for a process about
+    to end without unwinding its stack (a signal handler followed by ``os._exit``)."""
+    for tmp in list(_ACTIVE):
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
