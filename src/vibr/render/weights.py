@@ -23,6 +23,7 @@ from numba import njit, prange
 from ..geometry.samples import Samples
 from ..geometry.gradient import _grad_row
 from .operators import _row_coef, _sum_in_order, accumulate_bucket, sample_at
+from .solver import median
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
            "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior"]
@@ -211,8 +212,6 @@ def robust_factor(samples: Samples, u, splat, c: float = 3.0, loss: str = "cauch
     n = len(samples)
     if loss == "none" or u is None or n == 0:
         return np.ones(n, np.float32)
-    from .solver import median
-
     bu = splat.apply(np.ascontiguousarray(u, dtype=np.float32))
     r2 = ((bu - samples.colour) ** 2).sum(1) / 3.0
     s = c * 1.4826 * float(np.sqrt(median(r2)))
