@@ -152,6 +152,29 @@ def test_samples_are_sorted_by_target_cell():
         assert getattr(s, f).dtype == np.float32
 
 
+@pytest.mark.parametrize("band", [1, 3, 10_000])
+def test_samples_do_not_depend_on_the_fields_band(monkeypatch, band):
+    """The fields pass goes over every view band by band (FIELDS_BAND_ROWS rows per
+    thread): any band gives the same samples bit for bit, with views of different sizes
+    (one at half resolution, which ends its rows in an earlier band) and a sigma_z map."""
+    from vibr.geometry import sampling
+    from vibr.io.images import scaled_scene
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("free", n_views=5, width=48, height=40, seed=1)
+    views = list(sc.views)
+    views[2] = scaled_scene(Scene([views[2]]), 0.5).views[0]
+    views[3] = views[3].replace(sigma_z=np.full(views[3].depth.shape, 0.05, np.float32))
+    src, tg = Scene(views[1:]), views[0]
+    ref = compute_samples(src, tg, keep=("jac", "src_xy"))
+    monkeypatch.setattr(sampling, "FIELDS_BAND_ROWS", band)
+    s = compute_samples(src, tg, keep=("jac", "src_xy"))
+    assert len(s) > 500 and set(np.unique(s.view)) == {0, 1, 2, 3}
+    assert np.unique(s.sigma_z).size > 1  # the map and the scalars
+    for f in ("xy", "colour", "grad", "jac", "inv_det", "dtau_dz", "sigma_z", "view", "src_xy", "X"):
+        np.testing.assert_array_equal(getattr(s, f), getattr(ref, f), err_msg=f)
+
+
 def test_optional_fields_are_computed_only_when_kept():
     """jac and src_xy (no default render reads them) are None unless kept; the other fields
     are the same either way, and the footprint PSF asks for what it needs."""
