@@ -152,12 +152,16 @@ def test_samples_are_sorted_by_target_cell():
         assert getattr(s, f).dtype == np.float32
 
 
-@pytest.mark.parametrize("band", [1, 3, 10_000])
-def test_samples_do_not_depend_on_the_fields_band(monkeypatch, band):
-    """The fields pass goes over every view band by band (FIELDS_BAND_ROWS rows per
-    thread): any band gives the same samples bit for bit, with views of different sizes
-    (one at half resolution, which ends its rows in an earlier band) and a sigma_z map."""
-    from vibr.geometry import sampling
+@pytest.mark.parametrize("threads", [1, 2])
+def test_fields_of_views_of_two_sizes(threads):
+    """Views of different sizes (one at half resolution), one with a sigma_z map: each
+    sample's fields are its source pixel's, from the warp (vibr.geometry.warp.warp_view), the
+    image and its gradient (grad_image), with one thread or two."""
+    import numba
+
+    from vibr.geometry.depth import depth_derivatives
+    from vibr.geometry.gradient import grad_image
+    from vibr.geometry.warp import warp_view
     from vibr.io.images import scaled_scene
     from vibr.synthetic import make_scene
 
@@ -166,13 +170,29 @@ def test_samples_do_not_depend_on_the_fields_band(monkeypatch, band):
     views[2] = scaled_scene(Scene([views[2]]), 0.5).views[0]
     views[3] = views[3].replace(sigma_z=np.full(views[3].depth.shape, 0.05, np.float32))
     src, tg = Scene(views[1:]), views[0]
-    ref = compute_samples(src, tg, keep=("jac", "src_xy"))
-    monkeypatch.setattr(sampling, "FIELDS_BAND_ROWS", band)
-    s = compute_samples(src, tg, keep=("jac", "src_xy"))
-    assert len(s) > 500 and set(np.unique(s.view)) == {0, 1, 2, 3}
-    assert np.unique(s.sigma_z).size > 1  # the map and the scalars
-    for f in ("xy", "colour", "grad", "jac", "inv_det", "dtau_dz", "sigma_z", "view", "src_xy", "X"):
-        np.testing.assert_array_equal(getattr(s, f), getattr(ref, f), err_msg=f)
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        s = compute_samples(src, tg, keep=("jac", "src_xy"))
+    finally:
+        numba.set_num_threads(before)
+    assert set(np.unique(s.view)) == {0, 1, 2, 3} and np.unique(s.sigma_z).size > 1
+    for k, v in enumerate(src.views):
+        m = s.view == k
+        x, y = s.src_xy[m, 0], s.src_xy[m, 1]
+        assert m.sum() > 50 and x.max() < v.camera.width and y.max() < v.camera.height
+        z = np.asarray(v.depth, np.float64)
+        w = warp_view(v.camera, tg.camera, z, *depth_derivatives(z))
+        np.testing.assert_allclose(s.xy[m], w["tau"][y, x], rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(s.jac[m], w["jac"][y, x], rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(s.dtau_dz[m], w["dtau_dz"][y, x], rtol=1e-5, atol=1e-9)
+        np.testing.assert_array_equal(s.colour[m], v.image[y, x])
+        g = grad_image(np.ascontiguousarray(v.image.transpose(2, 0, 1)))  # (3, 2, H, W)
+        np.testing.assert_array_equal(s.grad[m], g[:, :, y, x].transpose(2, 0, 1))
+        sz = np.broadcast_to(v.sigma_z if v.sigma_z is not None else s.sigma_z[m][0], z.shape)
+        np.testing.assert_array_equal(s.sigma_z[m], np.asarray(sz, np.float32)[y, x])
+        xy, _ = v.camera.project(s.X[m])
+        np.testing.assert_allclose(xy, s.src_xy[m], atol=2e-3)  # X is float32
 
 
 def test_optional_fields_are_computed_only_when_kept():

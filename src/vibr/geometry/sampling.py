@@ -17,7 +17,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import numba
 from numba import njit, prange
 
 from ..camera import Camera
@@ -36,11 +35,6 @@ __all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL", "OPTIONAL_
 #: warp's Jacobian (the footprint PSF) and the source pixel (diagnostics, tests); 16 + 8 of
 #: the 108 bytes a sample takes.
 OPTIONAL_FIELDS = ("jac", "src_xy")
-
-#: Rows of every view the fields pass does per thread before the next band (see
-#: :func:`_write_fields`): the samples a band writes stay in cache, and a band is long
-#: enough that the kernel launches (one per view and band) cost little.
-FIELDS_BAND_ROWS = 8
 
 #: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
 #: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
@@ -103,12 +97,12 @@ def _cell_dest(key, n_cells):
 
 
 @njit(parallel=True, cache=True)
-def _fields_kernel(r0, r1, state, row_off, dest, z, zx, zy, M, c, A, Ck, img, forward, max_inv_det, sig_map,
-                   sig_scalar, k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
-    """Write the fields of the VISIBLE pixels of rows ``r0`` to ``r1 − 1`` of one view; row
-    ``i``'s samples are numbered from ``row_off[i]`` in source order, and sample ``s`` is
-    written at ``dest[s]`` (``jac``, ``src`` only when they have a row per sample). The
-    image gradient ``∇v`` is formed row by row from ``img`` (H, W, C) by the one gradient
+def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, forward, max_inv_det, sig_map, sig_scalar,
+                   k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
+    """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples are numbered
+    from ``row_off[i]`` in source order, and sample ``s`` is written at ``dest[s]``
+    (``jac``, ``src`` only when they have a row per sample). The image gradient ``∇v`` is
+    formed row by row from ``img`` (H, W, C) by the one gradient
     (:func:`vibr.geometry.gradient._grad_row`, ``forward`` or central), in cache: no planar
     copy of the image and no gradient image in memory."""
     H, W = z.shape
@@ -116,7 +110,7 @@ def _fields_kernel(r0, r1, state, row_off, dest, z, zx, zy, M, c, A, Ck, img, fo
     use_map = sig_map.shape[0] > 0
     keep_jac = jac.shape[0] == xy.shape[0]
     keep_src = src.shape[0] == xy.shape[0]
-    for i in prange(r0, min(r1, H)):
+    for i in prange(H):
         buf = np.empty(10)
         gx = np.empty((C, W), img.dtype)
         gy = np.empty((C, W), img.dtype)
@@ -156,33 +150,6 @@ def _fields_kernel(r0, r1, state, row_off, dest, z, zx, zy, M, c, A, Ck, img, fo
                 colour[s, ch] = img[i, j, ch]
                 grad[s, ch, 0] = gx[ch, j]
                 grad[s, ch, 1] = gy[ch, j]
-
-
-def _write_fields(prepped, states, offsets, dest, max_inv_det, sigma_z_default, forward, out) -> None:
-    """The fields pass (:func:`_fields_kernel`) over every view into the sample arrays
-    ``out`` = (xy, jac, inv_det, dtau, X, colour, grad, src, sig, view).
-
-    A band of rows of every view, then the next band: where the views map a row to nearby
-    target rows (a light field, a hand-held sweep), the samples of one target cell, one per
-    view and adjacent in the sorted arrays, are all written while their cache lines are
-    held, instead of each line being fetched again by every view's whole pass
-    (docs/RENDERER.md, "Speed round 4"). The samples do not depend on the band."""
-    per_view = []
-    for k, ((v, z, zx, zy, M, c), (state, vis_rows), row_off) in enumerate(zip(prepped, states, offsets)):
-        if int(vis_rows.sum()) == 0:
-            continue
-        A = np.ascontiguousarray(v.camera.R.T @ np.linalg.inv(v.camera.K))
-        sz = _view_sigma(v, z, sigma_z_default)
-        if np.ndim(sz) == 0:
-            sig_map, sig_scalar = np.zeros((0, 0)), float(sz)
-        else:
-            sig_map, sig_scalar = np.ascontiguousarray(sz, dtype=np.float64), 0.0
-        per_view.append((state, row_off, dest, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
-                         v.image, forward, float(max_inv_det), sig_map, sig_scalar, np.int32(k)) + tuple(out))
-    band = FIELDS_BAND_ROWS * numba.get_num_threads()
-    for r0 in range(0, max((p[1].shape[0] for p in prepped), default=0), band):
-        for args in per_view:
-            _fields_kernel(r0, r0 + band, *args)
 
 
 def _view_sigma(view: View, z: np.ndarray, sigma_z_default):
@@ -342,7 +309,7 @@ def _visibility(prepped, zbuf, vis_threshold):
 
 def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep) -> Samples:
     """The fields of every visible pixel, sorted by target cell (:func:`_cell_dest`): one
-    allocation for all samples, written in place by the fields pass (:func:`_write_fields`).
+    allocation for all samples, each view's kernel writing its samples in place.
 
     The order matters for speed only: the renderer's passes over the samples, bucketed by
     target row, then stream through memory instead of gathering from every view's stretch
@@ -373,7 +340,17 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
     src = np.empty((N if "src_xy" in keep else 0, 2), np.int32)
     sig = np.empty(N, f4)
     view = np.empty(N, np.int32)
-    _write_fields(prepped, states, offsets, dest, max_inv_det, sigma_z_default, grad_scheme == "forward",
-                  (xy, jac, inv_det, dtau, X, colour, grad, src, sig, view))
+    for k, ((v, z, zx, zy, M, c), (state, vis_rows), row_off) in enumerate(zip(prepped, states, offsets)):
+        if int(vis_rows.sum()) == 0:
+            continue
+        A = np.ascontiguousarray(v.camera.R.T @ np.linalg.inv(v.camera.K))
+        sz = _view_sigma(v, z, sigma_z_default)
+        if np.ndim(sz) == 0:
+            sig_map, sig_scalar = np.zeros((0, 0)), float(sz)
+        else:
+            sig_map, sig_scalar = np.ascontiguousarray(sz, dtype=np.float64), 0.0
+        _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
+                       v.image, grad_scheme == "forward", float(max_inv_det), sig_map, sig_scalar, np.int32(k),
+                       xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
     return Samples(xy, colour, grad, jac if "jac" in keep else None, inv_det, dtau, sig, view,
                    src if "src_xy" in keep else None, X, tuple(shape))
