@@ -20,8 +20,13 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
-def main():
-    if "--tol-outer" in sys.argv[1:]:
+def main(argv=None):
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tol-outer", action="store_true",
+                    help="the table of tol_outer (1e-4, 3e-4, 1e-3) instead of n_outer / tv_iter")
+    if ap.parse_args(argv).tol_outer:
         return tol_outer_table()
     from cotton_table import DATA, neighbours
     from vibr.geometry import compute_samples

@@ -177,6 +177,7 @@ def test_fields_of_views_of_two_sizes(threads):
     finally:
         numba.set_num_threads(before)
     assert set(np.unique(s.view)) == {0, 1, 2, 3} and np.unique(s.sigma_z).size > 1
+    assert all(v.sigma_z is not None for v in src.views)
     for k, v in enumerate(src.views):
         m = s.view == k
         x, y = s.src_xy[m, 0], s.src_xy[m, 1]
@@ -189,7 +190,7 @@ def test_fields_of_views_of_two_sizes(threads):
         np.testing.assert_array_equal(s.colour[m], v.image[y, x])
         g = grad_image(np.ascontiguousarray(v.image.transpose(2, 0, 1)))  # (3, 2, H, W)
         np.testing.assert_array_equal(s.grad[m], g[:, :, y, x].transpose(2, 0, 1))
-        sz = np.broadcast_to(v.sigma_z if v.sigma_z is not None else s.sigma_z[m][0], z.shape)
+        sz = np.broadcast_to(v.sigma_z, z.shape)  # a scalar or, for one view, a map
         np.testing.assert_array_equal(s.sigma_z[m], np.asarray(sz, np.float32)[y, x])
         xy, _ = v.camera.project(s.X[m])
         np.testing.assert_allclose(xy, s.src_xy[m], atol=2e-3)  # X is float32
