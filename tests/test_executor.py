@@ -133,6 +133,23 @@ def test_dask_round_trip_and_transient_errors_retried(tmp_path, client):
     assert run_tasks(T.fail_once, ["d", "e"], setup=str, setup_args=(str(tmp_path),), executor=2) == ["d", "e"]
 
 
+def test_two_local_clusters_at_once_share_no_port():
+    """start_local_cluster serves the scheduler's HTTP on a free loopback port: two clusters
+    at once (the Dask tests' cluster and a `--dask local` run) start without distributed's
+    "port 8787 already in use" warning, and nothing listens beyond 127.0.0.1."""
+    import warnings
+
+    from vibr.executor import start_local_cluster
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with start_local_cluster(1) as a, start_local_cluster(1) as b:
+            links = [c.scheduler.http_server.port for c in (a, b)]
+            addrs = [c.scheduler.address for c in (a, b)]
+    assert 8787 not in links and links[0] != links[1]
+    assert all(x.startswith("tcp://127.0.0.1:") for x in addrs)
+
+
 def test_a_terminated_pool_worker_leaves_no_partial_file(tmp_path):
     """A broken pool terminates its other workers (SIGTERM) while they may be writing: the
     worker removes its half-written file (vibr.io.atomic) and exits, instead of leaving a

@@ -393,8 +393,11 @@ def start_local_cluster(n_workers: int = 2):
     # adaptive mmap threshold: every large numpy temporary is then a fresh mmap, page-faulted
     # in and unmapped again, and a fly-through frame took ~25 % longer than in a plain process
     # (docs/SCALE.md, "Dask's malloc setting"). None removes the key (distributed's rule).
+    # the scheduler always serves HTTP (its dashboard, or health and metrics): on a free port of
+    # the loopback, not on the fixed :8787 (None means that default), which a second cluster
+    # or a user's own Dask dashboard would already hold
     with dask.config.set({f"{_PRE_SPAWN}.MALLOC_TRIM_THRESHOLD_": None}):
-        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=None,
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0",
                             env={_THREADS_VAR: str(threads)}, silence_logs=_logging.ERROR)
 
 
