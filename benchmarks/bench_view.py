@@ -21,7 +21,7 @@ time is taken when the rendered image has been encoded and queued to the client
 
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
-    python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic]
+    python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic] [--numba-threads default]
     python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu | --browser-timeline | --ab-arena
                                            (A/B comparisons, alternating in one process)
 """
@@ -39,8 +39,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from vibr.viewer.browser import free_port
 
 _REPO = Path(__file__).resolve().parents[1]
 
@@ -70,7 +68,7 @@ def _viewer_page(scene, points: str, on_load=None):
     from playwright.sync_api import sync_playwright
 
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings
-    from vibr.viewer.browser import launch_chromium
+    from vibr.viewer.browser import free_port, launch_chromium
 
     v = Viewer(scene, ViewerOptions(port=free_port(), points=points,
                                     settings=ViewSettings(n_views=8, full_long_side=768)))
@@ -179,7 +177,7 @@ def _startup_once(scene_dir: str, scale: float, cache_dir: str) -> None:
 
     from vibr.depthcache import load_scene_cached
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings, scene_with_depth
-    from vibr.viewer.browser import launch_chromium
+    from vibr.viewer.browser import free_port, launch_chromium
 
     stages = {"imports": time.perf_counter() - t_proc}
     cpu = {}
@@ -230,11 +228,12 @@ def _startup_once(scene_dir: str, scale: float, cache_dir: str) -> None:
                       "cpu": dict(zip([k for k in stages if k != "imports" and not k.startswith(" ")], cpu.values()))}))
 
 
-def fountain(scene_dir: Path, scale: float) -> dict:
+def fountain(scene_dir: Path, scale: float, numba_threads: str = "viewer") -> dict:
     out = {}
     with tempfile.TemporaryDirectory(prefix="vibr-view-cache-") as cache:
         for label in ("cold", "warm"):
-            r = subprocess.run([sys.executable, __file__, "--_startup", str(scene_dir), str(scale), cache],
+            r = subprocess.run([sys.executable, __file__, "--_startup", str(scene_dir), str(scale), cache,
+                                "--numba-threads", numba_threads],
                                capture_output=True, text=True, timeout=900)
             if r.returncode != 0:
                 raise RuntimeError(f"{label} start failed: {r.stderr[-2000:]}")
@@ -555,7 +554,14 @@ def main(argv=None) -> int:
     ap.add_argument("--ab-arena", action="store_true",
                     help="only renders on a thread: one malloc arena against per-thread arenas")
     ap.add_argument("--_arena-child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--numba-threads", choices=("viewer", "default"), default="viewer",
+                    help="'viewer' (default): two numba threads per core waiting passively, as `vibr view` "
+                         "sets them (vibr._threads); 'default': numba's one per core, libgomp's spin wait")
     a = ap.parse_args(argv)
+    if a.numba_threads == "viewer":  # before vibr imports numba, as `vibr view` does
+        from vibr._threads import oversubscribe_render_threads
+
+        oversubscribe_render_threads()
     from vibr._malloc import tune_malloc
 
     tune_malloc()  # as `vibr view` does (VIBR_MALLOC=default: glibc's own settings)
@@ -586,7 +592,11 @@ def main(argv=None) -> int:
     if a._startup:
         _startup_once(a._startup[0], float(a._startup[1]), a._startup[2])
         return 0
-    print(f"cpus: {os.cpu_count()}, load average: {os.getloadavg()[0]:.1f} (shared machine)", flush=True)
+    import numba
+
+    print(f"cpus: {os.cpu_count()}, load average: {os.getloadavg()[0]:.1f} (shared machine); numba threads "
+          f"{numba.config.NUMBA_NUM_THREADS}, OMP_WAIT_POLICY {os.environ.get('OMP_WAIT_POLICY', 'unset')}",
+          flush=True)
     rows = []
     if not a.skip_synthetic:
         s = synthetic(a.updates, a.points, a.browser_nice)
@@ -596,7 +606,7 @@ def main(argv=None) -> int:
                  ("synthetic 768², 8 sources: full (768²), update → sent", _stats(s["full"]), "≤ 1.5 s"),
                  ("  the full render itself", _stats(s["full_render"]), "")]
     if not a.skip_fountain:
-        f = fountain(Path(a.data) / "strecha_fountain-P11", 0.25)
+        f = fountain(Path(a.data) / "strecha_fountain-P11", 0.25, a.numba_threads)
         rows += [("fountain ×0.25: start → first full view, cold (depth estimated)",
                   f"{f['cold']['first_full_s']:6.1f} s  (depth {f['cold']['depth_s']:.1f} s)", "< 60 s"),
                  ("fountain ×0.25: start → first full view, depth cache",

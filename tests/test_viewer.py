@@ -203,8 +203,9 @@ def test_view_cli_serves_and_stops(tiny_scene, tmp_path):
 
     save_scene(tiny_scene, tmp_path / "scene")
     port = free_port()
-    p = subprocess.Popen([sys.executable, "-m", "vibr", "view", str(tmp_path / "scene"), "--port", str(port)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    env = {k: v for k, v in _env().items() if k not in ("NUMBA_NUM_THREADS", "OMP_WAIT_POLICY")}
+    p = subprocess.Popen([sys.executable, "-m", "vibr", "-v", "view", str(tmp_path / "scene"), "--port", str(port)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         line = ""
         deadline = time.monotonic() + 60
@@ -215,6 +216,9 @@ def test_view_cli_serves_and_stops(tiny_scene, tmp_path):
             assert resp.status == 200 and b"<html" in resp.read().lower()
         p.send_signal(signal.SIGINT)
         assert p.wait(timeout=20) == 0
+        from vibr._threads import cores
+
+        assert f"renders on {2 * cores()} numba threads" in p.stderr.read()  # vibr._threads
     finally:
         if p.poll() is None:
             p.kill()
@@ -340,3 +344,56 @@ def test_point_cloud_shown_while_the_camera_moves(tiny_scene, monkeypatch, mode)
     assert v.sent[7][-1].kind == "full"
     with pytest.raises(VibrInputError, match="points"):
         Viewer(tiny_scene, ViewerOptions(points="sometimes"))
+
+
+# ------------------------------------------------------------------ render threads
+_THREADS_PROBE = r"""
+import json, os, threading
+from vibr._threads import cores, oversubscribe_render_threads
+if os.environ.get("PROBE_LAUNCH_FIRST"):
+    import numba  # imported before the call: too late
+n = oversubscribe_render_threads()
+import numba, numpy as np
+from vibr.synthetic import make_scene
+from vibr.viewer import ViewRenderer, ViewSettings
+scene = make_scene("handheld", n_views=4, width=96, height=80)
+cam, st = scene.views[0].camera, ViewSettings(n_views=3)
+seen = {}
+def on_worker():  # as the viewer's render worker: numba's threads while its render solves
+    seen["image"] = ViewRenderer(scene).render(cam, st, should_stop=lambda: bool(
+        seen.setdefault("worker", numba.get_num_threads())) and False).image
+t = threading.Thread(target=on_worker)
+t.start(); t.join()
+same = bool(np.array_equal(ViewRenderer(scene, threads=1).render(cam, st).image, seen["image"]))
+print(json.dumps({"n": n, "cores": cores(), "config": numba.config.NUMBA_NUM_THREADS,
+                  "main": numba.get_num_threads(), "worker": seen["worker"],
+                  "wait": os.environ.get("OMP_WAIT_POLICY"), "same": same}))
+"""
+
+
+def _threads_probe(**env_changes):
+    env = _env()
+    for k in ("NUMBA_NUM_THREADS", "OMP_WAIT_POLICY", "PROBE_LAUNCH_FIRST"):
+        env.pop(k, None)
+    env.update(env_changes)
+    r = subprocess.run([sys.executable, "-c", _THREADS_PROBE], capture_output=True, text=True, timeout=240, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    import json
+
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def test_viewer_process_renders_on_two_threads_per_core():
+    """``vibr view``'s setting (vibr._threads): numba starts two threads per core that
+    wait passively, a render on the viewer's worker thread runs on all of them, and its
+    image is the one-thread render's, bit for bit."""
+    d = _threads_probe()
+    assert d["n"] == d["config"] == d["main"] == d["worker"] == 2 * d["cores"]
+    assert d["wait"] == "passive" and d["same"]
+
+
+def test_render_threads_keep_the_users_setting_and_an_imported_numba():
+    d = _threads_probe(NUMBA_NUM_THREADS="1")
+    assert d["n"] == d["config"] == d["main"] == 1 and d["wait"] is None and d["same"]
+    d = _threads_probe(PROBE_LAUNCH_FIRST="1")  # numba imported first: its own thread count
+    assert d["n"] == d["config"] == d["cores"] and d["wait"] is None and d["same"]

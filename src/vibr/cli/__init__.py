@@ -15,6 +15,7 @@ import sys
 
 from .. import __version__
 from .._malloc import tune_malloc
+from .._threads import oversubscribe_render_threads
 from ..errors import VibrInputError
 from ..progress import configure_logging
 
@@ -91,7 +92,21 @@ def _message(exc: VibrInputError) -> str:
     return f"{exc}; {hint}" if hint else str(exc)
 
 
+#: Process settings a command needs before numba is imported, which building the parser
+#: does (its choices come from the library's registries).
+_BEFORE_NUMBA = {"view": oversubscribe_render_threads}
+
+
+def _command_in(argv) -> str | None:
+    """The subcommand named in ``argv``: its first word that is not an option (the options
+    before a subcommand take no value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def main(argv=None) -> int:
+    setup = _BEFORE_NUMBA.get(_command_in(sys.argv[1:] if argv is None else argv))
+    if setup is not None:
+        setup()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

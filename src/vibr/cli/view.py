@@ -75,6 +75,9 @@ def run(args) -> int:
     viewer = Viewer(scene, ViewerOptions(host=args.host, port=args.port, max_points=args.max_points,
                                          points=args.points, path_out=args.path_out, settings=settings))
     url = viewer.start()
+    import numba
+
+    logger.debug("renders on %d numba threads (vibr._threads)", numba.config.NUMBA_NUM_THREADS)
     try:
         print(f"vibr view: {scene.name} ({len(scene)} views) at {url}  (Ctrl-C to stop)", flush=True)
         while True:

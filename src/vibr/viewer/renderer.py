@@ -95,9 +95,12 @@ class ViewRenderer:
     rank_points : (N, 3) array, optional
         World points used to rank the sources per camera; default a 4096-point sample of
         the depth maps.
+    threads : int, optional
+        numba threads per render; default all that numba started (in ``vibr view``, two per
+        core: :mod:`vibr._threads`). The image does not depend on it.
     """
 
-    def __init__(self, scene: Scene, rank_points: np.ndarray | None = None):
+    def __init__(self, scene: Scene, rank_points: np.ndarray | None = None, threads: int | None = None):
         from .geometry import point_cloud
 
         self.scene = scene
@@ -110,6 +113,7 @@ class ViewRenderer:
         # one render at a time: numba's default (workqueue) threading layer must not be
         # entered from two threads at once, and renders are CPU-bound anyway
         self._lock = threading.Lock()
+        self.threads = threads
         if rank_points is None:
             rank_points, _ = point_cloud(scene, 4096, seed=1)
         self.rank_points = np.asarray(rank_points, dtype=np.float64)
@@ -160,8 +164,16 @@ class ViewRenderer:
         ``should_stop()``, when given, is polled after every solver iteration; when it
         returns True the render is abandoned by raising :class:`RenderAbandoned` (a newer
         camera arrived: finishing would only delay its image)."""
+        import numba
+
         with self._lock:
-            return self._render(camera, settings, should_stop)
+            before = numba.get_num_threads()  # per calling thread
+            numba.set_num_threads(min(self.threads or numba.config.NUMBA_NUM_THREADS,
+                                      numba.config.NUMBA_NUM_THREADS))
+            try:
+                return self._render(camera, settings, should_stop)
+            finally:
+                numba.set_num_threads(before)
 
     def _render(self, camera: Camera, settings: ViewSettings, should_stop) -> ViewImage:
         t0 = time.perf_counter()
