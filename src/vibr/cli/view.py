@@ -19,6 +19,9 @@ it is still). Controls: method, gamma, lambda, number of source views, preview s
 keyframe" and "export path" write a camera_path.json (nerfstudio's schema) that
 'vibr render --path' renders. A scene without depth maps gets them estimated once at start.
 The server listens on 127.0.0.1 only unless --host says otherwise. Stop with Ctrl-C.
+Renders run on two numba threads per core that sleep between kernels, so that a browser
+drawing on the same cores slows them less (NUMBA_NUM_THREADS and OMP_WAIT_POLICY, when set,
+are kept).
 """
 
 _EPILOG = """\
