@@ -3,13 +3,13 @@
 numba's parallel loops split their iterations into equal parts, one per thread, fixed in
 advance (libgomp's static schedule). When another process takes part of one core, the
 thread on that core finishes last and every loop waits for it. Linux's autogroup
-scheduling makes this worse: a browser's drawing process in a session of its own gets as
-much of its core as the whole render process gets of both, so the render thread beside it
-gets about a third of that core. A browser without a GPU draws the viewer's page in
-software on the same cores, in bursts after every message it receives.
+scheduling can make this worse: a browser's drawing process in a session of its own is
+weighed against the whole render process, not against the one render thread beside it. A
+browser without a GPU draws the viewer's page in software on the same cores, in bursts
+after every message it receives.
 
-With twice as many numba threads as cores, each with half the work, the kernel's scheduler
-moves the waiting half onto the free core. Threads that outnumber the cores must sleep at
+With twice as many numba threads as cores, each with half the work, the operating system
+can run the share of a delayed thread on the other core. Threads that outnumber the cores must sleep at
 a loop's end (OpenMP's passive wait policy), not spin on a core another thread needs.
 A render's result does not depend on the thread count (tested bit for bit). Measurements:
 docs/VIEWER.md, "Render threads".
