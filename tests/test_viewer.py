@@ -397,3 +397,11 @@ def test_render_threads_keep_the_users_setting_and_an_imported_numba():
     assert d["n"] == d["config"] == d["main"] == 1 and d["wait"] is None and d["same"]
     d = _threads_probe(PROBE_LAUNCH_FIRST="1")  # numba imported first: its own thread count
     assert d["n"] == d["config"] == d["cores"] and d["wait"] is None and d["same"]
+
+
+def test_render_threads_must_be_positive(tiny_scene):
+    from vibr import VibrInputError
+    from vibr.viewer import ViewRenderer
+
+    with pytest.raises(VibrInputError, match="threads"):
+        ViewRenderer(tiny_scene, threads=0)

@@ -113,6 +113,10 @@ class ViewRenderer:
         # one render at a time: numba's default (workqueue) threading layer must not be
         # entered from two threads at once, and renders are CPU-bound anyway
         self._lock = threading.Lock()
+        if threads is not None and int(threads) < 1:
+            from ..errors import VibrInputError
+
+            raise VibrInputError(f"threads must be >= 1, got {threads}")
         self.threads = threads
         if rank_points is None:
             rank_points, _ = point_cloud(scene, 4096, seed=1)
@@ -168,7 +172,7 @@ class ViewRenderer:
 
         with self._lock:
             before = numba.get_num_threads()  # per calling thread
-            numba.set_num_threads(min(self.threads or numba.config.NUMBA_NUM_THREADS,
+            numba.set_num_threads(min(int(self.threads or numba.config.NUMBA_NUM_THREADS),
                                       numba.config.NUMBA_NUM_THREADS))
             try:
                 return self._render(camera, settings, should_stop)
