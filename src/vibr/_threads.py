@@ -9,10 +9,10 @@ browser without a GPU draws the viewer's page in software on the same cores, in 
 after every message it receives.
 
 With twice as many numba threads as cores, each with half the work, the operating system
-can run the share of a delayed thread on the other core. Threads that outnumber the cores must sleep at
-a loop's end (OpenMP's passive wait policy), not spin on a core another thread needs.
-A render's result does not depend on the thread count (tested bit for bit). Measurements:
-docs/VIEWER.md, "Render threads".
+can run the share of a delayed thread on the other core. Threads that outnumber the cores
+must sleep at a loop's end (OpenMP's passive wait policy), not spin on a core another
+thread needs. A render's result does not depend on the thread count (tested bit for bit).
+Measurements: docs/VIEWER.md, "Render threads".
 
 Only for processes vibr starts (``vibr view``, the viewer's benchmark), and only before
 numba is imported: numba reads ``NUMBA_NUM_THREADS`` when it is imported, libgomp reads
@@ -33,7 +33,8 @@ THREADS_PER_CORE = 2
 
 
 def cores() -> int:
-    """The cores this process may run on (its CPU affinity where the OS tells)."""
+    """The cores this process may run on (its CPU affinity where the OS tells): numba's own
+    default thread count."""
     try:
         return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
