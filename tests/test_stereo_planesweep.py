@@ -482,13 +482,12 @@ def _kernel_inputs(views, cams):
     (7×7 window every 2 px, σ_c 0.05, σ_s 3, as refine_planes): ``offs, wts, wI, sdI,
     srcs, sizes, A, b``."""
     from vibr.stereo import _kernels as kern
-    from vibr.stereo.planesweep import to_grey, window_offsets
+    from vibr.stereo.planesweep import _stack_greys, to_grey, window_offsets
 
     I = to_grey(views[0][0]).astype(np.float64)
     offs = window_offsets(3, 2)
     wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(views[0][0]))
-    srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
-    sizes = np.array([v[0].shape[:2] for v in views[1:]], np.int64)
+    srcs, sizes = _stack_greys([v[0] for v in views[1:]])
     A, b = plane_homographies(cams[0], cams[1:])
     return offs, wts, wI, sdI, srcs, sizes, A, b
 
@@ -496,22 +495,27 @@ def _kernel_inputs(views, cams):
 def test_plane_cost_kernel_matches_reference_implementation():
     """The compiled plane cost (a fast path without clamping for windows that land inside
     the source, the clamped sampler elsewhere) equals a plain numpy implementation, for
-    random slanted planes whose windows fall inside, across and outside the sources."""
+    random slanted planes whose windows fall inside, across and outside the sources, one
+    of them smaller than the others (the kernels read the sources from a zero-padded
+    stack whose rows are longer than that view's)."""
     from vibr.stereo import _kernels as kern
+    from vibr.stereo.planesweep import to_grey
 
     ref, cams, views, res, n, d = _slanted_setup(8)
     src3 = Camera.look_at([0.9, -0.2, 0.3], [1.2, 0.0, 5], [0, -1, 0], ref.K, 96, 80)
-    views.append(_textured_plane_views((n, d), [src3], blur=3.0)[0])
-    cams = cams + [src3]
+    src4 = Camera.look_at([-0.4, 0.3, 0.2], [0.0, 0.0, 5], [0, -1, 0], ref.K, 70, 58)
+    views += _textured_plane_views((n, d), [src3, src4], blur=3.0)
+    cams = cams + [src3, src4]
     offs, wts, wI, sdI, srcs, sizes, A, b = _kernel_inputs(views, cams)
+    assert len(set(map(tuple, sizes))) > 1
     rng = np.random.default_rng(1)
     w = rng.uniform(1 / 8, 1 / 2.5, ref.shape)
     gx, gy = (rng.normal(0, 2e-3, ref.shape) for _ in range(2))
     for n_best, lam1 in ((1, -1.0), (2, 0.1), (3, -1.0)):
         got = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 0.002 ** 2, w, gx, gy, lam1)
         want = _reference_plane_costs(wts.astype(np.float64), wI.astype(np.float64), sdI, offs,
-                                      list(srcs.astype(np.float64)), A, b, n_best, 0.002 ** 2,
-                                      w, gx, gy, lam1)
+                                      [to_grey(v[0]).astype(np.float64) for v in views[1:]], A, b,
+                                      n_best, 0.002 ** 2, w, gx, gy, lam1)
         assert (want == 2.0).mean() > 0.01 and (want < 2.0).mean() > 0.5  # both kinds occur
         np.testing.assert_allclose(got, want, atol=1e-5)
 

@@ -73,15 +73,20 @@ def _bilinear_clamped(srcs, v, x, y, wv, hv):
 
 
 @njit(cache=True, inline="always")
-def _bilinear_inside(srcs, v, x, y):
-    """:func:`_bilinear_clamped` for a point known to lie in [0, wv−1) × [0, hv−1) of view
-    ``v``: the same value, without the clamping."""
+def _bilinear_inside(flat, wst, x, y):
+    """:func:`_bilinear_clamped` for a point known to lie in [0, wv−1) × [0, hv−1) of a
+    view: the same value, without the clamping. ``flat`` is the view's padded image as one
+    row-major 1-d array of row stride ``wst``; the index is unsigned, so no load pays
+    numba's negative-index test."""
     x0 = int(x)
     y0 = int(y)
     fx = x - x0
     fy = y - y0
-    return ((1 - fy) * ((1 - fx) * srcs[v, y0, x0] + fx * srcs[v, y0, x0 + 1])
-            + fy * ((1 - fx) * srcs[v, y0 + 1, x0] + fx * srcs[v, y0 + 1, x0 + 1]))
+    p = np.uint64(y0 * wst + x0)
+    one = np.uint64(1)
+    row = np.uint64(wst)
+    return ((1 - fy) * ((1 - fx) * flat[p] + fx * flat[p + one])
+            + fy * ((1 - fx) * flat[p + row] + fx * flat[p + row + one]))
 
 
 @njit(cache=True, inline="always")
@@ -565,9 +570,11 @@ def support_weights(I, offs, sigma_c, sigma_s, guide):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _window_sums_inside(i, j, v, wts, wI, offs, srcs, cx, cy, cz, ex0, ex1, ex2, ey0, ey1, ey2):
+def _window_sums_inside(wts_ij, wI_ij, offf, flat, wst, cx, cy, cz, ex0, ex1, ex2, ey0, ey1, ey2):
     """The weighted window sums ``(Σ ω J, Σ ω J², Σ wI J)`` of :func:`_plane_cost` for a
-    window whose samples all land inside source ``v`` (no clamping, no test per sample)."""
+    window whose samples all land inside the source (no clamping, no test per sample);
+    ``wts_ij``, ``wI_ij`` the pixel's window weights, ``offf`` the offsets as floats,
+    ``flat``, ``wst`` the source as :func:`_bilinear_inside` reads it."""
     sJ = 0.0
     sJJ = 0.0
     sIJ = 0.0
@@ -576,29 +583,46 @@ def _window_sums_inside(i, j, v, wts, wI, offs, srcs, cx, cy, cz, ex0, ex1, ex2,
         # centre's 1/pz, computed once (the same numbers, one division per view instead
         # of one per sample)
         iz = 1.0 / cz
-        for k in range(offs.shape[0]):
-            dy = offs[k, 0]
-            dx = offs[k, 1]
-            q = _bilinear_inside(srcs, v, (cx + dx * ex0 + dy * ey0) * iz, (cy + dx * ex1 + dy * ey1) * iz)
-            wq = wts[i, j, k] * q
+        for k in range(offf.shape[0]):
+            dy = offf[k, 0]
+            dx = offf[k, 1]
+            q = _bilinear_inside(flat, wst, (cx + dx * ex0 + dy * ey0) * iz, (cy + dx * ex1 + dy * ey1) * iz)
+            wq = wts_ij[k] * q
             sJ += wq
             sJJ += wq * q
-            sIJ += wI[i, j, k] * q
+            sIJ += wI_ij[k] * q
     else:
-        for k in range(offs.shape[0]):
-            dy = offs[k, 0]
-            dx = offs[k, 1]
+        for k in range(offf.shape[0]):
+            dy = offf[k, 0]
+            dx = offf[k, 1]
             iz = 1.0 / (cz + dx * ex2 + dy * ey2)
-            q = _bilinear_inside(srcs, v, (cx + dx * ex0 + dy * ey0) * iz, (cy + dx * ex1 + dy * ey1) * iz)
-            wq = wts[i, j, k] * q
+            q = _bilinear_inside(flat, wst, (cx + dx * ex0 + dy * ey0) * iz, (cy + dx * ex1 + dy * ey1) * iz)
+            wq = wts_ij[k] * q
             sJ += wq
             sJJ += wq * q
-            sIJ += wI[i, j, k] * q
+            sIJ += wI_ij[k] * q
     return sJ, sJJ, sIJ
 
 
+@njit(cache=True)
+def _cost_setup(offs, srcs):
+    """What every :func:`_plane_cost` of one kernel call shares: the window offsets as
+    floats, the window's radius, and the sources as float64 rows (``flat``, (n, Hmax·Wmax)).
+    Why float64 and flat: the window sums read four source pixels per sample, and
+    converting them from float32 and indexing a 3-d array cost a quarter of the kernel's
+    time (the same values, so the same costs; docs/DEPTH.md)."""
+    nv = srcs.shape[0]
+    offf = offs.astype(np.float64)
+    rwin = 0
+    for k in range(offs.shape[0]):
+        rwin = max(rwin, abs(offs[k, 0]), abs(offs[k, 1]))
+    flat = np.ascontiguousarray(srcs).reshape(nv, -1).astype(np.float64)
+    return offf, rwin, flat
+
+
 @njit(cache=True, fastmath=True)
-def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, costs, lam1):
+def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes, A, b, n_best, eps2,
+                costs, lam1):
     """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
     the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
     reference pixel: the image of any 3D plane) at reference pixel (i, j). A view counts
@@ -608,14 +632,15 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
     weighted reference std of :func:`support_weights` for the window offsets ``offs``;
     ``srcs``, ``sizes``, ``A``, ``b`` as in :func:`sweep_slab`; ``costs`` (≥ nv,) scratch.
     The ZNCC is ``Σ wI J / (√(sdI² + eps2) √(var_w(J) + eps2))``, J sampled bilinearly
-    (clamped) at the plane's image of each window pixel."""
+    (clamped) at the plane's image of each window pixel. ``offf``, ``rwin``, ``flat``:
+    :func:`_cost_setup` of ``offs``, ``srcs``."""
     nv = srcs.shape[0]
     nwin = offs.shape[0]
+    wst = srcs.shape[2]
     nval = 0
     sI = np.sqrt(sdI[i, j] * sdI[i, j] + eps2)
-    rwin = 0
-    for k in range(nwin):
-        rwin = max(rwin, abs(offs[k, 0]), abs(offs[k, 1]))
+    wts_ij = wts[i, j]
+    wI_ij = wI[i, j]
     for v in range(nv):
         hv = sizes[v, 0]
         wv = sizes[v, 1]
@@ -662,7 +687,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
             if not inside:
                 break
         if inside:
-            sJ, sJJ, sIJ = _window_sums_inside(i, j, v, wts, wI, offs, srcs, cx, cy, cz, ex0, ex1,
+            sJ, sJJ, sIJ = _window_sums_inside(wts_ij, wI_ij, offf, flat[v], wst, cx, cy, cz, ex0, ex1,
                                                ex2, ey0, ey1, ey2)
             vJ = sJJ - sJ * sJ
             if vJ < 0.0:
@@ -671,7 +696,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
             nval += 1
             continue
         for k in range(nwin):
-            wk = wts[i, j, k]
+            wk = wts_ij[k]
             if wk == 0.0:
                 continue
             dy = offs[k, 0]
@@ -687,7 +712,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 
             wq = wk * q
             sJ += wq
             sJJ += wq * q
-            sIJ += wI[i, j, k] * q
+            sIJ += wI_ij[k] * q
         if bad:
             continue
         vJ = sJJ - sJ * sJ
@@ -711,17 +736,18 @@ def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, 
     H, W = w.shape
     out = np.empty((H, W))
     nv = srcs.shape[0]
+    offf, rwin, flat = _cost_setup(offs, srcs)
     for i in prange(H):
         costs = np.empty(max(nv, 1))
         for j in range(W):
-            out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], wts, wI, sdI, offs,
-                                    srcs, sizes, A, b, n_best, eps2, costs, lam1)
+            out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], wts, wI, sdI, offs, offf, rwin,
+                                    srcs, flat, sizes, A, b, n_best, eps2, costs, lam1)
     return out
 
 
 @njit(cache=True, inline="always")
-def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A, b, n_best,
-               eps2, costs, wmin, wmax, lam1, ver, seen, memo):
+def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes, A, b,
+               n_best, eps2, costs, wmin, wmax, lam1, ver, seen, memo):
     """Propagation: pixel (i, j) tries the plane of pixel (qi, qj), extended to it; returns
     1 when it evaluated the cost, else 0.
 
@@ -741,8 +767,8 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes, A
     # the cost would be the same, so it could not win
     if cw == w[i, j] and gx[qi, qj] == gx[i, j] and gy[qi, qj] == gy[i, j]:
         return 0
-    c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], wts, wI, sdI, offs, srcs, sizes, A, b,
-                    n_best, eps2, costs, lam1)
+    c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes,
+                    A, b, n_best, eps2, costs, lam1)
     if c < cost[i, j]:
         cost[i, j] = c
         w[i, j] = cw
@@ -783,6 +809,7 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
     inv_f = Kinv[0, 0]
     ver = np.zeros((H, W), np.int32)
     seen = np.full((4, H, W), -1, np.int32)
+    offf, rwin, flat = _cost_setup(offs, srcs)
     n_eval = np.zeros(max(H, W), np.int64)
     for it in range(n_iter):
         scale = 0.5 ** it
@@ -790,21 +817,21 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
             costs = np.empty(max(nv, 1))
             ne = 0
             for j in range(1, W):
-                ne += _try_plane(i, j, i, j - 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                                 A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[0], memo)
+                ne += _try_plane(i, j, i, j - 1, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
+                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[0], memo)
             for j in range(W - 2, -1, -1):
-                ne += _try_plane(i, j, i, j + 1, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                                 A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[1], memo)
+                ne += _try_plane(i, j, i, j + 1, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
+                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[1], memo)
             n_eval[i] += ne
         for j in prange(W):
             costs = np.empty(max(nv, 1))
             ne = 0
             for i in range(1, H):
-                ne += _try_plane(i, j, i - 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                                 A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[2], memo)
+                ne += _try_plane(i, j, i - 1, j, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
+                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[2], memo)
             for i in range(H - 2, -1, -1):
-                ne += _try_plane(i, j, i + 1, j, w, gx, gy, cost, wts, wI, sdI, offs, srcs, sizes,
-                                 A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[3], memo)
+                ne += _try_plane(i, j, i + 1, j, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
+                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[3], memo)
             n_eval[j] += ne
         for i in prange(H):
             costs = np.empty(max(nv, 1))
@@ -843,8 +870,8 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                         cy = bw * (u1 * Kinv[0, 1] + u2 * Kinv[1, 1] + u3 * Kinv[2, 1]) / nr
                     if cw < wmin or cw > wmax:
                         continue
-                    c = _plane_cost(i, j, cw, cx, cy, wts, wI, sdI, offs,
-                                    srcs, sizes, A, b, n_best, eps2, costs, lam1)
+                    c = _plane_cost(i, j, cw, cx, cy, wts, wI, sdI, offs, offf, rwin,
+                                    srcs, flat, sizes, A, b, n_best, eps2, costs, lam1)
                     n_eval[i] += 1
                     if c < bc:
                         bc = c
