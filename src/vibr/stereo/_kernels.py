@@ -609,8 +609,9 @@ def _cost_setup(offs, srcs):
     """What every :func:`_plane_cost` of one kernel call shares: the window offsets as
     floats, the window's radius, and the sources as float64 rows (``flat``, (n, Hmax·Wmax)).
     Why float64 and flat: the window sums read four source pixels per sample, and
-    converting them from float32 and indexing a 3-d array cost a quarter of the kernel's
-    time (the same values, so the same costs; docs/DEPTH.md)."""
+    converting each from float32 and indexing a 3-d array were a large share of the
+    innermost loop (the same values, so the same costs; docs/DEPTH.md, "The plane cost's
+    reads")."""
     nv = srcs.shape[0]
     offf = offs.astype(np.float64)
     rwin = 0
