@@ -53,3 +53,25 @@ def dottest(forward, adjoint, x_shape, y_shape, *, rng=None, tol: float = 1e-10,
         raise AssertionError(f"dottest failed: <Ax, y> = {lhs}, <x, A^H y> = {rhs}, "
                              f"|difference| = {abs(lhs - rhs):.3e} > {tol:g} * {scale:.3e}")
     return ok
+
+
+def random_model(H, W, per_pixel, seed, gamma=0.0, scheme="forward"):
+    """A :class:`vibr.render.solver.QuadraticModel` of random samples (``per_pixel`` per
+    target pixel, uniform positions, random weights and colours) on an H × W target: the
+    colour term, and with ``gamma`` the gradient term at unit weights. Returns
+    ``(model, A)``, ``A`` the colour stencil in float64."""
+    from vibr.render.operators import Splat
+    from vibr.render.solver import QuadraticModel
+
+    rng = np.random.default_rng(seed)
+    n = per_pixel * H * W
+    s = Splat(np.c_[rng.uniform(0, W - 1, n), rng.uniform(0, H - 1, n)], (H, W))
+    A, b, c = s.normal(rng.uniform(0.2, 1.0, s.n), rng.uniform(0, 1, (s.n, 3)))
+    Ag = bg = None
+    cg = 0.0
+    if gamma:
+        Ag, bg, cg = s.normal(np.ones(s.n), rng.normal(0, 0.1, (s.n, 6)))
+        Ag, bg = Ag.astype(np.float32), bg.reshape(3, 2, H, W).astype(np.float32)
+    model = QuadraticModel(A.astype(np.float32), b.astype(np.float32), c, Ag, bg, cg, 1.0, gamma, 0.01,
+                           grad_scheme=scheme)
+    return model, A

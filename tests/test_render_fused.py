@@ -62,16 +62,10 @@ def test_power_iteration_finds_the_largest_eigenvalue():
     """The one-pass power iteration of QuadraticModel.lipschitz against scipy's eigsh on
     the explicit colour stencil."""
     import scipy.sparse.linalg as spl
+    from _checks import random_model
 
-    from vibr.render.operators import Splat
-    from vibr.render.solver import QuadraticModel
-
-    rng = np.random.default_rng(5)
     H, W = 20, 23
-    xy = np.c_[rng.uniform(0, W - 1, 4 * H * W), rng.uniform(0, H - 1, 4 * H * W)]
-    s = Splat(xy, (H, W))
-    A, b, c = s.normal(rng.uniform(0.2, 1.0, s.n), rng.uniform(0, 1, (s.n, 3)))
-    model = QuadraticModel(A.astype(np.float32), b.astype(np.float32), c, None, None, 0.0, 1.0, 0.0, 0.0)
+    model, A = random_model(H, W, 4, 5)
     lam_max = spl.eigsh(stencil_to_sparse(A), k=1, which="LA")[0][0]
     assert abs(model.lipschitz(n_iter=300) / 1.05 - lam_max) < 1e-3 * lam_max
     v = power_start((3, H, W))

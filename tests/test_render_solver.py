@@ -216,18 +216,12 @@ def test_gershgorin_metric_dominates_the_hessian(gamma, scheme):
     small image) is at most 1. With the colour term alone the bound is exact (A ≥ 0
     entrywise, d its row sums: √d is an eigenvector of eigenvalue 1), so a metric off by
     any factor fails here."""
-    from vibr.render.operators import Splat
-    from vibr.render.solver import QuadraticModel, _metric_and_step
+    from _checks import random_model
 
-    rng = np.random.default_rng(3)
+    from vibr.render.solver import _metric_and_step
+
     H, W = 7, 9
-    xy = np.c_[rng.uniform(0, W - 1, 6 * H * W), rng.uniform(0, H - 1, 6 * H * W)]
-    s = Splat(xy, (H, W))
-    A, b, c = s.normal(rng.uniform(0.2, 1.0, s.n), rng.uniform(0, 1, (s.n, 3)))
-    Ag, bg, cg = s.normal(np.ones(s.n), rng.normal(0, 0.1, (s.n, 6)))
-    model = QuadraticModel(A.astype(np.float32), b.astype(np.float32), c, Ag.astype(np.float32),
-                           bg.reshape(3, 2, H, W).astype(np.float32), cg, 1.0, gamma, 0.01,
-                           grad_scheme=scheme)
+    model, _ = random_model(H, W, 6, 3, gamma, scheme)
     d = _metric_and_step(model, True, 0.05, None)[0]
     n = 3 * H * W
     Hm = np.empty((n, n))
