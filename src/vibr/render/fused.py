@@ -247,15 +247,20 @@ def _forward_kernel(x, xp, hx, hxp, r, beta, dinv, step, out):
     for t in prange((n + blk - 1) // blk):
         i0 = t * blk
         i1 = min(n, i0 + blk)
+        m = i1 - i0
+        dv = dinv[i0:i1] if use_d else dinv[:0]
         for c in range(C):
-            xc, xpc, hc, hpc, rc, oc = x[c], xp[c], hx[c], hxp[c], r[c], out[c]
+            # slices indexed from 0: with range(i0, i1) numba's negative-index wraparound
+            # made LLVM gather each element instead of loading vectors (docs/RENDERER.md)
+            xc, xpc, hc, hpc = x[c, i0:i1], xp[c, i0:i1], hx[c, i0:i1], hxp[c, i0:i1]
+            rc, oc = r[c, i0:i1], out[c, i0:i1]
             if use_d:
-                for i in range(i0, i1):
+                for i in range(m):
                     y = xc[i] + beta * (xc[i] - xpc[i])
                     hy = hc[i] + beta * (hc[i] - hpc[i])
-                    oc[i] = y - step * dinv[i] * (hy - rc[i])
+                    oc[i] = y - step * dv[i] * (hy - rc[i])
             else:
-                for i in range(i0, i1):
+                for i in range(m):
                     y = xc[i] + beta * (xc[i] - xpc[i])
                     hy = hc[i] + beta * (hc[i] - hpc[i])
                     oc[i] = y - step * (hy - rc[i])
