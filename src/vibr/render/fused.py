@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._jit import FASTMATH
-from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row
+from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row, _stencil_rows3
 from .tv import _weight_arg
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start", "row_sum_bound"]
@@ -57,6 +57,50 @@ def _stencil_row_padded(A, k, um, u0, up, out):
         out[j] = (a0[j] * um[j] + a1[j] * um[j + 1] + a2[j] * um[j + 2]
                   + a3[j] * u0[j] + a4[j] * u0[j + 1] + a5[j] * u0[j + 2]
                   + a6[j] * up[j] + a7[j] * up[j + 1] + a8[j] * up[j + 2])
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _stencil_rows3_padded(A, k, m0, c0, p0, m1, c1, p1, m2, c2, p2, o0, o1, o2):
+    """:func:`_stencil_row_padded` of three planes at once (rows above, at and below k of
+    each): the same sums in the same order, each stencil entry loaded once for the three."""
+    W = o0.shape[0]
+    a0, a1, a2 = A[0, k], A[1, k], A[2, k]
+    a3, a4, a5 = A[3, k], A[4, k], A[5, k]
+    a6, a7, a8 = A[6, k], A[7, k], A[8, k]
+    for j in range(W):
+        b0, b1, b2, b3, b4 = a0[j], a1[j], a2[j], a3[j], a4[j]
+        b5, b6, b7, b8 = a5[j], a6[j], a7[j], a8[j]
+        o0[j] = (b0 * m0[j] + b1 * m0[j + 1] + b2 * m0[j + 2] + b3 * c0[j] + b4 * c0[j + 1]
+                 + b5 * c0[j + 2] + b6 * p0[j] + b7 * p0[j + 1] + b8 * p0[j + 2])
+        o1[j] = (b0 * m1[j] + b1 * m1[j + 1] + b2 * m1[j + 2] + b3 * c1[j] + b4 * c1[j + 1]
+                 + b5 * c1[j + 2] + b6 * p1[j] + b7 * p1[j + 1] + b8 * p1[j + 2])
+        o2[j] = (b0 * m2[j] + b1 * m2[j + 1] + b2 * m2[j + 2] + b3 * c2[j] + b4 * c2[j + 1]
+                 + b5 * c2[j + 2] + b6 * p2[j] + b7 * p2[j + 1] + b8 * p2[j + 2])
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _ring_rows(dring, zero, k, H, c, d):
+    """Rows k − 1, k, k + 1 of plane (c, d) of the padded ``D x`` ring (``zero`` outside)."""
+    um = dring[(k - 1) % 3, c, d] if k >= 1 else zero
+    up = dring[(k + 1) % 3, c, d] if k + 1 < H else zero
+    return um, dring[k % 3, c, d], up
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _ag_dx_row(Ag, dring, zero, k, H, g):
+    """Row k of ``A_g D x`` for every plane (C, 2) into ``g``; three channels share the
+    stencil's loads (:func:`_stencil_rows3_padded`)."""
+    C = g.shape[0]
+    for d in range(2):
+        if C == 3:
+            m0, c0, p0 = _ring_rows(dring, zero, k, H, 0, d)
+            m1, c1, p1 = _ring_rows(dring, zero, k, H, 1, d)
+            m2, c2, p2 = _ring_rows(dring, zero, k, H, 2, d)
+            _stencil_rows3_padded(Ag, k, m0, c0, p0, m1, c1, p1, m2, c2, p2, g[0, d], g[1, d], g[2, d])
+        else:
+            for c in range(C):
+                um, u0, up = _ring_rows(dring, zero, k, H, c, d)
+                _stencil_row_padded(Ag, k, um, u0, up, g[c, d])
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -104,7 +148,7 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
         # without fast-math) and the result does not depend on the thread count
         acc = np.zeros((6, W))
         s_xAx, s_bx, s_xGx, s_gx, s_tv, s_hh = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
-        ax = np.empty(W, np.float32)
+        ax3 = np.empty((C, W), np.float32)
         tvacc = np.empty(W, np.float32)
         # ring buffers (row mod 3): D x padded, A_g D x; tags = the row a slot holds
         dring = np.zeros((3, C, 2, W + 2), np.float32)
@@ -120,12 +164,7 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
                     if dtag[s] != kk:
                         _dx_row(x, kk, forward, dring[s])
                         dtag[s] = kk
-                g = gring[k % 3]
-                for c in range(C):
-                    for d in range(2):
-                        um = dring[(k - 1) % 3, c, d] if k >= 1 else zero
-                        up = dring[(k + 1) % 3, c, d] if k + 1 < H else zero
-                        _stencil_row_padded(Ag, k, um, dring[k % 3, c, d], up, g[c, d])
+                _ag_dx_row(Ag, dring, zero, k, H, gring[k % 3])
             i = k - 1
             if i < r0 or i >= r1:
                 continue
@@ -134,8 +173,13 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
                 tvacc[:] = 0.0
             nxt = min(i + 1, H - 1)
             wr = wmap[min(np.int64(i), wmap.shape[0] - 1)]
+            if C == 3:
+                _stencil_rows3(A, x, i, ax3)
+            else:
+                for c in range(C):
+                    _stencil_row(A, x, c, i, ax3[c])
             for c in range(C):
-                _stencil_row(A, x, c, i, ax)
+                ax = ax3[c]
                 xr = x[c, i]
                 br = b[c, i]
                 hr = h[c, i]
