@@ -1,5 +1,7 @@
 """The one-pass kernels of the FISTA iteration equal the operators they fuse."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -44,6 +46,30 @@ def test_hessian_terms_equals_the_composition(H, W, coupled, gamma, scheme):
     np.testing.assert_array_equal(h2, h)
     assert abs(pAx - xAx) < tol and abs(pGx - xGx) < tol
     assert abs(hh - (h.astype(np.float64) ** 2).sum()) < 1e-5 * max(1.0, hh)
+
+
+@pytest.mark.parametrize("H,W", [(2, 3), (7, 9), (40, 37)])
+def test_preconditioned_power_iteration_equals_the_numpy_steps(H, W):
+    """The preconditioned power iteration's fused passes (power_scale, power_unscale) give
+    the step size of its numpy formulation bit for bit, and leave the same vector."""
+    from _checks import random_model
+
+    from vibr.render.operators import dot
+
+    model, _ = random_model(H, W, 4, 3, gamma=0.5)
+    d = model.gershgorin() + np.float32(0.1)
+    state = {}
+    L = model.lipschitz(n_iter=5, d=d, state=state)
+    x = power_start(model.b.shape)
+    s = (1.0 / np.sqrt(d))[None].astype(np.float32)
+    for _ in range(5):
+        x /= math.sqrt(max(dot(x, x), 1e-300))  # a Python float: divides in float32
+        y, _ = hessian_power(model.A, model.Ag, x * s, model.alpha, model.gamma)
+        y *= s
+        lam = dot(x, y)
+        x = y
+    assert L == 1.05 * lam
+    np.testing.assert_array_equal(state["v"], x)
 
 
 @pytest.mark.parametrize("H,W", [(1, 5), (3, 1), (7, 9), (50, 49)])

@@ -26,10 +26,11 @@ import numpy as np
 from numba import njit, prange
 
 from .._jit import FASTMATH
-from .operators import _grad_adj_row, _is_forward, _grad_row, _stencil_row, _stencil_rows3
+from .operators import _sum_in_order, _grad_adj_row, _is_forward, _grad_row, _stencil_row, _stencil_rows3
 from .tv import _weight_arg
 
-__all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start", "row_sum_bound"]
+__all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start", "power_scale", "power_unscale",
+           "row_sum_bound"]
 
 #: rows per band of :func:`hessian_terms` (halo work ≈ 3 / BAND of a pass)
 BAND = 24
@@ -260,6 +261,68 @@ def _run(A, Ag, x, b, bgt, alpha, gamma, coupled, with_terms, out, scheme, tv_we
                    _is_forward(scheme), bool(coupled), *_weight_arg(tv_weight),
                    bool(with_terms), BAND, out, parts)
     return out, parts.sum(0)
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _power_scale(x, s, v, xs):
+    """``x ← x / v``, ``xs = s · x`` (x (C, n), s (n,)): the numpy ``x /= v`` (v float32)
+    and ``np.multiply(x, s)`` of the preconditioned power iteration in one pass."""
+    C, n = x.shape
+    blk = 4096
+    for t in prange((n + blk - 1) // blk):
+        i0 = t * blk
+        i1 = min(n, i0 + blk)
+        sb = s[i0:i1]
+        for c in range(C):
+            xb, ob = x[c, i0:i1], xs[c, i0:i1]
+            for i in range(i1 - i0):
+                xv = xb[i] / v
+                xb[i] = xv
+                ob[i] = xv * sb[i]
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _power_unscale(y, s, x):
+    """``y ← s · y`` (y, x flat (C·n,), s (n,)) with ``(⟨x, y⟩, ⟨y, y⟩)`` of the new y,
+    summed in the chunks and order of :func:`.operators.dot` (bit-identical to it)."""
+    N = y.shape[0]
+    n = s.shape[0]
+    nb = 256
+    chunk = (N + nb - 1) // nb
+    parts = np.zeros((2, nb))
+    for k in prange(nb):
+        i0 = k * chunk
+        i1 = min(N, i0 + chunk)
+        j = i0 % n if i0 < N else 0
+        sxy = 0.0
+        syy = 0.0
+        for i in range(i0, i1):
+            yv = y[i] * s[j]
+            y[i] = yv
+            sxy += np.float64(x[i]) * np.float64(yv)
+            syy += np.float64(yv) * np.float64(yv)
+            j += 1
+            if j == n:
+                j = 0
+        parts[0, k] = sxy
+        parts[1, k] = syy
+    return _sum_in_order(parts[0]), _sum_in_order(parts[1])
+
+
+def power_scale(x, s, nx, out):
+    """Normalise ``x`` (C, H, W) in place by ``√nx`` (float32, as numpy's ``x /= √nx``)
+    and write ``s · x`` (``s`` (H, W)) to ``out``: the scaled vector a preconditioned
+    power iteration multiplies by H."""
+    C = x.shape[0]
+    xs = out
+    _power_scale(x.reshape(C, -1), s.reshape(-1), np.float32(math.sqrt(max(nx, 1e-300))), xs.reshape(C, -1))
+    return xs
+
+
+def power_unscale(y, s, x):
+    """``y ← s · y`` in place and ``(⟨x, y⟩, ⟨y, y⟩)`` (float64, as :func:`.operators.dot`)."""
+    a, b = _power_unscale(y.reshape(-1), s.reshape(-1), x.reshape(-1))
+    return float(a), float(b)
 
 
 @njit(parallel=True, cache=True)

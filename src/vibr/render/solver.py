@@ -38,7 +38,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .fused import forward_step, hessian_power, hessian_terms, power_start, row_sum_bound
+from .fused import (forward_step, hessian_power, hessian_terms, power_scale, power_start, power_unscale,
+                    row_sum_bound)
 from .operators import dot, grad_image_adj
 from .tv import TVProx
 
@@ -161,16 +162,16 @@ class QuadraticModel:
                 lam = (self.alpha * xAx + self.gamma * xGx) / max(nx, 1e-300)
                 x, buf, nx = h, x, hh
         else:
-            # the Hessian product alone (hessian_power: no energy terms), as hess_apply gives it
-            s = (1.0 / np.sqrt(d))[None].astype(np.float32)
+            # the Hessian product alone (hessian_power: no energy terms), as hess_apply gives
+            # it; the scalings and both inner products in two passes around it
+            s = (1.0 / np.sqrt(d)).astype(np.float32)
             Ag = self.Ag if self.use_grad else None
             xs, y = np.empty_like(x), np.empty_like(x)
+            nx = dot(x, x)
             for _ in range(n_iter):
-                x /= math.sqrt(max(dot(x, x), 1e-300))
-                np.multiply(x, s, out=xs)
+                power_scale(x, s, nx, out=xs)  # x /= ‖x‖, xs = s x
                 y, _ = hessian_power(self.A, Ag, xs, self.alpha, self.gamma, out=y, scheme=self.grad_scheme)
-                y *= s
-                lam = dot(x, y)
+                lam, nx = power_unscale(y, s, x)  # y ← s y; ⟨x, y⟩, ‖y‖²
                 x, y = y, x
         if state is not None:
             state["v"] = x
