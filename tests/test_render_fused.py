@@ -73,8 +73,8 @@ def test_preconditioned_power_iteration_equals_the_numpy_steps(H, W):
 
 
 @pytest.mark.parametrize("H,W", [(1, 5), (3, 1), (7, 9), (50, 49)])
-def test_three_channels_share_the_stencil_loads_bit_for_bit(H, W):
-    """With three channels the stencils are applied to the three at once (each entry
+def test_three_channels_share_the_colour_stencil_loads_bit_for_bit(H, W):
+    """With three channels the colour stencil is applied to the three at once (each entry
     loaded once); ``h`` of each channel equals that channel's ``h`` computed alone (the
     one-channel path), bit for bit."""
     rng = np.random.default_rng(7)

@@ -61,50 +61,6 @@ def _stencil_row_padded(A, k, um, u0, up, out):
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _stencil_rows3_padded(A, k, m0, c0, p0, m1, c1, p1, m2, c2, p2, o0, o1, o2):
-    """:func:`_stencil_row_padded` of three planes at once (rows above, at and below k of
-    each): the same sums in the same order, each stencil entry loaded once for the three."""
-    W = o0.shape[0]
-    a0, a1, a2 = A[0, k], A[1, k], A[2, k]
-    a3, a4, a5 = A[3, k], A[4, k], A[5, k]
-    a6, a7, a8 = A[6, k], A[7, k], A[8, k]
-    for j in range(W):
-        b0, b1, b2, b3, b4 = a0[j], a1[j], a2[j], a3[j], a4[j]
-        b5, b6, b7, b8 = a5[j], a6[j], a7[j], a8[j]
-        o0[j] = (b0 * m0[j] + b1 * m0[j + 1] + b2 * m0[j + 2] + b3 * c0[j] + b4 * c0[j + 1]
-                 + b5 * c0[j + 2] + b6 * p0[j] + b7 * p0[j + 1] + b8 * p0[j + 2])
-        o1[j] = (b0 * m1[j] + b1 * m1[j + 1] + b2 * m1[j + 2] + b3 * c1[j] + b4 * c1[j + 1]
-                 + b5 * c1[j + 2] + b6 * p1[j] + b7 * p1[j + 1] + b8 * p1[j + 2])
-        o2[j] = (b0 * m2[j] + b1 * m2[j + 1] + b2 * m2[j + 2] + b3 * c2[j] + b4 * c2[j + 1]
-                 + b5 * c2[j + 2] + b6 * p2[j] + b7 * p2[j + 1] + b8 * p2[j + 2])
-
-
-@njit(cache=True, fastmath=FASTMATH)
-def _ring_rows(dring, zero, k, H, c, d):
-    """Rows k − 1, k, k + 1 of plane (c, d) of the padded ``D x`` ring (``zero`` outside)."""
-    um = dring[(k - 1) % 3, c, d] if k >= 1 else zero
-    up = dring[(k + 1) % 3, c, d] if k + 1 < H else zero
-    return um, dring[k % 3, c, d], up
-
-
-@njit(cache=True, fastmath=FASTMATH)
-def _ag_dx_row(Ag, dring, zero, k, H, g):
-    """Row k of ``A_g D x`` for every plane (C, 2) into ``g``; three channels share the
-    stencil's loads (:func:`_stencil_rows3_padded`)."""
-    C = g.shape[0]
-    for d in range(2):
-        if C == 3:
-            m0, c0, p0 = _ring_rows(dring, zero, k, H, 0, d)
-            m1, c1, p1 = _ring_rows(dring, zero, k, H, 1, d)
-            m2, c2, p2 = _ring_rows(dring, zero, k, H, 2, d)
-            _stencil_rows3_padded(Ag, k, m0, c0, p0, m1, c1, p1, m2, c2, p2, g[0, d], g[1, d], g[2, d])
-        else:
-            for c in range(C):
-                um, u0, up = _ring_rows(dring, zero, k, H, c, d)
-                _stencil_row_padded(Ag, k, um, u0, up, g[c, d])
-
-
-@njit(cache=True, fastmath=FASTMATH)
 def _tv_cols(ur, un, coupled, tvacc, wr, use_w, col):
     """One channel's share of a row of TV into the per-column sums ``col`` (float64):
     coupled, |∇u_c|² into ``tvacc`` (the caller adds w·√tvacc with :func:`_sqrt_cols`);
@@ -165,7 +121,12 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
                     if dtag[s] != kk:
                         _dx_row(x, kk, forward, dring[s])
                         dtag[s] = kk
-                _ag_dx_row(Ag, dring, zero, k, H, gring[k % 3])
+                g = gring[k % 3]
+                for c in range(C):
+                    for d in range(2):
+                        um = dring[(k - 1) % 3, c, d] if k >= 1 else zero
+                        up = dring[(k + 1) % 3, c, d] if k + 1 < H else zero
+                        _stencil_row_padded(Ag, k, um, dring[k % 3, c, d], up, g[c, d])
             i = k - 1
             if i < r0 or i >= r1:
                 continue
