@@ -92,9 +92,12 @@ class QuadraticModel:
         # Dᵀ b_g, so that the gradient term's products stay 3-channel:
         # E_grad = ½⟨x, DᵀA_gD x⟩ − ⟨Dᵀb_g, x⟩ + c_g
         self.bgt = grad_image_adj(self.bg, self.grad_scheme) if self.use_grad else None
-        # the constant part of ∇f = H x − r, H = alpha A + gamma DᵀA_gD
-        self.r = (self.alpha * self.b if not self.use_grad
-                  else self.alpha * self.b + self.gamma * self.bgt).astype(np.float32)
+        # the constant part of ∇f = H x − r, H = alpha A + gamma DᵀA_gD (in place: the
+        # same arithmetic as alpha·b + gamma·bgt, without a sum array and its copy)
+        r = np.multiply(self.b, self.alpha)
+        if self.use_grad:
+            r += self.gamma * self.bgt
+        self.r = r.astype(np.float32, copy=False)
 
     def products(self, x, out=None) -> Products:
         """``H x`` and the inner products of the energy, in one pass over memory
