@@ -200,3 +200,29 @@ def test_samples_in_block_order_need_no_row_order():
     np.testing.assert_allclose(b2, b1, rtol=1e-12, atol=1e-12)
     assert c2 == pytest.approx(c1, rel=1e-12)
     dottest(t.apply, t.adjoint, (H, W, 3), (t.n, 3), rng=rng)
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 1000, 64 * 37 + 5])
+def test_bucket_by_cell_parallel_check_equals_the_counting_sort(n):
+    """The samples' row buckets: the parallel order check with binary searches gives the
+    counting sort's (order, starts) for sorted samples, and falls back to it otherwise,
+    also when the one inversion sits at a chunk boundary of the check."""
+    from vibr.render.operators import _bucket_by_cell, bucket_by_cell
+
+    rng = np.random.default_rng(n)
+    H, W = 13, 17
+    x0 = rng.integers(0, W - 1, n).astype(np.int32)
+    y0 = rng.integers(0, H - 1, n).astype(np.int32)
+    key = np.argsort(y0.astype(np.int64) * W + x0, kind="stable")
+    cases = [(x0, y0), (x0[key], y0[key])]
+    if n > 64:
+        xs, ys = x0[key].copy(), y0[key].copy()
+        b = (n + 63) // 64  # the check's chunk length: swap across the first boundary
+        xs[b - 1], xs[b], ys[b - 1], ys[b] = W - 2, 0, H - 2, 0
+        cases.append((xs, ys))
+    for xa, ya in cases:
+        order, starts = bucket_by_cell(xa, ya, H - 1, W)
+        want_order, want_starts = _bucket_by_cell(xa, ya, H - 1, W)
+        np.testing.assert_array_equal(order, want_order)
+        np.testing.assert_array_equal(starts, want_starts)
+        assert starts.dtype == want_starts.dtype
