@@ -67,6 +67,13 @@ OCCLUDED = 3   # behind the z-buffer by more than the threshold
 VISIBLE = 4
 
 
+#: The warps' kernels divide by IEEE rules (numba's "numpy" error model): each divisor is
+#: tested before or after its division (w > 0, |det| > 0, area ≠ 0), so a zero gives an
+#: infinity the test rejects, where Python's model added a zero test and an exception path
+#: to every division (docs/RENDERER.md, "Speed round 6").
+_DIVISION = "numpy"
+
+
 @njit(cache=True, inline="always")
 def _raster_tri(buf, ax, ay, aw, bx, by, bw, cx, cy, cw, Hu, Wu):
     # signed area (twice)
@@ -96,7 +103,7 @@ def _raster_tri(buf, ax, ay, aw, bx, by, bw, cx, cy, cw, Hu, Wu):
                     buf[i, j] = d
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model=_DIVISION)
 def _splat_kernel(z, zx, zy, M, c, bufs, max_quad):
     H, W = z.shape
     nb, Hu, Wu = bufs.shape
@@ -150,7 +157,7 @@ def _splat_kernel(z, zx, zy, M, c, bufs, max_quad):
                             cu[3], cv[3], cw[3], Hu, Wu)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model=_DIVISION)
 def _splat_affine_kernel(z, zx, zy, M, c, bufs, max_quad, half):
     H, W = z.shape
     nb, Hu, Wu = bufs.shape
@@ -205,7 +212,7 @@ def _splat_affine_kernel(z, zx, zy, M, c, bufs, max_quad, half):
                                 buf[pi, pj] = d
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model=_DIVISION)
 def _splat_mesh_kernel(z, M, c, bufs, max_quad, edge_rel):
     H, W = z.shape
     nb, Hu, Wu = bufs.shape
@@ -331,7 +338,7 @@ def reduce_zbuffers(bufs) -> np.ndarray:
     return out
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model=_DIVISION)
 def _visibility_kernel(z, zx, zy, M, c, zbuf, thr, state, counts):
     H, W = z.shape
     Hu, Wu = zbuf.shape
