@@ -275,9 +275,8 @@ def power_scale(x, s, nx, out):
     and write ``s · x`` (``s`` (H, W)) to ``out``: the scaled vector a preconditioned
     power iteration multiplies by H."""
     C = x.shape[0]
-    xs = out
-    _power_scale(x.reshape(C, -1), s.reshape(-1), np.float32(math.sqrt(max(nx, 1e-300))), xs.reshape(C, -1))
-    return xs
+    _power_scale(x.reshape(C, -1), s.reshape(-1), np.float32(math.sqrt(max(nx, 1e-300))), out.reshape(C, -1))
+    return out
 
 
 def power_unscale(y, s, x):
