@@ -125,3 +125,29 @@ def test_outputs_checked_before_the_work(capsys, tmp_path, bad):
         assert_one_line_error(code, err)
         assert time.perf_counter() - t0 < 5.0, cmd
         assert _tree(tmp_path) == before, cmd
+
+
+def test_atomic_path_registers_its_temporary_file_before_creating_it(tmp_path, monkeypatch):
+    """A SIGTERM handler (``remove_partial``) that runs right after the temporary file is
+    created finds it: the name is registered first (a pool worker terminated in that window
+    used to leave a ``.part`` file behind)."""
+    import os
+
+    import vibr.io.atomic as atomic
+
+    seen = []
+    real_close = os.close
+
+    def close_then_handler(fd):
+        real_close(fd)
+        atomic.remove_partial()  # what the worker's SIGTERM handler does at this moment
+        seen.append(sorted(p.name for p in tmp_path.glob(".*.part*")))
+
+    cm = atomic.atomic_path(tmp_path / "x.txt")
+    with monkeypatch.context() as m:
+        m.setattr(atomic.os, "close", close_then_handler)
+        cm.__enter__()
+    assert seen == [[]]
+    with __import__("contextlib").suppress(BaseException):
+        cm.__exit__(None, None, None)
+    assert not list(tmp_path.glob(".*.part*")) and not (tmp_path / "x.txt").exists()

@@ -4,10 +4,31 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
+import secrets
 
 #: temporary files of the writes in progress in this process (:func:`remove_partial`)
 _ACTIVE: set = set()
+
+
+def _new_temporary(folder: str, base: str, suffix: str) -> str:
+    """Create an empty private file ``.BASE.RANDOM.partSUFFIX`` in ``folder``, registered in
+    ``_ACTIVE`` *before* it exists: a signal handler calling :func:`remove_partial` at any
+    moment then finds it (with ``tempfile.mkstemp`` the name was known only once the file
+    existed, and a SIGTERM in between left it behind)."""
+    for _ in range(100):
+        tmp = os.path.join(folder, f".{base}.{secrets.token_hex(8)}.part{suffix}")
+        _ACTIVE.add(tmp)
+        try:
+            fd = os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
+        except FileExistsError:
+            _ACTIVE.discard(tmp)  # someone else's file: never ours to remove
+            continue
+        except BaseException:
+            _ACTIVE.discard(tmp)
+            raise
+        os.close(fd)
+        return tmp
+    raise FileExistsError(f"{folder}: no free temporary name for {base}")
 
 
 @contextlib.contextmanager
@@ -23,9 +44,7 @@ def atomic_path(path, suffix: str | None = None):
     os.makedirs(folder, exist_ok=True)
     if suffix is None:
         suffix = os.path.splitext(path)[1]
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".part" + suffix, dir=folder)
-    os.close(fd)
-    _ACTIVE.add(tmp)
+    tmp = _new_temporary(folder, os.path.basename(path), suffix)
     try:
         yield tmp
         # mkstemp makes the file private (0600); give it the mode a plain open() would
