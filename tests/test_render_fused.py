@@ -72,21 +72,6 @@ def test_preconditioned_power_iteration_equals_the_numpy_steps(H, W):
     np.testing.assert_array_equal(state["v"], x)
 
 
-@pytest.mark.parametrize("H,W", [(1, 5), (3, 1), (7, 9), (50, 49)])
-def test_three_channels_share_the_colour_stencil_loads_bit_for_bit(H, W):
-    """With three channels the colour stencil is applied to the three at once (each entry
-    loaded once); ``h`` of each channel equals that channel's ``h`` computed alone (the
-    one-channel path), bit for bit."""
-    rng = np.random.default_rng(7)
-    A, Ag = (rng.standard_normal((9, H, W)).astype(np.float32) for _ in range(2))
-    x = rng.standard_normal((3, H, W)).astype(np.float32)
-    for scheme in ("forward", "central"):
-        h3, _ = hessian_power(A, Ag, x, 0.7, 1.3, scheme=scheme)
-        for c in range(3):
-            h1, _ = hessian_power(A, Ag, x[c:c + 1].copy(), 0.7, 1.3, scheme=scheme)
-            np.testing.assert_array_equal(h3[c], h1[0])
-
-
 def test_forward_step():
     rng = np.random.default_rng(0)
     x, xp, hx, hxp, r = (rng.standard_normal((3, 17, 9000 // 17)).astype(np.float32) for _ in range(5))

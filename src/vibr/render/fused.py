@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._jit import FASTMATH
-from .operators import _sum_in_order, _grad_adj_row, _is_forward, _grad_row, _stencil_row, _stencil_rows3
+from .operators import _sum_in_order, _grad_adj_row, _is_forward, _grad_row, _stencil_row
 from .tv import _weight_arg
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start", "power_scale", "power_unscale",
@@ -105,7 +105,7 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
         # without fast-math) and the result does not depend on the thread count
         acc = np.zeros((6, W))
         s_xAx, s_bx, s_xGx, s_gx, s_tv, s_hh = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
-        ax3 = np.empty((C, W), np.float32)
+        ax = np.empty(W, np.float32)
         tvacc = np.empty(W, np.float32)
         # ring buffers (row mod 3): D x padded, A_g D x; tags = the row a slot holds
         dring = np.zeros((3, C, 2, W + 2), np.float32)
@@ -135,13 +135,8 @@ def _hessian_terms(A, Ag, x, b, bgt, alpha, gamma, use_grad, forward, coupled, w
                 tvacc[:] = 0.0
             nxt = min(i + 1, H - 1)
             wr = wmap[min(np.int64(i), wmap.shape[0] - 1)]
-            if C == 3:
-                _stencil_rows3(A, x, i, ax3)
-            else:
-                for c in range(C):
-                    _stencil_row(A, x, c, i, ax3[c])
             for c in range(C):
-                ax = ax3[c]
+                _stencil_row(A, x, c, i, ax)
                 xr = x[c, i]
                 br = b[c, i]
                 hr = h[c, i]

@@ -486,37 +486,6 @@ def _stencil_row(A, u, c, i, out):
             out[j] = _stencil_point(A, u, c, i, j, H, W)
 
 
-@njit(cache=True, fastmath=FASTMATH)
-def _stencil_rows3(A, u, i, out):
-    """Row i of the stencil applied to the three channels of ``u`` (3, H, W), into ``out``
-    (3, W): :func:`_stencil_row` per channel, the same sums in the same order, but each
-    stencil entry loaded once for the three (the loads, not the products, bound the row)."""
-    C, H, W = u.shape
-    if not (0 < i < H - 1 and W > 2):
-        for c in range(3):
-            _stencil_row(A, u, c, i, out[c])
-        return
-    a0, a1, a2 = A[0, i], A[1, i], A[2, i]
-    a3, a4, a5 = A[3, i], A[4, i], A[5, i]
-    a6, a7, a8 = A[6, i], A[7, i], A[8, i]
-    m0, c0, p0 = u[0, i - 1], u[0, i], u[0, i + 1]
-    m1, c1, p1 = u[1, i - 1], u[1, i], u[1, i + 1]
-    m2, c2, p2 = u[2, i - 1], u[2, i], u[2, i + 1]
-    o0, o1, o2 = out[0], out[1], out[2]
-    for j in range(1, W - 1):
-        b0, b1, b2, b3, b4 = a0[j], a1[j], a2[j], a3[j], a4[j]
-        b5, b6, b7, b8 = a5[j], a6[j], a7[j], a8[j]
-        o0[j] = (b0 * m0[j - 1] + b1 * m0[j] + b2 * m0[j + 1] + b3 * c0[j - 1] + b4 * c0[j]
-                 + b5 * c0[j + 1] + b6 * p0[j - 1] + b7 * p0[j] + b8 * p0[j + 1])
-        o1[j] = (b0 * m1[j - 1] + b1 * m1[j] + b2 * m1[j + 1] + b3 * c1[j - 1] + b4 * c1[j]
-                 + b5 * c1[j + 1] + b6 * p1[j - 1] + b7 * p1[j] + b8 * p1[j + 1])
-        o2[j] = (b0 * m2[j - 1] + b1 * m2[j] + b2 * m2[j + 1] + b3 * c2[j - 1] + b4 * c2[j]
-                 + b5 * c2[j + 1] + b6 * p2[j - 1] + b7 * p2[j] + b8 * p2[j + 1])
-    for c in range(3):
-        out[c, 0] = _stencil_point(A, u, c, i, 0, H, W)
-        out[c, W - 1] = _stencil_point(A, u, c, i, W - 1, H, W)
-
-
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _stencil_apply(A, u, out):
     """out[c] = Σ_s A[s] · shift_s(u[c]); planar (C, H, W) images, (9, H, W) stencil."""
