@@ -646,6 +646,53 @@ def test_median_planes_restores_a_plane_and_keeps_an_edge():
     assert np.allclose(out.sigma_z / out.depth.astype(np.float64) ** 2, 0.01, rtol=1e-5)
 
 
+def _plane_median_reference(w, gx, gy, known, guide, offs, sigma_c, sigma_s):
+    """plane_median written out with numpy per pixel: stable argsort, sequential cumsum."""
+    H, W = w.shape
+    out, ox, oy = w.copy(), gx.copy(), gy.copy()
+    ic = 0.5 / (sigma_c ** 2 * guide.shape[2])
+    for i in range(H):
+        for j in range(W):
+            vals, wts, src = [], [], []
+            for dy, dx in offs:
+                qi, qj = i + dy, j + dx
+                if 0 <= qi < H and 0 <= qj < W and known[qi, qj]:
+                    d2 = 0.0
+                    for ch in range(guide.shape[2]):
+                        d2 += (guide[i, j, ch] - guide[qi, qj, ch]) ** 2
+                    vals.append(w[qi, qj] - gx[qi, qj] * dx - gy[qi, qj] * dy)
+                    wts.append(np.exp(-(dy * dy + dx * dx) * (0.5 / sigma_s ** 2)) * np.exp(-d2 * ic))
+                    src.append((qi, qj))
+            if not vals:
+                continue
+            o = np.argsort(vals, kind="stable")
+            k = o[np.argmax(np.cumsum(np.asarray(wts)[o]) >= 0.5 * sum(wts))]
+            out[i, j] = vals[k]
+            ox[i, j], oy[i, j] = gx[src[k]], gy[src[k]]
+    return out, ox, oy
+
+
+def test_plane_median_kernel_equals_a_stable_sort_of_the_votes():
+    """The compiled median orders the votes by rank (vibr.stereo._kernels._stable_order):
+    the same planes, bit for bit, as a stable sort and a running sum of the weights, with
+    many tied votes (planes on a coarse grid) where the order among equals picks the slopes."""
+    from vibr.stereo._kernels import plane_median
+    from vibr.stereo.planesweep import window_offsets
+
+    rng = np.random.default_rng(3)
+    H, W = 13, 17
+    w = np.round(rng.uniform(0.2, 0.4, (H, W)), 2)
+    gx = rng.choice([0.0, 0.01, -0.01], (H, W))
+    gy = rng.choice([0.0, 0.01], (H, W))
+    known = rng.random((H, W)) > 0.2
+    guide = np.round(rng.random((H, W, 3)), 1)
+    offs = window_offsets(4, 2)
+    got = plane_median(w, gx, gy, known, guide, offs, 0.2, 4.0)
+    ref = _plane_median_reference(w, gx, gy, known, guide, offs, 0.2, 4.0)
+    assert all(np.array_equal(a, b) for a, b in zip(got, ref))
+    assert not np.array_equal(got[1], gx)  # slopes were taken from other pixels' votes
+
+
 def test_estimate_depth_options_and_unknown_keywords():
     """Options by keyword or as a DepthOptions give the same result; a misspelt option, in
     estimate_depth, its light-field dict or lightfield_depth, raises TypeError instead of

@@ -889,6 +889,20 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
 
 
 # --------------------------------------------------------------------------- plane-vote median
+@njit(cache=True)
+def _stable_order(vals, m, order):
+    """``order[:m]``: the indices of ``vals[:m]`` in ascending order, ties in index order
+    (a stable argsort), from each value's rank. Why ranks: the m² comparisons have no
+    data-dependent branch and run in vectors, where an insertion sort of a few dozen votes
+    mispredicted at every step (docs/DEPTH.md, "The median's sort")."""
+    for a in range(m):
+        v = vals[a]
+        r = 0
+        for b in range(m):
+            r += (vals[b] < v) | ((vals[b] == v) & (b < a))
+        order[r] = a
+
+
 @njit(parallel=True, cache=True, nogil=True)
 def plane_median(w, gx, gy, known, guide, offs, sigma_c, sigma_s):
     """Joint weighted median of per-pixel planes in inverse depth (Ma et al. 2013's
@@ -898,7 +912,9 @@ def plane_median(w, gx, gy, known, guide, offs, sigma_c, sigma_s):
     extended to p, ``w_q + gx_q (x_p − x_q) + gy_q (y_p − y_q)``, with the weight
     ``exp(−‖G_p − G_q‖²/(2σ_c² C) − |p − q|²/(2σ_s²))`` (G the (H,W,C) colour guide, the
     bilateral weights of :func:`support_weights`); p takes the weighted median of the votes
-    and the slopes of the plane that cast it. Pixels with no known voter keep their plane.
+    and the slopes of the plane that cast it: the first vote, in ascending order (ties in
+    window order), at which the running sum of the weights reaches half their total. Pixels
+    with no known voter keep their plane; a vote that is not finite does not count.
     Returns the filtered ``(w, gx, gy)``, (H,W) float64 each.
     """
     H, W = w.shape
@@ -915,6 +931,7 @@ def plane_median(w, gx, gy, known, guide, offs, sigma_c, sigma_s):
         vals = np.empty(n)
         wts = np.empty(n)
         src = np.empty(n, np.int64)
+        order = np.empty(n, np.int64)
         for j in range(W):
             m = 0
             tot = 0.0
@@ -927,25 +944,22 @@ def plane_median(w, gx, gy, known, guide, offs, sigma_c, sigma_s):
                 for ch in range(nc):
                     t = guide[i, j, ch] - guide[qi, qj, ch]
                     d2 += t * t
-                wk = ws[k] * np.exp(-d2 * ic)
                 v = w[qi, qj] - gx[qi, qj] * offs[k, 1] - gy[qi, qj] * offs[k, 0]
-                # insertion into the sorted votes (n ≤ a few dozen: faster than argsort)
-                p = m
-                while p > 0 and vals[p - 1] > v:
-                    vals[p] = vals[p - 1]
-                    wts[p] = wts[p - 1]
-                    src[p] = src[p - 1]
-                    p -= 1
-                vals[p] = v
-                wts[p] = wk
-                src[p] = qi * W + qj
+                if not np.isfinite(v):  # no vote (the ranks need a total order)
+                    continue
+                wk = ws[k] * np.exp(-d2 * ic)
+                vals[m] = v
+                wts[m] = wk
+                src[m] = qi * W + qj
                 tot += wk
                 m += 1
             if m == 0 or tot <= 0.0:
                 continue
+            _stable_order(vals, m, order)
             acc = 0.0
             half = 0.5 * tot
-            for k in range(m):
+            for r in range(m):
+                k = order[r]
                 acc += wts[k]
                 if acc >= half:
                     out[i, j] = vals[k]
