@@ -168,6 +168,29 @@ def _temple_cameras(d):
     return _cameras_only([(n, Camera(K, R, t, 640, 480)) for n, K, R, t in read_par(d / "templeSR_par.txt")])
 
 
+def test_interpolate_through_a_ring_goes_round_it(data_dir, caplog):
+    """templeSparseRing's file order jumps across the ring: a path in that order crosses the
+    ring's inside (where the temple stands). Through all the views the default order is by
+    proximity, and the path stays near the ring; the view with the same pose as its
+    neighbour by proximity (templeSR0011, templeSR0001's) is left out with a warning."""
+    import logging
+
+    from vibr.path import interpolate, scene_centre
+
+    scene = _temple_cameras(data_dir / "middlebury_templeSparseRing")
+    X = scene_centre([v.camera for v in scene.views])
+    ring = np.median([np.linalg.norm(v.camera.centre - X) for v in scene.views])
+
+    def closest(p):
+        return min(np.linalg.norm(c.centre - X) for c in p.cameras) / ring
+
+    with caplog.at_level(logging.WARNING, logger="vibr.path"):
+        p = interpolate(scene, n_frames=200)
+    assert "templeSR0011.png (after templeSR0001.png) left out" in caplog.text
+    assert len(p.meta["views"]) == 15 and closest(p) > 0.8
+    assert closest(interpolate(scene, order="given", n_frames=200)) < 0.5
+
+
 @pytest.mark.parametrize("which", ["fountain", "temple"])
 @pytest.mark.parametrize("kind", ["orbit", "spiral"])
 def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):

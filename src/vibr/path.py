@@ -433,7 +433,34 @@ def order_by_proximity(cameras) -> list[int]:
     return order
 
 
-def interpolate(scene, views=None, *, order: str = "given", n_frames: int | None = None,
+def _key_steps(cams, X):
+    """``‖C_i − C_{i−1}‖ + r · angle(R_{i−1}, R_i)`` between consecutive cameras, ``r`` their
+    mean distance to ``X``."""
+    from scipy.spatial.transform import Rotation
+
+    C = np.array([c.centre for c in cams])
+    rots = Rotation.from_matrix(np.array([c.R.T for c in cams]))
+    r = float(np.mean(np.linalg.norm(C - X, axis=1)))
+    return np.linalg.norm(np.diff(C, axis=0), axis=1) + r * (rots[:-1].inv() * rots[1:]).magnitude(), r
+
+
+def _distinct_keys(cams, names, X):
+    """The key cameras without those whose pose is the one before's (the spline needs
+    increasing knots), with a warning naming them; returns ``(cams, names, steps)``."""
+    step, r = _key_steps(cams, X)
+    same = np.flatnonzero(step <= 1e-12 * max(r, 1.0)) + 1
+    if len(same):
+        logger.warning("interpolate: %s left out: the same pose as the view before",
+                       ", ".join(f"{names[k]} (after {names[k - 1]})" for k in same))
+        keep = np.setdiff1d(np.arange(len(cams)), same)
+        cams, names = [cams[k] for k in keep], [names[k] for k in keep]
+        if len(cams) < 2:
+            raise VibrInputError(f"views {', '.join(names)}: all of the same pose, nothing to interpolate")
+        step, r = _key_steps(cams, X)
+    return cams, names, step
+
+
+def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | None = None,
                 seconds: float | None = None, fps: float = 24.0, width: int | None = None,
                 height: int | None = None, scale: float = 1.0) -> CameraPath:
     """A C²-smooth path through the scene's cameras (all, or ``views`` in that order).
@@ -451,8 +478,11 @@ def interpolate(scene, views=None, *, order: str = "given", n_frames: int | None
     ----------
     scene : Scene
     views : sequence of view names / indices, optional
-    order : {"given", "proximity"}
+    order : {"given", "proximity"}, optional
         Keep the given (or the scene's) order, or reorder by :func:`order_by_proximity`.
+        Default: ``"given"`` when ``views`` are named, else ``"proximity"`` (a scene's file
+        order need not follow its cameras: templeSparseRing's jumps across the ring, and a
+        path in that order goes through the temple).
     n_frames : int, or ``seconds`` × ``fps``
     width, height : int, optional
         Frame size (default: the first view's, times ``scale``).
@@ -461,6 +491,7 @@ def interpolate(scene, views=None, *, order: str = "given", n_frames: int | None
     from scipy.spatial.transform import Rotation, RotationSpline
 
     cams, names = _cameras_of(scene, views)
+    order = ("given" if views is not None else "proximity") if order is None else order
     if order not in ("given", "proximity"):
         raise VibrInputError(f"order must be 'given' or 'proximity', got {order!r}")
     if order == "proximity":
@@ -470,16 +501,11 @@ def interpolate(scene, views=None, *, order: str = "given", n_frames: int | None
         raise VibrInputError("interpolate needs at least two cameras")
     n = _frame_count(n_frames, seconds, fps)
     w, h = _output_size(cams, width, height, scale)
+    X = scene_centre(cams, scene_points(scene))
+    cams, names, step = _distinct_keys(cams, names, X)
+    t = np.concatenate([[0.0], np.cumsum(step)])
     C = np.array([c.centre for c in cams])
     rots = Rotation.from_matrix(np.array([c.R.T for c in cams]))  # camera-to-world
-    ang = (rots[:-1].inv() * rots[1:]).magnitude()
-    X = scene_centre(cams, scene_points(scene))
-    r = float(np.mean(np.linalg.norm(C - X, axis=1)))
-    step = np.linalg.norm(np.diff(C, axis=0), axis=1) + r * ang
-    if np.any(step <= 1e-12 * max(r, 1.0)):
-        k = int(np.argmin(step))
-        raise VibrInputError(f"views {names[k]} and {names[k + 1]} have the same pose: nothing to interpolate")
-    t = np.concatenate([[0.0], np.cumsum(step)])
     pos = CubicSpline(t, C, bc_type="natural")
     rot = RotationSpline(t, rots)
     foc = CubicSpline(t, [_vertical_focal(c) for c in cams], bc_type="natural")

@@ -10,8 +10,8 @@ _DESC = """\
 Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json schema
 (camera_to_world 4x4 row-major in OpenGL camera axes, vertical fov in degrees; docs/FLYTHROUGH.md),
 to render with 'vibr render SCENE --path PATH.json -o video.mp4' (or nerfstudio's ns-render).
-Kinds: interpolate (a C2-smooth spline through the scene's cameras, all or --views in that
-order), orbit (an ellipse around the point the cameras look at, at their mean height and
+Kinds: interpolate (a C2-smooth spline through the scene's cameras: all, nearest next, or
+--views in that order), orbit (an ellipse around the point the cameras look at, at their mean height and
 distance; an arc swept back and forth when the cameras do not surround it), spiral (an
 LLFF-style forward-facing spiral around the mean camera).
 """
@@ -50,8 +50,9 @@ def register(sub) -> None:
     p.add_argument("--size", type=_size, metavar="WxH", help="frame size (default: the first view's, after --scale)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.25 (default 1)")
     p.add_argument("--views", help="interpolate: comma-separated views to pass through, in order (default: all)")
-    p.add_argument("--order", choices=["given", "proximity"], default="given",
-                   help="interpolate: keep the given order or reorder the views by proximity (default: given)")
+    p.add_argument("--order", choices=["given", "proximity"], default=None,
+                   help="interpolate: keep the given order or reorder the views by proximity (default: "
+                        "proximity through all the scene's views, the given order with --views)")
     p.add_argument("--full", action="store_true", help="orbit: a full turn even when the cameras cover an arc")
     add_quiet(p)
     p.set_defaults(func=run)
