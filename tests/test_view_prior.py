@@ -2,7 +2,9 @@
 penalties, the k best views per pixel) and the fallback proxy for unknown source depth."""
 
 import numpy as np
+import pytest
 
+from vibr.errors import VibrInputError
 from vibr.geometry import fallback_depth
 from vibr.geometry.samples import Samples
 from vibr.render.api import render_samples
@@ -96,6 +98,57 @@ def test_fallback_default_plane_just_behind_the_known_depth():
     common = fallback_depth(sc.replace(views=views), common=True)
     for o in common.views:
         np.testing.assert_allclose(o.depth[:6, :6], max(far), rtol=1e-6)
+
+
+def test_known_depth_hides_the_fallback_proxy_whatever_its_depth():
+    """A fallback sample shows only where no known surface lands in the target, even when
+    its plane lies in front of the known surfaces (a source facing the target has its
+    backdrop plane between the object and the target): the known samples and the target
+    z-buffer are those of the scene without the proxy, and no fallback sample lands on a
+    pixel a known surface covers. Without the rule (one z-buffer for both) the proxy hides
+    known samples."""
+    from vibr.geometry import compute_samples
+
+    sc = make_scene("arc", n_views=3, width=48, height=40, seed=0)
+    tgt, a, b = sc.views
+    za = a.depth.copy()
+    za[:, 30:] = np.nan
+    m = np.zeros(b.depth.shape, bool)
+    m[:, 24:] = True
+    zb = np.where(m, 0.9 * b.depth, b.depth)  # the proxy 10 % in front of the surface
+    sb = np.where(m, 1.0, 0.01).astype(np.float32)
+    src = sc.replace(views=[a.replace(depth=za), b.replace(depth=zb, sigma_z=sb, fallback=m)])
+    S = compute_samples(src, tgt.camera, return_zbuffer=True)
+    bare = src.replace(views=[src.views[0], b.replace(depth=np.where(m, np.nan, zb), sigma_z=sb)])
+    R = compute_samples(bare, tgt.camera, return_zbuffer=True)
+    np.testing.assert_array_equal(S.meta["zbuffer"], R.meta["zbuffer"])
+    for name in (a.name, b.name):
+        assert {k: S.meta["counts"][name][k] for k in R.meta["counts"][name]} == R.meta["counts"][name]
+    proxy = np.asarray(S.sigma_z) == 1.0
+    c = S.meta["counts"][b.name]
+    assert c["fallback visible"] == proxy.sum() > 0 and c["fallback hidden"] > 0
+    key = np.lexsort(S.xy[~proxy].T)
+    np.testing.assert_array_equal(S.xy[~proxy][key], R.xy[np.lexsort(R.xy.T)])
+    px = np.floor(S.xy[proxy] + 0.5).astype(int)
+    assert np.isinf(S.meta["zbuffer"][px[:, 1], px[:, 0]]).all()
+    # the view's depth replaced without a mask: no proxy any more, and it hides known samples
+    plain = compute_samples(src.replace(views=[src.views[0], src.views[1].replace(depth=zb)]), tgt.camera)
+    assert "fallback visible" not in plain.meta["counts"][b.name]
+    assert plain.meta["counts"][a.name]["visible"] < R.meta["counts"][a.name]["visible"]
+
+
+def test_fallback_mask_follows_its_depth_map():
+    """fallback_depth marks the pixels it filled; a new depth map drops the mark unless it
+    comes with one, and a mask of the wrong shape is refused."""
+    sc = make_scene("grid", 4, 16, 16)
+    z = sc.views[0].depth.copy()
+    z[:5, :9] = np.nan
+    v = fallback_depth(sc.replace(views=[sc.views[0].replace(depth=z)])).views[0]
+    np.testing.assert_array_equal(v.fallback, np.isnan(z))
+    assert v.replace(sigma_z=0.1).fallback is v.fallback
+    assert v.replace(depth=sc.views[0].depth).fallback is None
+    with pytest.raises(VibrInputError, match="fallback mask"):
+        v.replace(fallback=np.ones((3, 3), bool))
 
 
 def test_fallback_keeps_complete_depth():

@@ -137,6 +137,11 @@ def test_point_cloud_lies_on_the_depth_maps(tiny_scene):
     ok = (z > 0) & (ij[:, 0] >= 0) & (ij[:, 0] < v.camera.width) & (ij[:, 1] >= 0) & (ij[:, 1] < v.camera.height)
     on = np.isclose(v.depth[ij[ok, 1], ij[ok, 0]], z[ok], rtol=0.02)
     assert on.mean() > 0.5  # the others are hidden in view 0 or on depth edges
+    # the pixels of a fallback proxy are no points: one view all proxy adds none
+    views = list(tiny_scene.views)
+    views[0] = v.replace(depth=v.depth, fallback=np.ones(v.shape, bool))
+    n_all = len(point_cloud(tiny_scene.replace(views=views[1:]), max_points=10**6)[0])
+    assert len(point_cloud(tiny_scene.replace(views=views), max_points=10**6)[0]) == n_all
 
 
 # ------------------------------------------------------------------ keyframes → path

@@ -86,6 +86,10 @@ class View:
         Depth uncertainty (standard deviation, scene units), scalar or H×W.
     path : str or None
         The image file, for messages.
+    fallback : ndarray or None
+        H×W bool: the pixels whose depth is not a measurement but the fallback proxy
+        (:func:`vibr.geometry.fallback_depth`); the geometry stage lets known depth hide
+        them. Reset to None by :meth:`replace` when the depth changes without it.
     """
 
     name: str
@@ -94,6 +98,7 @@ class View:
     depth: np.ndarray | None = None
     sigma_z: float | np.ndarray | None = None
     path: str | None = None
+    fallback: np.ndarray | None = None
 
     def __post_init__(self):
         src = self.path or self.name
@@ -117,6 +122,11 @@ class View:
             if s.shape != self.camera.shape:
                 raise VibrInputError(f"sigma_z has shape {s.shape}, image has {self.camera.shape}", src)
             self.sigma_z = s
+        if self.fallback is not None:
+            m = np.asarray(self.fallback, dtype=bool)
+            if m.shape != self.camera.shape:
+                raise VibrInputError(f"fallback mask has shape {m.shape}, image has {self.camera.shape}", src)
+            self.fallback = m if m.any() else None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -132,6 +142,8 @@ class View:
         return float(np.nanmin(self.depth)), float(np.nanmax(self.depth))
 
     def replace(self, **changes) -> "View":
+        if "depth" in changes and "fallback" not in changes:
+            changes["fallback"] = None  # a new depth map says nothing of the old one's proxy
         return replace(self, **changes)
 
 

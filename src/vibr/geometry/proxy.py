@@ -143,11 +143,13 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     explicit because the median would otherwise include the plane). A view with no known
     depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
     largest ``D_k``. Views with less than ``min_fraction`` of their pixels unknown are left
-    as they are. The plane behind the known geometry lets the target z-buffer hide a
-    fallback sample wherever a known surface projects (known geometry wins); other
-    placements measured in docs/RENDERER.md.
+    as they are. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a
+    fallback sample wherever a known surface lands in the target, whatever their depths
+    (known geometry wins: a source facing the target has its plane in front of the object);
+    other placements measured in docs/RENDERER.md.
 
-    Returns the scene with ``meta["fallback"] = {name: {"depth": D_k, "fraction": f_k}}``
+    Returns the scene with each such view's ``fallback`` mask (:class:`vibr.scene.View`) set
+    to its unknown pixels, and ``meta["fallback"] = {name: {"depth": D_k, "fraction": f_k}}``
     for the views that had unknown pixels (``f_k`` their fraction).
     """
     from .sampling import DEFAULT_SIGMA_Z_REL
@@ -173,7 +175,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         else:
             s = np.full(z.shape, dsr * float(np.median(z[known])) if known.any() else 0.0, np.float32)
         s[unknown] = sigma_rel * D
-        views.append(v.replace(depth=np.where(unknown, np.float32(D), z), sigma_z=s))
+        views.append(v.replace(depth=np.where(unknown, np.float32(D), z), sigma_z=s, fallback=unknown))
         info[v.name] = {"depth": D, "fraction": float(unknown.mean())}
     return sources.replace(views=views, meta=dict(sources.meta, fallback=info))
 

@@ -4,7 +4,9 @@ Steps (paper §5, docs/METHOD.md §2), per source view k:
 
 1. depth preparation: NaN = unknown; optionally fill holes (joint bilateral, Kopf 2007);
    slopes ``(z_x, z_y)`` (edge-aware, :func:`vibr.geometry.depth.depth_derivatives`);
-2. splat every pixel's quad into the target z-buffer (all views into one buffer);
+2. splat every pixel's quad into the target z-buffer (all views into one buffer); the pixels
+   of a fallback proxy (:attr:`vibr.scene.View.fallback`) into a second one, that counts
+   only where the first is empty (known geometry wins, whatever the depths);
 3. per pixel: warp ``tau_k``, in-target test, visibility against the z-buffer;
 4. per visible sample: ``tau``, ``∂tau/∂x_m``, ``1/|det|`` (capped), ``∂tau/∂z``, world
    point, colour, colour gradient ``∇v`` (the renderer's own ``D``, the rows of
@@ -213,7 +215,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     -------
     Samples
         ``meta`` holds per-view counts (``counts``: name → dict of visible / occluded /
-        outside / behind / unknown) and per-stage times in seconds (``times``: wall clock,
+        outside / behind / unknown, and for a view with a fallback proxy its fallback
+        pixels' ``fallback visible`` / ``fallback hidden``) and per-stage times in seconds (``times``: wall clock,
         ``cpu_times``: process CPU time of all threads).
 
     Raises
@@ -235,14 +238,23 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
-        prepped = _prepare_views(sources, cam, fill_holes, edge_rel, prepared)
+        known, proxy = _split_fallback(_prepare_views(sources, cam, fill_holes, edge_rel, prepared), edge_rel)
     with _Timer(times, cpu, "zbuffer"):
-        zbuf = _target_zbuffer(prepped, cam.shape, max_quad_px, splat_mode)
+        zbuf = _target_zbuffer(known, cam.shape, max_quad_px, splat_mode)
+        if proxy:
+            # known geometry wins: a fallback sample only shows where no known surface lands
+            zproxy = _target_zbuffer(proxy, cam.shape, max_quad_px, splat_mode)
+            zproxy[np.isfinite(zbuf)] = -np.inf
     with _Timer(times, cpu, "visibility"):
-        states, counts = _visibility(prepped, zbuf, vis_threshold)
+        states, counts = _visibility(known, zbuf, vis_threshold)
+        if proxy:
+            st, cnt = _visibility(proxy, zproxy, vis_threshold)
+            states += st
+            for name, c in cnt.items():
+                counts[name].update({"fallback visible": c["visible"], "fallback hidden": c["occluded"]})
     with _Timer(times, cpu, "assembly"):
-        out = _gather_samples(prepped, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme, keep)
-        del prepped, states
+        out = _gather_samples(known + proxy, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme, keep)
+        del known, proxy, states
     if len(out) == 0:
         raise VibrInputError("no source view sees the target", tname)
     out.meta["counts"] = counts
@@ -274,31 +286,47 @@ class _Timer:
 
 
 def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel, prepared=None) -> list:
-    """Per source view: ``(view, z, z_x, z_y, M, c)``, its depth and slopes (from
+    """Per source view k: ``(k, view, z, z_x, z_y, M, c)``, its depth and slopes (from
     ``prepared`` when given) and the constants of its warp into ``cam``."""
     prepped = []
-    for v in sources.views:
+    for k, v in enumerate(sources.views):
         pre = prepared.get(v.name) if prepared else None
         z, zx, zy = pre if pre is not None else prepare_depth(v, fill_holes=fill_holes, edge_rel=edge_rel)
         if v.image is None:
             raise VibrInputError(f"source view {v.name} has no image", v.path or v.name)
         M, c = warp_constants(v.camera, cam)
-        prepped.append((v, z, zx, zy, M, c))
+        prepped.append((k, v, z, zx, zy, M, c))
     return prepped
 
 
-def _target_zbuffer(prepped, shape, max_quad_px, splat_mode) -> np.ndarray:
-    """Every view's pixel quads splatted into one target z-buffer (+inf where empty)."""
+def _split_fallback(prepped, edge_rel) -> tuple[list, list]:
+    """The layers warped into the target: each view's known depth, and apart, the fallback
+    proxy of the views that have one (:attr:`vibr.scene.View.fallback`), each NaN where the
+    other has depth and with its own slopes: the known layer is the view as it would be
+    without the proxy."""
+    known, proxy = [], []
+    for k, v, z, zx, zy, M, c in prepped:
+        m = v.fallback
+        if m is None or m.shape != z.shape:
+            known.append((k, v, z, zx, zy, M, c))
+            continue
+        for layers, part in ((known, np.where(m, np.nan, z)), (proxy, np.where(m, z, np.nan))):
+            layers.append((k, v, part, *depth_derivatives(part, edge_rel), M, c))
+    return known, proxy
+
+
+def _target_zbuffer(layers, shape, max_quad_px, splat_mode) -> np.ndarray:
+    """Every layer's pixel quads splatted into one target z-buffer (+inf where empty)."""
     bufs = new_zbuffers(tuple(shape))
-    for v, z, zx, zy, M, c in prepped:
+    for k, v, z, zx, zy, M, c in layers:
         splat_zbuffer(bufs, M, c, z, zx, zy, max_quad_px, splat_mode)
     return reduce_zbuffers(bufs)
 
 
-def _visibility(prepped, zbuf, vis_threshold):
-    """Per view: ``(state, visible pixels per row)``, and the counts per state by view name."""
+def _visibility(layers, zbuf, vis_threshold):
+    """Per layer: ``(state, visible pixels per row)``, and the counts per state by view name."""
     states, counts = [], {}
-    for v, z, zx, zy, M, c in prepped:
+    for k, v, z, zx, zy, M, c in layers:
         state, row_counts = visibility_mask(M, c, z, zx, zy, zbuf, vis_threshold, return_counts=True)
         hist = row_counts.sum(axis=0)
         counts[v.name] = {"unknown": int(hist[0]), "behind": int(hist[1]), "outside": int(hist[2]),
@@ -307,9 +335,9 @@ def _visibility(prepped, zbuf, vis_threshold):
     return states, counts
 
 
-def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep) -> Samples:
+def _gather_samples(layers, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep) -> Samples:
     """The fields of every visible pixel, sorted by target cell (:func:`_cell_dest`): one
-    allocation for all samples, each view's kernel writing its samples in place.
+    allocation for all samples, each layer's kernel writing its samples in place.
 
     The order matters for speed only: the renderer's passes over the samples, bucketed by
     target row, then stream through memory instead of gathering from every view's stretch
@@ -323,7 +351,7 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
         o += int(vis_rows.sum())
     H_t, W_t = shape
     key = np.empty(N, np.int64)
-    for (v, z, zx, zy, M, c), (state, _), row_off in zip(prepped, states, offsets):
+    for (k, v, z, zx, zy, M, c), (state, _), row_off in zip(layers, states, offsets):
         _keys_kernel(state, row_off, z, M, c, H_t, W_t, key)
     dest = _cell_dest(key, max(H_t - 1, 1) * max(W_t - 1, 1))
     del key
@@ -340,7 +368,7 @@ def _gather_samples(prepped, states, shape, max_inv_det, sigma_z_default, grad_s
     src = np.empty((N if "src_xy" in keep else 0, 2), np.int32)
     sig = np.empty(N, f4)
     view = np.empty(N, np.int32)
-    for k, ((v, z, zx, zy, M, c), (state, vis_rows), row_off) in enumerate(zip(prepped, states, offsets)):
+    for (k, v, z, zx, zy, M, c), (state, vis_rows), row_off in zip(layers, states, offsets):
         if int(vis_rows.sum()) == 0:
             continue
         A = np.ascontiguousarray(v.camera.R.T @ np.linalg.inv(v.camera.K))

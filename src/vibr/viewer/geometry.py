@@ -19,7 +19,8 @@ def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0) -> tuple
     ``s = ceil(sqrt(N_pixels / max_points))`` (all views together), back-projected with their
     depth (``X = C + depth · Rᵀ K⁻¹ x̄``, :meth:`vibr.camera.Camera.backproject`); a random
     subset of ``max_points`` is kept when the grid gives more. Views without depth add
-    nothing; when no view has depth the scene's sparse points (grey) are used.
+    nothing, nor do the pixels of a view's fallback proxy (:attr:`vibr.scene.View.fallback`);
+    when no view has depth the scene's sparse points (grey) are used.
 
     Returns
     -------
@@ -41,6 +42,8 @@ def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0) -> tuple
         z = v.depth[::step, ::step]
         yy, xx = np.mgrid[0:h:step, 0:w:step]
         ok = np.isfinite(z) & (z > 0)
+        if v.fallback is not None:  # the fallback proxy's plane is not a surface of the scene
+            ok &= ~v.fallback[::step, ::step]
         if not np.any(ok):
             continue
         xy = np.stack([xx[ok], yy[ok]], -1).astype(np.float64)
