@@ -216,8 +216,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     Samples
         ``meta`` holds per-view counts (``counts``: name → dict of visible / occluded /
         outside / behind / unknown, and for a view with a fallback proxy its fallback
-        pixels' ``fallback visible`` / ``fallback hidden``) and per-stage times in seconds (``times``: wall clock,
-        ``cpu_times``: process CPU time of all threads).
+        pixels' ``fallback visible`` / ``fallback hidden``) and per-stage times in seconds
+        (``times``: wall clock, ``cpu_times``: process CPU time of all threads).
 
     Raises
     ------
@@ -307,7 +307,7 @@ def _split_fallback(prepped, edge_rel) -> tuple[list, list]:
     known, proxy = [], []
     for k, v, z, zx, zy, M, c in prepped:
         m = v.fallback
-        if m is None or m.shape != z.shape:
+        if m is None:
             known.append((k, v, z, zx, zy, M, c))
             continue
         for layers, part in ((known, np.where(m, np.nan, z)), (proxy, np.where(m, z, np.nan))):
