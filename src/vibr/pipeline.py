@@ -51,6 +51,11 @@ __all__ = ["DEPTH_MODES", "prepare"]
 
 logger = logging.getLogger(__name__)
 
+#: Estimating depth for more source views than this, because every view is a source by
+#: default, is worth a warning: it takes one view's estimate per view (a 9×9 light field:
+#: minutes), where a render needs its few best views.
+MANY_SOURCES = 16
+
 #: The one depth vocabulary (module docstring); "auto" is the default everywhere.
 DEPTH_MODES = ("auto", "gt", "estimated", "planar", "files")
 
@@ -113,6 +118,9 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     elif depth == "estimated":
         from .stereo import estimate_depth
 
+        if len(src) > MANY_SOURCES and n_views is None and sources is None:
+            logger.warning(f"estimating depth for all {len(src)} source views, one after the other: "
+                           f"n_views=K (--views K) renders from the K best views only")
         src = estimate_depth(src, **(estimate_kw or {}))
     elif depth == "planar":
         src = _planar_depth(scene, src, tcam)
