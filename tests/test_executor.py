@@ -272,7 +272,7 @@ def _eval_all(scene_dir, out, *extra):
     return json.loads(Path(out).read_text())
 
 
-def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path):
+def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path, monkeypatch):
     """Serial (2 numba threads on 2 cores), --workers 2 and --dask local (1 thread each, other
     targets before this one in the same worker): the same JSON numbers bit for bit."""
     from vibr.evaluate_all import results_only
@@ -298,6 +298,12 @@ def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path):
     again = _eval_all(scene_dir, tmp_path / "serial.json")
     assert all(v.get("skipped") for v in again["per_view"].values())
     assert results_only(again) == results_only(serial)
+    # ... but not with other code: the reports are then recomputed
+    import vibr.io.checkpoint as ckpt
+
+    monkeypatch.setattr(ckpt, "code_fingerprint", lambda: "other code")
+    other = _eval_all(scene_dir, tmp_path / "serial.json")
+    assert not any(v.get("skipped") for v in other["per_view"].values())
 
 
 def test_flythrough_frames_identical_on_every_engine(tmp_path, monkeypatch):

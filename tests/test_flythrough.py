@@ -308,7 +308,8 @@ def test_hand_written_nerfstudio_camera_renders_like_camera_json(grid_dir, tmp_p
 
 def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     """vibr path -> vibr render --path -> MP4 with the right frame count and size (decoded
-    back); a rerun skips the frames written; an odd size is padded to even."""
+    back); a rerun skips the frames written, but not those of another path or other
+    settings (each frame carries its key); an odd size is padded to even."""
     from vibr.cli import main
     from vibr.io.video import read_video_info
 
@@ -331,13 +332,29 @@ def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     # the video is the one the PNGs on disk give (the resumed run's included)
     import imageio_ffmpeg
 
-    from vibr.io import read_image
+    from vibr.io import read_image, write_image
     from vibr.io.video import write_video
 
     ref = tmp_path / "ref.mp4"
     write_video(ref, (read_image(f) for f in frames), fps=24)
     for a, b in zip(imageio_ffmpeg.read_frames(str(out)), imageio_ffmpeg.read_frames(str(ref))):
         assert a == b
+
+    # frames of another path or other settings are rendered again, never reused; so is a
+    # frame without its key (written by something else)
+    pj2 = tmp_path / "s.json"
+    assert main(["path", "spiral", str(grid_dir), "-o", str(pj2), "--frames", "5", "--size", "47x33", "-q"]) == 0
+    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "4", "-q"]) == 0
+    assert "rendered 5 frames (0 already there)" in capsys.readouterr().out
+    fresh = tmp_path / "fresh"
+    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(fresh), "--views", "4", "-q"]) == 0
+    for a, b in zip(frames, sorted(fresh.glob("frame_*.png"))):
+        assert np.array_equal(read_image(a), read_image(b))
+    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 0
+    assert "rendered 5 frames (0 already there)" in capsys.readouterr().out
+    write_image(frames[1], read_image(frames[1]), bits=8)  # the same pixels, no key
+    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 0
+    assert "rendered 1 frames (4 already there)" in capsys.readouterr().out
 
 
 def test_view_weights_soft_and_continuous(arc_scene):

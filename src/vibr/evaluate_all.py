@@ -4,8 +4,8 @@
 Each held-out view is one task: the worker loads the scene once (:func:`load_context`),
 evaluates its target (:func:`evaluate_target`, the target never takes part in the depth
 estimation of its sources) and writes that target's report atomically to
-``VIEWS_DIR/TARGET.json``. A rerun with the same settings finds those files and skips their
-targets. The driver gathers the per-target reports into one report, in the spirit of 3D
+``VIEWS_DIR/TARGET.json``. A rerun with the same settings and the same code finds those files
+and skips their targets. The driver gathers the per-target reports into one report, in the spirit of 3D
 Gaussian Splatting's ``per_view.json`` / ``results.json``: ``per_view`` (target → report)
 and ``summary`` (per setting: mean and median PSNR, SSIM and DSSIM over the targets).
 """
@@ -58,8 +58,12 @@ def load_context(scene_path, scale: float):
 
 
 def _config_key(task: dict) -> str:
-    """A hash of everything that decides a target's numbers (not where files go)."""
+    """A hash of everything that decides a target's numbers (not where files go), vibr's
+    code included: a report written by other code is recomputed, not mixed in."""
+    from .io.checkpoint import code_fingerprint
+
     cfg = {k: v for k, v in task.items() if k not in ("report", "eval_kw")}
+    cfg["code"] = code_fingerprint()
     cfg["eval_kw"] = {k: v for k, v in task["eval_kw"].items() if k != "figures"}
     cfg["settings"] = [(s.method, s.params) for s in task["settings"]]
     blob = json.dumps(cfg, sort_keys=True, default=str)

@@ -19,8 +19,10 @@ Per frame (:func:`render_frame`, a top-level function of ``(context, frame index
    :func:`vibr.render.render_samples`).
 2. geometry (:func:`vibr.geometry.compute_samples`) and render
    (:func:`vibr.render.render_samples`) with the method's parameters;
-3. the frame is written atomically as ``frame_NNNNN.png`` (8-bit) in the frames folder;
-   a frame already there is skipped unless ``overwrite``.
+3. the frame is written atomically as ``frame_NNNNN.png`` (8-bit) in the frames folder,
+   with a key (:func:`frame_key`: the camera, the sources, the method and its parameters,
+   vibr's code) in a text chunk. A frame already there with the same key is skipped unless
+   ``overwrite``; one rendered for another path or other settings is rendered again.
 
 Work that does not depend on the frame is done once (:func:`prepare_sources`): the scene,
 the sources' depth, the world points of every source used to rank views (a strided
@@ -56,6 +58,10 @@ def frame_name(i: int) -> str:
     return FRAME_PATTERN.format(i)
 
 
+#: The PNG text chunk of a frame that holds its :func:`frame_key`.
+FRAME_KEY = "vibr-frame"
+
+
 @dataclass
 class FrameContext:
     """Everything a frame task needs (picklable: sent once per worker)."""
@@ -71,6 +77,7 @@ class FrameContext:
     geometry_kw: dict = field(default_factory=dict)
     view_points: list = field(default_factory=list)  # per source: (N_k, 3) world points
     prepared: dict = field(default_factory=dict)  # per source: prepare_depth's (z, z_x, z_y)
+    job_key: str = ""  # what every frame depends on besides its camera (:func:`job_key`)
 
     def __post_init__(self):
         # the optional sample fields the method reads (the footprint PSF's Jacobians), once
@@ -112,11 +119,43 @@ def prepare_sources(ctx: FrameContext, cache_depth: bool = True) -> None:
     from .geometry.depth import DEFAULT_EDGE_REL
 
     ctx.view_points = _source_points(ctx.sources)
+    ctx.job_key = job_key(ctx)
     ctx.prepared = {}
     if cache_depth:
         fill = bool(ctx.geometry_kw.get("fill_holes", False))
         edge = ctx.geometry_kw.get("edge_rel", DEFAULT_EDGE_REL)
         ctx.prepared = {v.name: prepare_depth(v, fill_holes=fill, edge_rel=edge) for v in ctx.sources.views}
+
+
+def job_key(ctx: FrameContext) -> str:
+    """SHA-1 of what every frame depends on besides its camera: vibr's code, the method and
+    its parameters, the source selection and the sources (names, cameras, images, depth,
+    sigma_z, fallback masks)."""
+    from .io.checkpoint import code_fingerprint, digest
+
+    parts = [code_fingerprint(), ctx.method, ctx.params, ctx.n_views, ctx.blend, ctx.geometry_kw]
+    for v in ctx.sources.views:
+        c = v.camera
+        parts += [v.name, c.K, c.R, c.t, list(c.shape), v.image, v.depth,
+                  v.sigma_z if isinstance(v.sigma_z, np.ndarray) else [v.sigma_z],
+                  v.fallback if v.fallback is not None else []]
+    return digest(*parts)
+
+
+def frame_key(ctx: FrameContext, i: int) -> str:
+    """The key written into frame ``i``'s PNG (text chunk ``vibr-frame``): a frame on disk is
+    reused only when its key is this one (:func:`render_frame`)."""
+    from .io.checkpoint import digest
+
+    c = ctx.cameras[i]
+    return digest(ctx.job_key, c.K, c.R, c.t, list(c.shape))
+
+
+def frame_done(ctx: FrameContext, i: int) -> bool:
+    """Whether frame ``i`` is on disk with its :func:`frame_key`."""
+    from .io.images import read_png_text
+
+    return read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) == frame_key(ctx, i)
 
 
 def _smoothstep(x):
@@ -164,7 +203,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     from .render import render_samples
 
     out = os.path.join(ctx.frames_dir, frame_name(i))
-    if not ctx.overwrite and os.path.isfile(out):
+    if not ctx.overwrite and frame_done(ctx, i):
         return {"index": i, "skipped": True, "seconds": 0.0}
     t0 = time.perf_counter()
     cam = ctx.cameras[i]
@@ -188,7 +227,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
                          target_centre=cam.centre, **ctx.params)
     tm["render"] = -t + (t := time.perf_counter())
-    write_image(out, res.image, bits=8)
+    write_image(out, res.image, bits=8, text={FRAME_KEY: frame_key(ctx, i)})
     tm["write"] = time.perf_counter() - t
     tm.update({f"geometry: {k}": v for k, v in samples.meta.get("times", {}).items()})
     tm.update({f"render: {k}": v for k, v in res.times.items() if k != "total"})
@@ -359,8 +398,7 @@ def auto_executor(ctx: FrameContext, n_todo: int):
 def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[list, str]:
     """The frames' summaries, and where they ran (:attr:`FlyResult.engine`)."""
     if executor == "auto":
-        todo = n if ctx.overwrite else sum(not os.path.isfile(os.path.join(ctx.frames_dir, frame_name(i)))
-                                           for i in range(n))
+        todo = n if ctx.overwrite else sum(not frame_done(ctx, i) for i in range(n))
         executor = auto_executor(ctx, todo)
     if executor is not None:
         from .executor import parse_executor, run_tasks

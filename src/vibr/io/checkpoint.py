@@ -3,13 +3,14 @@ keeps the views it had finished.
 
 Each finished view is written atomically (:func:`vibr.io.atomic.atomic_path`) to
 ``folder/NAME.npz`` with a key: the SHA-1 of everything its result depends on (the view's
-image and camera, its partners', the job's parameters). A file is read back only when its
+image and camera, its partners', the job's parameters, vibr's code). A file is read back only when its
 key matches and it loads completely; anything else (another run's parameters, a damaged
 file) is recomputed, never trusted.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -24,7 +25,20 @@ from .atomic import atomic_path
 logger = logging.getLogger(__name__)
 
 
-def _digest(*parts) -> str:
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """SHA-1 of vibr's own source files (names and contents): results saved under a key
+    that includes it are recomputed by other code, never mixed with its own."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha1()
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def digest(*parts) -> str:
+    """SHA-1 of arrays (dtype, shape, bytes) and JSON-able values, in order."""
     h = hashlib.sha1()
     for p in parts:
         if isinstance(p, np.ndarray):
@@ -45,7 +59,7 @@ class ViewCheckpoint:
         self.n_loaded = 0
 
     def key(self, view, camera, partners) -> str:
-        return _digest(self.params, view.name, camera.K, camera.R, camera.t, list(camera.shape),
+        return digest(code_fingerprint(), self.params, view.name, camera.K, camera.R, camera.t, list(camera.shape),
                        view.image, [(p.name, p.camera.K, p.camera.R, p.camera.t) for p in partners])
 
     def _path(self, name: str) -> Path:
