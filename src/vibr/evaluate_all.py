@@ -4,10 +4,11 @@
 Each held-out view is one task: the worker loads the scene once (:func:`load_context`),
 evaluates its target (:func:`evaluate_target`, the target never takes part in the depth
 estimation of its sources) and writes that target's report atomically to
-``VIEWS_DIR/TARGET.json``. A rerun with the same settings and the same code finds those files
-and skips their targets. The driver gathers the per-target reports into one report, in the spirit of 3D
-Gaussian Splatting's ``per_view.json`` / ``results.json``: ``per_view`` (target → report)
-and ``summary`` (per setting: mean and median PSNR, SSIM and DSSIM over the targets).
+``VIEWS_DIR/TARGET.json``. A rerun with the same settings and the same code finds those
+files and skips their targets. The driver gathers the per-target reports into one report,
+in the spirit of 3D Gaussian Splatting's ``per_view.json`` / ``results.json``: ``per_view``
+(target → report) and ``summary`` (per setting: mean and median PSNR, SSIM and DSSIM over
+the targets).
 """
 
 from __future__ import annotations

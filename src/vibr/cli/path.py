@@ -11,9 +11,9 @@ Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json 
 (camera_to_world 4x4 row-major in OpenGL camera axes, vertical fov in degrees; docs/FLYTHROUGH.md),
 to render with 'vibr render SCENE --path PATH.json -o video.mp4' (or nerfstudio's ns-render).
 Kinds: interpolate (a C2-smooth spline through the scene's cameras: all, nearest next, or
---views in that order), orbit (an ellipse around the point the cameras look at, at their mean height and
-distance; an arc swept back and forth when the cameras do not surround it), spiral (an
-LLFF-style forward-facing spiral around the mean camera).
+--views in that order), orbit (an ellipse around the point the cameras look at, at their
+mean height and distance; an arc swept back and forth when the cameras do not surround
+it), spiral (an LLFF-style forward-facing spiral around the mean camera).
 """
 
 _EPILOG = """\

@@ -3,9 +3,9 @@ keeps the views it had finished.
 
 Each finished view is written atomically (:func:`vibr.io.atomic.atomic_path`) to
 ``folder/NAME.npz`` with a key: the SHA-1 of everything its result depends on (the view's
-image and camera, its partners', the job's parameters, vibr's code). A file is read back only when its
-key matches and it loads completely; anything else (another run's parameters, a damaged
-file) is recomputed, never trusted.
+image and camera, its partners', the job's parameters, vibr's code). A file is read back
+only when its key matches and it loads completely; anything else (another run's
+parameters, other code, a damaged file) is recomputed, never trusted.
 """
 
 from __future__ import annotations
@@ -59,8 +59,9 @@ class ViewCheckpoint:
         self.n_loaded = 0
 
     def key(self, view, camera, partners) -> str:
-        return digest(code_fingerprint(), self.params, view.name, camera.K, camera.R, camera.t, list(camera.shape),
-                       view.image, [(p.name, p.camera.K, p.camera.R, p.camera.t) for p in partners])
+        return digest(code_fingerprint(), self.params, view.name, camera.K, camera.R, camera.t,
+                      list(camera.shape), view.image,
+                      [(p.name, p.camera.K, p.camera.R, p.camera.t) for p in partners])
 
     def _path(self, name: str) -> Path:
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)

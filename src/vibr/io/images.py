@@ -431,7 +431,8 @@ def headers_only():
 def scaled_scene(scene, s: float):
     """Every view of ``scene`` resized by ``s`` as :func:`vibr.io.load_scene` does with
     ``scale``: images by :func:`resize_image`, cameras by :meth:`vibr.camera.Camera.scaled`,
-    depth and sigma_z maps by nearest neighbour (:func:`resize_depth`). ``s = 1``: the scene."""
+    depth, sigma_z and fallback maps by nearest neighbour (:func:`resize_depth`). ``s = 1``:
+    the scene."""
     if s == 1.0:
         return scene
     views = []
@@ -440,6 +441,8 @@ def scaled_scene(scene, s: float):
         sz = v.sigma_z
         if sz is not None and np.ndim(sz) > 0:
             sz = resize_depth(np.asarray(sz, np.float32), cam.shape)
+        fb = None if v.fallback is None else resize_depth(v.fallback, cam.shape)
         views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
-                               depth=None if v.depth is None else resize_depth(v.depth, cam.shape), sigma_z=sz))
+                               depth=None if v.depth is None else resize_depth(v.depth, cam.shape), sigma_z=sz,
+                               fallback=fb))
     return scene.replace(views=views)
