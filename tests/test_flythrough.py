@@ -278,6 +278,27 @@ def test_frame_at_held_out_view_matches_render_target(grid_dir, tmp_path, capsys
     assert np.abs(t8 - fr).max() <= 1 / 255 + 1e-6
 
 
+def test_a_frame_that_sees_nothing_stops_with_one_line(grid_dir, tmp_path, capsys):
+    """A path whose third camera looks away from the scene: exit 2, one line naming the frame
+    and what is wrong, the frames before it kept."""
+    from vibr.camera import Camera
+    from vibr.cli import main
+    from vibr.io import load_scene
+    from vibr.path import write_camera_path
+
+    scene = load_scene(grid_dir)
+    c = scene["view_004"].camera
+    away = Camera.from_centre(c.K, np.diag([1.0, -1.0, -1.0]) @ c.R, c.centre, c.width, c.height)
+    write_camera_path(tmp_path / "p.json", [scene["view_003"].camera, c, away], fps=1.0)
+    capsys.readouterr()
+    code = main(["render", str(grid_dir), "--path", str(tmp_path / "p.json"), "-o", str(tmp_path / "fr"),
+                 "--workers", "1", "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "Traceback" not in err
+    assert "frame 2: " in err and "no photograph looked" in err
+    assert sorted(p.name for p in (tmp_path / "fr").glob("frame_*.png")) == ["frame_00000.png", "frame_00001.png"]
+
+
 def test_hand_written_nerfstudio_camera_renders_like_camera_json(grid_dir, tmp_path, capsys):
     """A camera written by hand in nerfstudio's convention (OpenGL axes: the grid looks down
     world +z, so camera_to_world = diag(1, -1, -1) at the centre) renders the same image as

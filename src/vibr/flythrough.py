@@ -58,6 +58,9 @@ def frame_name(i: int) -> str:
     return FRAME_PATTERN.format(i)
 
 
+#: What a frame that sees nothing of the scene stops on, said with its error.
+_SEES_NOTHING = "; the path goes where no photograph looked (inside or behind the object?)"
+
 #: The PNG text chunk of a frame that holds its :func:`frame_key`.
 FRAME_KEY = "vibr-frame"
 
@@ -212,14 +215,14 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
                      view_points=ctx.view_points or None)
     idx = np.flatnonzero(w > 0)
     if not len(idx):
-        raise VibrInputError(f"frame {i}: no source view sees it (camera {cam})")
+        raise VibrInputError(f"frame {i}: no source view sees it (camera {cam}){_SEES_NOTHING}")
     views = [ctx.sources.views[k] for k in idx]
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     tm["view weights"] = -t0 + (t := time.perf_counter())
     try:
         samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
     except VibrInputError as exc:
-        raise VibrInputError(f"frame {i}: {exc.problem}") from None
+        raise VibrInputError(f"frame {i}: {exc.problem} (camera {cam}){_SEES_NOTHING}") from None
     tm["geometry"] = -t + (t := time.perf_counter())
     ws = w[idx]
     if np.any(ws < 1.0):
