@@ -154,11 +154,12 @@ def frame_key(ctx: FrameContext, i: int) -> str:
     return digest(ctx.job_key, c.K, c.R, c.t, list(c.shape))
 
 
-def frame_done(ctx: FrameContext, i: int) -> bool:
-    """Whether frame ``i`` is on disk with its :func:`frame_key`."""
+def frame_done(ctx: FrameContext, i: int, key: str | None = None) -> bool:
+    """Whether frame ``i`` is on disk with its :func:`frame_key` (``key`` when given)."""
     from .io.images import read_png_text
 
-    return read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) == frame_key(ctx, i)
+    key = frame_key(ctx, i) if key is None else key
+    return read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) == key
 
 
 def _smoothstep(x):
@@ -206,7 +207,8 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     from .render import render_samples
 
     out = os.path.join(ctx.frames_dir, frame_name(i))
-    if not ctx.overwrite and frame_done(ctx, i):
+    key = frame_key(ctx, i)
+    if not ctx.overwrite and frame_done(ctx, i, key):
         return {"index": i, "skipped": True, "seconds": 0.0}
     t0 = time.perf_counter()
     cam = ctx.cameras[i]
@@ -230,7 +232,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
                          target_centre=cam.centre, **ctx.params)
     tm["render"] = -t + (t := time.perf_counter())
-    write_image(out, res.image, bits=8, text={FRAME_KEY: frame_key(ctx, i)})
+    write_image(out, res.image, bits=8, text={FRAME_KEY: key})
     tm["write"] = time.perf_counter() - t
     tm.update({f"geometry: {k}": v for k, v in samples.meta.get("times", {}).items()})
     tm.update({f"render: {k}": v for k, v in res.times.items() if k != "total"})

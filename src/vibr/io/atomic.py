@@ -47,7 +47,7 @@ def atomic_path(path, suffix: str | None = None):
     tmp = _new_temporary(folder, os.path.basename(path), suffix)
     try:
         yield tmp
-        # mkstemp makes the file private (0600); give it the mode a plain open() would
+        # the temporary file is private (0600); give it the mode a plain open() would
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
