@@ -373,6 +373,9 @@ def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
         assert np.array_equal(read_image(a), read_image(b))
     assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 0
     assert "rendered 5 frames (0 already there)" in capsys.readouterr().out
+    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 0
+    txt = capsys.readouterr().out
+    assert "rendered 0 frames (5 already there)" in txt and "per frame" not in txt  # nothing to divide
     write_image(frames[1], read_image(frames[1]), bits=8)  # the same pixels, no key
     assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 0
     assert "rendered 1 frames (4 already there)" in capsys.readouterr().out

@@ -163,7 +163,8 @@ def _run_path(args) -> int:
     t = res.times
     what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
-    print(f"rendered {res.rendered} frames ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}, "
-          f"{res.seconds_per_frame:.2f} s per frame; total {t['total']:.1f} s (depth: {res.depth_source} "
+    per = f", {res.seconds_per_frame:.2f} s per frame" if res.rendered else ""
+    print(f"rendered {res.rendered} frames ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}"
+          f"{per}; total {t['total']:.1f} s (depth: {res.depth_source} "
           f"({t['depth']:.1f} s); video {t['video']:.1f} s); wrote {what}")
     return 0
