@@ -8,7 +8,10 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
 * fountain-P11: views 0002, 0005, 0008 from the 10 others, estimated depth, image scale 0.25;
 * temple (Middlebury templeSparseRing): templeSR0004 from its 4 best views, estimated depth;
 * synthetic (``vibr.synthetic.make_scene``, exact depth, 128×128): the middle view of the
-  grid, arc, free and handheld layouts from the others.
+  grid, arc, free and handheld layouts from the others;
+* every other view a source, as ``vibr eval`` renders by default: cotton's centre from its
+  80 other views (ground-truth depth) and templeSR0004 from the 15 others (estimated depth,
+  the fallback proxy where it is unknown).
 
 Estimated depth is computed from the sources only (the target never takes part) and cached
 on disk (``vibr.depthcache``, default ~/.cache/vibr): a second run is rendering only.
@@ -18,7 +21,8 @@ Settings per case: ULR, BVS, ``gradient`` with TV "uniform" over gamma × lam =
 gamma ∈ {0.1, 0.25, 0.5}, lam 0.1 and at gamma 0.1, lam 0.3; with ULR's view prior
 (``view_k=4``) at lam 0.3: gamma 0.1 and 0.25, gamma 0.1 with ``grad_weighting="W"``, gamma
 0.1 with TV "samples"; with the preconditioned solver (``precond=True``) at (gamma, lam) =
-(0, 0.3), (0.1, 0.1), (0.1, 0.3), (0.25, 0.3) and with the view prior at (0.1, 0.3); and ``gamma="auto", lam="auto"`` (``vibr.autotune``:
+(0, 0.3), (0.1, 0.1), (0.1, 0.3), (0.25, 0.3) and with the view prior at gamma × lam =
+{0.1, 0.2, 0.3} × {0.3, 0.6, 1}; and ``gamma="auto", lam="auto"`` (``vibr.autotune``:
 leave-one-source-out on the sources, never the target image), whose tuning time is measured
 against the median full-size render time of the target over the case's gradient settings
 (same process, same minutes: the machine's load hits both alike).
@@ -26,7 +30,7 @@ against the median full-size render time of the target over the case's gradient 
 Metrics: PSNR over all pixels and over the covered pixels (those every setting of the case
 reconstructed), 2-pixel border excluded. The held-out split is fixed before any number is
 seen: within each family (cotton gt, cotton estimated, cotton planar, fountain, temple +
-synthetic) the cases alternate, in the order listed above, between "choose" (1st, 3rd, ...)
+synthetic, all views) the cases alternate, in the order listed above, between "choose" (1st, 3rd, ...)
 and "report" (2nd, 4th, ...). The default is the setting with the best mean all-pixel PSNR
 over the "choose" cases; it is reported on the "report" cases beside BVS, ULR, the auto
 weights and the per-case oracle (the best setting of the sweep for that case).
@@ -57,6 +61,8 @@ from paper_tables import SceneCache, cotton_neighbours, data_dir  # noqa: E402  
 GAMMAS = (0.0, 0.1, 0.25, 0.5, 1.0)
 LAMS = (0.1, 0.3)
 SAMPLES_GAMMAS = (0.1, 0.25, 0.5)
+PV4_GAMMAS = (0.1, 0.2, 0.3)
+PV4_LAMS = (0.3, 0.6, 1.0)
 BEGIN, END = "<!-- q23b:begin -->", "<!-- q23b:end -->"
 BORDER = 2
 
@@ -85,8 +91,12 @@ def _settings():
     # the diagonally preconditioned solver (precond=True: same energy, another metric)
     out += [(f"γ{g:g} λ{l:g} P", "gradient", {"gamma": g, "lam": l, "tv_weighting": "uniform", "precond": True})
             for g, l in ((0.0, 0.3), (0.1, 0.1), (0.1, 0.3), (0.25, 0.3))]
-    out += [("γ0.1 λ0.3 P V4", "gradient", {"gamma": 0.1, "lam": 0.3, "tv_weighting": "uniform", "precond": True,
-                                            "view_k": 4})]
+    # the preconditioned solver with the view prior over a wider grid: since the colour term is
+    # divided by the prior-weighted density (docs/RENDERER.md, "Density with the view prior")
+    # the same (gamma, lam) weigh the colour term up to a few times more
+    out += [(f"γ{g:g} λ{l:g} P V4", "gradient", {"gamma": g, "lam": l, "tv_weighting": "uniform", "precond": True,
+                                                 "view_k": 4})
+            for g in PV4_GAMMAS for l in PV4_LAMS]
     return out
 
 
@@ -99,6 +109,9 @@ def case_list():
     fam["fountain"] = [dict(kind="fountain", target=t, name=f"fountain {t}") for t in ("0002", "0005", "0008")]
     fam["other"] = ([dict(kind="temple", name="temple 0004")]
                     + [dict(kind="synthetic", layout=lo, name=f"synthetic {lo}") for lo in ("grid", "arc", "free", "handheld")])
+    # every other view a source (what vibr eval does by default): cotton's 80, temple's 15
+    fam["all views"] = [dict(kind="cotton", depth="gt", stride=0, name="cotton gt all 80"),
+                        dict(kind="temple", all=True, name="temple 0004 all 15")]
     out = []
     for f, cases in fam.items():
         for i, c in enumerate(cases):
@@ -119,7 +132,9 @@ def _sources(cache, case):
         return sc.split(len(sc) // 2)
     if case["kind"] == "cotton":
         sc = cache.get("hci2016_cotton", 1.0)
-        tname, names = "input_Cam040", cotton_neighbours(sc, case["stride"])
+        tname = "input_Cam040"
+        names = ([v.name for v in sc.views if v.name != tname] if case["stride"] == 0
+                 else cotton_neighbours(sc, case["stride"]))
     elif case["kind"] == "fountain":
         sc = cache.get("strecha_fountain-P11", 0.25)
         tname = case["target"]
@@ -128,12 +143,17 @@ def _sources(cache, case):
         sc = cache.get("middlebury_templeSparseRing", 1.0)
         tname = "templeSR0004"
         rest, tv = sc.split(tname)
-        names = [rest.views[i].name for i in select_views(rest, tv.camera, 4)]
+        names = ([v.name for v in rest.views] if case.get("all")
+                 else [rest.views[i].name for i in select_views(rest, tv.camera, 4)])
     depth = case.get("depth", "estimated")
     if depth != "estimated":
         return prepare(sc, tname, sources=names, depth=depth)
     tview = sc[tname]
     src = scene_with_depth(sc.subset(names), depth="estimated")  # the target takes no part
+    if case.get("all"):  # as vibr eval renders it: the fallback proxy where depth is unknown
+        from vibr.geometry import apply_fallback
+
+        src = apply_fallback(src, "auto")
     return src, tview
 
 
@@ -211,7 +231,7 @@ def table(reps, chosen):
          "(its choice; *tune / render*: its tuning time over the median full-size render time of the case's gradient settings).", "",
          f"Command: `python3 benchmarks/sweep_defaults.py --workers 2 --write-docs`; code: "
          f"{', '.join(sorted({r.get('commit', '?') for r in reps}))}; {len(reps)} cases. Split fixed in "
-         "advance: within each family (cotton gt / estimated / planar, fountain, temple + synthetic) "
+         "advance: within each family (cotton gt / estimated / planar, fountain, temple + synthetic, all views) "
          "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*. Estimated depth: from the "
          "sources only, cached (`vibr.depthcache`).", "",
          "| case | split | ULR | BVS | chosen | auto (γ, λ) | oracle (setting) | chosen − BVS | auto − oracle | tune / render |",

@@ -32,9 +32,9 @@ __all__ = ["AUTO", "GAMMA_GRID", "LAM_GRID", "Tuned", "probe_views", "probe_scal
 #: The value that asks for self-tuning (``gamma="auto"``, ``lam="auto"``, CLI ``--gamma auto``).
 AUTO = "auto"
 #: Candidate gradient-term weights (vibr's units, :mod:`vibr.render.methods`).
-GAMMA_GRID = (0.0, 0.1, 0.25, 0.5, 1.0)
+GAMMA_GRID = (0.0, 0.1, 0.2, 0.5, 1.0)
 #: Candidate TV weights (grey levels of 255).
-LAM_GRID = (0.1, 0.3)
+LAM_GRID = (0.2, 0.6, 1.0)
 #: Metric border (pixels) of the probe renders, as the evaluation's.
 BORDER = 2
 #: Smallest probe size (pixels on the short side): below it the probe says little.

@@ -70,7 +70,7 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
                         f"(default {_d('gamma')})")
     p.add_argument("--lam", type=_weight, metavar="L|" + AUTO,
                    help=f"TV weight, on the --intensity-scale, or {AUTO} (over {', '.join(map(str, LAM_GRID))}) "
-                        f"(default {_d('lam')})")
+                        f"(default {_dm('lam')})")
     p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
     p.add_argument("--sigma-z", type=float,
                    help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")

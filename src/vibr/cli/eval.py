@@ -9,7 +9,7 @@ from ..render.methods import DEFAULTS, METHODS
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
-                       check_depth_args, method_help, names)
+                       _dm, check_depth_args, method_help, names)
 
 _DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
@@ -65,7 +65,7 @@ def register(sub) -> None:
     p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)})")
     p.add_argument("--alpha", type=_floats, help=f"colour-term weights (default: {DEFAULTS['alpha']:g})")
-    p.add_argument("--lam", type=_floats, help=f"TV weights (default: {DEFAULTS['lam']:g})")
+    p.add_argument("--lam", type=_floats, help=f"TV weights (default: {_dm('lam')})")
     p.add_argument("--scale", type=float, default=1.0,
                    help="IMAGE scale the scene is loaded at, e.g. 0.25 (default: 1)")
     add_intensity_scale_option(p)

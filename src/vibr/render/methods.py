@@ -13,8 +13,8 @@ gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term,
 Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/METHOD.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
-* ``gamma = 0.1`` gradient-term weight for ``gradient`` and ``lam = 0.3`` TV weight (grey
-  levels of 255: a 1-grey-level step costs 0.3 per pixel of edge), with the uniform TV
+* ``gamma = 0.2`` gradient-term weight for ``gradient`` and ``lam = 0.6`` TV weight (grey
+  levels of 255: a 1-grey-level step costs 0.6 per pixel of edge), with the uniform TV
   (eq. energy_final; vibr's units: forward differences, docs/RENDERER.md "One image
   gradient"; the paper's γ is reached through ``preset="paper"``), the view prior
   (``view_k = 4``) and the preconditioned solver (``precond = True``): chosen together by
@@ -22,6 +22,8 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   *choose* half of a sweep across cotton, fountain, temple and the synthetic scenes, reported
   on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs,
   which keep their published form (``view_k = 0``, ``precond = False``) unless given.
+  With the view prior the colour term is divided by the prior-weighted density
+  (:func:`vibr.render.variational.colour_density`), the gradient term by the plain one.
   ``"auto"`` for either: chosen per scene by leave-one-source-out (:mod:`vibr.autotune`).
 * ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/METHOD.md §3, the authors' value).
 * ``sigma_z = None`` depth std. dev., scene units: the samples' own (the geometry stage's
@@ -70,7 +72,7 @@ __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
-    alpha=1.0, gamma=0.1, lam=0.3, sigma_s=1.0, sigma_z=None, scale=255.0,
+    alpha=1.0, gamma=0.2, lam=0.6, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=True, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
@@ -170,8 +172,10 @@ def register_method(method: Method) -> Method:
 
 register_method(Method("ulr", "Unstructured Lumigraph Rendering (direct blend, no solve)",
                        solve=False, reweight=False, overrides=dict(gamma=0.0, n_outer=0)))
-# the baselines keep their published form (no view prior, plain FISTA) unless asked
-_PUBLISHED = dict(view_k=0, precond=False)
+# the baselines keep their published form (no view prior, plain FISTA) unless asked, and
+# the TV weight they had before the gradient method's defaults moved with the prior-weighted
+# density (docs/RENDERER.md, "Density with the view prior")
+_PUBLISHED = dict(view_k=0, precond=False, lam=0.3)
 register_method(Method("savsr", "Wanner & Goldluecke 2012: deformation weights, one solve",
                        reweight=False, geometric=False, overrides=dict(gamma=0.0, n_outer=1, **_PUBLISHED)))
 register_method(Method("bvs", "Pujades et al. 2014: Bayesian weights re-estimated from u",

@@ -32,7 +32,8 @@ class RenderResult:
     method : str
     params : dict
         The parameters used (defaults filled in), plus (variational methods) ``density``
-        (the normalisation rho), ``psf_shrunk`` (fraction of the samples whose footprint
+        (the normalisation rho of the gradient term), ``colour_density`` (rho_c, the colour
+        term's: rho weighted by the view prior), ``psf_shrunk`` (fraction of the samples whose footprint
         was shrunk to fit a 2×2 block; 0 with the bilinear PSF) and ``psf_degenerate``
         (fraction with a non-finite or singular Jacobian, given the unit-square PSF).
     n_samples : int

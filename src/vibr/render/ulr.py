@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.samples import Samples
-from .operators import Splat
 
 __all__ = ["ulr_blend", "ulr_penalty", "ulr_view_weights"]
 
@@ -42,34 +41,12 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
         ``Σ_v w_v ‖c_v − c‖² / (3 Σ_v w_v)``: the ULR-weighted variance of the blended views'
         colours around the blend (per channel, [0, 1] units; 0 where no view lands).
     """
-    H, W = samples.target_shape
-    pen = ulr_penalty(samples, source_centres, target_centre, beta_res)
-    V = len(np.asarray(source_centres))
-    colour = np.zeros((V, H, W, 3))
-    pview = np.full((V, H, W), np.inf)
-    acc = np.zeros((H, W))
-    for v in range(V):
-        sel = samples.view == v
-        if not np.any(sel):
-            continue
-        sp = Splat(samples.xy[sel], (H, W))
-        vals = np.concatenate([samples.colour[sel].astype(np.float64), pen[sel, None],
-                               np.ones((int(sel.sum()), 1))], axis=1)
-        s = sp.adjoint(vals)
-        wv = s[..., 4]
-        ok = wv > 1e-3
-        colour[v][ok] = s[ok, :3] / wv[ok, None]
-        pview[v][ok] = s[ok, 3] / wv[ok]
-        acc += wv
-    wt = ulr_view_weights(pview, k, eps)
-    sw = wt.sum(0)
-    # single-view pixels: w̃ = 0 with the inflated threshold only if p = thresh; guard anyway
-    img = np.where(sw[..., None] > 0, (wt[..., None] * colour).sum(0) / np.maximum(sw, 1e-300)[..., None], 0.0)
-    if not spread:
-        return img.astype(np.float32), acc.astype(np.float32)
-    dev = ((colour - img[None]) ** 2).sum(-1)  # (V, H, W); absent views have wt = 0
-    var = np.where(sw > 0, (wt * dev).sum(0) / (3 * np.maximum(sw, 1e-300)), 0.0)
-    return img.astype(np.float32), acc.astype(np.float32), var.astype(np.float32)
+    from .weights import ulr_pixels
+
+    # compiled: a numpy pass per view does not scale to a light field's 80 views
+    # (docs/RENDERER.md, "Density with the view prior")
+    img, acc, var = ulr_pixels(samples, source_centres, target_centre, k, beta_res, eps, spread)
+    return (img, acc) if not spread else (img, acc, var)
 
 
 def ulr_penalty(samples: Samples, source_centres, target_centre, beta_res: float = 0.1) -> np.ndarray:

@@ -334,7 +334,8 @@ def hole_distance(coverage) -> np.ndarray:
 
 
 def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float = 255.0,
-                      density: float = 1.0, terms=TERMS, view=None) -> np.ndarray:
+                      density: float = 1.0, terms=TERMS, view=None,
+                      grad_density: float | None = None) -> np.ndarray:
     """σ per pixel (H, W) float32, grey levels of ``scale``, of a variational render.
 
     Parameters
@@ -352,9 +353,12 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     coverage : (H, W) bool
         Pixels reached by the samples; the rest get ``σ_hole`` (:func:`hole_sigma`).
     density : float
-        The density normalisation rho the data terms were divided by
-        (``RenderResult.params["density"]``): the model's variance is that of the
-        unnormalised energy (the paper's), ``1 / (rho · diag(H))``.
+        The density the colour term was divided by (``RenderResult.params["colour_density"]``,
+        rho_c): the model's variance is that of the unnormalised energy (the paper's),
+        ``1 / diag(rho_c · alpha · A + rho · gamma · DᵀA_gD)``.
+    grad_density : float, optional
+        The density the gradient term was divided by (``RenderResult.params["density"]``,
+        rho); None: ``density``.
     terms : sequence of {"model", "spread", "views", "hole"} or a "+"-joined string
         The variances added: the model's ``1/diag(H)``, the disagreement of the sources
         ``s²·(1 + 1/n_eff)`` and the view offsets (``views``: the spread is then taken with
@@ -375,8 +379,9 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     var = np.zeros(np.shape(coverage))
     s2_scale = float(scale) ** 2
     if "model" in terms:
-        var = var + model_variance(model.A, model.Ag if model.use_grad else None, model.alpha,
-                                   model.gamma if model.use_grad else 0.0) / float(density)
+        rg = float(density if grad_density is None else grad_density)
+        var = var + model_variance(model.A, model.Ag if model.use_grad else None, model.alpha * float(density),
+                                   model.gamma * rg if model.use_grad else 0.0)
     with_views = "views" in terms and view is not None and len(view) > 0
     if "spread" in terms or with_views:
         up = np.asarray(u)

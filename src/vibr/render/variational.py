@@ -3,6 +3,7 @@
     splat_coverage    the image-formation operator B (bilinear or footprint PSF), the
                       unweighted coverage Bᵀ1 and, with the gradient term, Bᵀ B and Bᵀ ∇v
     sample_density    rho, the mean coverage: data terms are divided by it
+    colour_density    rho_c, rho weighted by the view prior: the colour term's divisor
     initial_image     the W-weighted blend of the samples, holes filled by push–pull
     assemble_model    the quadratic model of one outer pass (colour and gradient stencils)
     solve_variational the outer passes: re-estimate the weights from u, assemble, FISTA
@@ -28,7 +29,7 @@ from .result import RenderResult
 from .solver import QuadraticModel, fista
 from .tv import TVProx
 
-__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "initial_image", "solve_variational",
+__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "colour_density", "initial_image", "solve_variational",
            "TV_WEIGHTINGS", "tv_weight_map"]
 
 logger = logging.getLogger(__name__)
@@ -123,6 +124,20 @@ def sample_density(acc, coverage, normalise: bool) -> float:
     and lam mean the same whatever the number of views (the authors' code divides the data
     gradient by the accumulated splat weight to the same effect)."""
     return float(acc[coverage].mean()) if normalise and coverage.any() else 1.0
+
+
+def colour_density(rho: float, prior, normalise: bool) -> float:
+    """rho_c, the density the colour term is divided by: ``rho · mean_m(prior_m)``, the
+    number of views a covered pixel weighs once ULR's view prior (``prior`` (N,) in [0, 1],
+    :func:`vibr.render.weights.view_prior`; None: 1) has weighed them.
+
+    The prior keeps about ``view_k`` views per pixel whatever the number of sources, so
+    dividing the colour term by rho (every view that lands) would shrink it against the
+    TV and the gradient term as the sources grow (docs/RENDERER.md, "Density with the view
+    prior")."""
+    if prior is None or not normalise or len(prior) == 0:
+        return rho
+    return max(rho * float(np.mean(prior, dtype=np.float64)), 1e-12)
 
 
 def initial_image(cov: SplatCoverage) -> np.ndarray:
@@ -224,8 +239,9 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     sp = cov.splat
     times["assembly"] += time.perf_counter() - t0
     rho = sample_density(cov.acc, cov.coverage, p["normalise"])
+    rho_c = colour_density(rho, prior, p["normalise"])
     need_w = p["grad_weighting"] == "W" or bool(uncertainty)
-    colour_term = _ColourTerm(samples, p, sp, rho, method.geometric, times, need_w, prior)
+    colour_term = _ColourTerm(samples, p, sp, rho_c, method.geometric, times, need_w, prior)
 
     # initial image: the deformation-weighted blend (u unknown yet) + push-pull
     t0 = time.perf_counter()
@@ -288,11 +304,12 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         from .uncertainty import variational_sigma
 
         t0 = time.perf_counter()
-        sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho,
+        sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho_c,
+                                grad_density=rho,
                                 terms=uncertainty, view=samples.view)
         times["uncertainty"] = time.perf_counter() - t0
     times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
-    p = dict(p, density=rho, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
+    p = dict(p, density=rho, colour_density=rho_c, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
     return RenderResult(img, cov.coverage, energy, terms, outer, times, method.name, p, len(samples),
                         init=init, iterations=n_iter, power_iterations=n_power, uncertainty=sig)

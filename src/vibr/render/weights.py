@@ -26,7 +26,7 @@ from .operators import _row_coef, _sum_in_order, accumulate_bucket, sample_at
 from .solver import median
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
-           "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior"]
+           "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior", "ulr_pixels"]
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
 
@@ -396,13 +396,15 @@ def _ulr_penalty_one(X, c, cu, beta_res):
 
 
 @njit(parallel=True, cache=True)
-def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_res, acc):
+def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_res, colour, acc):
     """``acc[y, x, v] += (B_m· pen_m, B_m·)`` per view: each view's penalty splat and
     coverage, one pass over the samples (row buckets of even then odd rows: threads never
-    write the same row). The view is the fast axis: a pixel's views lie together."""
+    write the same row). The view is the fast axis: a pixel's views lie together. With
+    ``colour`` (N, 3) (else (0, 3)), ``B_m· colour_m`` into ``acc[..., 2:5]`` too (ULR)."""
     n = fx.shape[0]
     n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == n and n > 0
+    with_colour = colour.shape[0] == n and n > 0
     for parity in range(2):
         for r in prange(n_rows):
             if r % 2 != parity or starts[r] == starts[r + 1]:
@@ -422,45 +424,107 @@ def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_re
                 acc[y + 1, x, v, 1] += b2
                 acc[y + 1, x + 1, v, 0] += b3 * pen
                 acc[y + 1, x + 1, v, 1] += b3
+                if with_colour:
+                    for c in range(3):
+                        cv = colour[i, c]
+                        acc[y, x, v, 2 + c] += b0 * cv
+                        acc[y, x + 1, v, 2 + c] += b1 * cv
+                        acc[y + 1, x, v, 2 + c] += b2 * cv
+                        acc[y + 1, x + 1, v, 2 + c] += b3 * cv
+
+
+@njit(cache=True)
+def _buehler_weights(a, k, eps, p, srt):
+    """Buehler's weights of one pixel's views into ``p`` (V,) (:func:`vibr.render.ulr.ulr_view_weights`,
+    not normalised): from ``a`` (V, ≥2), each view's penalty sum and coverage; a view counts
+    where its coverage > 1e-3. ``srt`` (V,) scratch. Returns the largest weight."""
+    V = p.shape[0]
+    kk = min(k, V - 1)
+    nfin = 0
+    for v in range(V):
+        c = a[v, 1]
+        p[v] = a[v, 0] / c if c > 1e-3 else np.inf
+        # insertion sort of the V penalties (V is small)
+        j = v
+        while j > 0 and srt[j - 1] > p[v]:
+            srt[j] = srt[j - 1]
+            j -= 1
+        srt[j] = p[v]
+        if c > 1e-3:
+            nfin += 1
+    thresh = srt[kk] if V > k else np.inf
+    if not math.isfinite(thresh):  # fewer than k+1 views: the largest present, inflated
+        thresh = srt[max(nfin - 1, 0)] * 1.01 + eps
+    top = 0.0
+    for v in range(V):
+        w = 0.0
+        if math.isfinite(p[v]):
+            w = max(0.0, 1.0 - p[v] / thresh) / (p[v] + eps)
+        p[v] = w
+        top = max(top, w)
+    return top
 
 
 @njit(parallel=True, cache=True)
 def _prior_pixels(acc, k, eps, wt):
     """Per pixel: each view's mean penalty (where its coverage > 1e-3), Buehler's weights of
-    the ``k`` best views (:func:`vibr.render.ulr.ulr_view_weights`), divided by the largest.
+    the ``k`` best views (:func:`_buehler_weights`), divided by the largest.
     ``acc`` (H, W, V, 2), ``wt`` (H, W, V); ``wt`` may be ``acc[..., 0]`` (a pixel's sums
     are read before its weights are written)."""
     H, W, V = wt.shape
-    kk = min(k, V - 1)
     for y in prange(H):
         p = np.empty(V, np.float64)
         srt = np.empty(V, np.float64)
         for x in range(W):
-            nfin = 0
-            for v in range(V):
-                c = acc[y, x, v, 1]
-                p[v] = acc[y, x, v, 0] / c if c > 1e-3 else np.inf
-                # insertion sort of the V penalties (V is small)
-                j = v
-                while j > 0 and srt[j - 1] > p[v]:
-                    srt[j] = srt[j - 1]
-                    j -= 1
-                srt[j] = p[v]
-                if c > 1e-3:
-                    nfin += 1
-            thresh = srt[kk] if V > k else np.inf
-            if not math.isfinite(thresh):  # fewer than k+1 views: the largest present, inflated
-                thresh = srt[max(nfin - 1, 0)] * 1.01 + eps
-            top = 0.0
-            for v in range(V):  # the weights in p (float64), normalised as they are stored
-                w = 0.0
-                if math.isfinite(p[v]):
-                    w = max(0.0, 1.0 - p[v] / thresh) / (p[v] + eps)
-                p[v] = w
-                top = max(top, w)
-            top = max(top, 1e-300)
+            top = max(_buehler_weights(acc[y, x], k, eps, p, srt), 1e-300)
             for v in range(V):
                 wt[y, x, v] = p[v] / top
+
+
+@njit(parallel=True, cache=True)
+def _ulr_pixels(acc, k, eps, img, cover, var):
+    """ULR's blend per pixel from ``acc`` (H, W, V, 5) of :func:`_prior_splat` with colour:
+    ``Σ_v w_v c_v / Σ_v w_v`` with each view's splatted colour ``c_v`` and Buehler's weights
+    (:func:`_buehler_weights`) into ``img`` (H, W, 3), the views' summed coverage into
+    ``cover`` (H, W), and with ``var`` (H, W) (else (0, 0)) ``Σ_v w_v ‖c_v − c‖² / (3 Σ_v w_v)``.
+    A pixel no view covers is 0."""
+    H, W, V = acc.shape[0], acc.shape[1], acc.shape[2]
+    spread = var.shape[0] == H
+    for y in prange(H):
+        p = np.empty(V, np.float64)
+        srt = np.empty(V, np.float64)
+        for x in range(W):
+            a = acc[y, x]
+            _buehler_weights(a, k, eps, p, srt)
+            sw = 0.0
+            s0 = s1 = s2 = 0.0
+            cov = 0.0
+            for v in range(V):
+                cv = np.float64(a[v, 1])
+                cov += cv
+                if p[v] > 0.0:
+                    sw += p[v]
+                    s0 += p[v] * (a[v, 2] / cv)
+                    s1 += p[v] * (a[v, 3] / cv)
+                    s2 += p[v] * (a[v, 4] / cv)
+            cover[y, x] = cov
+            if sw <= 0.0:
+                img[y, x, 0] = img[y, x, 1] = img[y, x, 2] = 0.0
+                if spread:
+                    var[y, x] = 0.0
+                continue
+            m0, m1, m2 = s0 / sw, s1 / sw, s2 / sw
+            img[y, x, 0], img[y, x, 1], img[y, x, 2] = m0, m1, m2
+            if spread:
+                d = 0.0
+                for v in range(V):
+                    if p[v] > 0.0:
+                        cv = np.float64(a[v, 1])
+                        e0 = a[v, 2] / cv - m0
+                        e1 = a[v, 3] / cv - m1
+                        e2 = a[v, 4] / cv - m2
+                        d += p[v] * (e0 * e0 + e1 * e1 + e2 * e2)
+                var[y, x] = d / (3.0 * sw)
 
 
 @njit(parallel=True, cache=True)
@@ -501,9 +565,32 @@ def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta
     # over its penalty sums once read: the maps are (H, W, V), the largest of a render's
     acc = np.zeros((H, W, len(Cs), 2), np.float32)
     _prior_splat(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, sp.order, sp.starts, view, np.ascontiguousarray(samples.X),
-                 Cs, Cu, float(beta_res), acc)
+                 Cs, Cu, float(beta_res), np.zeros((0, 3), np.float32), acc)
     wt = acc[..., 0]
     _prior_pixels(acc, int(k), float(eps), wt)
     out = np.empty(len(samples), np.float32)
     _prior_gather(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, view, wt, out)
     return out
+
+
+def ulr_pixels(samples: Samples, source_centres, target_centre, k: int = 4, beta_res: float = 0.1,
+               eps: float = 1e-6, spread: bool = False):
+    """ULR's blend (:func:`vibr.render.ulr.ulr_blend`) in two compiled passes: each view's
+    colour, penalty and coverage splatted per target pixel (float32 sums, ``(H, W, V, 5)``),
+    then Buehler's weights and the blend per pixel. Returns ``(image (H, W, 3), coverage
+    (H, W), variance (H, W) or None)`` float32."""
+    from .operators import Splat
+
+    H, W = samples.target_shape
+    Cs = np.ascontiguousarray(source_centres, np.float64).reshape(-1, 3)
+    Cu = np.ascontiguousarray(target_centre, np.float64).reshape(3)
+    sp = Splat(samples.xy, (H, W))
+    acc = np.zeros((H, W, len(Cs), 5), np.float32)
+    _prior_splat(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, sp.order, sp.starts, np.ascontiguousarray(samples.view),
+                 np.ascontiguousarray(samples.X), Cs, Cu, float(beta_res),
+                 np.ascontiguousarray(samples.colour, np.float32), acc)
+    img = np.empty((H, W, 3), np.float32)
+    cover = np.empty((H, W), np.float32)
+    var = np.empty((H, W) if spread else (0, 0), np.float32)
+    _ulr_pixels(acc, int(k), float(eps), img, cover, var)
+    return img, cover, (var if spread else None)
