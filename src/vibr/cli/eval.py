@@ -39,8 +39,9 @@ variational method, and default to the renderer's documented defaults.
 """
 
 
-#: The gamma values of the paper's tables (one row each for the gradient method).
-GAMMAS = (0, 1, 2, 3)
+#: The gamma values of the paper's tables and vibr's default (one row each for the gradient
+#: method): the default setting is always compared with the baselines.
+GAMMAS = tuple(sorted({0.0, 1.0, 2.0, 3.0, float(DEFAULTS["gamma"])}))
 
 
 def _floats(s):
@@ -63,7 +64,8 @@ def register(sub) -> None:
     p.add_argument("--method", type=names, default=list(METHODS),
                    help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
     p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
-                   help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)})")
+                   help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)}: the "
+                        f"paper's and vibr's default {DEFAULTS['gamma']:g})")
     p.add_argument("--alpha", type=_floats, help=f"colour-term weights (default: {DEFAULTS['alpha']:g})")
     p.add_argument("--lam", type=_floats, help=f"TV weights (default: {_dm('lam')})")
     p.add_argument("--scale", type=float, default=1.0,
