@@ -77,7 +77,7 @@ def run_case(name, src, tgt, factors, extra):
         ref = (downscale_local_mean(tgt.image.astype(np.float64), (f, f, 1)) if f > 1
                else tgt.image.astype(np.float64)).astype(np.float32)
         assert ref.shape[:2] == (cam.height, cam.width)
-        S = compute_samples(src, cam)
+        S = compute_samples(src, cam, keep=("jac",))
         res = {}
         for m, psf in SETTINGS:
             t0 = time.perf_counter()
@@ -130,7 +130,7 @@ def coarse_case(extra):
     hi = make_scene("grid", width=256, height=256)
     tgt = hi.views[4]
     src = lo.subset([v.name for v in lo.views if v.name != tgt.name])
-    S = compute_samples(src, tgt.camera)
+    S = compute_samples(src, tgt.camera, keep=("jac",))
     res = {key: render_samples(S, key[0], psf=key[1], **extra) for key in SETTINGS}
     cover = np.logical_and.reduce([r.coverage for r in res.values()])
     cells = [f"{psnr(r.image, tgt.image, mask=cover, border=2):.2f} / "
