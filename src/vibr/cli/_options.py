@@ -21,7 +21,7 @@ def _d(key) -> str:
     return "the geometry's" if v is None else f"{v:g}" if isinstance(v, float) else str(v)
 
 
-def _dm(key) -> str:
+def method_default(key) -> str:
     """The default of ``key`` and the methods that override it, e.g. "2; ulr: 0, savsr: 1"."""
     over = [f"{m.name}: {m.overrides[key]:g}" for m in REGISTRY.values() if key in m.overrides]
     return _d(key) + (f"; {', '.join(over)}" if over else "")
@@ -70,12 +70,12 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
                         f"(default {_d('gamma')})")
     p.add_argument("--lam", type=_weight, metavar="L|" + AUTO,
                    help=f"TV weight, on the --intensity-scale, or {AUTO} (over {', '.join(map(str, LAM_GRID))}) "
-                        f"(default {_dm('lam')})")
+                        f"(default {method_default('lam')})")
     p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
     p.add_argument("--sigma-z", type=float,
                    help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")
     add_intensity_scale_option(p)
-    p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {_dm('n_outer')})")
+    p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {method_default('n_outer')})")
     p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")
     p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
     p.add_argument("--preset", choices=tuple(PRESETS), default=None,

@@ -9,7 +9,7 @@ from ..render.methods import DEFAULTS, METHODS
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
-                       _dm, check_depth_args, method_help, names)
+                       check_depth_args, method_default, method_help, names)
 
 _DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
@@ -67,7 +67,7 @@ def register(sub) -> None:
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)}: the "
                         f"paper's and vibr's default {DEFAULTS['gamma']:g})")
     p.add_argument("--alpha", type=_floats, help=f"colour-term weights (default: {DEFAULTS['alpha']:g})")
-    p.add_argument("--lam", type=_floats, help=f"TV weights (default: {_dm('lam')})")
+    p.add_argument("--lam", type=_floats, help=f"TV weights (default: {method_default('lam')})")
     p.add_argument("--scale", type=float, default=1.0,
                    help="IMAGE scale the scene is loaded at, e.g. 0.25 (default: 1)")
     add_intensity_scale_option(p)
