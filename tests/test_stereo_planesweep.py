@@ -190,6 +190,30 @@ def test_estimate_depth_excluded_views_never_used():
         assert h[0].depth.shape == s[0].depth.shape and np.isfinite(h[0].depth).mean() > 0.5
 
 
+def test_estimate_depth_says_how_long_all_views_will_take():
+    """After the first view, one log line: how many views and about how long for all."""
+    import logging
+
+    from vibr.synthetic import make_scene
+
+    records = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    log = logging.getLogger("vibr.stereo.api")
+    log.addHandler(handler)
+    old = log.level
+    log.setLevel(logging.INFO)
+    try:
+        s = make_scene("free", n_views=4, width=48, height=40, seed=1)
+        e = estimate_depth(s, n_planes=16, method="mvs", consistency=False)
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(old)
+    n = len(e.meta["depth_estimation"]["views"])
+    lines = [r.getMessage() for r in records if "first of" in r.getMessage()]
+    assert len(lines) == 1 and f"first of {n} views" in lines[0] and "all of them in about" in lines[0]
+
+
 def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):
     """The temple ring's neighbours are ~22° apart: the half-image parallax limit alone put
     the sweep's near end at 1.17 while the temple lies around 0.5–0.6 from the cameras. The

@@ -64,6 +64,31 @@ VIEW_THREADS = 2
 
 
 # --------------------------------------------------------------------------- helpers
+class _ViewClock:
+    """Counts finished views and, when the first one is done, logs how long all of them
+    should take: a light field's 80 views or a large scene take minutes, and the per-view
+    lines alone do not say how many are left."""
+
+    def __init__(self, total: int, side_by_side: int = 1):
+        import threading
+
+        self.total, self.side, self.done = int(total), max(1, int(side_by_side)), 0
+        self.t0 = time.perf_counter()
+        self._lock = threading.Lock()
+
+    def view_done(self) -> None:
+        with self._lock:
+            self.done += 1
+            if self.done == 1 and self.total > 2:
+                t = time.perf_counter() - self.t0
+                logger.info(f"depth: first of {self.total} views in {t:.1f} s; all of them in about "
+                            f"{_minutes(t * self.total / self.side)}")
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
+
+
 def map_views(fn, items: list) -> list:
     """``[fn(i) for i in items]``, with up to :data:`VIEW_THREADS` views side by side.
 
@@ -648,8 +673,17 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
                                 radius=opt.radius, max_cost=opt.max_cost, mem_bytes=opt.mem_bytes,
                                 n_best=opt.n_best, **lf)[:3]
 
+    import numba
+
+    clock = _ViewClock(len(targets), min(len(targets), numba.get_num_threads(), VIEW_THREADS))
+
+    def timed(i):
+        out = one(i)
+        clock.view_done()
+        return out
+
     depths, sigmas, stats = {}, {}, {}
-    for i, (z, s, st) in zip(targets, map_views(one, list(targets))):
+    for i, (z, s, st) in zip(targets, map_views(timed, list(targets))):
         depths[i], sigmas[i] = z, s
         stats[scene.views[i].name] = dict(st, role="target")
     return depths, sigmas, stats
@@ -666,6 +700,7 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
         from ..io.checkpoint import ViewCheckpoint
 
         ck = ViewCheckpoint(checkpoint, {**{f.name: getattr(opt, f.name) for f in fields(opt)}, "med_r": med_r})
+    clock = _ViewClock(sum(1 for i in est if nbrs[i]))
     for i in est:
         if not nbrs[i]:
             continue
@@ -677,6 +712,7 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
         st["time_s"] = st.get("time_s", time.perf_counter() - t0)
         st["role"] = "target" if i in targets else "consistency partner"
         stats[scene.views[i].name] = st
+        clock.view_done()
     depths, sigmas = {}, {}
     for i in targets:
         d, s, grad, dr = raw[i]
