@@ -81,8 +81,9 @@ class _ViewClock:
             self.done += 1
             if self.done == 1 and self.total > 2:
                 t = time.perf_counter() - self.t0
+                rounds = -(-self.total // self.side)  # views side by side finish in pairs
                 logger.info(f"depth: first of {self.total} views in {t:.1f} s; all of them in about "
-                            f"{_minutes(t * self.total / self.side)}")
+                            f"{_minutes(t * rounds)}")
 
 
 def _minutes(seconds: float) -> str:
