@@ -33,6 +33,27 @@ def test_progress_off_a_terminal_logs_one_line(restore_vibr_logger):
     assert len(lines) == 2 and lines[0].startswith("stage A: 5/5") and lines[1].startswith("stage B: 3/3")
 
 
+def test_a_long_stage_off_a_terminal_says_how_far_it_is(restore_vibr_logger, monkeypatch):
+    """A stage past LONG_S logs its count and the time left, at most once per EVERY_S; a
+    short one stays one line (the test above)."""
+    import vibr.progress as P
+
+    clock = [100.0]
+    monkeypatch.setattr(P.time, "perf_counter", lambda: clock[0])
+    buf = io.StringIO()
+    configure_logging(0, stream=buf)
+    bar = progress(total=81, desc="leave-one-out")
+    for dt in (400.0, 30.0, 400.0):  # 1 done at 400 s, 2 at 430 s (too soon), 3 at 830 s
+        clock[0] += dt
+        bar.update(1)
+    bar.close()
+    lines = buf.getvalue().splitlines()
+    assert lines[0] == "leave-one-out: 1/81 in 7 min, about 8.9 h left"
+    assert lines[1] == "leave-one-out: 3/81 in 14 min, about 6.0 h left"
+    assert lines[2].startswith("leave-one-out: 3/81 in 830.0 s") and len(lines) == 3
+    assert P.duration_text(42) == "42 s" and P.duration_text(420) == "7 min"
+
+
 def test_verbosity_levels(restore_vibr_logger):
     lg = logging.getLogger("vibr.somewhere")
     for v, shown in ((-1, ["w"]), (0, ["i", "w"]), (1, ["d", "i", "w"])):

@@ -20,10 +20,24 @@ import time
 
 from tqdm import tqdm
 
-__all__ = ["progress", "configure_logging", "LOGGER_NAME"]
+__all__ = ["progress", "configure_logging", "duration_text", "LOGGER_NAME"]
 
 LOGGER_NAME = "vibr"
 logger = logging.getLogger(LOGGER_NAME)
+
+#: A stage without a bar says how far it is once it has run this long (s), then at most
+#: once per :data:`EVERY_S`: a redirected stderr otherwise shows nothing for hours.
+LONG_S = 10.0
+EVERY_S = 60.0
+
+
+def duration_text(seconds: float) -> str:
+    """``"42 s"``, ``"7 min"`` or ``"8.7 h"``: a duration as a person reads it."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def _bars_wanted() -> bool:
@@ -40,6 +54,7 @@ class _StageLine:
             total = len(iterable)
         self.total = total
         self._t0 = time.perf_counter()
+        self._said = -float("inf")
         self._closed = False
 
     def __iter__(self):
@@ -62,6 +77,13 @@ class _StageLine:
 
     def update(self, n=1):
         self.n += n
+        now = time.perf_counter()
+        if (self.total and 0 < self.n < self.total and now - self._t0 >= LONG_S
+                and now - self._said >= EVERY_S):
+            self._said = now
+            el = now - self._t0
+            logger.info("%s: %d/%d in %s, about %s left", self.desc or "progress", self.n, self.total,
+                        duration_text(el), duration_text(el * (self.total - self.n) / self.n))
 
     def set_postfix(self, *args, **kw):
         pass

@@ -35,6 +35,7 @@ from scipy.ndimage import map_coordinates
 from ..camera import Camera, axes_meeting_point
 from ..errors import VibrInputError
 from ..io.images import resize_image
+from ..progress import duration_text
 from ..scene import Scene
 from .consistency import check_consistency
 from .planesweep import SweepResult, median_planes, plane_sweep, refine_planes
@@ -83,11 +84,7 @@ class _ViewClock:
                 t = time.perf_counter() - self.t0
                 rounds = -(-self.total // self.side)  # views side by side finish in pairs
                 logger.info(f"depth: first of {self.total} views in {t:.1f} s; all of them in about "
-                            f"{_minutes(t * rounds)}")
-
-
-def _minutes(seconds: float) -> str:
-    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
+                            f"{duration_text(t * rounds)}")
 
 
 def map_views(fn, items: list) -> list:
