@@ -9,7 +9,8 @@ installs a stderr handler at WARNING with ``-q``, INFO by default, DEBUG with ``
 :func:`progress` draws a bar only when stderr is a terminal and the ``"vibr"`` logger shows
 INFO; otherwise (a log file, a pipe, a notebook capturing stderr, ``-q``) it draws nothing
 and logs one line when the stage ends, so a redirected stderr never fills with
-carriage-return frames.
+carriage-return frames; a stage that has run :data:`LONG_S` also logs its count and the time
+left, at most once per :data:`EVERY_S`.
 """
 
 from __future__ import annotations
