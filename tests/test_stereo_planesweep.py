@@ -190,28 +190,27 @@ def test_estimate_depth_excluded_views_never_used():
         assert h[0].depth.shape == s[0].depth.shape and np.isfinite(h[0].depth).mean() > 0.5
 
 
-def test_estimate_depth_says_how_long_all_views_will_take():
-    """After the first view, one log line: how many views and about how long for all."""
-    import logging
+def test_estimate_depth_counts_its_views(monkeypatch):
+    """One progress stage over the views (vibr.progress: its count and the time left once it
+    has run long): off a terminal, its line names every view estimated."""
+    import io
 
+    from vibr.progress import configure_logging
     from vibr.synthetic import make_scene
 
-    records = []
-    handler = logging.Handler()
-    handler.emit = records.append
-    log = logging.getLogger("vibr.stereo.api")
-    log.addHandler(handler)
-    old = log.level
-    log.setLevel(logging.INFO)
+    import logging
+
+    lg = logging.getLogger("vibr")
+    saved = (list(lg.handlers), lg.level, lg.propagate)
+    buf = io.StringIO()
+    configure_logging(0, stream=buf)
     try:
         s = make_scene("free", n_views=4, width=48, height=40, seed=1)
         e = estimate_depth(s, n_planes=16, method="mvs", consistency=False)
     finally:
-        log.removeHandler(handler)
-        log.setLevel(old)
+        lg.handlers[:], lg.level, lg.propagate = saved
     n = len(e.meta["depth_estimation"]["views"])
-    lines = [r.getMessage() for r in records if "first of" in r.getMessage()]
-    assert len(lines) == 1 and f"first of {n} views" in lines[0] and "all of them in about" in lines[0]
+    assert [ln for ln in buf.getvalue().splitlines() if ln.startswith(f"depth views: {n}/{n} in ")]
 
 
 def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):

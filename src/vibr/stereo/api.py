@@ -35,7 +35,7 @@ from scipy.ndimage import map_coordinates
 from ..camera import Camera, axes_meeting_point
 from ..errors import VibrInputError
 from ..io.images import resize_image
-from ..progress import duration_text
+from ..progress import progress
 from ..scene import Scene
 from .consistency import check_consistency
 from .planesweep import SweepResult, median_planes, plane_sweep, refine_planes
@@ -65,28 +65,6 @@ VIEW_THREADS = 2
 
 
 # --------------------------------------------------------------------------- helpers
-class _ViewClock:
-    """Counts finished views and, when the first one is done, logs how long all of them
-    should take: a light field's 80 views or a large scene take minutes, and the per-view
-    lines alone do not say how many are left."""
-
-    def __init__(self, total: int, side_by_side: int = 1):
-        import threading
-
-        self.total, self.side, self.done = int(total), max(1, int(side_by_side)), 0
-        self.t0 = time.perf_counter()
-        self._lock = threading.Lock()
-
-    def view_done(self) -> None:
-        with self._lock:
-            self.done += 1
-            if self.done == 1 and self.total > 2:
-                t = time.perf_counter() - self.t0
-                rounds = -(-self.total // self.side)  # views side by side finish in pairs
-                logger.info(f"depth: first of {self.total} views in {t:.1f} s; all of them in about "
-                            f"{duration_text(t * rounds)}")
-
-
 def map_views(fn, items: list) -> list:
     """``[fn(i) for i in items]``, with up to :data:`VIEW_THREADS` views side by side.
 
@@ -671,17 +649,16 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
                                 radius=opt.radius, max_cost=opt.max_cost, mem_bytes=opt.mem_bytes,
                                 n_best=opt.n_best, **lf)[:3]
 
-    import numba
+    # one bar over the views (a light field's 80 take minutes): its count and time left
+    with progress(total=len(targets), desc="depth views", unit="view") as bar:
+        def counted(i):
+            out = one(i)
+            bar.update(1)
+            return out
 
-    clock = _ViewClock(len(targets), min(len(targets), numba.get_num_threads(), VIEW_THREADS))
-
-    def timed(i):
-        out = one(i)
-        clock.view_done()
-        return out
-
+        results = map_views(counted, list(targets))
     depths, sigmas, stats = {}, {}, {}
-    for i, (z, s, st) in zip(targets, map_views(timed, list(targets))):
+    for i, (z, s, st) in zip(targets, results):
         depths[i], sigmas[i] = z, s
         stats[scene.views[i].name] = dict(st, role="target")
     return depths, sigmas, stats
@@ -698,19 +675,19 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
         from ..io.checkpoint import ViewCheckpoint
 
         ck = ViewCheckpoint(checkpoint, {**{f.name: getattr(opt, f.name) for f in fields(opt)}, "med_r": med_r})
-    clock = _ViewClock(sum(1 for i in est if nbrs[i]))
-    for i in est:
-        if not nbrs[i]:
-            continue
-        t0 = time.perf_counter()
-        if ck is None:
-            raw[i], st, nbrs[i] = _sweep_view(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
-        else:
-            raw[i], st, nbrs[i] = _sweep_view_resumable(ck, scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
-        st["time_s"] = st.get("time_s", time.perf_counter() - t0)
-        st["role"] = "target" if i in targets else "consistency partner"
-        stats[scene.views[i].name] = st
-        clock.view_done()
+    with progress(total=sum(1 for i in est if nbrs[i]), desc="depth views", unit="view") as bar:
+        for i in est:
+            if not nbrs[i]:
+                continue
+            t0 = time.perf_counter()
+            if ck is None:
+                raw[i], st, nbrs[i] = _sweep_view(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
+            else:
+                raw[i], st, nbrs[i] = _sweep_view_resumable(ck, scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
+            st["time_s"] = st.get("time_s", time.perf_counter() - t0)
+            st["role"] = "target" if i in targets else "consistency partner"
+            stats[scene.views[i].name] = st
+            bar.update(1)
     depths, sigmas = {}, {}
     for i in targets:
         d, s, grad, dr = raw[i]
