@@ -24,7 +24,7 @@ import numpy as np
 from .errors import VibrInputError
 from .metrics import METRIC_BORDER, dssim, psnr, view_metrics
 from .progress import progress
-from .render.methods import METHODS, get_method
+from .render.methods import DEFAULTS, METHODS, get_method
 from .geometry.samples import view_counts
 from .scene import Scene
 
@@ -44,7 +44,12 @@ class Setting:
         return self.method + (f"({extra})" if extra else "")
 
 
-def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = (0, 1, 2, 3),
+#: The gamma values of the paper's tables and vibr's default (one row each for the gradient
+#: method): the default setting is always compared with the baselines.
+GAMMAS = tuple(sorted({0.0, 1.0, 2.0, 3.0, float(DEFAULTS["gamma"])}))
+
+
+def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = GAMMAS,
                   alphas: Sequence[float] | None = None, lams: Sequence[float] | None = None) -> list[Setting]:
     """Settings for each method: ``gradient`` once per gamma (``gamma`` is only its parameter),
     every variational method once per alpha and lambda given."""

@@ -6,6 +6,7 @@ import argparse
 
 from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS
+from ..evaluate import GAMMAS
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
@@ -39,9 +40,6 @@ variational method, and default to the renderer's documented defaults.
 """
 
 
-#: The gamma values of the paper's tables and vibr's default (one row each for the gradient
-#: method): the default setting is always compared with the baselines.
-GAMMAS = tuple(sorted({0.0, 1.0, 2.0, 3.0, float(DEFAULTS["gamma"])}))
 
 
 def _floats(s):
