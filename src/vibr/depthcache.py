@@ -165,9 +165,8 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude) -> S
             from .geometry import ensure_source_depth
 
             src = ensure_source_depth(src)
-        src.meta["depth_source"] = "scene"
-        src.meta["depth_time_s"] = time.perf_counter() - t0
-        return src
+        # a new meta: the caller's scene is not changed
+        return src.replace(meta=dict(src.meta, depth_source="scene", depth_time_s=time.perf_counter() - t0))
     # estimated: from the kept views only, through the cache
     bare = Scene([v.replace(depth=None, sigma_z=None) for v in src.views], src.name, src.root,
                  src.grid, src.points, dict(src.meta))

@@ -207,29 +207,12 @@ def scaled_scene(scene: Scene, s: float) -> Scene:
 
 
 def scene_with_depth(scene: Scene, *, cache_dir=None) -> Scene:
-    """``scene`` with depth on every view.
+    """``scene`` with depth on every view, as fly-throughs get it
+    (:func:`vibr.depthcache.scene_with_depth`, depth "auto"): the scene's own, transferred
+    to the views without it, or estimated once and kept in the on-disk cache; the fallback
+    proxy as ``vibr render`` applies it."""
+    from ..depthcache import scene_with_depth as _with_depth
 
-    A scene whose views all have depth is returned as is. Otherwise
-    :func:`vibr.depthcache.scene_with_depth` gives it depth (the scene's own, transferred,
-    or estimated once and cached on disk). Without that module (an older vibr), depth is
-    transferred from the views that have some (:func:`vibr.geometry.ensure_source_depth`)
-    or estimated from all views (:func:`vibr.stereo.estimate_depth`), uncached.
-    """
-    if scene.has_depth:
-        return scene
-    try:
-        from ..depthcache import scene_with_depth as _cached
-    except ImportError:
-        _cached = None
-    if _cached is not None:
+    if not scene.has_depth:
         logger.info("giving every view depth (the on-disk depth cache is used when present)")
-        return _cached(scene, depth="auto", cache_dir=cache_dir)
-    if any(v.depth is not None for v in scene.views):
-        from ..geometry import ensure_source_depth
-
-        logger.info("transferring depth to the views without it")
-        return ensure_source_depth(scene)
-    from ..stereo import estimate_depth
-
-    logger.info("the scene has no depth maps: estimating them from its %d views", len(scene))
-    return estimate_depth(scene)
+    return _with_depth(scene, depth="auto", cache_dir=cache_dir)
