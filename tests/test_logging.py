@@ -54,6 +54,20 @@ def test_a_long_stage_off_a_terminal_says_how_far_it_is(restore_vibr_logger, mon
     assert P.duration_text(42) == "42 s" and P.duration_text(420) == "7 min"
 
 
+def test_a_stage_inside_another_logs_at_debug(restore_vibr_logger):
+    """Each view's stage inside "depth views" is a DEBUG line: by default only the outer
+    stage's line, with -v both; a stage after the outer one closed is INFO again."""
+    for v, expect in ((0, ["depth views: 2/2", "after: 1/1"]),
+                      (1, ["view a: 3/3", "view b: 3/3", "depth views: 2/2", "after: 1/1"])):
+        buf = io.StringIO()
+        configure_logging(v, stream=buf)
+        for name in progress(["a", "b"], desc="depth views"):
+            list(progress(range(3), desc=f"view {name}"))
+        list(progress(range(1), desc="after"))
+        lines = buf.getvalue().splitlines()
+        assert [ln.split(" in ")[0] for ln in lines] == expect
+
+
 def test_verbosity_levels(restore_vibr_logger):
     lg = logging.getLogger("vibr.somewhere")
     for v, shown in ((-1, ["w"]), (0, ["i", "w"]), (1, ["d", "i", "w"])):

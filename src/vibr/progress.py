@@ -10,13 +10,17 @@ installs a stderr handler at WARNING with ``-q``, INFO by default, DEBUG with ``
 INFO; otherwise (a log file, a pipe, a notebook capturing stderr, ``-q``) it draws nothing
 and logs one line when the stage ends, so a redirected stderr never fills with
 carriage-return frames; a stage that has run :data:`LONG_S` also logs its count and the time
-left, at most once per :data:`EVERY_S`.
+left, at most once per :data:`EVERY_S`. A stage that starts while another is open (each view's
+depth inside "depth views") logs at DEBUG: the outer stage's lines already say how far the work
+is, and a log should not fill with one line per view.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import sys
+import threading
 import time
 
 from tqdm import tqdm
@@ -41,6 +45,12 @@ def duration_text(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
+# stages open now, process-wide (a view's stage may run on a worker thread of the outer one)
+_open: set = set()
+_open_lock = threading.Lock()
+_ids = itertools.count()
+
+
 def _bars_wanted() -> bool:
     isatty = getattr(sys.stderr, "isatty", None)
     return bool(isatty and isatty()) and logger.isEnabledFor(logging.INFO)
@@ -57,6 +67,10 @@ class _StageLine:
         self._t0 = time.perf_counter()
         self._said = -float("inf")
         self._closed = False
+        with _open_lock:
+            self._level = logging.DEBUG if _open else logging.INFO
+            self._id = next(_ids)
+            _open.add(self._id)
 
     def __iter__(self):
         try:
@@ -83,8 +97,8 @@ class _StageLine:
                 and now - self._said >= EVERY_S):
             self._said = now
             el = now - self._t0
-            logger.info("%s: %d/%d in %s, about %s left", self.desc or "progress", self.n, self.total,
-                        duration_text(el), duration_text(el * (self.total - self.n) / self.n))
+            logger.log(self._level, "%s: %d/%d in %s, about %s left", self.desc or "progress", self.n,
+                       self.total, duration_text(el), duration_text(el * (self.total - self.n) / self.n))
 
     def set_postfix(self, *args, **kw):
         pass
@@ -105,8 +119,11 @@ class _StageLine:
         if self._closed:
             return
         self._closed = True
+        with _open_lock:
+            _open.discard(self._id)
         of = f"/{self.total}" if self.total is not None else ""
-        logger.info("%s: %d%s in %.1f s", self.desc or "done", self.n, of, time.perf_counter() - self._t0)
+        logger.log(self._level, "%s: %d%s in %.1f s", self.desc or "done", self.n, of,
+                   time.perf_counter() - self._t0)
 
 
 def progress(iterable=None, *, desc: str | None = None, total: int | None = None, **kw):
