@@ -221,6 +221,56 @@ def test_a_script_without_main_guard_fails_instead_of_hanging(tmp_path):
     assert "__main__" in p.stderr and "worker process died" in p.stderr
 
 
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_an_interrupt_stops_the_running_tasks_at_once(tmp_path, sig):
+    """Ctrl-C in the driver (SIGINT to it alone, as ``kill -INT`` sends it), or SIGTERM read as
+    one (``vibr.cli.interrupt_on_sigterm``, as the CLI installs it; a job scheduler's stop)
+    stops the workers in the middle of their tasks: the driver exits within seconds, not
+    after the running tasks (two minutes here) or never (a shutdown stuck in the pool's
+    locks), the workers are gone and their half-written files removed."""
+    import signal
+    import subprocess
+    import time
+
+    script = tmp_path / "interrupted.py"
+    script.write_text(
+        "import sys\n"
+        f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
+        "import _scaleout_tasks as T\n"
+        "from vibr.executor import run_tasks\n"
+        "from vibr.cli import interrupt_on_sigterm\n"
+        "if __name__ == '__main__':\n"
+        "    interrupt_on_sigterm()\n"
+        "    try:\n"
+        "        run_tasks(T.write_and_hang, ['a', 'b', 'c'], setup=str, setup_args=(sys.argv[1],), executor=2)\n"
+        "    except KeyboardInterrupt:\n"
+        "        sys.exit(130)\n")
+    work = tmp_path / "out"
+    work.mkdir()
+    p = subprocess.Popen([sys.executable, str(script), str(work)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(work.glob("*.tmp"))) < 2 and time.monotonic() < deadline and p.poll() is None:
+            time.sleep(0.05)
+        time.sleep(0.2)  # both workers now sleep inside their writes
+        pids = [int(m.read_text().split("\n")[1]) for m in work.glob("*.tmp")]
+        assert len(pids) == 2
+        t0 = time.monotonic()
+        p.send_signal(getattr(signal, sig))
+        _, err = p.communicate(timeout=30)
+        assert p.returncode == 130, err
+        assert time.monotonic() - t0 < 15
+    finally:
+        if p.poll() is None:
+            p.kill()
+    time.sleep(0.5)
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    assert not list(work.glob(".*.part*")) and not list(work.glob("*.txt"))
+
+
 def test_missing_extra_gives_one_line(monkeypatch, capsys, tmp_path):
     from vibr.cli import main
 

@@ -268,6 +268,40 @@ def test_depth_killed_midway_resumes(tmp_path, capsys, monkeypatch):
     got = load_scene(out)
     for a, b in zip(ref.views, got.views):
         assert (a.depth is None) == (b.depth is None)
+
+
+def test_depth_cache_killed_midway_resumes(tmp_path, monkeypatch):
+    """The depth a fly-through, eval or the viewer estimates (vibr.depthcache) resumes as
+    `vibr depth` does: killed in its second view, the rerun keeps the first, writes the same
+    maps as an uninterrupted run, and removes its checkpoint folder once the cache is written."""
+    import vibr.stereo.api as sapi
+    from vibr.depthcache import scene_with_depth
+    from vibr.io.checkpoint import resume_folder
+    from vibr.scene import Scene
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=3, width=40, height=32, seed=2)
+    bare = Scene([v.replace(depth=None, sigma_z=None) for v in s.views], s.name, None, None, None, {})
+    kw = dict(refine_iter=1, sweep_scale=1)
+    ref = scene_with_depth(bare, cache_dir=tmp_path / "ref", estimate_kw=kw)
+    real, calls = sapi.plane_sweep, []
+
+    def killed(*a, **k):
+        if k.get("desc") == "depth view_001":
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(sapi, "plane_sweep", killed)
+    with pytest.raises(KeyboardInterrupt):
+        scene_with_depth(bare, cache_dir=tmp_path / "c", estimate_kw=kw)
+    (resume,) = [p for p in (tmp_path / "c").iterdir() if p.name.endswith(".vibr-resume")]
+    assert len(list(resume.glob("*.npz"))) == 1
+    monkeypatch.setattr(sapi, "plane_sweep", lambda *a, **k: calls.append(k.get("desc")) or real(*a, **k))
+    got = scene_with_depth(bare, cache_dir=tmp_path / "c", estimate_kw=kw)
+    assert "depth view_000" not in calls and "depth view_001" in calls
+    assert not resume.exists() and resume == resume_folder(got.meta["depth_cache"])
+    for a, b in zip(ref.views, got.views):
+        assert np.array_equal(a.depth, b.depth, equal_nan=True)
         if a.depth is not None:
             np.testing.assert_array_equal(a.depth, b.depth)
 

@@ -25,6 +25,7 @@ import hashlib
 import json
 import logging
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -32,6 +33,7 @@ import numpy as np
 
 from .errors import VibrInputError
 from .io.atomic import atomic_path
+from .io.checkpoint import resume_folder
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -185,9 +187,12 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude) -> S
     from .stereo import estimate_depth
 
     logger.info("the scene has no depth maps: estimating them for %d views (once; cached)", len(bare))
-    out = estimate_depth(bare, **kw)
+    # each view's sweep kept as it finishes: a run killed midway resumes (as `vibr depth`)
+    resume = None if cpath is None else resume_folder(cpath)
+    out = estimate_depth(bare, checkpoint=resume, **kw)
     if cpath is not None:
         _save(cpath, out)
+        shutil.rmtree(resume, ignore_errors=True)
     out.meta.update(depth_source="estimated", depth_time_s=time.perf_counter() - t0)
     if cpath is not None:
         out.meta["depth_cache"] = str(cpath)

@@ -52,6 +52,7 @@ import pickle
 import signal
 import tempfile
 import threading
+import time
 import uuid
 from typing import Any, Callable, Sequence
 
@@ -349,10 +350,34 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
                     pool.shutdown(wait=True, cancel_futures=True)
                     pool = None
                 pending.sort()
+        except BaseException:
+            if pool is not None:
+                _stop_pool(pool)
+                pool = None
+            raise
         finally:
             if pool is not None:
                 pool.shutdown(wait=True, cancel_futures=True)
     return results
+
+
+def _stop_pool(pool, grace_s: float = 5.0) -> None:
+    """Stop a pool now, its running tasks included (an interrupt, a failed task): a graceful
+    shutdown would wait for every task already handed to a worker (minutes for a view's
+    depth or a large frame), and an interrupt that lands inside the pool's own locks can
+    leave that shutdown waiting for ever. SIGTERM lets each worker remove its half-written
+    outputs (:func:`_on_sigterm`); SIGKILL after ``grace_s``."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for proc in procs:
+        with contextlib.suppress(OSError, ValueError):
+            proc.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    deadline = time.monotonic() + grace_s
+    for proc in procs:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
 
 
 # -- Dask --------------------------------------------------------------------------------------

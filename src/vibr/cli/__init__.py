@@ -11,7 +11,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import signal
 import sys
+import threading
 
 from .. import __version__
 from .._malloc import tune_malloc
@@ -103,6 +105,19 @@ def _command_in(argv) -> str | None:
     return next((a for a in argv if not a.startswith("-")), None)
 
 
+def interrupt_on_sigterm():
+    """Read SIGTERM (``kill``, a job scheduler's stop) as Ctrl-C: the command then stops as it
+    does on an interrupt (workers stopped, half-written outputs removed, exit 130) instead of
+    dying at once and leaving its worker processes running. Main thread only (elsewhere a
+    no-op); returns the handler it replaced (None when it did nothing)."""
+    def _interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _interrupt)
+
+
 def main(argv=None) -> int:
     setup = _BEFORE_NUMBA.get(_command_in(sys.argv[1:] if argv is None else argv))
     if setup is not None:
@@ -114,6 +129,7 @@ def main(argv=None) -> int:
         return 2
     configure_logging(verbosity(args))
     tune_malloc()
+    before = interrupt_on_sigterm()
     from .. import io as vio
 
     vio.ALLOW_OUTSIDE_PATHS = bool(getattr(args, "allow_outside_paths", False))
@@ -127,6 +143,8 @@ def main(argv=None) -> int:
         return 130
     finally:
         vio.ALLOW_OUTSIDE_PATHS = False
+        if before is not None:
+            signal.signal(signal.SIGTERM, before)
 
 
 if __name__ == "__main__":  # pragma: no cover
