@@ -401,22 +401,25 @@ def auto_executor(ctx: FrameContext, n_todo: int):
 
 
 def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[list, str]:
-    """The frames' summaries, and where they ran (:attr:`FlyResult.engine`)."""
+    """The frames' summaries in frame order, and where they ran (:attr:`FlyResult.engine`).
+    Frames already on disk with their key are skipped here, before any task is made: the
+    progress line and its time left then count only the frames still to render."""
+    done = [] if ctx.overwrite else [i for i in range(n) if frame_done(ctx, i)]
+    todo = sorted(set(range(n)) - set(done))
+    skipped = [{"index": i, "skipped": True, "seconds": 0.0} for i in done]
     if executor == "auto":
-        todo = n if ctx.overwrite else sum(not frame_done(ctx, i) for i in range(n))
-        executor = auto_executor(ctx, todo)
+        executor = auto_executor(ctx, len(todo))
     if executor is not None:
         from .executor import parse_executor, run_tasks
 
         kind, arg = parse_executor(executor)
         engine = {"serial": "in this process", "processes": f"on {arg} processes",
                   "dask-local": f"on a local Dask cluster of {arg} workers"}.get(kind, f"on Dask ({arg})")
-        return run_tasks(render_frame, list(range(n)), setup=_same, setup_args=(ctx,),
-                         executor=executor, desc="frames"), engine
-    from .progress import progress as bar
+        out = run_tasks(render_frame, todo, setup=_same, setup_args=(ctx,), executor=executor,
+                        desc="frames") if todo else []
+    else:
+        from .progress import progress as bar
 
-    out = []
-    it = bar(range(n), desc="frames", total=n) if progress else range(n)
-    for i in it:
-        out.append(render_frame(ctx, i))
-    return out, "in this process"
+        engine = "in this process"
+        out = [render_frame(ctx, i) for i in (bar(todo, desc="frames") if progress else todo)]
+    return sorted(out + skipped, key=lambda f: f["index"]), engine
