@@ -107,11 +107,12 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     """
     if depth not in DEPTH_MODES:
         raise VibrInputError(f"unknown depth mode {depth!r} (choose from {', '.join(DEPTH_MODES)})")
-    if depth == "auto":
+    auto = depth == "auto"
+    if auto:
         depth = "gt" if any(v.depth is not None for v in scene.views) else "estimated"
-        if depth == "estimated":
-            logger.info("the scene has no depth maps: estimating them from the source views")
-    src, tview, ti = _hold_out(scene, target, sources, n_views)
+    src, tview, ti = _hold_out(scene, target, sources, n_views)  # its errors first
+    if auto and depth == "estimated":
+        logger.info("the scene has no depth maps: estimating them from the source views")
     tcam = tview if isinstance(tview, Camera) else tview.camera
     if depth == "gt":
         src = _gt_depth(scene, src, ti)
