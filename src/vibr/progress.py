@@ -17,7 +17,6 @@ is, and a log should not fill with one line per view.
 
 from __future__ import annotations
 
-import itertools
 import logging
 import sys
 import threading
@@ -45,10 +44,10 @@ def duration_text(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
-# stages open now, process-wide (a view's stage may run on a worker thread of the outer one)
-_open: set = set()
+# the number of stages open now, process-wide (a view's stage may run on a worker thread
+# of the outer one)
+_open = [0]
 _open_lock = threading.Lock()
-_ids = itertools.count()
 
 
 def _bars_wanted() -> bool:
@@ -68,9 +67,8 @@ class _StageLine:
         self._said = -float("inf")
         self._closed = False
         with _open_lock:
-            self._level = logging.DEBUG if _open else logging.INFO
-            self._id = next(_ids)
-            _open.add(self._id)
+            self._level = logging.DEBUG if _open[0] else logging.INFO
+            _open[0] += 1
 
     def __iter__(self):
         try:
@@ -120,7 +118,7 @@ class _StageLine:
             return
         self._closed = True
         with _open_lock:
-            _open.discard(self._id)
+            _open[0] -= 1
         of = f"/{self.total}" if self.total is not None else ""
         logger.log(self._level, "%s: %d%s in %.1f s", self.desc or "done", self.n, of,
                    time.perf_counter() - self._t0)

@@ -259,12 +259,12 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
     power_state: dict = {}
     n_iter = n_power = 0
-    bar = None
+    passes = range(n_outer)
     if progress_bar:
         from ..progress import progress
 
-        bar = progress(total=n_outer, desc=f"render {method.name}")
-    for o in range(n_outer):
+        passes = progress(passes, desc=f"render {method.name}")
+    for o in passes:
         if method.reweight or (o == 0 and p["robust"] != "none"):
             # savsr keeps its weights, but a robust loss reweights them once from the blend
             model = A = b = None  # the previous pass's stencils go before the new ones come
@@ -295,10 +295,6 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         energy += res.energy
         terms += res.terms
         logger.log(logging.INFO if verbose else logging.DEBUG, "%s", _outer_line(method.name, o, n_outer, res))
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
     sig = None
     if uncertainty:  # issue 28: Jacobi diag(H⁻¹) of the last pass's model + spread of the sources
         from .uncertainty import variational_sigma
