@@ -68,6 +68,26 @@ def test_a_stage_inside_another_logs_at_debug(restore_vibr_logger):
         assert [ln.split(" in ")[0] for ln in lines] == expect
 
 
+def test_a_long_stage_inside_another_still_says_how_far_it_is(restore_vibr_logger, monkeypatch):
+    import vibr.progress as P
+
+    clock = [0.0]
+    monkeypatch.setattr(P.time, "perf_counter", lambda: clock[0])
+    buf = io.StringIO()
+    configure_logging(0, stream=buf)
+    with progress(total=2, desc="depth views") as outer:
+        with progress(total=4, desc="plane sweep") as inner:
+            for _ in range(4):
+                clock[0] += 30.0
+                inner.update(1)
+        outer.update(1)
+    # the inner stage's count and time left (at most once a minute), not its end; the outer's both
+    assert buf.getvalue().splitlines() == ["plane sweep: 1/4 in 30 s, about 2 min left",
+                                           "plane sweep: 3/4 in 2 min, about 30 s left",
+                                           "depth views: 1/2 in 2 min, about 2 min left",
+                                           "depth views: 1/2 in 120.0 s"]
+
+
 def test_verbosity_levels(restore_vibr_logger):
     lg = logging.getLogger("vibr.somewhere")
     for v, shown in ((-1, ["w"]), (0, ["i", "w"]), (1, ["d", "i", "w"])):

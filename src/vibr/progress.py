@@ -11,8 +11,9 @@ INFO; otherwise (a log file, a pipe, a notebook capturing stderr, ``-q``) it dra
 and logs one line when the stage ends, so a redirected stderr never fills with
 carriage-return frames; a stage that has run :data:`LONG_S` also logs its count and the time
 left, at most once per :data:`EVERY_S`. A stage that starts while another is open (each view's
-depth inside "depth views") logs at DEBUG: the outer stage's lines already say how far the work
-is, and a log should not fill with one line per view.
+depth inside "depth views") logs its end at DEBUG: the outer stage's line already says how far
+the work is, and a log should not fill with one line per view; a long one still says how far
+it is.
 """
 
 from __future__ import annotations
@@ -95,8 +96,8 @@ class _StageLine:
                 and now - self._said >= EVERY_S):
             self._said = now
             el = now - self._t0
-            logger.log(self._level, "%s: %d/%d in %s, about %s left", self.desc or "progress", self.n,
-                       self.total, duration_text(el), duration_text(el * (self.total - self.n) / self.n))
+            logger.info("%s: %d/%d in %s, about %s left", self.desc or "progress", self.n, self.total,
+                        duration_text(el), duration_text(el * (self.total - self.n) / self.n))
 
     def set_postfix(self, *args, **kw):
         pass
