@@ -3,12 +3,20 @@ the repository; tests that need them skip only when that folder is absent."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
 
 _REPO = Path(__file__).resolve().parents[1]
+
+# The suite's own depth and scene cache (vibr.depthcache), inherited by the processes it
+# starts: a run never reads the user's cache (maps another run left there) nor fills it.
+os.environ["VIBR_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibr-test-cache-")
+atexit.register(shutil.rmtree, os.environ["VIBR_CACHE_DIR"], True)
 
 
 def find_data_dir() -> Path | None:

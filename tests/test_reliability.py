@@ -315,3 +315,42 @@ def test_strecha_infinite_image_size_is_refused(tmp_path):
         p.write_text("10 0 6\n0 10 4\n0 0 1\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n0 0 0\n" + wh + "\n")
         with pytest.raises(VibrInputError, match="image size"):
             read_strecha_camera(p)
+
+
+def test_eval_and_render_estimate_depth_once_through_the_cache(tmp_path, capsys, monkeypatch):
+    """`vibr eval` and `vibr render` estimate their sources' depth through the depth cache: a
+    second run on the same sources loads it (the same numbers, the estimator's statistics
+    kept in the report); --no-cache estimates again and writes nothing; other code (vibr's
+    code fingerprint) does not take the maps."""
+    import json
+
+    import vibr.depthcache as dc
+    from vibr.cli import main
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=4, width=40, height=32, seed=2)
+    src = save_scene(s.replace(views=[v.replace(depth=None, sigma_z=None) for v in s.views]), tmp_path / "s")
+    cache = tmp_path / "cache"
+    args = ["eval", str(src), "--target", "view_000", "--method", "gradient", "--gamma", "0.2", "--depth",
+            "estimated", "--cache-dir", str(cache)]
+    reports = []
+    for k in range(2):
+        assert main(args + ["--json", str(tmp_path / f"e{k}.json")]) == 0
+        reports.append(json.loads((tmp_path / f"e{k}.json").read_text()))
+    err = capsys.readouterr().err
+    assert err.count("estimating depth for 3 views") == 1 and "loaded from the cache" in err
+    assert len(list(cache.glob("depth-*.npz"))) == 1 and not list(cache.glob(".*vibr-resume"))
+    a, b = (r["results"][0]["psnr"] for r in reports)
+    assert a == b and reports[1]["depth_estimation"] == reports[0]["depth_estimation"]
+    assert reports[0]["depth_estimation"]["views"]  # the estimator's per-view statistics
+    # `vibr render` of the same target from the same sources: the same cache entry
+    assert main(["render", str(src), "--target", "view_000", "-o", str(tmp_path / "r.png"), "--depth",
+                 "estimated", "--cache-dir", str(cache)]) == 0
+    assert "loaded from the cache" in capsys.readouterr().err
+    assert main(args[:-2] + ["--no-cache", "--json", str(tmp_path / "e2.json")]) == 0
+    assert "estimating depth for 3 views" in capsys.readouterr().err
+    assert len(list(cache.glob("depth-*.npz"))) == 1
+    bare = load_scene(src).subset(["view_001", "view_002", "view_003"])
+    key = dc.depth_cache_key(bare)
+    monkeypatch.setattr(dc, "code_fingerprint", lambda: "other code")
+    assert dc.depth_cache_key(bare) != key

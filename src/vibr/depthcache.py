@@ -9,9 +9,11 @@ once, not per frame and not per run. :func:`scene_with_depth` gives every view a
 * otherwise depth estimated by :func:`vibr.stereo.estimate_depth`, **cached on disk**: one
   ``depth-KEY.npz`` file per (scene, views, depth parameters), ``KEY`` a SHA-256 of the
   scene's root folder, the view names, image sizes, image files (size and modification
-  time, or the pixels for scenes made in memory), camera matrices, the excluded views and
-  the estimation parameters. A second run, or a second path on the same scene, loads it
-  (tens of milliseconds) instead of estimating again (a minute on fountain at 768×512).
+  time, or the pixels for scenes made in memory), camera matrices, the excluded views, the
+  estimation parameters and vibr's code. A second run, or a second path on the same scene,
+  loads it (tens of milliseconds) instead of estimating again (a minute on fountain at
+  768×512, six at 3072×2048). :func:`estimated_depth` is that step alone: ``vibr render``
+  and ``vibr eval`` (:func:`vibr.pipeline.prepare`) estimate their sources' depth through it.
 
 The cache folder is ``cache_dir``, else ``$VIBR_CACHE_DIR``, else ``$XDG_CACHE_HOME/vibr``
 (``~/.cache/vibr``): never the dataset's folder, which is often shared or read-only.
@@ -33,14 +35,14 @@ import numpy as np
 
 from .errors import VibrInputError
 from .io.atomic import atomic_path
-from .io.checkpoint import resume_folder
+from .io.checkpoint import code_fingerprint, resume_folder
 from .scene import Scene
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["scene_with_depth", "load_scene_cached", "default_cache_dir", "depth_cache_key"]
+__all__ = ["scene_with_depth", "estimated_depth", "load_scene_cached", "default_cache_dir", "depth_cache_key"]
 
-_CACHE_VERSION = 1
+_CACHE_VERSION = 2  # 2: the estimator's statistics; vibr's code in the key
 
 
 def default_cache_dir() -> Path:
@@ -69,12 +71,14 @@ def _view_fingerprint(v, h) -> None:
 
 def depth_cache_key(scene: Scene, estimate_kw: dict | None = None, exclude=()) -> str:
     """SHA-256 (hex) of the scene root, views (names, sizes, images, cameras), the
-    excluded views, the estimation parameters and the estimator's version
-    (:data:`vibr.stereo.api.ESTIMATOR_VERSION`)."""
+    excluded views, the estimation parameters, the estimator's version
+    (:data:`vibr.stereo.api.ESTIMATOR_VERSION`) and vibr's code
+    (:func:`vibr.io.checkpoint.code_fingerprint`): other code estimates again rather than
+    take maps it might not make."""
     from .stereo.api import ESTIMATOR_VERSION
 
     h = hashlib.sha256()
-    h.update(f"vibr-depth-cache v{_CACHE_VERSION} estimator {ESTIMATOR_VERSION}|".encode())
+    h.update(f"vibr-depth-cache v{_CACHE_VERSION} estimator {ESTIMATOR_VERSION} code {code_fingerprint()}|".encode())
     h.update(str(os.path.abspath(scene.root)).encode() if scene.root else b"<memory>")
     for v in scene.views:
         _view_fingerprint(v, h)
@@ -94,14 +98,21 @@ def _load(path: Path, scene: Scene) -> Scene | None:
                 d = z[f"depth_{i}"]
                 s = z[f"sigma_{i}"]
                 views.append(v.replace(depth=d, sigma_z=s if s.ndim == 2 else (None if np.isnan(s) else float(s))))
+            stats = json.loads(str(z["estimation"]))
     except (OSError, KeyError, ValueError) as exc:
         logger.warning("ignoring unreadable depth cache %s (%s)", path, exc)
         return None
-    return Scene(views, scene.name, scene.root, scene.grid, scene.points, dict(scene.meta))
+    return Scene(views, scene.name, scene.root, scene.grid, scene.points, dict(scene.meta, depth_estimation=stats))
+
+
+def _plain(x):
+    """JSON for the estimator's numpy numbers and arrays."""
+    return x.tolist() if hasattr(x, "tolist") else str(x)
 
 
 def _save(path: Path, scene: Scene) -> None:
-    arrays = {"names": np.array(scene.names)}
+    arrays = {"names": np.array(scene.names),
+              "estimation": np.array(json.dumps(scene.meta.get("depth_estimation", {}), default=_plain))}
     for i, v in enumerate(scene.views):
         arrays[f"depth_{i}"] = np.asarray(v.depth, np.float32)
         s = v.sigma_z
@@ -169,33 +180,43 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude) -> S
             src = ensure_source_depth(src)
         # a new meta: the caller's scene is not changed
         return src.replace(meta=dict(src.meta, depth_source="scene", depth_time_s=time.perf_counter() - t0))
-    # estimated: from the kept views only, through the cache
-    bare = Scene([v.replace(depth=None, sigma_z=None) for v in src.views], src.name, src.root,
-                 src.grid, src.points, dict(src.meta))
+    return estimated_depth(src, estimate_kw, cache_dir)  # from the kept views only
+
+
+def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=None) -> Scene:
+    """Depth estimated for every view of ``scene`` (:func:`vibr.stereo.estimate_depth`; depth
+    the views have is ignored), through the on-disk cache (module docstring).
+
+    ``cache_dir``: the cache folder; None: :func:`default_cache_dir`; False: no cache (always
+    estimated, nothing written). While estimating, each view's sweep is kept beside the cache
+    file as it finishes, so that a run killed midway resumes. ``meta["depth_source"]`` is
+    ``"cache"`` or ``"estimated"``, ``meta["depth_cache"]`` the cache file when used,
+    ``meta["depth_time_s"]`` the time spent, ``meta["depth_estimation"]`` the estimator's
+    statistics (kept from the run that filled the cache).
+    """
+    from .stereo import estimate_depth
+
+    t0 = time.perf_counter()
+    bare = Scene([v.replace(depth=None, sigma_z=None) for v in scene.views], scene.name, scene.root,
+                 scene.grid, scene.points, dict(scene.meta))
     kw = dict(estimate_kw or {})
     cpath = None
     if cache_dir is not False:
         folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
         cpath = folder / f"depth-{depth_cache_key(bare, kw)}.npz"
-        if cpath.is_file():
-            out = _load(cpath, bare)
-            if out is not None:
-                logger.info("depth of %d views loaded from the cache %s", len(out), cpath)
-                out.meta.update(depth_source="cache", depth_cache=str(cpath),
-                                depth_time_s=time.perf_counter() - t0)
-                return out
-    from .stereo import estimate_depth
-
-    logger.info("the scene has no depth maps: estimating them for %d views (once; cached)", len(bare))
-    # each view's sweep kept as it finishes: a run killed midway resumes (as `vibr depth`)
+        out = _load(cpath, bare) if cpath.is_file() else None
+        if out is not None:
+            logger.info("depth of %d views loaded from the cache %s", len(out), cpath)
+            out.meta.update(depth_source="cache", depth_cache=str(cpath), depth_time_s=time.perf_counter() - t0)
+            return out
+    logger.info("estimating depth for %d views%s", len(bare), "" if cpath is None else " (once; cached)")
     resume = None if cpath is None else resume_folder(cpath)
     out = estimate_depth(bare, checkpoint=resume, **kw)
     if cpath is not None:
         _save(cpath, out)
         shutil.rmtree(resume, ignore_errors=True)
-    out.meta.update(depth_source="estimated", depth_time_s=time.perf_counter() - t0)
-    if cpath is not None:
         out.meta["depth_cache"] = str(cpath)
+    out.meta.update(depth_source="estimated", depth_time_s=time.perf_counter() - t0)
     return out
 
 

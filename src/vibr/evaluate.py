@@ -98,7 +98,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
                    render_kw: dict | None = None, intensity_scale: float | None = None,
                    geometry_kw: dict | None = None, use_lpips: bool = True,
                    view_split: int | None = None, uncertainty: bool = False,
-                   fallback: str | bool = "auto") -> Evaluation:
+                   fallback: str | bool = "auto", cache_dir=False) -> Evaluation:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
@@ -127,6 +127,8 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         pixels as the other metrics; plot: :func:`vibr.uncertainty_figures.write_sparsification_figure`).
     fallback : {"auto", "always", "never"}
         The fallback proxy for source pixels of unknown depth (:func:`vibr.pipeline.prepare`).
+    cache_dir : path, None or False
+        The cache of estimated depth (:func:`vibr.pipeline.prepare`); False (default): none.
 
     Returns an :class:`Evaluation` whose ``report`` is JSON-serialisable: ``scene``,
     ``target``, ``sources``, ``scale`` (the image scale the scene was loaded at),
@@ -141,7 +143,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     settings, intensity_scale = _checked_settings(settings, mask, intensity_scale)
     t0 = time.perf_counter()
     src, tview = prepare(scene, target, sources=sources, depth=depth, depth_files=depth_files,
-                         n_views=n_views, estimate_kw=estimate_kw, fallback=fallback)
+                         n_views=n_views, estimate_kw=estimate_kw, fallback=fallback, cache_dir=cache_dir)
     t_depth = time.perf_counter() - t0
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)

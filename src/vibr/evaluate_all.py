@@ -65,7 +65,7 @@ def _config_key(task: dict) -> str:
 
     cfg = {k: v for k, v in task.items() if k not in ("report", "eval_kw")}
     cfg["code"] = code_fingerprint()
-    cfg["eval_kw"] = {k: v for k, v in task["eval_kw"].items() if k != "figures"}
+    cfg["eval_kw"] = {k: v for k, v in task["eval_kw"].items() if k not in ("figures", "cache_dir")}
     cfg["settings"] = [(s.method, s.params) for s in task["settings"]]
     blob = json.dumps(cfg, sort_keys=True, default=str)
     return hashlib.sha1(blob.encode()).hexdigest()[:16]

@@ -14,8 +14,9 @@ chosen geometry:
     centre view's disparity and whose centre is the target, that is the target's own depth,
     which is the paper's "ground-truth geometry" protocol.
 ``estimated``
-    estimated from the sources alone (:func:`vibr.stereo.estimate_depth`); the target never
-    takes part. Source pixels that stereo leaves unknown (a black backdrop, the sky) get
+    estimated from the sources alone (:func:`vibr.stereo.estimate_depth`, through the depth
+    cache when ``cache_dir`` allows it, as ``vibr render`` and ``vibr eval`` do); the target
+    never takes part. Source pixels that stereo leaves unknown (a black backdrop, the sky) get
     the fallback proxy (:func:`vibr.geometry.fallback_depth`: a plane of their view just
     behind its farthest known depth, with a large sigma_z), so that they still take part
     where no known surface hides them: by default (``fallback="auto"``) in the views that
@@ -74,7 +75,8 @@ def _depth_file_for(folder: Path, name: str) -> Path:
 
 def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int | str] | None = None,
             depth: str = "auto", depth_files: str | os.PathLike | None = None, n_views: int | None = None,
-            estimate_kw: dict | None = None, fallback: str | bool = "auto") -> tuple[Scene, View | Camera]:
+            estimate_kw: dict | None = None, fallback: str | bool = "auto",
+            cache_dir=False) -> tuple[Scene, View | Camera]:
     """Choose the target and the sources, and give every source a depth map.
 
     Parameters
@@ -98,6 +100,10 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         (:func:`vibr.geometry.apply_fallback`): "auto" (default) in the views at least
         :data:`vibr.geometry.proxy.FALLBACK_MIN_FRACTION` unknown, "always" (True) in every
         view with unknown pixels, "never" (False).
+    cache_dir : path, None or False
+        Estimated depth through the on-disk cache of :func:`vibr.depthcache.estimated_depth`
+        (keyed by the sources, their images and cameras, ``estimate_kw`` and vibr's code):
+        a folder, None for the default one, False (default) for none.
 
     Returns
     -------
@@ -117,12 +123,12 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     if depth == "gt":
         src = _gt_depth(scene, src, ti)
     elif depth == "estimated":
-        from .stereo import estimate_depth
+        from .depthcache import estimated_depth
 
         if len(src) > MANY_SOURCES and n_views is None and sources is None:
             logger.warning(f"estimating depth for all {len(src)} source views, one after the other: "
                            f"n_views=K (--views K) renders from the K best views only")
-        src = estimate_depth(src, **(estimate_kw or {}))
+        src = estimated_depth(src, estimate_kw, cache_dir)
     elif depth == "planar":
         src = _planar_depth(scene, src, tcam)
     else:

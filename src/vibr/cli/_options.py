@@ -113,6 +113,16 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                         "behind the view's known depth with a large sigma_z instead of being dropped: "
                         f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown (auto, the default), "
                         "in every view (always), or never (docs/RENDERER.md \"Fallback proxy\")")
+    p.add_argument("--cache-dir", metavar="DIR",
+                   help="cache of estimated depth (and, with --path, of resized views): a rerun on the same "
+                        "sources loads it instead of estimating again (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
+    p.add_argument("--no-cache", action="store_true", help="estimate depth again and keep nothing on disk")
+
+
+def cache_dir_from_args(args):
+    """``--cache-dir`` / ``--no-cache`` as the library reads them: a folder, None (the
+    default folder) or False (no cache)."""
+    return False if getattr(args, "no_cache", False) else getattr(args, "cache_dir", None)
 
 
 def check_depth_args(args) -> None:

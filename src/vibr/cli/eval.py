@@ -10,7 +10,7 @@ from ..evaluate import GAMMAS
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
-                       check_depth_args, method_default, method_help, names)
+                       cache_dir_from_args, check_depth_args, method_default, method_help, names)
 
 _DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
@@ -128,7 +128,7 @@ def run(args) -> int:
     ev = run_evaluation(scene, args.target, settings, sources=args.sources, depth=args.depth,
                         depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                         border=args.border, estimate_kw=estimate_kw or None,
-                        intensity_scale=args.intensity_scale,
+                        intensity_scale=args.intensity_scale, cache_dir=cache_dir_from_args(args),
                         render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
     report = ev.report
     if args.figures:
@@ -158,7 +158,7 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
                           executor=executor, sources=args.sources, depth=args.depth,
                           depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                           border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
-                          intensity_scale=args.intensity_scale,
+                          intensity_scale=args.intensity_scale, cache_dir=cache_dir_from_args(args),
                           render_kw={"psf": args.psf} if args.psf else None)
     write_report(report, out)
     print(format_all_table(report))

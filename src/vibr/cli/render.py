@@ -9,7 +9,8 @@ import os
 from ._executor import add_executor_args, executor_from_args
 from . import add_quiet
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
-                       add_render_params, add_source_options, check_depth_args, names, render_params)
+                       add_render_params, add_source_options, cache_dir_from_args, check_depth_args, names,
+                       render_params)
 
 logger = logging.getLogger(__name__)
 
@@ -70,8 +71,6 @@ def _add_path_options(p) -> None:
     g.add_argument("--overwrite", action="store_true", help="render frames already written again (default: skip them)")
     g.add_argument("--exclude", type=names, default=(),
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
-    g.add_argument("--cache-dir", metavar="DIR",
-                   help="cache of estimated depth and resized views (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
     # frames on local processes or Dask (vibr.executor, docs/SCALE.md)
     add_executor_args(g, default="auto: one process per core for a long path of large frames, "
                                   "else here (vibr.executor.auto_workers)")
@@ -115,7 +114,8 @@ def run(args) -> int:
     if args.views is not None and args.views < 1:
         raise VibrInputError(f"--views must be at least 1, got {args.views}")
     sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
-                              depth_files=args.depth_files, n_views=args.views, fallback=args.fallback)
+                              depth_files=args.depth_files, n_views=args.views, fallback=args.fallback,
+                              cache_dir=cache_dir_from_args(args))
     res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
                  **render_params(args))  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth)
@@ -153,12 +153,13 @@ def _run_path(args) -> int:
     applied = scene_applied_transform(args.scene) if args.dataparser_transforms else None
     cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
                              applied_transform=applied)
-    scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=args.cache_dir)
+    cache_dir = cache_dir_from_args(args)
+    scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
     params = {k: v for k, v in render_params(args).items() if v is not None}
     res = render_path(scene, cpath, out, method=args.method,
                       n_views=8 if args.views is None else args.views, params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
-                      cache_dir=args.cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
+                      cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
                       crf=args.crf, fps=args.fps, executor=executor_from_args(args, default="auto"))
     t = res.times
     what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
