@@ -254,3 +254,21 @@ def test_calibrated_scene_runs_through_depth_estimation(calibrated):
     assert ok.mean() > 0.3
     rel = np.abs(d[ok] * e["scale"] - dt[ok]) / dt[ok]
     assert np.median(rel) < 0.02, np.median(rel)
+
+
+def test_importing_pycolmap_keeps_the_sigterm_handler():
+    """pycolmap's glog replaces SIGTERM's handler on import (a stack trace, no cleanup);
+    vibr imports it through vibr._pycolmap, which gives the handler back: `vibr calibrate`
+    stopped by SIGTERM then exits 130 with its work folder removed."""
+    import subprocess
+    import sys
+
+    code = ("import os, signal, time\n"
+            "signal.signal(signal.SIGTERM, lambda *a: print('handler', flush=True))\n"
+            "from vibr._pycolmap import import_pycolmap\n"
+            "import_pycolmap()\n"
+            "os.kill(os.getpid(), signal.SIGTERM)\n"
+            "time.sleep(0.5)\n"
+            "print('alive', flush=True)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.split() == ["handler", "alive"], r.stderr[-800:]

@@ -216,7 +216,9 @@ def test_a_script_without_main_guard_fails_instead_of_hanging(tmp_path):
         "import _scaleout_tasks as T\n"
         "from vibr.executor import run_tasks\n"
         "run_tasks(T.identity, [0, 1], setup=len, setup_args=(bytes(4_000_000),), executor=2, retries=0)\n")
-    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    # the children that die while starting leave their own setup file: in tmp_path, not /tmp
+    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60,
+                       env=dict(os.environ, TMPDIR=str(tmp_path)))
     assert p.returncode != 0
     assert "__main__" in p.stderr and "worker process died" in p.stderr
 

@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._pycolmap import import_pycolmap
 from .camera import Camera
 from .errors import OutputExists, VibrInputError
 from .progress import progress
@@ -143,7 +144,7 @@ def _to8bit(im):
 @contextlib.contextmanager
 def _colmap_log_level(verbose: bool):
     """Silence COLMAP's glog INFO lines unless ``verbose``."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     old = pycolmap.logging.minloglevel
     pycolmap.logging.minloglevel = 0 if verbose else 2
@@ -287,7 +288,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
         points, ``scene.meta`` the calibration summary.
     report : CalibrationReport
     """
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     opt = replace(options or CalibrateOptions(), **kw)
     photos_dir = Path(photos_dir)
@@ -383,7 +384,7 @@ def _clean_work(work: Path) -> tuple[Path, Path, Path, Path]:
 
 def _extract_features(db: Path, img_dir: Path, names: list[str], sizes, opt: CalibrateOptions) -> float:
     """Step 2: SIFT features of every photo into the database (CPU). Returns seconds."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     t0 = time.perf_counter()
     size = max(sizes, key=lambda wh: wh[0] * wh[1])
@@ -407,7 +408,7 @@ def _extract_features(db: Path, img_dir: Path, names: list[str], sizes, opt: Cal
 def _match_features(db: Path, opt: CalibrateOptions) -> float:
     """Step 3: exhaustive or sequential matching with two-view geometric verification.
     Returns seconds."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     t0 = time.perf_counter()
     logger.info(f"calibrate [3/5] {opt.matcher} matching")
@@ -430,7 +431,7 @@ def _match_features(db: Path, opt: CalibrateOptions) -> float:
 def _incremental_mapping(db: Path, img_dir: Path, sparse: Path, n_photos: int, opt: CalibrateOptions):
     """Step 4: COLMAP's incremental mapper (poses, intrinsics, sparse points), seeded,
     with a progress bar of the registered photos. Returns its reconstructions (dict)."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     logger.info("calibrate [4/5] incremental mapping (poses, intrinsics, sparse points)")
     iopt = pycolmap.IncrementalPipelineOptions()
@@ -516,7 +517,7 @@ def _refine_principal_point(rec, num_threads: int):
 
     Returns ``(reconstruction, note)``: the refined copy or ``rec`` itself, and a note.
     """
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     trial = pycolmap.Reconstruction(rec)
     opt = pycolmap.BundleAdjustmentOptions()

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._pycolmap import import_pycolmap
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene
@@ -70,7 +71,7 @@ def colmap_camera_K(cam, source) -> np.ndarray:
 
 def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     """Load a COLMAP sparse model (+ images, + dense geometric depth maps when present)."""
-    import pycolmap
+    pycolmap = import_pycolmap()
 
     from . import select_entries
 

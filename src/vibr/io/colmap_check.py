@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._pycolmap import import_pycolmap
 from ..errors import VibrInputError
 
 _MAX_SIDE = 1_000_000
@@ -47,7 +48,7 @@ _MODELS_FALLBACK = {0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RAD
 def camera_models() -> dict[int, tuple[str, int]]:
     """COLMAP camera model id -> (name, number of parameters)."""
     try:
-        import pycolmap
+        pycolmap = import_pycolmap()
 
         out = {}
         for name, mid in pycolmap.CameraModelId.__members__.items():
