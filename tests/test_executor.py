@@ -346,10 +346,19 @@ def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path, 
             assert {k: v for k, v in ra.items() if k != "results"} == {k: v for k, v in rb.items() if k != "results"}
             assert ra["results"] == rb["results"]  # every method, to the last bit
 
-    # a rerun finds the per-view reports and recomputes nothing: the same numbers, bit for bit
+    # a rerun finds the per-view reports and recomputes nothing: the same numbers, bit for bit;
+    # the reports are read before any task is made (the progress counts what is left)
+    import vibr.executor as ex
+
+    real, handed = ex.run_tasks, []
+    monkeypatch.setattr(ex, "run_tasks", lambda fn, tasks, **kw: handed.append(len(tasks)) or real(fn, tasks, **kw))
     again = _eval_all(scene_dir, tmp_path / "serial.json")
-    assert all(v.get("skipped") for v in again["per_view"].values())
+    assert all(v.get("skipped") for v in again["per_view"].values()) and handed == []
     assert results_only(again) == results_only(serial)
+    (tmp_path / "serial_views" / "view_008.json").unlink()
+    partial = _eval_all(scene_dir, tmp_path / "serial.json")
+    assert handed == [1] and partial["per_view"]["view_000"].get("skipped")
+    assert results_only(partial) == results_only(serial)
     # ... but not with other code: the reports are then recomputed
     import vibr.io.checkpoint as ckpt
 

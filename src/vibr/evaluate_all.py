@@ -71,6 +71,19 @@ def _config_key(task: dict) -> str:
     return hashlib.sha1(blob.encode()).hexdigest()[:16]
 
 
+def _report_done(task: dict) -> dict | None:
+    """The report ``task`` already has on disk, made with its ``config`` (``"skipped":
+    true`` added), else None."""
+    path = Path(task["report"])
+    if not path.is_file():
+        return None
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return {**old, "skipped": True} if isinstance(old, dict) and old.get("config") == task["config"] else None
+
+
 def evaluate_target(scene, task: dict) -> dict:
     """One leave-one-out evaluation (a task of :func:`vibr.executor.run_tasks`).
 
@@ -81,14 +94,10 @@ def evaluate_target(scene, task: dict) -> dict:
     """
     from .evaluate import run_evaluation
 
+    old = _report_done(task)
+    if old is not None:
+        return old
     path = Path(task["report"])
-    if path.is_file():
-        try:
-            old = json.loads(path.read_text())
-        except (OSError, ValueError):
-            old = None
-        if isinstance(old, dict) and old.get("config") == task["config"]:
-            return {**old, "skipped": True}
     t0 = time.perf_counter()
     kw = dict(task["eval_kw"])
     figures = kw.pop("figures", None)
@@ -142,8 +151,16 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
         task["config"] = _config_key(task)
         tasks.append(task)
     t0 = time.perf_counter()
-    reports = run_tasks(evaluate_target, tasks, setup=load_context, setup_args=(scene_path, float(scale)),
-                        executor=executor, desc="leave-one-out", retries=retries)
+    # the targets already evaluated are read here, so that the tasks and the progress line
+    # (its time left) are the targets still to do
+    reports = [_report_done(t) for t in tasks]
+    todo = [i for i, r in enumerate(reports) if r is None]
+    if todo:
+        done = run_tasks(evaluate_target, [tasks[i] for i in todo], setup=load_context,
+                         setup_args=(scene_path, float(scale)), executor=executor, desc="leave-one-out",
+                         retries=retries)
+        for i, r in zip(todo, done):
+            reports[i] = r
     skipped = sum(bool(r.get("skipped")) for r in reports)
     if skipped:
         logger.info("%d of %d targets were already evaluated (%s)", skipped, len(targets), views_dir)
