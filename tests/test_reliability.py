@@ -354,3 +354,26 @@ def test_eval_and_render_estimate_depth_once_through_the_cache(tmp_path, capsys,
     key = dc.depth_cache_key(bare)
     monkeypatch.setattr(dc, "code_fingerprint", lambda: "other code")
     assert dc.depth_cache_key(bare) != key
+
+
+def test_a_cache_folder_that_cannot_be_written(tmp_path, capsys):
+    """--cache-dir that is, or lies under, a file: one line, exit 2, before any work. A
+    checkpoint folder that cannot be made (a read-only cache) only costs the resumption."""
+    from vibr.cli import main
+    from vibr.io.checkpoint import ViewCheckpoint
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=3, width=40, height=32, seed=2)
+    src = save_scene(s.replace(views=[v.replace(depth=None, sigma_z=None) for v in s.views]), tmp_path / "s")
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for bad, why in ((afile, "is a file, a folder is expected"), (afile / "sub", "cannot be made")):
+        assert main(["eval", str(src), "--target", "view_000", "--method", "ulr", "--json", str(tmp_path / "e.json"),
+                     "--cache-dir", str(bad)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert why in err[-1] and "Traceback" not in "".join(err)
+    assert not (tmp_path / "e.json").exists()
+    ck = ViewCheckpoint(afile / "resume", {})
+    for _ in range(2):
+        ck.save("view_000", "k", {"depth": np.zeros((2, 2), np.float32)}, {})
+    assert ck.unwritable and ck.load("view_000", "k") is None

@@ -121,8 +121,22 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
 
 def cache_dir_from_args(args):
     """``--cache-dir`` / ``--no-cache`` as the library reads them: a folder, None (the
-    default folder) or False (no cache)."""
-    return False if getattr(args, "no_cache", False) else getattr(args, "cache_dir", None)
+    default folder) or False (no cache). A path that is, or lies under, a file is refused
+    before any work."""
+    from pathlib import Path
+
+    from ..errors import VibrInputError
+
+    if getattr(args, "no_cache", False):
+        return False
+    d = getattr(args, "cache_dir", None)
+    if d is not None:
+        p = Path(d).absolute()
+        first = next(a for a in (p, *p.parents) if a.exists())
+        if not first.is_dir():
+            raise VibrInputError("--cache-dir is a file, a folder is expected" if first == p
+                                 else f"--cache-dir cannot be made: {first} is a file", d)
+    return d
 
 
 def check_depth_args(args) -> None:

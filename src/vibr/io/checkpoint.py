@@ -57,6 +57,7 @@ class ViewCheckpoint:
         self.folder = Path(folder)
         self.params = params
         self.n_loaded = 0
+        self.unwritable = False
 
     def key(self, view, camera, partners) -> str:
         return digest(code_fingerprint(), self.params, view.name, camera.K, camera.R, camera.t,
@@ -85,11 +86,20 @@ class ViewCheckpoint:
         return arrays, info
 
     def save(self, name: str, key: str, arrays: dict, info: dict) -> None:
-        self.folder.mkdir(parents=True, exist_ok=True)
-        with atomic_path(self._path(name), suffix=".npz") as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, key=np.array(key), info=np.array(json.dumps(info, default=float)),
-                         **{f"a_{k}": v for k, v in arrays.items() if v is not None})
+        """Keep ``name``'s result; a folder that cannot be written only costs the resumption
+        (one warning, then nothing more is tried)."""
+        if self.unwritable:
+            return
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            with atomic_path(self._path(name), suffix=".npz") as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, key=np.array(key), info=np.array(json.dumps(info, default=float)),
+                             **{f"a_{k}": v for k, v in arrays.items() if v is not None})
+        except OSError as exc:
+            self.unwritable = True
+            logger.warning("cannot keep per-view results in %s (%s): an interrupted run will start over",
+                           self.folder, exc.strerror or exc)
 
     def remove(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)
