@@ -367,6 +367,7 @@ def test_a_cache_folder_that_cannot_be_written(tmp_path, capsys):
     src = save_scene(s.replace(views=[v.replace(depth=None, sigma_z=None) for v in s.views]), tmp_path / "s")
     afile = tmp_path / "afile"
     afile.write_text("x")
+    capsys.readouterr()  # only what the commands below write
     for bad, why in ((afile, "is a file, a folder is expected"), (afile / "sub", "cannot be made")):
         assert main(["eval", str(src), "--target", "view_000", "--method", "ulr", "--json", str(tmp_path / "e.json"),
                      "--cache-dir", str(bad)]) == 2
