@@ -53,7 +53,10 @@ def _cases(s, o):
               (["eval", s, "--target", "0", "--json", o / "r.json", "--figures", f"{ro}/f"], o / "r.json"),
               (["depth", s, "-o", f"{ro}/d"], None), (["convert", s, f"{ro}/c"], None),
               (["calibrate", s, f"{ro}/cal"], None), (["demo", "-o", f"{ro}/x.png"], None),
-              (["render", s, "--target", "0", "-o", o], None)]
+              (["render", s, "--target", "0", "-o", o], None),
+              (["path", "orbit", s, "-o", miss / "p.json"], miss),  # a folder that is not there
+              (["render", s, "--target", "0", "-o", o / "r.png", "--cache-dir", s + "/transforms.json"],
+               o / "r.png")]
     return cases
 
 

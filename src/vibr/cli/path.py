@@ -65,6 +65,9 @@ def run(args) -> int:
 
     if not args.output.lower().endswith(".json"):
         raise VibrInputError("the camera path file must end in .json", args.output)
+    from ..io.outputs import check_output
+
+    check_output(args.output, "file", what="-o")  # as every command: its folder must exist
     if args.frames is not None and args.seconds is not None:
         raise VibrInputError("give --frames or --seconds, not both")
     if args.scale <= 0:
