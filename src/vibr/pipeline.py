@@ -118,7 +118,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         depth = "gt" if any(v.depth is not None for v in scene.views) else "estimated"
     src, tview, ti = _hold_out(scene, target, sources, n_views)  # its errors first
     if auto and depth == "estimated":
-        logger.info("the scene has no depth maps: estimating them from the source views")
+        logger.info("the scene has no depth maps: the sources get depth estimated from them (or cached)")
     tcam = tview if isinstance(tview, Camera) else tview.camera
     if depth == "gt":
         src = _gt_depth(scene, src, ti)
