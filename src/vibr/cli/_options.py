@@ -113,9 +113,15 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                         "behind the view's known depth with a large sigma_z instead of being dropped: "
                         f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown (auto, the default), "
                         "in every view (always), or never (docs/RENDERER.md \"Fallback proxy\")")
+    add_cache_options(p)
+
+
+def add_cache_options(p: argparse.ArgumentParser) -> None:
+    """``--cache-dir`` and ``--no-cache``: the on-disk cache of estimated depth and resized
+    views (vibr.depthcache), one for every command that uses it."""
     p.add_argument("--cache-dir", metavar="DIR",
-                   help="cache of estimated depth (and, with --path, of resized views): a rerun on the same "
-                        "sources loads it instead of estimating again (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
+                   help="cache of estimated depth and of resized views: a rerun on the same sources loads "
+                        "them instead of estimating again (default $VIBR_CACHE_DIR or ~/.cache/vibr)")
     p.add_argument("--no-cache", action="store_true", help="estimate depth again and keep nothing on disk")
 
 

@@ -7,7 +7,7 @@ import logging
 import time
 
 from . import add_quiet
-from ._options import add_method_option
+from ._options import add_cache_options, add_method_option, cache_dir_from_args
 
 logger = logging.getLogger(__name__)
 
@@ -47,9 +47,7 @@ def register(sub) -> None:
     p.add_argument("--points", choices=POINT_MODES, default=POINT_MODES[0],
                    help=f"when the point cloud is drawn over the render (default '{POINT_MODES[0]}': hidden "
                         "once the camera is still and the full-size render starts)")
-    p.add_argument("--cache-dir", metavar="DIR",
-                   help="cache of the loaded scene and of estimated depth (default $VIBR_CACHE_DIR or "
-                        "~/.cache/vibr; the same cache as 'vibr render --path')")
+    add_cache_options(p)
     p.add_argument("--path-out", default="camera_path.json", help="file 'export path' writes (default camera_path.json)")
     add_quiet(p)
     p.set_defaults(func=run)
@@ -67,11 +65,11 @@ def run(args) -> int:
     settings = ViewSettings(method=args.method, n_views=args.views)
     check_port_free(args.host, args.port)  # fail before the (slow) loading
     # the resized photographs and the estimated depth come from the on-disk cache when there
-    scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=args.cache_dir)
+    cache_dir = cache_dir_from_args(args)
+    scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
     if not scene.has_depth:
-        logger.info("%s has no depth maps: estimating them once (cached for the next start) ...", scene.name)
         t0 = time.perf_counter()
-        scene = scene_with_depth(scene, cache_dir=args.cache_dir)
+        scene = scene_with_depth(scene, cache_dir=cache_dir)
         logger.info("depth ready in %.1f s", time.perf_counter() - t0)
     # a browser's aborted preconnect is logged with a traceback by websockets: not an error here
     logging.getLogger("websockets.server").setLevel(logging.CRITICAL)

@@ -213,6 +213,4 @@ def scene_with_depth(scene: Scene, *, cache_dir=None) -> Scene:
     proxy as ``vibr render`` applies it."""
     from ..depthcache import scene_with_depth as _with_depth
 
-    if not scene.has_depth:
-        logger.info("giving every view depth (the on-disk depth cache is used when present)")
     return _with_depth(scene, depth="auto", cache_dir=cache_dir)
