@@ -378,3 +378,41 @@ def test_a_cache_folder_that_cannot_be_written(tmp_path, capsys):
     for _ in range(2):
         ck.save("view_000", "k", {"depth": np.zeros((2, 2), np.float32)}, {})
     assert ck.unwritable and ck.load("view_000", "k") is None
+
+
+def test_the_cache_keeps_under_its_bound_least_recently_used_first(tmp_path, monkeypatch):
+    """prune_cache removes the entries used longest ago until the rest fit; a cache hit counts
+    as a use; the entry just written is never removed; other files are left alone."""
+    import os
+
+    import vibr.depthcache as dc
+
+    names = ["depth-a.npz", "depth-b.npz", "scene-c.pkl", "depth-d.npz"]
+    for k, n in enumerate(names):
+        (tmp_path / n).write_bytes(bytes(100))
+        os.utime(tmp_path / n, (1000 + k, 1000 + k))
+    (tmp_path / "notes.txt").write_bytes(bytes(500))
+    dc._used(tmp_path / "depth-a.npz")  # a hit: now the most recent
+    assert dc.prune_cache(tmp_path, keep=[tmp_path / "depth-b.npz"], max_bytes=250) == 200
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["depth-a.npz", "depth-b.npz", "notes.txt"]
+    monkeypatch.setenv("VIBR_CACHE_MAX_GB", "0")
+    assert dc.prune_cache(tmp_path, keep=[tmp_path / "depth-a.npz"]) == 100
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["depth-a.npz", "notes.txt"]
+
+
+def test_a_leave_one_out_keeps_depth_in_the_cache_only_when_asked(tmp_path, monkeypatch):
+    """`vibr eval --target all` estimates each target's sources once (the per-view reports
+    make a rerun resume): no cache entry by default, one per target with --cache-dir."""
+    from vibr.cli import main
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=3, width=40, height=32, seed=2)
+    src = save_scene(s.replace(views=[v.replace(depth=None, sigma_z=None) for v in s.views]), tmp_path / "s")
+    default = tmp_path / "default"
+    monkeypatch.setenv("VIBR_CACHE_DIR", str(default))
+    argv = ["-q", "eval", str(src), "--target", "all", "--method", "ulr", "--depth", "estimated"]
+    assert main(argv + ["--json", str(tmp_path / "a.json")]) == 0
+    assert not list(default.glob("depth-*.npz"))
+    asked = tmp_path / "asked"
+    assert main(argv + ["--json", str(tmp_path / "b.json"), "--cache-dir", str(asked)]) == 0
+    assert len(list(asked.glob("depth-*.npz"))) == 3

@@ -16,13 +16,16 @@ once, not per frame and not per run. :func:`scene_with_depth` gives every view a
   and ``vibr eval`` (:func:`vibr.pipeline.prepare`) estimate their sources' depth through it.
 
 The cache folder is ``cache_dir``, else ``$VIBR_CACHE_DIR``, else ``$XDG_CACHE_HOME/vibr``
-(``~/.cache/vibr``): never the dataset's folder, which is often shared or read-only.
+(``~/.cache/vibr``): never the dataset's folder, which is often shared or read-only. It is
+kept under :data:`CACHE_MAX_BYTES` (``$VIBR_CACHE_MAX_GB``): after each write the least
+recently used entries are removed (:func:`prune_cache`).
 Files are written atomically (temporary name, then rename), so an interrupted run leaves
 no partial cache entry.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
@@ -40,9 +43,15 @@ from .scene import Scene
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["scene_with_depth", "estimated_depth", "load_scene_cached", "default_cache_dir", "depth_cache_key"]
+__all__ = ["scene_with_depth", "estimated_depth", "load_scene_cached", "default_cache_dir", "depth_cache_key",
+           "prune_cache", "CACHE_MAX_BYTES"]
 
 _CACHE_VERSION = 2  # 2: the estimator's statistics; vibr's code in the key
+
+#: The cache folder's entries are kept under this many bytes (``$VIBR_CACHE_MAX_GB``
+#: overrides it, in GB): after each write the least recently used entries go. One entry of
+#: cotton's 80 views at 512² is 170 MB, fountain's 10 views at 3072×2048 about 500 MB.
+CACHE_MAX_BYTES = 8 * 10**9
 
 
 def default_cache_dir() -> Path:
@@ -85,6 +94,46 @@ def depth_cache_key(scene: Scene, estimate_kw: dict | None = None, exclude=()) -
     h.update(json.dumps(sorted(str(e) for e in exclude)).encode())
     h.update(json.dumps(estimate_kw or {}, sort_keys=True, default=repr).encode())
     return h.hexdigest()[:32]
+
+
+def _cache_max_bytes() -> int:
+    env = os.environ.get("VIBR_CACHE_MAX_GB")
+    try:
+        return int(float(env) * 10**9) if env else CACHE_MAX_BYTES
+    except ValueError:
+        logger.warning("ignoring VIBR_CACHE_MAX_GB=%r (not a number)", env)
+        return CACHE_MAX_BYTES
+
+
+def _used(path: Path) -> None:
+    """Mark a cache entry as just used (its modification time orders the pruning)."""
+    with contextlib.suppress(OSError):
+        os.utime(path)
+
+
+def prune_cache(folder, keep=(), max_bytes: int | None = None) -> int:
+    """Remove the least recently used entries (``depth-*.npz``, ``scene-*.pkl``) of the cache
+    ``folder`` until the rest fit in ``max_bytes`` (default :data:`CACHE_MAX_BYTES` or
+    ``$VIBR_CACHE_MAX_GB``); ``keep`` are never removed. Returns the bytes freed."""
+    max_bytes = _cache_max_bytes() if max_bytes is None else int(max_bytes)
+    keep = {Path(k).resolve() for k in keep}
+    entries = []
+    for p in list(Path(folder).glob("depth-*.npz")) + list(Path(folder).glob("scene-*.pkl")):
+        with contextlib.suppress(OSError):
+            st = p.stat()
+            entries.append((st.st_mtime, st.st_size, p))
+    total = sum(e[1] for e in entries)
+    freed = 0
+    for _, size, p in sorted(entries, key=lambda e: e[0]):
+        if total - freed <= max_bytes:
+            break
+        if p.resolve() in keep:
+            continue
+        with contextlib.suppress(OSError):
+            p.unlink()
+            freed += size
+            logger.info("cache: removed %s, the least recently used entry (%.0f MB)", p.name, size / 1e6)
+    return freed
 
 
 def _load(path: Path, scene: Scene) -> Scene | None:
@@ -206,6 +255,7 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
         cpath = folder / f"depth-{depth_cache_key(bare, kw)}.npz"
         out = _load(cpath, bare) if cpath.is_file() else None
         if out is not None:
+            _used(cpath)
             logger.info("depth of %d views loaded from the cache %s", len(out), cpath)
             out.meta.update(depth_source="cache", depth_cache=str(cpath), depth_time_s=time.perf_counter() - t0)
             return out
@@ -215,6 +265,7 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
     if cpath is not None:
         _save(cpath, out)
         shutil.rmtree(resume, ignore_errors=True)
+        prune_cache(cpath.parent, keep=[cpath])
         out.meta["depth_cache"] = str(cpath)
     out.meta.update(depth_source="estimated", depth_time_s=time.perf_counter() - t0)
     return out
@@ -266,6 +317,7 @@ def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
             with open(cpath, "rb") as f:
                 scene = pickle.load(f)
             if isinstance(scene, Scene):
+                _used(cpath)
                 logger.info("scene loaded from the cache %s", cpath)
                 return scene
         except Exception as exc:  # noqa: BLE001 - a bad cache entry is only a slower load
@@ -276,6 +328,7 @@ def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
         with atomic_path(cpath) as tmp:
             with open(tmp, "wb") as f:
                 pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
+        prune_cache(folder, keep=[cpath])
     except OSError as exc:
         logger.warning("could not write the scene cache %s (%s)", cpath, exc)
     return scene

@@ -152,13 +152,16 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
     from ..evaluate_all import evaluate_all, format_all_table, resolve_targets
 
     targets = resolve_targets(scene, args.target)
+    # every target has sources of its own, each estimate is used once, and the per-view
+    # reports already let a rerun resume: the depth cache only with an explicit --cache-dir
+    cache_dir = cache_dir_from_args(args) if args.cache_dir is not None else False
     out = Path(args.json)
     views_dir = out.with_name(out.stem + "_views")
     report = evaluate_all(args.scene, targets, settings, views_dir=views_dir, scale=args.scale,
                           executor=executor, sources=args.sources, depth=args.depth,
                           depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                           border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
-                          intensity_scale=args.intensity_scale, cache_dir=cache_dir_from_args(args),
+                          intensity_scale=args.intensity_scale, cache_dir=cache_dir,
                           render_kw={"psf": args.psf} if args.psf else None)
     write_report(report, out)
     print(format_all_table(report))
