@@ -199,6 +199,29 @@ def test_a_killed_worker_loses_nothing(tmp_path, engine, request):
     assert all(r["skipped"] for r in again)
 
 
+def test_more_processes_than_cores_or_tasks(monkeypatch):
+    """N processes for fewer tasks: only as many as the tasks start; more processes than
+    cores: a warning (they take turns, each with its own copy of the context)."""
+    import io
+    import logging
+
+    import vibr.executor as ex
+
+    buf = io.StringIO()
+    h = logging.StreamHandler(buf)
+    lg = logging.getLogger("vibr.executor")
+    lg.addHandler(h)
+    monkeypatch.setattr(lg, "level", logging.INFO)
+    try:
+        monkeypatch.setattr(ex, "available_cores", lambda: 1)
+        res = run_tasks(T.identity, [1, 2], executor=99)
+    finally:
+        lg.removeHandler(h)
+    out = buf.getvalue()
+    assert res == [(None, 1), (None, 2)]
+    assert "2 tasks on 2 processes" in out and "2 processes on 1 cores" in out
+
+
 def test_a_task_that_always_kills_its_worker_fails_cleanly(tmp_path):
     with pytest.raises(RuntimeError, match="failed 2 times"):
         run_tasks(T.die_always, ["x"], executor=2, retries=1)

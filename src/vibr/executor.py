@@ -307,7 +307,13 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
+    n = min(int(n), len(tasks))  # a process more than the tasks would only start and wait
     threads = threads_per_worker(n)
+    cores = available_cores()
+    if n > cores:
+        logger.warning("%s: %d processes on %d cores: they take turns on the cores, and each holds "
+                       "its own copy of the scene in memory (one process per core is the most that pays)",
+                       desc, n, cores)
     logger.info("%s: %d tasks on %d processes (%d numba threads each)", desc, len(tasks), n, threads)
     results: list = [None] * len(tasks)
     attempts = [0] * len(tasks)
