@@ -210,13 +210,15 @@ def test_more_processes_than_cores_or_tasks(monkeypatch):
     buf = io.StringIO()
     h = logging.StreamHandler(buf)
     lg = logging.getLogger("vibr.executor")
+    level = lg.level
     lg.addHandler(h)
-    monkeypatch.setattr(lg, "level", logging.INFO)
+    lg.setLevel(logging.INFO)  # setLevel, not the attribute: it clears the loggers' caches
     try:
         monkeypatch.setattr(ex, "available_cores", lambda: 1)
         res = run_tasks(T.identity, [1, 2], executor=99)
     finally:
         lg.removeHandler(h)
+        lg.setLevel(level)
     out = buf.getvalue()
     assert res == [(None, 1), (None, 2)]
     assert "2 tasks on 2 processes" in out and "2 processes on 1 cores" in out

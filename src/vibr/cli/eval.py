@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 
 from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS
@@ -11,6 +12,8 @@ from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
                        cache_dir_from_args, check_depth_args, method_default, method_help, names)
+
+logger = logging.getLogger(__name__)
 
 _DESC = f"""\
 Hold one view of SCENE out, render it from the other views (or --sources) with each method
@@ -125,6 +128,9 @@ def run(args) -> int:
                                      ("depth_range", args.depth_range)) if v is not None}
     if args.target.strip().lower() == "all" or "," in args.target:
         return _run_all(args, scene, settings, executor, estimate_kw)
+    if executor is not None:
+        logger.warning("--workers and --dask run several targets (--target all or a list) in parallel; "
+                       "one target is evaluated here")
     ev = run_evaluation(scene, args.target, settings, sources=args.sources, depth=args.depth,
                         depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                         border=args.border, estimate_kw=estimate_kw or None,
