@@ -413,7 +413,8 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
         from .executor import parse_executor, run_tasks
 
         kind, arg = parse_executor(executor)
-        engine = {"serial": "in this process", "processes": f"on {min(arg, max(len(todo), 1))} processes",
+        n_proc = min(arg, max(len(todo), 1)) if kind == "processes" else arg
+        engine = {"serial": "in this process", "processes": f"on {n_proc} processes",
                   "dask-local": f"on a local Dask cluster of {arg} workers"}.get(kind, f"on Dask ({arg})")
         out = run_tasks(render_frame, todo, setup=_same, setup_args=(ctx,), executor=executor,
                         desc="frames") if todo else []
