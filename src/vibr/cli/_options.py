@@ -146,10 +146,12 @@ def cache_dir_from_args(args):
 
 
 def check_depth_args(args) -> None:
+    """The depth options checked before any work (the scene not loaded yet)."""
     from ..errors import VibrInputError
 
     if args.depth == "files" and not args.depth_files:
         raise VibrInputError("--depth files needs --depth-files DIR")
+    cache_dir_from_args(args)
 
 
 def add_overwrite_option(p: argparse.ArgumentParser, what: str) -> None:

@@ -8,6 +8,11 @@ Each sample (k, m) carries the penalty of view k for the 3D point X it sees:
 each view's colour and penalty are splatted (bilinear), the k best views get the weights
 ``w̃ = 1 − p / p_(k+1)`` (``p_(k+1)`` the (k+1)-th smallest penalty, Buehler eq. 2),
 ``w = w̃ / p`` normalised: the blend is continuous as views enter and leave the k best.
+
+The renders run compiled kernels (:func:`vibr.render.weights.ulr_pixels`, and the view
+prior's :func:`vibr.render.weights.view_prior`); :func:`ulr_penalty` and
+:func:`ulr_view_weights` are the same formulas in numpy, the reference the tests hold the
+kernels to (tests/test_render_ulr.py, tests/test_view_prior.py).
 """
 
 from __future__ import annotations
