@@ -17,7 +17,7 @@ import _scaleout_tasks as T  # noqa: E402
 
 from vibr.errors import VibrInputError  # noqa: E402
 from vibr.executor import (AUTO_MIN_TASK_PIXELS, AUTO_MIN_TASKS_PER_WORKER, auto_workers,  # noqa: E402
-                           parse_executor, run_tasks, threads_per_worker)
+                           check_scheduler, parse_executor, run_tasks, threads_per_worker)
 
 import distributed
 
@@ -122,6 +122,7 @@ def client():
 def test_dask_round_trip_and_transient_errors_retried(tmp_path, client):
     """setup once per worker, numba threads, task order; a Client passed in is used and left
     open; a task that raises once is retried, one that keeps raising fails the run."""
+    check_scheduler(client.scheduler.address)  # the CLI's check passes for a real scheduler
     res = run_tasks(T.square_probe, range(8), setup=T.setup_probe, setup_args=(str(tmp_path),), executor=client)
     _check_workers(res, tmp_path, 2)
     # without Dask's default MALLOC_TRIM_THRESHOLD_ (it slowed frames ~25 %, docs/SCALE.md)
@@ -307,6 +308,42 @@ def test_missing_extra_gives_one_line(monkeypatch, capsys, tmp_path):
     rc = main(["eval", str(tmp_path), "--target", "all", "--json", str(tmp_path / "r.json"), "--dask", "local"])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and "pip install 'vibr[dask]'" in err
+
+
+@pytest.mark.parametrize("server", ["none", "http"])
+def test_a_wrong_dask_address_fails_at_once(tmp_path, capsys, server):
+    """Nothing listening, or another server on the port (as the dashboard's 8787 would be):
+    one line and exit 2 within seconds, before the scene is read (the scene folder is empty
+    here, so its own error would come first otherwise). Before, the client hung or died with
+    a traceback after the depth had been estimated."""
+    import threading
+    import time
+    from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+
+    from vibr.cli import main
+    from vibr.viewer.browser import free_port
+
+    class Quiet(SimpleHTTPRequestHandler):
+        def log_message(self, *args):
+            pass
+
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), Quiet) if server == "http" else None
+    if httpd is not None:
+        threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    port = httpd.server_address[1] if httpd is not None else free_port()
+    capsys.readouterr()
+    t0 = time.monotonic()
+    try:
+        rc = main(["eval", str(tmp_path), "--target", "all", "--json", str(tmp_path / "r.json"),
+                   "--dask", f"tcp://127.0.0.1:{port}"])
+    finally:
+        if httpd is not None:
+            httpd.shutdown()
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert f"tcp://127.0.0.1:{port}" in err and "Dask scheduler" in err
+    assert time.monotonic() - t0 < 15
+    assert not (tmp_path / "r.json").exists()
 
 
 def test_a_render_is_bit_identical_on_1_and_2_numba_threads():

@@ -50,6 +50,7 @@ import multiprocessing
 import os
 import pickle
 import signal
+import socket
 import tempfile
 import threading
 import time
@@ -170,6 +171,60 @@ def require_distributed():
     except ImportError:
         raise VibrInputError(f"--dask needs dask.distributed, which is not installed: {DASK_HINT}") from None
     return distributed
+
+
+def check_scheduler(address: str, timeout_s: float = 5.0) -> None:
+    """Raise a one-line :class:`VibrInputError` unless a Dask scheduler answers at
+    ``address`` within ``timeout_s``: a command checks this before it loads a scene or
+    estimates depth, so that a wrong address fails in seconds instead of after minutes of
+    work. Two steps: a TCP connection (a refused port or an unknown host fails at once), then
+    Dask's handshake, bounded in time (another server on that port, e.g. the dashboard's,
+    would otherwise make the client hang or fail with a traceback). tls:// addresses get the
+    first step only (the handshake needs the user's certificates)."""
+    from distributed.comm import parse_address
+    from distributed.comm.addressing import parse_host_port
+
+    try:
+        scheme, loc = parse_address(address)
+        if scheme not in ("tcp", "tls"):
+            return  # inproc://, ucx://, ws://: left to the client
+        host, port = parse_host_port(loc, default_port=8786)
+    except ValueError as exc:
+        raise VibrInputError(f"bad Dask scheduler address {address!r}: {exc}") from None
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        why = "timed out" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        raise VibrInputError(f"cannot reach the Dask scheduler at {address}: {why}") from None
+    if scheme == "tcp" and not _dask_handshake(address, timeout_s):
+        raise VibrInputError(f"no Dask scheduler answered at {address} (a scheduler listens on "
+                             f"port 8786 unless told otherwise; 8787 is its dashboard)")
+
+
+def _dask_handshake(address: str, timeout_s: float) -> bool:
+    """Whether a Dask comm at ``address`` completes distributed's handshake in time."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def _probe():
+        comm = await connect(address, timeout=timeout_s)
+        await comm.close()
+
+    def _run(ok):
+        try:
+            asyncio.run(asyncio.wait_for(_probe(), timeout_s))
+            ok.append(True)
+        except Exception:  # noqa: BLE001 - any failure means: not a scheduler we can use
+            pass
+
+    # on a thread of its own: the caller may already run an event loop (a notebook)
+    ok: list = []
+    t = threading.Thread(target=_run, args=(ok,), daemon=True, name="vibr-dask-probe")
+    t.start()
+    t.join(timeout_s + 1.0)
+    return bool(ok)
 
 
 def run_tasks(fn: Callable, tasks: Sequence, *, setup: Callable | None = None, setup_args: Sequence = (),
@@ -442,6 +497,7 @@ def _run_dask(fn, tasks, setup, setup_args, kind, arg, desc, retries):
             cluster = start_local_cluster(arg)
             client = Client(cluster)
         elif kind == "dask":
+            check_scheduler(arg)
             try:
                 client = Client(arg, timeout="20s")
             except (OSError, TimeoutError, ValueError) as exc:

@@ -22,14 +22,16 @@ def executor_from_args(args, default=None):
     """The ``executor`` argument of :func:`vibr.executor.run_tasks` for parsed flags
     (``default`` when neither flag is given)."""
     from ..errors import VibrInputError
-    from ..executor import parse_executor, require_distributed
+    from ..executor import check_scheduler, parse_executor, require_distributed
 
     workers, dask = getattr(args, "workers", None), getattr(args, "dask", None)
     if dask is not None:
         if not dask.strip():
             raise VibrInputError("--dask needs a scheduler address or 'local'")
         require_distributed()
-        parse_executor(dask)
+        kind, address = parse_executor(dask)
+        if kind == "dask":
+            check_scheduler(address)
         return dask
     if workers is not None:
         if workers < 1:

@@ -153,6 +153,7 @@ def _run_path(args) -> int:
     applied = scene_applied_transform(args.scene) if args.dataparser_transforms else None
     cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
                              applied_transform=applied)
+    executor = executor_from_args(args, default="auto")  # a bad scheduler fails before the work
     cache_dir = cache_dir_from_args(args)
     scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
     params = {k: v for k, v in render_params(args).items() if v is not None}
@@ -160,7 +161,7 @@ def _run_path(args) -> int:
                       n_views=8 if args.views is None else args.views, params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
-                      crf=args.crf, fps=args.fps, executor=executor_from_args(args, default="auto"))
+                      crf=args.crf, fps=args.fps, executor=executor)
     t = res.times
     what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
