@@ -443,11 +443,20 @@ def _incremental_mapping(db: Path, img_dir: Path, sparse: Path, n_photos: int, o
     iopt.ba_refine_principal_point = bool(opt.refine_principal_point)
     sparse.mkdir()
     bar = progress(total=n_photos, desc="calibrate: registered")
+    size = [0]  # photos in the model being built
+
+    def _registered(new_model: bool) -> None:
+        # COLMAP starts a new model where the last one stopped growing: the bar shows the
+        # largest model so far (summing the models' registrations had shown 17/16)
+        size[0] = 2 if new_model else size[0] + 1
+        if size[0] > bar.n:
+            bar.update(min(size[0], n_photos) - bar.n)
+
     try:
         return pycolmap.incremental_mapping(
             db, img_dir, sparse, options=iopt,
-            initial_image_pair_callback=lambda: bar.update(2),
-            next_image_callback=lambda: bar.update(1),
+            initial_image_pair_callback=lambda: _registered(True),
+            next_image_callback=lambda: _registered(False),
         )
     finally:
         bar.close()
