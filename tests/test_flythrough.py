@@ -249,6 +249,24 @@ def test_bad_path_files_exit_2_one_line_no_output(grid_dir, tmp_path, capsys, co
     assert not out.exists() and not (tmp_path / "out_frames").exists()
 
 
+@pytest.mark.parametrize("extra,msg", [
+    (["--crf", "30", "--workers", "2"], "--crf, --workers apply to --path only"),
+    (["--exclude", "view_003"], "--exclude applies to --path only; with --target, choose the sources"),
+    (["--dask", "local"], "--dask applies to --path only"),
+])
+def test_path_options_with_a_target_are_refused(grid_dir, tmp_path, capsys, extra, msg):
+    """The fly-through's options are refused with --target, not silently ignored (an
+    --exclude'd view would otherwise have been used as a source)."""
+    from vibr.cli import main
+
+    out = tmp_path / "v.png"
+    capsys.readouterr()
+    assert main(["render", str(grid_dir), "--target", "view_004", "-o", str(out), "-q", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err
+    assert not out.exists()
+
+
 # ----------------------------------------------------------------------------- rendering
 def _psnr_png(a, b):
     from vibr.metrics import psnr

@@ -64,7 +64,7 @@ def _add_path_options(p) -> None:
                    help="render every camera of a camera path (nerfstudio camera_path.json, as written by "
                         "'vibr path' or nerfstudio's viewer) to -o OUT.mp4 or -o FRAMES_DIR/ instead of --target")
     g.add_argument("--frames-dir", metavar="DIR", help="where the numbered PNG frames go (default: OUT_frames/ beside OUT.mp4)")
-    g.add_argument("--crf", type=int, default=18, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
+    g.add_argument("--crf", type=int, default=None, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
     g.add_argument("--fps", type=float, help="video frame rate (default: the path file's)")
     g.add_argument("--dataparser-transforms", metavar="JSON",
                    help="nerfstudio's dataparser_transforms.json: the path is in nerfstudio's normalised frame")
@@ -97,6 +97,7 @@ def run(args) -> int:
         check_output(args.output, "file" if args.output.lower().endswith(".mp4") else "dir",
                      overwrite=True, what="-o")
         return _run_path(args)
+    _refuse_path_options(args)
     check_output(args.output, "file", what="-o")
     check_depth_args(args)
     if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
@@ -135,6 +136,21 @@ def run(args) -> int:
     return 0
 
 
+#: the fly-through's options (attribute, flag), refused with --target rather than ignored
+_PATH_ONLY = (("frames_dir", "--frames-dir"), ("crf", "--crf"), ("fps", "--fps"),
+              ("dataparser_transforms", "--dataparser-transforms"), ("overwrite", "--overwrite"),
+              ("exclude", "--exclude"), ("workers", "--workers"), ("dask", "--dask"))
+
+
+def _refuse_path_options(args) -> None:
+    from ..errors import VibrInputError
+
+    given = [flag for attr, flag in _PATH_ONLY if getattr(args, attr, None) not in (None, False, (), [])]
+    if given:
+        hint = "; with --target, choose the sources with --sources" if "--exclude" in given else ""
+        raise VibrInputError(f"{', '.join(given)} {'apply' if len(given) > 1 else 'applies'} to --path only{hint}")
+
+
 def _run_path(args) -> int:
     """``--path``: a thin layer over :func:`vibr.flythrough.render_path`."""
     from ..errors import VibrInputError
@@ -161,7 +177,7 @@ def _run_path(args) -> int:
                       n_views=8 if args.views is None else args.views, params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
-                      crf=args.crf, fps=args.fps, executor=executor)
+                      crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor)
     t = res.times
     what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
