@@ -267,6 +267,22 @@ def test_path_options_with_a_target_are_refused(grid_dir, tmp_path, capsys, extr
     assert not out.exists()
 
 
+@pytest.mark.parametrize("kind,extra,msg", [
+    ("orbit", ["--views", "view_001,view_002"], "--views applies to 'vibr path interpolate' only"),
+    ("spiral", ["--order", "given"], "--order applies to 'vibr path interpolate' only"),
+    ("interpolate", ["--full"], "--full applies to 'vibr path orbit' only"),
+])
+def test_path_options_of_another_kind_are_refused(grid_dir, tmp_path, capsys, kind, extra, msg):
+    from vibr.cli import main
+
+    pj = tmp_path / "p.json"
+    capsys.readouterr()
+    assert main(["path", kind, str(grid_dir), "-o", str(pj), "-q", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err
+    assert not pj.exists()
+
+
 # ----------------------------------------------------------------------------- rendering
 def _psnr_png(a, b):
     from vibr.metrics import psnr

@@ -72,6 +72,10 @@ def run(args) -> int:
         raise VibrInputError("give --frames or --seconds, not both")
     if args.scale <= 0:
         raise VibrInputError(f"--scale must be positive, got {args.scale}")
+    for flag, kind, value in (("--views", "interpolate", args.views), ("--order", "interpolate", args.order),
+                              ("--full", "orbit", args.full)):
+        if value not in (None, False) and args.kind != kind:  # refused, not ignored
+            raise VibrInputError(f"{flag} applies to 'vibr path {kind}' only, not to {args.kind}")
     seconds = 4.0 if args.frames is None and args.seconds is None else args.seconds
     scene = load_scene_cached(args.scene, scale=args.scale)  # the same cache as render --path
     w, h = args.size if args.size else (None, None)
