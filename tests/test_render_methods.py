@@ -115,3 +115,50 @@ def test_a_registered_method_renders():
     finally:
         del methods.REGISTRY["bvs1"]
         methods.METHODS = tuple(methods.REGISTRY)
+
+
+#: a value other than the default for each render parameter
+_OTHER = {"alpha": 2.0, "gamma": 0.7, "lam": 2.5, "sigma_s": 3.0, "sigma_z": 0.05, "n_outer": 3,
+          "max_iter": 4, "precond": True, "psf": "footprint"}
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_ignored_params_are_really_ignored(name):
+    """What ``Method.ignored_params`` lists changes nothing in the image (the CLI refuses
+    them on that ground), and every parameter it does not list changes the image."""
+    from vibr.geometry import compute_samples
+    from vibr.render import render
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", n_views=9, width=40, height=40, seed=3)
+    src = sc.subset([0, 1, 2, 3, 5, 6, 7, 8])
+    smp = compute_samples(src, sc.views[4].camera, keep=("jac",))  # the footprint PSF's too
+    base = render(src, sc.views[4], name, samples=smp).image
+    ignored = get_method(name).ignored_params()
+    assert set(ignored) <= set(_OTHER)
+    for k, v in _OTHER.items():
+        if k == "precond":  # its default differs between the methods
+            v = not method_params(name)["precond"]
+        img = render(src, sc.views[4], name, samples=smp, **{k: v}).image
+        same = np.array_equal(img, base)
+        assert same == (k in ignored), f"{name}: {k}={v} {'changed' if not same else 'did not change'} the image"
+
+
+@pytest.mark.parametrize("extra,msg", [
+    (["--method", "ulr", "--gamma", "0.5"], "--gamma does not apply to --method ulr"),
+    (["--method", "ulr", "--lam", "2", "--precond"], "--lam, --precond do not apply to --method ulr"),
+    (["--method", "bvs", "--gamma", "1"], "--gamma does not apply to --method bvs"),
+    (["--method", "savsr", "--sigma-z", "0.01"], "--sigma-z does not apply to --method savsr"),
+])
+def test_cli_refuses_a_parameter_the_method_ignores(tmp_path, capsys, extra, msg):
+    from vibr.cli import main
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    save_scene(make_scene("grid", n_views=4, width=24, height=24, seed=1), tmp_path / "s")
+    out = tmp_path / "v.png"
+    capsys.readouterr()
+    assert main(["render", str(tmp_path / "s"), "--target", "view_000", "-o", str(out), "-q", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err
+    assert not out.exists()

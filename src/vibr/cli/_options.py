@@ -98,6 +98,25 @@ def render_params(args) -> dict:
     return params
 
 
+#: the command-line flag of each render parameter (:func:`render_params`)
+PARAM_FLAGS = {"alpha": "--alpha", "gamma": "--gamma", "lam": "--lam", "sigma_s": "--sigma-s",
+               "sigma_z": "--sigma-z", "n_outer": "--outer", "max_iter": "--iterations",
+               "precond": "--precond", "psf": "--psf"}
+
+
+def refuse_ignored_params(args) -> None:
+    """A render parameter given for a method that does not read it
+    (:meth:`vibr.render.methods.Method.ignored_params`) is an error, not a silent no-op."""
+    from ..errors import VibrInputError
+    from ..render.methods import get_method
+
+    ignored = get_method(args.method).ignored_params()
+    given = [PARAM_FLAGS[k] for k, v in render_params(args).items() if v is not None and k in ignored]
+    if given:
+        raise VibrInputError(f"{', '.join(given)} {'do' if len(given) > 1 else 'does'} not apply to "
+                             f"--method {args.method}")
+
+
 def add_depth_options(p: argparse.ArgumentParser) -> None:
     """``--depth`` (vibr.pipeline.DEPTH_MODES) and ``--depth-files``."""
     p.add_argument("--depth", default="auto", choices=DEPTH_MODES,

@@ -10,7 +10,7 @@ from ._executor import add_executor_args, executor_from_args
 from . import add_quiet
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
                        add_render_params, add_source_options, cache_dir_from_args, check_depth_args, names,
-                       render_params)
+                       refuse_ignored_params, render_params)
 
 logger = logging.getLogger(__name__)
 
@@ -84,6 +84,7 @@ def run(args) -> int:
     from ..render import render
     from ..render.methods import method_params
 
+    refuse_ignored_params(args)
     numeric = lambda v: None if v == "auto" else v  # noqa: E731 - "auto" is resolved by render()
     method_params(args.method, alpha=args.alpha, gamma=numeric(args.gamma), lam=numeric(args.lam),
                   sigma_s=args.sigma_s,

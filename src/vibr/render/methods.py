@@ -114,6 +114,14 @@ class Method:
     geometric: bool = True
     overrides: dict = field(default_factory=dict)
 
+    def ignored_params(self) -> tuple[str, ...]:
+        """The render parameters this method does not read: ulr solves nothing (no weights,
+        no energy, no PSF model), only ``gradient`` has gamma, savsr's weights carry no
+        sigma_z. The CLI refuses a value given for one of them rather than ignore it."""
+        if not self.solve:
+            return ("alpha", "gamma", "lam", "sigma_s", "sigma_z", "n_outer", "max_iter", "precond", "psf")
+        return (() if self.gradient else ("gamma",)) + (() if self.geometric else ("sigma_z",))
+
     def render(self, samples, p: dict, *, source_centres=None, target_centre=None, callback=None,
                progress_bar: bool = False, verbose: bool = False, uncertainty=False):
         """Render from :class:`~vibr.geometry.Samples` with filled parameters ``p``
