@@ -162,3 +162,21 @@ def test_cli_refuses_a_parameter_the_method_ignores(tmp_path, capsys, extra, msg
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("extra,msg", [
+    (["--method", "ulr,bvs", "--gamma", "0.5"], "--gamma applies to gradient only, not to --method ulr,bvs"),
+    (["--method", "ulr", "--lam", "1"], "--lam applies to savsr, bvs, gradient only, not to --method ulr"),
+])
+def test_eval_refuses_a_grid_parameter_no_method_reads(tmp_path, capsys, extra, msg):
+    from vibr.cli import main
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    save_scene(make_scene("grid", n_views=4, width=24, height=24, seed=1), tmp_path / "s")
+    out = tmp_path / "e.json"
+    capsys.readouterr()
+    assert main(["eval", str(tmp_path / "s"), "--target", "view_000", "--json", str(out), "-q", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err
+    assert not out.exists()

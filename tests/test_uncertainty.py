@@ -177,7 +177,7 @@ def test_cli_render_writes_uncertainty_png_and_npy(tmp_path, capsys):
     for ext in ("npy", "png"):
         out = tmp_path / f"std.{ext}"
         assert main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(tmp_path / "v.png"),
-                     "--method", "ulr" if ext == "png" else "gradient", "--iterations", "10",
+                     *(["--method", "ulr"] if ext == "png" else ["--method", "gradient", "--iterations", "10"]),
                      "--uncertainty", str(out), "-q"]) == 0
         assert out.exists()
         if ext == "npy":

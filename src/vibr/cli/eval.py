@@ -64,7 +64,7 @@ def register(sub) -> None:
     add_depth_options(p)
     p.add_argument("--method", type=names, default=list(METHODS),
                    help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
-    p.add_argument("--gamma", type=_floats, default=list(GAMMAS),
+    p.add_argument("--gamma", type=_floats, default=None,
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)}: the "
                         f"paper's and vibr's default {DEFAULTS['gamma']:g})")
     p.add_argument("--alpha", type=_floats, help=f"colour-term weights (default: {DEFAULTS['alpha']:g})")
@@ -94,6 +94,20 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _refuse_unused_grid(args) -> None:
+    """--gamma without a method that has the gradient term, --alpha or --lam without a
+    variational method: refused, not ignored."""
+    from ..errors import VibrInputError
+    from ..render.methods import REGISTRY, get_method
+
+    specs = [get_method(m) for m in args.method]  # an unknown name gives get_method's error
+    for flag, value, needs in (("--gamma", args.gamma, lambda m: m.gradient),
+                               ("--alpha", args.alpha, lambda m: m.solve), ("--lam", args.lam, lambda m: m.solve)):
+        if value is not None and not any(needs(m) for m in specs):
+            users = ", ".join(m.name for m in REGISTRY.values() if needs(m))
+            raise VibrInputError(f"{flag} applies to {users} only, not to --method {','.join(args.method)}")
+
+
 def run(args) -> int:
     from ..evaluate import format_table, run_evaluation, settings_grid, write_report
     from ..figures import write_evaluation_figures
@@ -107,7 +121,8 @@ def run(args) -> int:
     if args.figures is not None:
         check_output(args.figures, "dir", what="--figures")
     check_depth_args(args)
-    settings = settings_grid(args.method, args.gamma, args.alpha, args.lam)
+    _refuse_unused_grid(args)
+    settings = settings_grid(args.method, list(GAMMAS) if args.gamma is None else args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
     executor = executor_from_args(args)
