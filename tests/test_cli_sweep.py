@@ -82,3 +82,19 @@ def test_cli_sweep(scene, tmp_path, capsys):
                 p.unlink() if p.is_file() else __import__("shutil").rmtree(p)
     assert not failures, "\n".join(failures)
     del itertools
+
+
+@pytest.mark.parametrize("extra,msg", [
+    (["--neighbours", "2"], "--neighbours applies to the MVS estimate only"),
+    (["--method", "lightfield", "--no-consistency", "--fill-segments"],
+     "--no-consistency, --fill-segments apply to the MVS estimate only"),
+])
+def test_depth_refuses_the_plane_sweeps_options_for_a_light_field(cotton_dir, tmp_path, capsys, extra, msg):
+    """The light-field estimate reads none of them: refused, not ignored (before, they were
+    accepted and did nothing)."""
+    out = tmp_path / "d"
+    capsys.readouterr()
+    assert main(["-q", "depth", str(cotton_dir), "--views", "input_Cam040", "-o", str(out), *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err and str(cotton_dir) in err
+    assert not out.exists()

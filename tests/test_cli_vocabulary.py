@@ -63,6 +63,6 @@ def test_depth_scale_is_the_estimation_scale(scene_dir, tmp_path):
 
     out = tmp_path / "d"
     assert main(["-q", "depth", str(scene_dir), "-o", str(out), "--scale", "0.5", "--depth-scale", "0.5",
-                 "--views", "view_004", "--no-consistency"]) == 0
+                 "--views", "view_004"]) == 0  # a light-field grid: no consistency check to skip
     sc = load_scene(out)
     assert sc["view_004"].camera.shape == (24, 24) and sc["view_004"].depth.shape == (24, 24)

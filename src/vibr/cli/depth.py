@@ -48,7 +48,7 @@ def register(sub) -> None:
                         "upsampled back to its size (default 1)")
     p.add_argument("--method", choices=["auto", "mvs", "lightfield"], default="auto",
                    help="auto: lightfield when the scene is a grid, else mvs")
-    p.add_argument("--neighbours", type=int, default=4,
+    p.add_argument("--neighbours", type=int, default=None,
                    help="nearest stereo partners per view (MVS, default 4; views that see what "
                    "they miss are added)")
     p.add_argument("--depth-range", type=float, nargs=2, metavar=("NEAR", "FAR"), default=None,
@@ -86,6 +86,24 @@ def _split(s):
     return None if s is None else [t.strip() for t in s.split(",") if t.strip()]
 
 
+def _refuse_mvs_options(args, scene) -> None:
+    """The plane sweep's options (n_neighbours, step_px, max_planes, consistency,
+    fill_segments: read by vibr.stereo.api's MVS path only) given for a light-field estimate
+    (vibr.stereo.api.depth_method): refused, not ignored."""
+    from ..errors import VibrInputError
+    from ..stereo.api import depth_method
+
+    if depth_method(scene, args.method) != "lightfield":
+        return
+    given = [f for f, v in (("--neighbours", args.neighbours), ("--step-px", args.step_px),
+                            ("--max-planes", args.max_planes), ("--no-consistency", args.no_consistency),
+                            ("--fill-segments", args.fill_segments)) if v not in (None, False)]
+    if given:
+        how = "" if args.method == "lightfield" else " (its light-field grid; --method mvs for a plane sweep)"
+        raise VibrInputError(f"{', '.join(given)} {'apply' if len(given) > 1 else 'applies'} to the MVS "
+                             f"estimate only, and this scene's depth is estimated as a light field{how}", args.scene)
+
+
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, save_scene
@@ -97,9 +115,10 @@ def run(args) -> int:
 
     from ..validate import check_depth_params
 
-    check_depth_params(scale=args.depth_scale, depth_range=args.depth_range, n_neighbours=args.neighbours,
-                       **{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
-                                            ("refine_iter", args.refine_iter), ("median_radius", args.median_radius),
+    check_depth_params(scale=args.depth_scale, depth_range=args.depth_range,
+                       **{k: v for k, v in (("n_neighbours", args.neighbours), ("step_px", args.step_px),
+                                            ("max_planes", args.max_planes), ("refine_iter", args.refine_iter),
+                                            ("median_radius", args.median_radius),
                                             ("sweep_scale", args.sweep_scale), ("coarse_iter", args.coarse_iter))
                           if v is not None})  # before loading the scene
     src = Path(args.scene)
@@ -122,14 +141,16 @@ def run(args) -> int:
         if out.is_dir():
             check_replaceable(out)
     scene = load_scene(args.scene, scale=args.scale)
-    opt = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+    _refuse_mvs_options(args, scene)
+    opt = {k: v for k, v in (("n_neighbours", args.neighbours),
+                             ("step_px", args.step_px), ("max_planes", args.max_planes),
                              ("refine_iter", args.refine_iter),
                              ("median_radius", args.median_radius),
                              ("sweep_scale", args.sweep_scale),
                              ("coarse_iter", args.coarse_iter)) if v is not None}
     est = estimate_depth(scene, views=_split(args.views), scale=args.depth_scale,
                          depth_range=args.depth_range, method=args.method,
-                         exclude=_split(args.exclude) or (), n_neighbours=args.neighbours,
+                         exclude=_split(args.exclude) or (),
                          consistency=not args.no_consistency, fill_segments=args.fill_segments,
                          checkpoint=resume_folder(out), **opt)  # a rerun after a kill resumes
     info = est.meta["depth_estimation"]

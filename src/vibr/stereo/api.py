@@ -574,6 +574,16 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
     return replace(scene, views=new_views, meta=meta)
 
 
+def depth_method(scene: Scene, method: str = "auto") -> str:
+    """The estimator ``method`` means for ``scene``: "auto" is "lightfield" on a light-field
+    grid (``scene.grid``), else "mvs"."""
+    if method == "auto":
+        return "lightfield" if scene.grid is not None else "mvs"
+    if method not in ("mvs", "lightfield"):
+        raise VibrInputError(f"unknown depth method {method!r} (auto, mvs, lightfield)", scene.root)
+    return method
+
+
 def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
     """The requested views (``targets``), the usable inputs, the excluded set, the
     resolved method, and ``opt`` with its depth range as floats; bad requests raise
@@ -598,11 +608,7 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
     r = opt.lightfield.get("pm_radius")  # lightfield_depth's refinement window half-size
     if r is not None and (int(r) != r or r < 1):
         raise VibrInputError(f"pm_radius must be an integer >= 1, got {r}", scene.root)
-    method = opt.method
-    if method == "auto":
-        method = "lightfield" if scene.grid is not None else "mvs"
-    if method not in ("mvs", "lightfield"):
-        raise VibrInputError(f"unknown depth method {method!r} (auto, mvs, lightfield)", scene.root)
+    method = depth_method(scene, opt.method)
     if opt.depth_range is not None:
         dr = (float(opt.depth_range[0]), float(opt.depth_range[1]))
         if not 0 < dr[0] < dr[1]:
