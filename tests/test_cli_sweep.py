@@ -37,6 +37,7 @@ def _cases(s, o):
     cases += [(["convert", s, o / "c", "--scale", v], o / "c") for v in ("0", "nan", "-1", "1e9")]
     cases += [(["info", s, "--scale", v], None) for v in ("0", "nan")]
     cases += [(["demo", "--size", v, "-o", o / "x.png"], o / "x.png") for v in ("0", "-3", "100000")]
+    cases += [(["demo", "--no-video", "--video", o / "x.mp4"], o / "x.mp4")]  # contradictory
     # missing inputs
     miss = o / "missing"
     cases += [(["render", miss, "--target", "0", "-o", o / "r.png"], o / "r.png"),

@@ -36,9 +36,10 @@ def register(sub) -> None:
     add_method_option(p)
     p.add_argument("--seed", type=int, default=0, help="random seed of the scene (default: 0)")
     p.add_argument("-o", "--output", help="also write the rendered view to this PNG")
-    p.add_argument("--video", default="vibr-demo.mp4",
+    v = p.add_mutually_exclusive_group()
+    v.add_argument("--video", default="vibr-demo.mp4",
                    help="fly-through (a ~2 s orbit of the scene) written to this MP4 (default: vibr-demo.mp4)")
-    p.add_argument("--no-video", action="store_true", help="skip the fly-through video")
+    v.add_argument("--no-video", action="store_true", help="skip the fly-through video")
     add_bit_depth_option(p)
     add_quiet(p)
     p.set_defaults(func=run)
