@@ -203,6 +203,17 @@ def test_view_cli_bad_scene(tmp_path):
     c.close()
 
 
+def test_view_cli_unwritable_path_out(tmp_path):
+    """--path-out is checked at start (as every output), not at the first 'export path'."""
+    port = free_port()
+    bad = tmp_path / "no_such_folder" / "p.json"
+    r = subprocess.run([sys.executable, "-m", "vibr", "view", str(tmp_path / "missing"), "--port", str(port),
+                        "--path-out", str(bad)], capture_output=True, text=True, timeout=60, env=_env())
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--path-out" in lines[0] and "does not exist" in lines[0]
+
+
 def test_view_cli_serves_and_stops(tiny_scene, tmp_path):
     from vibr.io import save_scene
 

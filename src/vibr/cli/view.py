@@ -48,7 +48,7 @@ def register(sub) -> None:
                    help=f"when the point cloud is drawn over the render (default '{POINT_MODES[0]}': hidden "
                         "once the camera is still and the full-size render starts)")
     add_cache_options(p)
-    p.add_argument("--path-out", default="camera_path.json", help="file 'export path' writes (default camera_path.json)")
+    p.add_argument("--path-out", default=None, help="file 'export path' writes (default camera_path.json)")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -63,6 +63,10 @@ def run(args) -> int:
     if args.views < 1 or args.max_points < 0:
         raise VibrInputError("--views must be >= 1 and --max-points >= 0")
     settings = ViewSettings(method=args.method, n_views=args.views)
+    from ..io.outputs import check_output
+
+    if args.path_out is not None:  # given: checked now, not at the first 'export path'
+        check_output(args.path_out, "file", overwrite=True, what="--path-out")
     check_port_free(args.host, args.port)  # fail before the (slow) loading
     # the resized photographs and the estimated depth come from the on-disk cache when there
     cache_dir = cache_dir_from_args(args)
@@ -73,8 +77,9 @@ def run(args) -> int:
         logger.info("depth ready in %.1f s", time.perf_counter() - t0)
     # a browser's aborted preconnect is logged with a traceback by websockets: not an error here
     logging.getLogger("websockets.server").setLevel(logging.CRITICAL)
-    viewer = Viewer(scene, ViewerOptions(host=args.host, port=args.port, max_points=args.max_points,
-                                         points=args.points, path_out=args.path_out, settings=settings))
+    opts = ViewerOptions(host=args.host, port=args.port, max_points=args.max_points, points=args.points,
+                         path_out=args.path_out or "camera_path.json", settings=settings)
+    viewer = Viewer(scene, opts)
     url = viewer.start()
     import numba
 
