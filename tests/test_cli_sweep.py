@@ -99,3 +99,19 @@ def test_depth_refuses_the_plane_sweeps_options_for_a_light_field(cotton_dir, tm
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err and str(cotton_dir) in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("extra,msg", [
+    (["--step-px", "2"], "--step-px applies to estimated depth only, and this evaluation's depth is 'gt'"),
+    (["--depth", "planar", "--depth-range", "1", "2"], "--depth-range applies to estimated depth only"),
+    (["--depth", "estimated", "--max-planes", "50"], "--max-planes applies to the MVS estimate only"),
+])
+def test_eval_refuses_depth_estimation_options_that_do_not_apply(scene, tmp_path, capsys, extra, msg):
+    """The synthetic grid has depth and a light-field grid: the estimate's options are
+    refused where no depth is estimated, and the plane sweep's where a light field is."""
+    out = tmp_path / "e.json"
+    capsys.readouterr()
+    assert main(["-q", "eval", str(scene), "--target", "0", "--json", str(out), *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err
+    assert not out.exists()

@@ -114,8 +114,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     if depth not in DEPTH_MODES:
         raise VibrInputError(f"unknown depth mode {depth!r} (choose from {', '.join(DEPTH_MODES)})")
     auto = depth == "auto"
-    if auto:
-        depth = "gt" if any(v.depth is not None for v in scene.views) else "estimated"
+    depth = depth_mode(scene, depth)
     src, tview, ti = _hold_out(scene, target, sources, n_views)  # its errors first
     if auto and depth == "estimated":
         logger.info("the scene has no depth maps: the sources get depth estimated from them (or cached)")
@@ -136,6 +135,16 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     from .geometry import apply_fallback
 
     return apply_fallback(src, fallback), tview
+
+
+def depth_mode(scene: Scene, depth: str = "auto") -> str:
+    """The mode ``depth`` means for ``scene``: "auto" is "gt" when a view has depth, else
+    "estimated"; the others are themselves."""
+    if depth not in DEPTH_MODES:
+        raise VibrInputError(f"unknown depth mode {depth!r} (choose from {', '.join(DEPTH_MODES)})")
+    if depth == "auto":
+        return "gt" if any(v.depth is not None for v in scene.views) else "estimated"
+    return depth
 
 
 def _hold_out(scene: Scene, target, sources, n_views):

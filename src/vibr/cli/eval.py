@@ -108,6 +108,25 @@ def _refuse_unused_grid(args) -> None:
             raise VibrInputError(f"{flag} applies to {users} only, not to --method {','.join(args.method)}")
 
 
+def _refuse_unused_estimate_options(args, scene, estimate_kw: dict) -> None:
+    """--step-px, --max-planes, --depth-range where no depth is estimated, or the plane
+    sweep's two on a light field: refused, not ignored."""
+    from ..errors import VibrInputError
+    from ..pipeline import depth_mode
+    from ..stereo.api import depth_method
+
+    flags = {"step_px": "--step-px", "max_planes": "--max-planes", "depth_range": "--depth-range"}
+    mode = depth_mode(scene, args.depth)
+    given = [flags[k] for k in estimate_kw] if mode != "estimated" else \
+        [flags[k] for k in ("step_px", "max_planes") if k in estimate_kw and depth_method(scene) == "lightfield"]
+    if given:
+        why = f"this evaluation's depth is {mode!r} (--depth {args.depth})" if mode != "estimated" else \
+            "this scene's depth is estimated as a light field"
+        raise VibrInputError(f"{', '.join(given)} {'apply' if len(given) > 1 else 'applies'} to "
+                             f"{'estimated depth' if mode != 'estimated' else 'the MVS estimate'} only, and {why}",
+                             args.scene)
+
+
 def run(args) -> int:
     from ..evaluate import format_table, run_evaluation, settings_grid, write_report
     from ..figures import write_evaluation_figures
@@ -141,6 +160,7 @@ def run(args) -> int:
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                                      ("depth_range", args.depth_range)) if v is not None}
+    _refuse_unused_estimate_options(args, scene, estimate_kw)
     if args.target.strip().lower() == "all" or "," in args.target:
         return _run_all(args, scene, settings, executor, estimate_kw)
     if executor is not None:
