@@ -1,0 +1,76 @@
+"""The gradient term's weights under the default's solver and view prior: ``grad_weighting``
+"visibility" (the default) against "W" (the colour term's weights, the authors' ``gw_type 1``)
+at a few (gamma, lam), on ``sweep_defaults.py``'s 19 cases plus templeSR0005 from its 15
+other views (docs/RENDERER.md, "Known gaps").
+
+Prints a table of all-pixel PSNR (dB, 2-px border) per case and setting, and the means over
+the sweep's *choose* and *report* halves. Estimated depth goes through the depth cache.
+
+    python3 benchmarks/grad_weighting.py [--workers 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+import sweep_defaults as S  # noqa: E402
+
+VARIANTS = [("ULR", "ulr", {}), ("default", "gradient", {}), ("γ0", "gradient", {"gamma": 0.0}),
+            ("W γ0.2 λ0.6", "gradient", {"grad_weighting": "W"}),
+            ("W γ0.3 λ0.6", "gradient", {"grad_weighting": "W", "gamma": 0.3}),
+            ("W γ0.5 λ0.6", "gradient", {"grad_weighting": "W", "gamma": 0.5}),
+            ("W γ0.2 λ1", "gradient", {"grad_weighting": "W", "lam": 1.0}),
+            ("W γ0.3 λ1", "gradient", {"grad_weighting": "W", "gamma": 0.3, "lam": 1.0})]
+EXTRA = "temple 0005 all 15"
+
+
+def _temple5(cache):
+    from vibr.depthcache import scene_with_depth
+    from vibr.geometry import apply_fallback
+
+    rest, tv = cache.get("middlebury_templeSparseRing", 1.0).split("templeSR0005")
+    return apply_fallback(scene_with_depth(rest, depth="estimated"), "auto"), tv
+
+
+def run_case(cache, case) -> dict:
+    from vibr.geometry import compute_samples
+    from vibr.metrics import psnr
+    from vibr.render import render
+
+    src, tv = _temple5(cache) if case["name"] == EXTRA else S._sources(cache, case)
+    smp = compute_samples(src, tv.camera)
+    res = {lab: float(psnr(render(src, tv.camera, m, samples=smp, **kw).image, tv.image, border=2))
+           for lab, m, kw in VARIANTS}
+    return {"name": case["name"], "split": case["split"], "psnr": res}
+
+
+def main(argv=None) -> None:
+    from vibr.executor import run_tasks
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
+    ap.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes")
+    a = ap.parse_args(argv)
+    cases = S.case_list() + [{"name": EXTRA, "split": "extra", "family": "extra"}]
+    t0 = time.perf_counter()
+    reps = run_tasks(run_case, cases, setup=S.SceneCache, setup_args=(str(S.data_dir(a.data)),),
+                     executor=a.workers, desc="cases")
+    labs = [v[0] for v in VARIANTS]
+    print("| case | split | " + " | ".join(labs) + " |\n|---|---|" + "---|" * len(labs))
+    for r in reps:
+        print(f"| {r['name']} | {r['split']} | " + " | ".join(f"{r['psnr'][k]:.2f}" for k in labs) + " |")
+    for sp in ("choose", "report"):
+        sel = [r for r in reps if r["split"] == sp]
+        print(f"\nmean {sp} ({len(sel)} cases): "
+              + ", ".join(f"{k} {np.mean([r['psnr'][k] for r in sel]):.2f}" for k in labs))
+    print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
