@@ -144,6 +144,7 @@ _PATH_ONLY = (("frames_dir", "--frames-dir"), ("crf", "--crf"), ("fps", "--fps")
 
 
 def _refuse_path_options(args) -> None:
+    """With --target: any of :data:`_PATH_ONLY` given is an error (one line)."""
     from ..errors import VibrInputError
 
     given = [flag for attr, flag in _PATH_ONLY if getattr(args, attr, None) not in (None, False, (), [])]
