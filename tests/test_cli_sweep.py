@@ -37,7 +37,11 @@ def _cases(s, o):
     cases += [(["convert", s, o / "c", "--scale", v], o / "c") for v in ("0", "nan", "-1", "1e9")]
     cases += [(["info", s, "--scale", v], None) for v in ("0", "nan")]
     cases += [(["demo", "--size", v, "-o", o / "x.png"], o / "x.png") for v in ("0", "-3", "100000")]
-    cases += [(["demo", "--no-video", "--video", o / "x.mp4"], o / "x.mp4")]  # contradictory
+    # options that do not apply: refused, not ignored
+    cases += [(["demo", "--no-video", "--video", o / "x.mp4"], o / "x.mp4"),
+              (["demo", "--no-video", "--bit-depth", "16"], None),
+              (r + ["--depth-files", o], o / "r.png"),
+              (e + ["--depth", "gt", "--depth-files", o], o / "r.json")]
     # missing inputs
     miss = o / "missing"
     cases += [(["render", miss, "--target", "0", "-o", o / "r.png"], o / "r.png"),

@@ -226,6 +226,21 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
 
 
 # ----------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize("extra,msg", [(["--uncertainty", "u.png"], "--uncertainty does not apply to --path"),
+                                       (["--bit-depth", "16"], "--bit-depth does not apply to --path")])
+def test_target_only_options_with_a_path_are_refused(grid_dir, tmp_path, capsys, extra, msg):
+    from vibr.cli import main
+
+    pj = tmp_path / "p.json"
+    assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "2", "-q"]) == 0
+    out = tmp_path / "frames"
+    capsys.readouterr()
+    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(out), "-q", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and msg in err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("content,msg", [
     ("{not json", "malformed JSON"),
     ('{"render_width": 8, "render_height": 8, "fps": 24}', "camera_path"),

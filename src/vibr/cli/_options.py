@@ -170,6 +170,8 @@ def check_depth_args(args) -> None:
 
     if args.depth == "files" and not args.depth_files:
         raise VibrInputError("--depth files needs --depth-files DIR")
+    if args.depth_files and args.depth != "files":  # refused, not ignored
+        raise VibrInputError(f"--depth-files applies to --depth files only, not to --depth {args.depth}")
     cache_dir_from_args(args)
 
 
@@ -182,7 +184,7 @@ def add_overwrite_option(p: argparse.ArgumentParser, what: str) -> None:
 
 def add_bit_depth_option(p: argparse.ArgumentParser) -> None:
     """``--bit-depth 8|16`` of the images a subcommand writes (8 by default)."""
-    p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
+    p.add_argument("--bit-depth", type=int, choices=(8, 16), default=None,
                    help="bits per channel of the PNG written (default: 8; 16 keeps the solver's "
                         "precision)")
 

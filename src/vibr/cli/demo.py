@@ -51,13 +51,14 @@ def run(args) -> int:
     from ..render import render
     from ..synthetic import make_scene
 
+    from ..errors import VibrInputError
     from ..io.outputs import check_output
 
     if args.output is not None:
         check_output(args.output, "file", what="-o")
+    elif args.bit_depth is not None:
+        raise VibrInputError("--bit-depth applies to the PNG of -o only (the video is 8-bit)")
     if not 16 <= args.size <= 4096:
-        from ..errors import VibrInputError
-
         raise VibrInputError(f"--size must be between 16 and 4096 pixels, got {args.size}")
     t0 = time.perf_counter()
     n = 9 if args.layout == "grid" else 8
@@ -78,7 +79,7 @@ def run(args) -> int:
     print(f"  DSSIM {dssim(res.image, tview.image, mask=mask):6.1f}      (1e4 * (1 - SSIM), lower is better)")
     print(f"  PSNR  {psnr(res.image, tview.image):6.2f} dB   (all pixels, holes filled by push-pull)")
     if args.output:
-        write_image(args.output, res.image, bits=args.bit_depth)
+        write_image(args.output, res.image, bits=args.bit_depth or 8)
         print(f"  wrote {args.output}")
     if not args.no_video:
         _demo_video(scene, args)

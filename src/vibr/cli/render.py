@@ -120,7 +120,7 @@ def run(args) -> int:
                               cache_dir=cache_dir_from_args(args))
     res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
                  **render_params(args))  # -v: per pass
-    write_image(args.output, res.image, bits=args.bit_depth)
+    write_image(args.output, res.image, bits=args.bit_depth or 8)
     if args.uncertainty:
         from ..uncertainty_figures import write_sigma
 
@@ -163,7 +163,7 @@ def _run_path(args) -> int:
     out = args.output
     if not (out.lower().endswith(".mp4") or not os.path.splitext(out)[1]):
         raise VibrInputError("with --path, -o is a .mp4 video or a folder for the frames", out)
-    for flag in ("sources", "depth_files"):
+    for flag in ("sources", "depth_files", "uncertainty", "bit_depth"):  # frames are 8-bit colour only
         if getattr(args, flag, None):
             raise VibrInputError(f"--{flag.replace('_', '-')} does not apply to --path")
     if args.depth not in ("auto", "gt", "given", "estimated"):
