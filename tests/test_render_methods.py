@@ -86,6 +86,20 @@ def test_prepare_is_the_one_depth_vocabulary():
     assert "--" not in str(e.value)  # library messages name no CLI flag
 
 
+def test_n_views_picks_the_best_of_the_listed_sources():
+    """``n_views`` with ``sources``: the K best of that list (a list used to turn it off)."""
+    from vibr.pipeline import prepare
+    from vibr.selection import select_views
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", n_views=9, width=24, height=24, seed=0)
+    listed = [0, 1, 2, 3, 5]
+    src, tgt = prepare(sc, 4, sources=listed, n_views=2)
+    pool = sc.subset(listed)
+    assert src.names == [pool.names[i] for i in select_views(pool, tgt.camera, 2)]
+    assert len(src) == 2 and set(src.names) <= set(pool.names)
+
+
 def test_render_holds_out_a_target_among_its_sources():
     """render() prepares sources that are not ready (target among them): the result equals
     rendering from the prepared sources."""

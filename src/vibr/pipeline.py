@@ -92,7 +92,8 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     depth_files : path, optional
         Folder of depth files, for ``depth="files"``.
     n_views : int, optional
-        Keep only this many source views, the best for the target (:mod:`vibr.selection`).
+        Keep only this many source views, the best for the target (:mod:`vibr.selection`)
+        among ``sources`` when given (until 2026-11-26 a list of sources ignored it).
     estimate_kw : dict, optional
         Extra arguments of :func:`vibr.stereo.estimate_depth`.
     fallback : {"auto", "always", "never"} or bool
@@ -159,7 +160,7 @@ def _hold_out(scene: Scene, target, sources, n_views):
         ti = scene.index(target)
         src, tview = scene.split(ti, sources)
         tcam = tview.camera
-    if n_views is not None and sources is None and n_views < len(src):
+    if n_views is not None and n_views < len(src):  # the K best of the listed sources, or of all
         src = src.subset(select_views(src, tcam, n_views))
     return src, tview, ti
 

@@ -198,4 +198,5 @@ def add_source_options(p: argparse.ArgumentParser) -> None:
     """``--sources`` (a list) and ``--views K`` (the K best), as :func:`vibr.pipeline.prepare`."""
     p.add_argument("--sources", type=names, help="comma-separated source views (default: all others)")
     p.add_argument("--views", type=int, metavar="K",
-                   help="render from the K best source views for the target (ULR ranking; default: all)")
+                   help="render from the K best source views for the target, of --sources when given "
+                        "(ULR ranking; default: all)")
