@@ -213,6 +213,16 @@ def test_cli_eval_uncertainty_report_and_plot(tmp_path):
         assert 0 <= u["ause"] < 1 and -1 <= u["spearman"] <= 1 and len(u["curve"]) == len(u["oracle"])
     img = iio.imread(r["figures"]["sparsification"])
     assert img.ndim == 3 and img.shape[0] > 100
+    # several targets: each view's report scores its uncertainty, the summary averages AUSE
+    # (--uncertainty was ignored with --target all or a list until 2026-11-26)
+    rep2 = tmp_path / "r2.json"
+    assert main(["eval", str(tmp_path / "s"), "--target", "view_000,view_004", "--method", "ulr,gradient",
+                 "--gamma", "1", "--json", str(rep2), "--uncertainty", "-q"]) == 0
+    r2 = json.loads(rep2.read_text())
+    for lab, summ in r2["summary"].items():
+        per = [row["uncertainty"]["ause"] for v in r2["per_view"].values()
+               for row in v["results"] if row["label"] == lab]
+        assert len(per) == 2 and summ["ause"]["mean"] == pytest.approx(sum(per) / 2)
 
 
 def test_sample_statistics_one_pass_matches_separate_splats(grid):

@@ -178,19 +178,26 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
 
 
 def summarise(reports: Sequence[dict]) -> dict:
-    """Per setting label: ``n`` targets and mean / median of PSNR, SSIM and DSSIM."""
+    """Per setting label: ``n`` targets and mean / median of PSNR, SSIM and DSSIM, and of the
+    uncertainty's AUSE and Spearman correlation when the reports hold them (``uncertainty``)."""
     by: dict[str, dict[str, list]] = {}
     for rep in reports:
         for r in rep["results"]:
-            d = by.setdefault(r["label"], {"method": r["method"], "psnr": [], "ssim": [], "dssim": []})
+            d = by.setdefault(r["label"], {"method": r["method"], "psnr": [], "ssim": [], "dssim": [],
+                                           "ause": [], "spearman": []})
             for k in ("psnr", "ssim", "dssim"):
                 d[k].append(r[k])
+            for k in ("ause", "spearman"):
+                if "uncertainty" in r:
+                    d[k].append(r["uncertainty"][k])
     out = {}
     for label, d in by.items():
         out[label] = {"method": d["method"], "n": len(d["psnr"])}
-        for k in ("psnr", "ssim", "dssim"):
+        for k in ("psnr", "ssim", "dssim", "ause", "spearman"):
             a = np.asarray(d[k], float)
-            out[label][k] = {"mean": float(a.mean()), "median": float(np.median(a))}
+            a = a[np.isfinite(a)] if k in ("ause", "spearman") else a  # a flat sigma has no rank
+            if len(a):
+                out[label][k] = {"mean": float(a.mean()), "median": float(np.median(a))}
     return out
 
 
@@ -223,4 +230,7 @@ def format_all_table(report: dict) -> str:
         lines.append(f"{stat:<10}" + "".join(
             f" {s[lb]['psnr'][stat]:>{w - 8}.2f} / {s[lb]['dssim'][stat]:>5.0f}" for lb in labels))
     lines.append(f"SSIM mean: " + ", ".join(f"{lb} {s[lb]['ssim']['mean']:.4f}" for lb in labels))
+    if any("ause" in s[lb] for lb in labels):  # --uncertainty
+        lines.append("uncertainty AUSE mean (lower is better): "
+                     + ", ".join(f"{lb} {s[lb]['ause']['mean']:.4f}" for lb in labels if "ause" in s[lb]))
     return "\n".join(lines)

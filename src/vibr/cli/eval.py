@@ -203,7 +203,7 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
                           depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                           border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
                           intensity_scale=args.intensity_scale, cache_dir=cache_dir,
-                          render_kw={"psf": args.psf} if args.psf else None)
+                          render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
     write_report(report, out)
     print(format_all_table(report))
     print(f"wrote {out} (per-view reports in {views_dir}/)")
