@@ -386,6 +386,15 @@ def _eval_all(scene_dir, out, *extra):
     return json.loads(Path(out).read_text())
 
 
+def test_eval_of_several_targets_holds_each_out_of_a_listed_pool(scene_dir, tmp_path):
+    """``--sources`` with several targets is the pool: each target is rendered from the
+    others of the list (it used to fail: 'target view ... is also listed as a source')."""
+    pool = ["view_000", "view_001", "view_003", "view_004", "view_008"]
+    rep = _eval_all(scene_dir, tmp_path / "p.json", "--sources", ",".join(pool))
+    for t in ("view_000", "view_008"):
+        assert rep["per_view"][t]["sources"] == [v for v in pool if v != t]
+
+
 def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path, monkeypatch):
     """Serial (2 numba threads on 2 cores), --workers 2 and --dask local (1 thread each, other
     targets before this one in the same worker): the same JSON numbers bit for bit."""

@@ -100,6 +100,8 @@ def evaluate_target(scene, task: dict) -> dict:
     path = Path(task["report"])
     t0 = time.perf_counter()
     kw = dict(task["eval_kw"])
+    if kw.get("sources"):  # leave-one-out over a listed pool: each target is held out of it
+        kw["sources"] = [v for v in kw["sources"] if scene[v].name != task["target"]]
     figures = kw.pop("figures", None)
     ev = run_evaluation(scene, task["target"], task["settings"], **kw)
     rep = ev.report
