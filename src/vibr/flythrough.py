@@ -342,6 +342,11 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         raise VibrInputError(f"n_views must be at least 1, got {n_views}")
     out = Path(out)
     fdir, video = _frames_dir_for(out, frames_dir)
+    fps = camera_path.fps if fps is None else fps
+    if video is not None:
+        from .io.video import check_video_options
+
+        check_video_options(video, fps=fps, crf=crf)  # before any frame is rendered
     cams = list(camera_path.cameras)
     if check_scene:
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
@@ -366,7 +371,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
 
         t0 = time.perf_counter()
         paths = [fdir / frame_name(i) for i in range(len(cams))]
-        n, w, h = write_video(video, (read_image(p) for p in paths), fps=fps or camera_path.fps, crf=crf)
+        n, w, h = write_video(video, (read_image(p) for p in paths), fps=fps, crf=crf)
         t_video = time.perf_counter() - t0
         res.video, res.video_frames, res.video_size = str(video), n, (w, h)
     res.times = {"depth": t_depth, "to_first_frame": t_first, "frames": t_frames, "video": t_video,

@@ -379,9 +379,13 @@ def scene_points(scene, max_points: int = 4096) -> np.ndarray | None:
 
 
 def _frame_count(n_frames, seconds, fps) -> int:
+    if not (math.isfinite(float(fps)) and float(fps) > 0):
+        raise VibrInputError(f"fps must be positive and finite, got {fps}")
     if n_frames is None:
         if seconds is None:
             raise VibrInputError("give the number of frames or the duration in seconds")
+        if not (math.isfinite(float(seconds)) and float(seconds) > 0):
+            raise VibrInputError(f"the duration must be positive and finite (seconds), got {seconds}")
         n_frames = int(round(float(seconds) * float(fps)))
     n = int(n_frames)
     if n < 1:

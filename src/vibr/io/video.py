@@ -41,6 +41,19 @@ def _as_uint8(img) -> np.ndarray:
     return np.ascontiguousarray(a[..., :3])
 
 
+#: the highest frame rate accepted (a typo such as 24000 would give an unplayable file)
+MAX_FPS = 1000.0
+
+
+def check_video_options(path, *, fps: float, crf: int = 18) -> None:
+    """One-line :class:`VibrInputError` naming ``path`` for a ``crf`` outside 0..51 or an
+    ``fps`` that is not in (0, :data:`MAX_FPS`]: checked before frames are rendered."""
+    if not (0 <= int(crf) <= 51):
+        raise VibrInputError(f"crf must be in 0..51, got {crf}", os.fspath(path))
+    if not (np.isfinite(fps) and 0 < fps <= MAX_FPS):
+        raise VibrInputError(f"fps must be in (0, {MAX_FPS:g}], got {fps}", os.fspath(path))
+
+
 def write_video(path, frames, *, fps: float, crf: int = 18, preset: str = "medium") -> tuple[int, int, int]:
     """Encode frames (an iterable of (H, W, 3) uint8, or float in [0, 1]) as H.264 MP4.
 
@@ -51,10 +64,7 @@ def write_video(path, frames, *, fps: float, crf: int = 18, preset: str = "mediu
     import imageio_ffmpeg
 
     p = os.fspath(path)
-    if not (0 <= int(crf) <= 51):
-        raise VibrInputError(f"crf must be in 0..51, got {crf}", p)
-    if not (fps > 0 and np.isfinite(fps)):
-        raise VibrInputError(f"fps must be positive, got {fps}", p)
+    check_video_options(p, fps=fps, crf=crf)
     n = 0
     size = None
     with atomic_path(p) as tmp:
