@@ -224,6 +224,11 @@ def test_bad_options(synthetic_photos):
         calibrate_scene(photos, matcher="vocab")
     with pytest.raises(VibrInputError, match="scale"):
         calibrate_scene(photos, scale=0)
+    # COLMAP's own checks raised a ValueError with a traceback for these
+    for kw, word in ((dict(max_features=0), "max_features"), (dict(num_threads=-5), "num_threads"),
+                     (dict(num_threads=0), "num_threads")):
+        with pytest.raises(VibrInputError, match=word):
+            calibrate_scene(photos, **kw)
     # a misspelt option is an error, not a silent default
     with pytest.raises(TypeError, match="matchr"):
         calibrate_scene(photos, matchr="sequential")

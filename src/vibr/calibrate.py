@@ -362,6 +362,11 @@ def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> Ca
         raise VibrInputError(
             f"camera model must be one of {', '.join(CAMERA_MODELS)}, got {opt.camera_model!r}", photos_dir
         )
+    if int(opt.max_features) != opt.max_features or opt.max_features < 1:
+        raise VibrInputError(f"max_features must be an integer >= 1, got {opt.max_features}", photos_dir)
+    if int(opt.num_threads) != opt.num_threads or not (opt.num_threads >= 1 or opt.num_threads == -1):
+        raise VibrInputError(f"num_threads must be an integer >= 1 (or -1: every core), got {opt.num_threads}",
+                             photos_dir)
     opt = replace(opt, min_registered=max(2, int(opt.min_registered)))
     if n_photos < opt.min_registered:
         raise VibrInputError(

@@ -46,7 +46,7 @@ def register(sub) -> None:
     p.add_argument("--min-registered", type=int, default=3,
                    help="fail if fewer photos register (default 3)")
     p.add_argument("--max-features", type=int, default=8192, help="SIFT features per photo (default 8192)")
-    p.add_argument("--threads", type=int, default=2, help="COLMAP threads (default 2)")
+    p.add_argument("--threads", type=int, default=2, help="COLMAP threads, -1 for every core (default 2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--work", metavar="DIR", default=None,
                    help="keep COLMAP's database, model and undistorted images here")
