@@ -421,3 +421,29 @@ def test_render_threads_must_be_positive(tiny_scene):
 
     with pytest.raises(VibrInputError, match="threads"):
         ViewRenderer(tiny_scene, threads=0)
+
+
+@pytest.mark.parametrize("size,hint", [((3072, 2048), "--scale 0.25"), ((3840, 2160), "--scale 0.25"),
+                                       ((1920, 1080), None), ((768, 512), None)])
+def test_view_hints_a_scale_for_large_views(size, hint):
+    """Fountain's full-size photographs (3072×2048) take minutes per view to estimate and
+    seconds per still render: `vibr view` says so and suggests a --scale near half a
+    megapixel; 1080p and below get no hint."""
+    import io
+    import logging
+    from types import SimpleNamespace
+
+    from vibr.cli.view import _hint_large_views
+    from vibr.progress import configure_logging
+
+    scene = SimpleNamespace(views=[SimpleNamespace(camera=SimpleNamespace(width=size[0], height=size[1]))])
+    lg = logging.getLogger("vibr")
+    saved = (list(lg.handlers), lg.level, lg.propagate)
+    buf = io.StringIO()
+    configure_logging(0, stream=buf)
+    try:
+        _hint_large_views(scene, 1.0)
+    finally:
+        lg.handlers[:], lg.level, lg.propagate = saved
+    text = buf.getvalue()
+    assert (hint in text and f"{size[0]}x{size[1]}" in text) if hint else text == ""

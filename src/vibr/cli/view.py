@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import time
 
 from . import add_quiet
@@ -53,6 +54,19 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: views larger than this (pixels) make the viewer slow at --scale 1: a hint is printed
+LARGE_VIEW_PIXELS = 2_500_000
+
+
+def _hint_large_views(scene, scale: float) -> None:
+    """A one-line hint when the views are large (docs/VIEWER.md, "Large photographs")."""
+    w, h = max((v.camera.width, v.camera.height) for v in scene.views)
+    if w * h > LARGE_VIEW_PIXELS:
+        s = 2 ** round(math.log2(math.sqrt(500_000 / (w * h)) * scale))  # about half a megapixel
+        logger.warning("the views are %dx%d: depth estimation takes minutes per view and each still "
+                       "render seconds at this size; --scale %g keeps the viewer interactive", w, h, s)
+
+
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..depthcache import load_scene_cached
@@ -71,6 +85,7 @@ def run(args) -> int:
     # the resized photographs and the estimated depth come from the on-disk cache when there
     cache_dir = cache_dir_from_args(args)
     scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
+    _hint_large_views(scene, args.scale)
     if not scene.has_depth:
         t0 = time.perf_counter()
         scene = scene_with_depth(scene, cache_dir=cache_dir)
