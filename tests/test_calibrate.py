@@ -306,3 +306,21 @@ def test_the_registered_count_is_the_kept_models(temple_dir, tmp_path):
     done, total = map(int, lines[-1].split(":")[2].split()[0].split("/"))
     assert total == 16 and done <= total
     assert done == len(report.registered)
+
+
+def test_photos_are_turned_upright_by_their_exif_orientation(tmp_path):
+    """A phone stores a portrait photo sideways with EXIF orientation 6 (turn 90° clockwise
+    to display): calibrate's copies, which COLMAP and the scene use, stand upright."""
+    from PIL import Image
+
+    from vibr.calibrate import _downscale_photos
+
+    a = np.zeros((40, 60, 3), np.uint8)
+    a[:, :30] = 255  # stored landscape, its left half white
+    im = Image.fromarray(a)
+    exif = im.getexif()
+    exif[0x0112] = 6
+    im.save(tmp_path / "p.jpg", exif=exif.tobytes(), quality=95)
+    assert _downscale_photos([tmp_path / "p.jpg"], tmp_path / "out", 1.0) == [(40, 60)]
+    up = iio.imread(tmp_path / "out" / "p.png").astype(float).mean(axis=(1, 2))
+    assert up.shape == (60,) and up[:25].min() > 200 and up[35:].max() < 50  # the white half on top

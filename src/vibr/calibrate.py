@@ -106,12 +106,13 @@ def list_photos(photos_dir) -> list[Path]:
 
 
 def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> list[tuple[int, int]]:
-    """Write each photo, resized by ``scale`` (Lanczos), as ``out_dir/<stem>.png`` (8-bit RGB).
+    """Write each photo, turned upright by its EXIF orientation and resized by ``scale``
+    (Lanczos), as ``out_dir/<stem>.png`` (8-bit RGB).
 
     Returns the list of (width, height) of the written images. The new size is
     ``round(W·s) × round(H·s)``, consistent with :meth:`vibr.camera.Camera.scaled`.
     """
-    from PIL import Image
+    from PIL import Image, ImageOps
 
     out_dir.mkdir(parents=True, exist_ok=True)
     sizes = []
@@ -119,6 +120,9 @@ def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> list[tu
         try:
             with Image.open(f) as im:
                 im.load()
+                # a phone's portrait photo is stored sideways with an EXIF orientation: the
+                # scene (and COLMAP, which reads these copies) gets it as it is displayed
+                im = ImageOps.exif_transpose(im)
                 if im.mode not in ("RGB", "L"):
                     # 16-bit / alpha / palette → 8-bit RGB (SIFT works on 8-bit grey).
                     im = im.convert("RGB") if im.mode not in ("I;16", "I", "F") else _to8bit(im)
