@@ -65,6 +65,11 @@ def test_unrecognised_folder(capsys, tmp_path):
     (tmp_path / "notes.txt").write_text("hello")
     code, err = run_cli(capsys, "info", tmp_path)
     assert_one_line_error(code, err, tmp_path, "no supported scene")
+    assert "calibrate" not in err
+    # a folder of photos without cameras: the error says how to get cameras
+    write_image(tmp_path / "IMG_0001.png", np.zeros((8, 8, 3), np.float32))
+    code, err = run_cli(capsys, "info", tmp_path)
+    assert_one_line_error(code, err, tmp_path, "no supported scene", "vibr calibrate")
 
 
 def test_garbage_png_in_light_field(capsys, tmp_path, cotton_dir):

@@ -68,9 +68,11 @@ def detect_format(path) -> str:
         return "middlebury"
     if is_strecha_folder(p):
         return "strecha"
+    photos = any(f.suffix.lower() in (".png", ".jpg", ".jpeg", ".tif", ".tiff") for f in p.iterdir())
     raise VibrInputError(
         "no supported scene found (looked for transforms.json, input_CamNNN.png light-field views, "
-        "a COLMAP sparse model, a *_par.txt file, or images with .camera files)", p)
+        "a COLMAP sparse model, a *_par.txt file, or images with .camera files)"
+        + ("; photos without cameras are calibrated first: vibr calibrate (COLMAP)" if photos else ""), p)
 
 
 def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | None = None, **options):
