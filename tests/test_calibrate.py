@@ -174,8 +174,14 @@ def test_missing_or_empty_folder(tmp_path):
     (tmp_path / "a.txt").write_text("x")
     with pytest.raises(VibrInputError, match="no photos found") as exc:
         calibrate(tmp_path, tmp_path / "out")
-    assert str(tmp_path) in str(exc.value)
+    assert str(tmp_path) in str(exc.value) and "HEIC" not in str(exc.value)
     assert not (tmp_path / "out").exists()
+    (tmp_path / "IMG_0001.HEIC").write_bytes(b"\0")  # a phone's default format, not readable here
+    with pytest.raises(VibrInputError, match="HEIC photos .* need converting to JPEG"):
+        list_photos(tmp_path)
+    _write_png(tmp_path / "b.png", np.zeros((8, 8, 3)))
+    iio.imwrite(tmp_path / "c.webp", np.zeros((8, 8, 3), np.uint8))
+    assert [p.name for p in list_photos(tmp_path)] == ["b.png", "c.webp"]
 
 
 def test_duplicate_stems_refused(tmp_path):

@@ -48,7 +48,7 @@ from .scene import Scene, View
 logger = logging.getLogger(__name__)
 
 #: Photo file extensions read by calibrate (case-insensitive).
-IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
+IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".webp")
 
 #: Default minimum number of registered images (two sources and a target to render).
 MIN_REGISTERED = 3
@@ -95,8 +95,10 @@ def list_photos(photos_dir) -> list[Path]:
         raise VibrInputError("not a folder (calibrate takes a folder of photos)", d)
     files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS)
     if not files:
+        heic = any(p.suffix.lower() in (".heic", ".heif") for p in d.iterdir())
         raise VibrInputError(
-            f"no photos found (looked for {', '.join(IMAGE_EXTENSIONS)})", d
+            f"no photos found (looked for {', '.join(IMAGE_EXTENSIONS)})"
+            + ("; HEIC photos (a phone's default) need converting to JPEG first" if heic else ""), d
         )
     stems = [p.stem for p in files]
     dup = sorted({s for s in stems if stems.count(s) > 1})
