@@ -363,7 +363,8 @@ def test_frame_at_held_out_view_matches_render_target(grid_dir, tmp_path, capsys
 
 def test_a_frame_that_sees_nothing_stops_with_one_line(grid_dir, tmp_path, capsys):
     """A path whose third camera looks away from the scene: exit 2, one line naming the frame
-    and what is wrong, the frames before it kept."""
+    and what is wrong, the other frames kept; every such frame is named at once, after the
+    others are rendered (it used to stop at the first)."""
     from vibr.camera import Camera
     from vibr.cli import main
     from vibr.io import load_scene
@@ -380,6 +381,15 @@ def test_a_frame_that_sees_nothing_stops_with_one_line(grid_dir, tmp_path, capsy
     assert code == 2 and "\n" not in err and "Traceback" not in err
     assert "frame 2: " in err and "no photograph looked" in err
     assert sorted(p.name for p in (tmp_path / "fr").glob("frame_*.png")) == ["frame_00000.png", "frame_00001.png"]
+    # two runs of such frames among seven: all named in one line, the others rendered, no video
+    cams = [away, away, scene["view_003"].camera, away, c, scene["view_005"].camera, scene["view_001"].camera]
+    write_camera_path(tmp_path / "q.json", cams, fps=1.0)
+    code = main(["render", str(grid_dir), "--path", str(tmp_path / "q.json"), "-o", str(tmp_path / "q.mp4"),
+                 "--workers", "2", "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "3 of 7 frames saw nothing: frames 0-1, 3 (frame 0: " in err
+    assert sorted(int(p.stem[6:]) for p in (tmp_path / "q_frames").glob("frame_*.png")) == [2, 4, 5, 6]
+    assert not (tmp_path / "q.mp4").exists()
 
 
 def test_hand_written_nerfstudio_camera_renders_like_camera_json(grid_dir, tmp_path, capsys):

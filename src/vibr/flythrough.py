@@ -216,15 +216,15 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     w = view_weights(ctx.sources, cam, ctx.n_views, blend=ctx.blend,
                      view_points=ctx.view_points or None)
     idx = np.flatnonzero(w > 0)
-    if not len(idx):
-        raise VibrInputError(f"frame {i}: no source view sees it (camera {cam}){_SEES_NOTHING}")
+    if not len(idx):  # reported with the other such frames once every frame is done
+        return {"index": i, "skipped": False, "seconds": 0.0, "failed": f"no source view sees it (camera {cam})"}
     views = [ctx.sources.views[k] for k in idx]
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     tm["view weights"] = -t0 + (t := time.perf_counter())
     try:
         samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
     except VibrInputError as exc:
-        raise VibrInputError(f"frame {i}: {exc.problem} (camera {cam}){_SEES_NOTHING}") from None
+        return {"index": i, "skipped": False, "seconds": 0.0, "failed": f"{exc.problem} (camera {cam})"}
     tm["geometry"] = -t + (t := time.perf_counter())
     ws = w[idx]
     if np.any(ws < 1.0):
@@ -362,6 +362,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     t0 = time.perf_counter()
     frames, engine = _run_frames(ctx, len(cams), executor, progress)
     t_frames = time.perf_counter() - t0
+    _check_frames_rendered(frames, fdir, camera_path.meta.get("file"))
     rendered = sum(not f["skipped"] for f in frames)
     res = FlyResult(len(cams), rendered, len(cams) - rendered, str(fdir), None,
                     depth_source=sources.meta.get("depth_source", ""), frames=frames, engine=engine)
@@ -378,6 +379,24 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
                  "total": time.perf_counter() - t_start,
                  "depth_source_time": sources.meta.get("depth_time_s", t_depth)}
     return res
+
+
+def _check_frames_rendered(frames: list, fdir, source) -> None:
+    """One error naming every frame that saw nothing (render_frame's ``failed``), raised once
+    the other frames are on disk, before the video: a rerun of the mended path renders only
+    what is missing."""
+    bad = [f for f in frames if f.get("failed")]
+    if not bad:
+        return
+    idx = [f["index"] for f in bad]
+    runs, start = [], idx[0]
+    for a, b in zip(idx, idx[1:] + [None]):
+        if b != a + 1:
+            runs.append(str(a) if a == start else f"{start}-{a}")
+            start = b
+    raise VibrInputError(f"{len(bad)} of {len(frames)} frames saw nothing: frame{'s' if len(bad) > 1 else ''} "
+                         f"{', '.join(runs)} (frame {idx[0]}: {bad[0]['failed']}){_SEES_NOTHING}; the other "
+                         f"frames are in {fdir}", source)
 
 
 def _context_bytes(ctx: FrameContext) -> int:
