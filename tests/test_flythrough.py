@@ -226,23 +226,24 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
 
 
 # ----------------------------------------------------------------------------- bad input
-@pytest.mark.parametrize("extra,msg", [(["--fps", "nan"], "fps must be in (0, 1000]"),
-                                       (["--fps", "0"], "fps must be in (0, 1000]"),
-                                       (["--fps", "24000"], "fps must be in (0, 1000]"),
-                                       (["--crf", "99"], "crf must be in 0..51")])
-def test_bad_video_options_are_refused_before_any_frame(grid_dir, tmp_path, capsys, extra, msg):
-    """(--fps nan was checked only once the frames were rendered; --fps 0 fell back to the
-    path's rate silently.)"""
+@pytest.mark.parametrize("out,extra,msg", [
+    ("v.mp4", ["--fps", "nan"], "fps must be in (0, 1000]"),  # checked only after the frames, before
+    ("v.mp4", ["--fps", "0"], "fps must be in (0, 1000]"),  # fell back to the path's rate silently
+    ("v.mp4", ["--fps", "24000"], "fps must be in (0, 1000]"),
+    ("v.mp4", ["--crf", "99"], "crf must be in 0..51"),
+    ("frames", ["--uncertainty", "u.png"], "--uncertainty does not apply to --path"),
+    ("frames", ["--bit-depth", "16"], "--bit-depth does not apply to --path"),
+])
+def test_bad_render_path_options_are_refused_before_any_frame(grid_dir, tmp_path, capsys, out, extra, msg):
     from vibr.cli import main
 
     pj = tmp_path / "p.json"
     assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "2", "-q"]) == 0
-    out = tmp_path / "v.mp4"
     capsys.readouterr()
-    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(out), "-q", *extra]) == 2
+    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(tmp_path / out), "-q", *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err
-    assert not out.exists() and not (tmp_path / "v_frames").exists()
+    assert not (tmp_path / out).exists() and not (tmp_path / "v_frames").exists()
 
 
 @pytest.mark.parametrize("extra,msg", [(["--fps", "nan"], "fps must be positive and finite"),
@@ -258,21 +259,6 @@ def test_bad_path_timing_is_one_line(grid_dir, tmp_path, capsys, extra, msg):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err and "Traceback" not in err
     assert not pj.exists()
-
-
-@pytest.mark.parametrize("extra,msg", [(["--uncertainty", "u.png"], "--uncertainty does not apply to --path"),
-                                       (["--bit-depth", "16"], "--bit-depth does not apply to --path")])
-def test_target_only_options_with_a_path_are_refused(grid_dir, tmp_path, capsys, extra, msg):
-    from vibr.cli import main
-
-    pj = tmp_path / "p.json"
-    assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "2", "-q"]) == 0
-    out = tmp_path / "frames"
-    capsys.readouterr()
-    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(out), "-q", *extra]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and msg in err
-    assert not out.exists()
 
 
 @pytest.mark.parametrize("content,msg", [
