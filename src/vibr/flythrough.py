@@ -201,7 +201,8 @@ def view_weights(sources: Scene, camera: Camera, n_views: int | None, *, blend: 
 def render_frame(ctx: FrameContext, i: int) -> dict:
     """Render frame ``i`` of the path and write it (the per-frame task, see the module
     docstring). Returns a small dict: index, skipped, seconds, views and weights, and the
-    seconds of each stage (``times``)."""
+    seconds of each stage (``times``); for a frame that sees nothing, ``failed`` (why) and no
+    file (:func:`render_path` then names every such frame in one error)."""
     from .geometry import compute_samples
     from .io import write_image
     from .render import render_samples
