@@ -447,3 +447,28 @@ def test_view_hints_a_scale_for_large_views(size, hint):
         lg.handlers[:], lg.level, lg.propagate = saved
     text = buf.getvalue()
     assert (hint in text and f"{size[0]}x{size[1]}" in text) if hint else text == ""
+
+
+def test_a_camera_that_sees_nothing_is_said_in_the_panel(tiny_scene, monkeypatch):
+    """A camera turned away from the scene: the panel's status says so and nothing is sent;
+    the worker logged a traceback for it before."""
+    from types import SimpleNamespace
+
+    from vibr.camera import Camera
+    from vibr.viewer import app
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer.worker import Request
+
+    monkeypatch.setattr(app, "send_background", lambda client, img, kind: None)
+    v = Viewer(tiny_scene, ViewerOptions(warm_up=False, settings=ViewSettings(full_long_side=32)))
+    v.gui = {"points": SimpleNamespace(value="never"), "status": SimpleNamespace(content=""),
+             "show_sources": SimpleNamespace(value=False)}
+    v._points = SimpleNamespace(visible=False)
+    client = SimpleNamespace(client_id=3, flush=lambda: None)
+    c = tiny_scene.views[0].camera
+    away = Camera.from_centre(c.K, np.diag([1.0, -1.0, -1.0]) @ c.R, c.centre, c.width, c.height)
+    wxyz, pos, fov, aspect = app.viser_pose_from_camera(away)
+    cam = SimpleNamespace(wxyz=tuple(wxyz), position=tuple(pos), fov=fov, aspect=aspect, client=client)
+    v._render_for(client, Request(1, 0.0, (app.CameraState.of(cam), v.settings)), "full")
+    assert v.gui["status"].content.startswith("nothing to render from here: ")
+    assert not v.sent.get(3)

@@ -483,6 +483,11 @@ class Viewer:
         except RenderAbandoned:
             self.abandoned += 1
             return  # the camera moved on: the newer request is rendered next
+        except VibrInputError as exc:  # a camera turned away from the scene: said in the panel
+            logger.debug("%s render of request %d: %s", kind, req.seq, exc.problem)
+            if "status" in self.gui:
+                self.gui["status"].content = f"nothing to render from here: {exc.problem}"
+            return
         if kind == "full" and stale is not None and stale():
             return
         img = np.clip(out.image * 255.0 + 0.5, 0, 255).astype(np.uint8)
