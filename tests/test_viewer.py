@@ -155,6 +155,12 @@ def test_exported_path_renders_with_vibr_render(tiny_scene, tmp_path):
     for v in (tiny_scene.views[0], tiny_scene.views[2]):
         wxyz, pos, fov, aspect = viser_pose_from_camera(v.camera)
         viewer.add_keyframe(CameraState(tuple(wxyz), tuple(pos), fov, aspect))
+    from vibr.errors import VibrInputError
+
+    # an unwritable path file is a one-line error (shown in the panel), not an OSError
+    for bad in (tmp_path / "no_such_folder" / "p.json", tmp_path):
+        with pytest.raises(VibrInputError, match="path file|folder"):
+            viewer.export_path(bad, seconds=1.0)
     out = viewer.export_path(tmp_path / "camera_path.json", seconds=1.0)
     cpath = path_mod.read_camera_path(out)
     assert len(cpath.cameras) == 4 and (cpath.width, cpath.height) == (64, 48)

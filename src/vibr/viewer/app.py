@@ -401,7 +401,9 @@ class Viewer:
             raise VibrInputError("no keyframes to export: add some first")
         if path is None:
             path = self.gui["path_out"].value if "path_out" in self.gui else self.options.path_out
-        out = Path(path)
+        from ..io.outputs import check_output
+
+        out = check_output(path, "file", overwrite=True, what="path file")  # said in the panel, not a traceback
         fps = self.options.fps
         if seconds is None:
             seconds = max(len(self.keyframes) - 1, 1) * self.options.seconds_per_keyframe
