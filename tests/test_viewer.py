@@ -161,6 +161,18 @@ def test_exported_path_renders_with_vibr_render(tiny_scene, tmp_path):
     for bad in (tmp_path / "no_such_folder" / "p.json", tmp_path):
         with pytest.raises(VibrInputError, match="path file|folder"):
             viewer.export_path(bad, seconds=1.0)
+    # the panel's file name: a bare name in the folder of --path-out, never a path elsewhere
+    from types import SimpleNamespace
+
+    viewer.options.path_out = str(tmp_path / "camera_path.json")
+    for typed in ("../evil.json", "/etc/evil.json", "sub/p.json", "p.txt", ".bashrc.json"):
+        viewer.gui["path_out"] = SimpleNamespace(value=typed)
+        with pytest.raises(VibrInputError, match="a file name ending in .json"):
+            viewer.export_path(seconds=1.0)
+    viewer.gui["path_out"] = SimpleNamespace(value="mine.json")
+    assert viewer.export_path(seconds=1.0) == tmp_path / "mine.json"
+    viewer.gui["path_out"] = SimpleNamespace(value="camera_path.json")  # what the panel starts with
+    assert viewer.export_path(seconds=1.0) == tmp_path / "camera_path.json"
     out = viewer.export_path(tmp_path / "camera_path.json", seconds=1.0)
     cpath = path_mod.read_camera_path(out)
     assert len(cpath.cameras) == 4 and (cpath.width, cpath.height) == (64, 48)

@@ -51,7 +51,8 @@ class ViewerOptions:
     points : when the point cloud is shown, one of :data:`POINT_MODES` (default "while
         moving")
     settle_s : seconds the camera must be still before the full-size render
-    path_out : where "export path" writes camera_path.json
+    path_out : where "export path" writes camera_path.json (the panel may change its file
+        name, not its folder)
     fps, seconds_per_keyframe : timing of the exported path (nerfstudio's fps / seconds)
     warm_up : at start, render a 32-px image on a background thread while the scene is
         drawn and the browser loads the page: numba loads its compiled kernels on a
@@ -320,7 +321,8 @@ class Viewer:
         g["status"] = gui.add_markdown("waiting for a camera")
         g["add_keyframe"] = gui.add_button("add keyframe")
         g["add_keyframe"].on_click(lambda e: self.add_keyframe(e.client))
-        g["path_out"] = gui.add_text("path file", self.options.path_out)
+        out = Path(self.options.path_out)
+        g["path_out"] = gui.add_text("path file", out.name, hint=f"file name, written in {out.parent.resolve()}")
         g["export"] = gui.add_button("export path")
         g["export"].on_click(lambda e: self._export_clicked(e.client))
         g["keyframes"] = gui.add_markdown("0 keyframes")
@@ -390,6 +392,19 @@ class Viewer:
             self.gui["keyframes"].content = f"{len(self.keyframes)} keyframes"
         return cam
 
+    def _gui_path_file(self) -> Path:
+        """The panel's "path file": a bare file name ending in .json, in the folder of
+        ``options.path_out``. Whoever reaches the page types it (with ``--host 0.0.0.0``,
+        anyone on the network): a path with folders could overwrite any file vibr may write."""
+        default = Path(self.options.path_out)
+        if "path_out" not in self.gui:
+            return default
+        name = str(self.gui["path_out"].value).strip()
+        if Path(name).name != name or not name.lower().endswith(".json") or name.startswith("."):
+            raise VibrInputError(f"the path file is a file name ending in .json, written in "
+                                 f"{default.parent.resolve()}; got {name!r}")
+        return default.parent / name
+
     def export_path(self, path=None, seconds: float | None = None) -> Path:
         """Write the keyframes as nerfstudio's camera_path.json: a C²-smooth path through
         them (:func:`vibr.path.interpolate`, ``seconds`` × fps frames; default
@@ -400,7 +415,7 @@ class Viewer:
         if not self.keyframes:
             raise VibrInputError("no keyframes to export: add some first")
         if path is None:
-            path = self.gui["path_out"].value if "path_out" in self.gui else self.options.path_out
+            path = self._gui_path_file()
         from ..io.outputs import check_output
 
         out = check_output(path, "file", overwrite=True, what="path file")  # said in the panel, not a traceback
