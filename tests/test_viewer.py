@@ -232,18 +232,21 @@ def test_view_cli_unwritable_path_out(tmp_path):
     assert len(lines) == 1 and "--path-out" in lines[0] and "does not exist" in lines[0]
 
 
-def test_view_cli_serves_and_stops(tiny_scene, tmp_path):
+@pytest.mark.parametrize("host", ["127.0.0.1", "0.0.0.0"])
+def test_view_cli_serves_and_stops(tiny_scene, tmp_path, host):
+    """Serves its page, exits 0 on Ctrl-C with the port freed; on a non-loopback address it
+    says who can reach it."""
     from vibr.io import save_scene
 
     save_scene(tiny_scene, tmp_path / "scene")
     port = free_port()
     env = {k: v for k, v in _env().items() if k not in ("NUMBA_NUM_THREADS", "OMP_WAIT_POLICY")}
-    p = subprocess.Popen([sys.executable, "-m", "vibr", "-v", "view", str(tmp_path / "scene"), "--port", str(port)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    p = subprocess.Popen([sys.executable, "-m", "vibr", "-v", "view", str(tmp_path / "scene"), "--port", str(port),
+                          "--host", host], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         line = ""
         deadline = time.monotonic() + 60
-        while f"http://127.0.0.1:{port}" not in line:
+        while f"http://{host}:{port}" not in line:
             assert time.monotonic() < deadline and p.poll() is None, p.stderr.read() if p.poll() is not None else "timeout"
             line = p.stdout.readline()
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as resp:
@@ -252,7 +255,9 @@ def test_view_cli_serves_and_stops(tiny_scene, tmp_path):
         assert p.wait(timeout=20) == 0
         from vibr._threads import cores
 
-        assert f"renders on {2 * cores()} numba threads" in p.stderr.read()  # vibr._threads
+        err = p.stderr.read()
+        assert f"renders on {2 * cores()} numba threads" in err  # vibr._threads
+        assert ("listening on 0.0.0.0: anyone who reaches this machine" in err) == (host == "0.0.0.0")
     finally:
         if p.poll() is None:
             p.kill()

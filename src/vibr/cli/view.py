@@ -99,6 +99,9 @@ def run(args) -> int:
     import numba
 
     logger.debug("renders on %d numba threads (vibr._threads)", numba.config.NUMBA_NUM_THREADS)
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        logger.warning("listening on %s: anyone who reaches this machine at %s can use the viewer "
+                       "(its photographs, and keyframe paths written beside --path-out)", args.host, url)
     try:
         print(f"vibr view: {scene.name} ({len(scene)} views) at {url}  (Ctrl-C to stop)", flush=True)
         while True:
