@@ -42,13 +42,14 @@ import numpy as np
 from ._pycolmap import import_pycolmap
 from .camera import Camera
 from .errors import OutputExists, VibrInputError
+from .io.images import IMAGE_EXTS
 from .progress import progress
 from .scene import Scene, View
 
 logger = logging.getLogger(__name__)
 
-#: Photo file extensions read by calibrate (case-insensitive).
-IMAGE_EXTENSIONS = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".webp")
+#: Photo file extensions read by calibrate (case-insensitive): the ones every loader reads.
+IMAGE_EXTENSIONS = IMAGE_EXTS
 
 #: Default minimum number of registered images (two sources and a target to render).
 MIN_REGISTERED = 3

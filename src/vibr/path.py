@@ -81,7 +81,7 @@ class CameraPath:
         self.width = int(self.width or c0.width)
         self.height = int(self.height or c0.height)
         if not (self.fps > 0 and math.isfinite(self.fps)):
-            raise VibrInputError(f"fps must be positive, got {self.fps}")
+            raise VibrInputError(f"fps must be positive and finite, got {self.fps}")
         if self.seconds is None:
             self.seconds = len(self.cameras) / float(self.fps)
 

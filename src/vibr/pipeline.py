@@ -112,10 +112,8 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Every view has depth (NaN where unknown).
     target : View or Camera
     """
-    if depth not in DEPTH_MODES:
-        raise VibrInputError(f"unknown depth mode {depth!r} (choose from {', '.join(DEPTH_MODES)})")
     auto = depth == "auto"
-    depth = depth_mode(scene, depth)
+    depth = depth_mode(scene, depth)  # an unknown mode is refused here
     src, tview, ti = _hold_out(scene, target, sources, n_views)  # its errors first
     if auto and depth == "estimated":
         logger.info("the scene has no depth maps: the sources get depth estimated from them (or cached)")

@@ -24,7 +24,7 @@ from pathlib import Path
 from ..errors import VibrInputError
 from .camera_json import read_camera_json, write_camera_json
 from .depthfiles import read_depth, read_pfm, write_depth, write_pfm
-from .images import read_image, write_image
+from .images import is_image_file, read_image, write_image
 from .transforms import save_scene
 
 __all__ = ["load_scene", "save_scene", "detect_format", "read_image", "write_image", "read_depth",
@@ -68,7 +68,7 @@ def detect_format(path) -> str:
         return "middlebury"
     if is_strecha_folder(p):
         return "strecha"
-    photos = any(f.suffix.lower() in (".png", ".jpg", ".jpeg", ".tif", ".tiff") for f in p.iterdir())
+    photos = any(is_image_file(f) for f in p.iterdir())
     raise VibrInputError(
         "no supported scene found (looked for transforms.json, input_CamNNN.png light-field views, "
         "a COLMAP sparse model, a *_par.txt file, or images with .camera files)"

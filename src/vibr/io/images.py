@@ -26,7 +26,7 @@ from .atomic import atomic_path
 _HEADERS_ONLY = contextvars.ContextVar("vibr_headers_only", default=False)
 
 #: Image file extensions recognised when scanning folders.
-IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
+IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".webp")
 
 
 def is_image_file(name) -> bool:
