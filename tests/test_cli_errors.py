@@ -191,3 +191,56 @@ def test_exit_status_of_the_real_command(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2
     assert r.stderr.strip().count("\n") == 0 and "missing" in r.stderr and "Traceback" not in r.stderr
+
+
+# ----------------------------------------------------------------------------- sizes and lists
+def test_scale_too_small_is_refused_at_load(capsys, temple_dir):
+    """A --scale that shrinks the photos to a few pixels fails at load, naming the image and
+    its size (it gave a traceback deep in the depth estimate)."""
+    code, err = run_cli(capsys, "render", temple_dir, "--scale", "1e-9", "--target", "3", "-o", "x.png")
+    assert_one_line_error(code, err, "templeSR0001.png", "640x480 is 1x1", "at least 8 pixels")
+    code, err = run_cli(capsys, "info", temple_dir, "--scale", "0.01")
+    assert_one_line_error(code, err, "6x5", "larger --scale")
+
+
+def test_a_view_too_small_to_measure(capsys, tmp_path, temple_dir):
+    """eval refuses, before any work, a held-out view on which DSSIM is undefined; render
+    writes the image and reports the PSNR, DSSIM n/a."""
+    code, err = run_cli(capsys, "eval", temple_dir, "--scale", "0.025", "--target", "3",
+                        "--json", tmp_path / "e.json")
+    assert_one_line_error(code, err, "16x12", "at least 15 pixels")
+    assert not (tmp_path / "e.json").exists()
+    code = main(["render", str(temple_dir), "--scale", "0.025", "--target", "3", "-o", str(tmp_path / "x.png")])
+    out = capsys.readouterr().out
+    assert code == 0 and (tmp_path / "x.png").exists()
+    assert "DSSIM n/a" in out and "PSNR" in out and "nan" not in out
+
+
+@pytest.mark.parametrize("cmd", [
+    ["info", "{scene}", "--views", ",,"],
+    ["convert", "{scene}", "{tmp}/c", "--views", " , "],
+    ["depth", "{scene}", "-o", "{tmp}/d", "--views", ","],
+    ["depth", "{scene}", "-o", "{tmp}/d", "--exclude", ","],
+    ["path", "interpolate", "{scene}", "-o", "{tmp}/p.json", "--views", ",,"],
+    ["render", "{scene}", "--target", "3", "--sources", ",", "-o", "{tmp}/x.png"],
+    ["eval", "{scene}", "--target", "3", "--gamma", ",", "--json", "{tmp}/e.json"],
+])
+def test_an_empty_list_is_refused(capsys, tmp_path, temple_dir, cmd):
+    """An option given with an empty comma list is a mistake, not "all" (vibr depth --views ,
+    wrote a scene with depth for no view)."""
+    args = [a.format(scene=temple_dir, tmp=tmp_path) for a in cmd]
+    with pytest.raises(SystemExit) as e:
+        main(args + ["-q"])
+    err = capsys.readouterr().err.strip()
+    assert e.value.code == 2 and "expected comma-separated" in err or "expected a comma-separated" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_path_too_large_for_memory_is_refused_before_the_depth(capsys, tmp_path, temple_dir):
+    assert main(["path", "orbit", str(temple_dir), "--frames", "3", "--size", "100000x100000",
+                 "-o", str(tmp_path / "p.json"), "-q"]) == 0
+    capsys.readouterr()
+    code, err = run_cli(capsys, "render", temple_dir, "--scale", "0.1", "--path", tmp_path / "p.json",
+                        "-o", tmp_path / "v", "--no-cache")
+    assert_one_line_error(code, err, "p.json", "100000x100000", "vibr path --size")
+    assert not (tmp_path / "v").exists()

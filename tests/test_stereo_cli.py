@@ -68,3 +68,19 @@ def test_vibr_depth_coarse_level_options(tmp_path, capsys):
     assert main(["-q", "depth", str(src), "-o", str(out), "--views", "view_000",
                  "--sweep-scale", "1", "--coarse-iter", "0", "--no-consistency"]) == 0
     assert np.isfinite(load_scene(out)[0].depth).mean() > 0.15
+
+
+def test_estimate_depth_refuses_an_empty_or_repeated_request():
+    import pytest
+
+    from vibr.errors import VibrInputError
+    from vibr.stereo import estimate_depth
+    from vibr.synthetic import make_scene
+
+    s = make_scene("free", n_views=3, width=32, height=24, seed=2)
+    with pytest.raises(VibrInputError, match="list of views is empty"):
+        estimate_depth(s, views=[])
+    with pytest.raises(VibrInputError, match="every view is excluded"):
+        estimate_depth(s, exclude=[0, 1, 2])
+    with pytest.raises(VibrInputError, match="listed twice"):
+        estimate_depth(s, views=[1, "view_001"])

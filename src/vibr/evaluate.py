@@ -22,7 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import VibrInputError
-from .metrics import METRIC_BORDER, dssim, psnr, view_metrics
+from .metrics import METRIC_BORDER, check_measurable, dssim, psnr, view_metrics
 from .progress import progress
 from .render.methods import DEFAULTS, METHODS, get_method
 from .geometry.samples import view_counts
@@ -141,6 +141,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     from .pipeline import prepare
 
     settings, intensity_scale = _checked_settings(settings, mask, intensity_scale)
+    check_measurable(scene.views[scene.index(target)].camera.shape, border, scene.root)
     t0 = time.perf_counter()
     src, tview = prepare(scene, target, sources=sources, depth=depth, depth_files=depth_files,
                          n_views=n_views, estimate_kw=estimate_kw, fallback=fallback, cache_dir=cache_dir)

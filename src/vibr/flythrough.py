@@ -303,6 +303,19 @@ def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
     return out, None
 
 
+def _check_frame_memory(scene: Scene, cams, n_views, source) -> None:
+    """Refuse, before the depth work, a path whose largest frame could not be rendered in
+    the memory available (:func:`vibr.validate.check_render_memory`; the largest sources)."""
+    from .validate import check_render_memory
+
+    if not cams:
+        return
+    big = max(cams, key=lambda c: c.width * c.height)
+    shapes = sorted((v.camera.shape for v in scene.views), key=lambda s: s[0] * s[1], reverse=True)
+    check_render_memory(shapes[:n_views] if n_views else shapes, big.shape, source,
+                        way_out="make the path with smaller frames (vibr path --size WxH)")
+
+
 def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_views: int | None = 8,
                 params: dict | None = None, overwrite: bool = False, executor="auto",
                 depth: str = "auto", estimate_kw: dict | None = None, cache_dir=None,
@@ -351,6 +364,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     cams = list(camera_path.cameras)
     if check_scene:
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
+    _check_frame_memory(scene, cams, n_views, camera_path.meta.get("file"))
     t0 = time.perf_counter()
     sources = scene_with_depth(scene, depth=depth, estimate_kw=estimate_kw, cache_dir=cache_dir,
                                exclude=exclude)

@@ -76,6 +76,10 @@ def psnr(img, ref, mask=None, border: int = 0, data_range: float = 1.0) -> float
     return float(10.0 * np.log10(data_range**2 / e))
 
 
+#: The side of SSIM's Gaussian window (sigma 1.5): 2 * int(3.5 * 1.5 + 0.5) + 1.
+SSIM_WINDOW = 11
+
+
 def ssim(img, ref, mask=None, border: int = 0) -> float:
     """Mean structural similarity (Wang et al. 2004), Gaussian window sigma 1.5.
 
@@ -94,8 +98,8 @@ def ssim(img, ref, mask=None, border: int = 0) -> float:
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         raise VibrInputError("ssim: the images have non-finite values")
     H, W = a.shape[:2]
-    pad = 5  # (win_size - 1) // 2 with win_size = 2 * int(3.5 * 1.5 + 0.5) + 1 = 11
-    if H < 2 * pad + 1 or W < 2 * pad + 1:
+    pad = SSIM_WINDOW // 2
+    if H < SSIM_WINDOW or W < SSIM_WINDOW:
         raise VibrInputError(f"ssim: image of {W}x{H} (after border) is smaller than the 11×11 window")
     _, S = structural_similarity(
         a, b, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
@@ -164,9 +168,22 @@ def view_metrics(img, ref, mask=None, border: int = METRIC_BORDER) -> dict:
     """The metrics of a rendered view against the held-out photograph, by the one rule of
     ``vibr render`` and ``vibr eval``: ``psnr``, ``ssim`` and ``dssim = 10⁴ · (1 − SSIM)``
     over the pixels of ``mask`` (the reconstructed pixels) with ``border`` pixels at each
-    edge excluded."""
-    s = ssim(img, ref, mask, border)
+    edge excluded. ``ssim`` and ``dssim`` are NaN for an image too small for SSIM's window
+    (:func:`check_measurable`): the PSNR of a tiny render is still worth reporting."""
+    H, W = np.shape(img)[:2]
+    s = ssim(img, ref, mask, border) if min(H, W) - 2 * int(border) >= SSIM_WINDOW else float("nan")
     return {"psnr": psnr(img, ref, mask, border), "ssim": s, "dssim": 1e4 * (1.0 - s)}
+
+
+def check_measurable(shape, border: int = METRIC_BORDER, source=None) -> None:
+    """Refuse, before any work, to measure a view of ``shape`` (H, W, ...) on which DSSIM
+    is undefined: its side, less the ``border`` on each edge, under SSIM's window."""
+    H, W = shape[:2]
+    need = SSIM_WINDOW + 2 * int(border)
+    if min(H, W) < need:
+        raise VibrInputError(f"the held-out view is {W}x{H}: DSSIM needs at least {need} pixels a side "
+                             f"({SSIM_WINDOW}-px window, {int(border)}-px border; use a larger --scale"
+                             f"{' or a smaller --border' if border else ''})", source)
 
 
 # ----------------------------------------------------------------------------- uncertainty

@@ -168,10 +168,10 @@ def render_memory(source_shapes, target_shape, keep=()) -> int:
                + tpx * len(source_shapes) * GEOMETRY_BYTES_PER_TARGET_PIXEL_VIEW)
 
 
-def check_render_memory(source_shapes, target_shape, source=None, keep=()) -> None:
+def check_render_memory(source_shapes, target_shape, source=None, keep=(), way_out=None) -> None:
     """Refuse a render whose :func:`render_memory` exceeds the available memory."""
     th, tw = target_shape
     check_memory(render_memory(source_shapes, target_shape, keep),
                  f"rendering {tw}x{th} from {len(source_shapes)} views",
-                 "render at a lower resolution (--scale 0.5, or a smaller camera) or from fewer "
-                 "views (--views K)", source)
+                 way_out or "render at a lower resolution (--scale 0.5, or a smaller camera) or from "
+                 "fewer views (--views K)", source)

@@ -190,8 +190,12 @@ def add_bit_depth_option(p: argparse.ArgumentParser) -> None:
 
 
 def names(text: str) -> list[str]:
-    """'a, b,3' → ['a', 'b', '3'] (an argparse type)."""
-    return [x.strip() for x in text.split(",") if x.strip()]
+    """'a, b,3' → ['a', 'b', '3'] (an argparse type; an empty list is refused: an option
+    given with nothing in it is a mistake, not "all")."""
+    out = [x.strip() for x in text.split(",") if x.strip()]
+    if not out:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
+    return out
 
 
 def add_source_options(p: argparse.ArgumentParser) -> None:

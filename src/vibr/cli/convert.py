@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import add_quiet
-from ._options import add_overwrite_option
+from ._options import add_overwrite_option, names
 
 _DESC = """\
 Load a scene in any supported format and write it as a nerfstudio / instant-NGP
@@ -33,7 +33,7 @@ def register(sub) -> None:
     p.add_argument("out", metavar="OUT", help="output folder (must not exist unless --overwrite)")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
-    p.add_argument("--views", default=None,
+    p.add_argument("--views", type=names, default=None,
                    help="comma-separated view names or indices to keep (default: all)")
     add_overwrite_option(p, "OUT (only a folder vibr wrote)")
     add_quiet(p)
@@ -43,13 +43,12 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..io import load_scene, save_scene
     from ..io.outputs import check_not_input, check_output, check_replaceable
-    from .info import parse_views
 
     out = check_output(args.out, "dir", overwrite=args.overwrite, what="OUT")
     check_not_input(out, [args.scene])
     if out.is_dir():
         check_replaceable(out)
-    scene = load_scene(args.scene, scale=args.scale, views=parse_views(args.views))
+    scene = load_scene(args.scene, scale=args.scale, views=args.views)
     out = save_scene(scene, out, overwrite=args.overwrite)
     nd = sum(v.depth is not None for v in scene.views)
     print(f"wrote {out}/transforms.json: {len(scene)} views ({scene.meta.get('format', '?')}), "

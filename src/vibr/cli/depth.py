@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from . import add_quiet
-from ._options import add_overwrite_option
+from ._options import add_overwrite_option, names
 
 _DESC = """\
 Estimate orthogonal depth maps and their uncertainty sigma_z for the views of a scene, on
@@ -38,8 +38,8 @@ def register(sub) -> None:
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
     p.add_argument("-o", "--out", default=None,
                    help="output folder (default: update SCENE in place if it is a transforms.json scene)")
-    p.add_argument("--views", default=None, help="comma-separated views to estimate (default: all)")
-    p.add_argument("--exclude", default=None, help="comma-separated views never used as inputs")
+    p.add_argument("--views", type=names, default=None, help="comma-separated views to estimate (default: all)")
+    p.add_argument("--exclude", type=names, default=None, help="comma-separated views never used as inputs")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.25; the output has that size (default 1)")
     p.add_argument("--resize", dest="scale", type=float, help=argparse.SUPPRESS)  # the old name
@@ -80,10 +80,6 @@ def register(sub) -> None:
     add_overwrite_option(p, "OUT (only a folder vibr wrote)")
     add_quiet(p)
     p.set_defaults(func=run)
-
-
-def _split(s):
-    return None if s is None else [t.strip() for t in s.split(",") if t.strip()]
 
 
 def _refuse_mvs_options(args, scene) -> None:
@@ -148,9 +144,9 @@ def run(args) -> int:
                              ("median_radius", args.median_radius),
                              ("sweep_scale", args.sweep_scale),
                              ("coarse_iter", args.coarse_iter)) if v is not None}
-    est = estimate_depth(scene, views=_split(args.views), scale=args.depth_scale,
+    est = estimate_depth(scene, views=args.views, scale=args.depth_scale,
                          depth_range=args.depth_range, method=args.method,
-                         exclude=_split(args.exclude) or (),
+                         exclude=args.exclude or (),
                          consistency=not args.no_consistency, fill_segments=args.fill_segments,
                          checkpoint=resume_folder(out), **opt)  # a rerun after a kill resumes
     info = est.meta["depth_estimation"]

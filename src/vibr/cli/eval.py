@@ -47,9 +47,12 @@ variational method, and default to the renderer's documented defaults.
 
 def _floats(s):
     try:
-        return [float(x) for x in s.split(",") if x.strip()]
+        out = [float(x) for x in s.split(",") if x.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}") from None
+        out = []
+    if not out:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}")
+    return out
 
 
 def register(sub) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import add_quiet
+from ._options import names
 
 _DESC = """\
 Load a scene (format detected: HCI light field, Strecha, Middlebury *_par.txt,
@@ -31,18 +32,10 @@ def register(sub) -> None:
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
-    p.add_argument("--views", default=None,
+    p.add_argument("--views", type=names, default=None,
                    help="comma-separated view names or indices to load (default: all)")
     add_quiet(p)
     p.set_defaults(func=run)
-
-
-def parse_views(text):
-    """'a,b,3' → ['a', 'b', '3'] (None stays None)."""
-    if text is None:
-        return None
-    items = [s.strip() for s in str(text).split(",") if s.strip()]
-    return items or None
 
 
 def describe(scene) -> str:
@@ -82,7 +75,7 @@ def run(args) -> int:
     from ..io.images import headers_only
 
     with headers_only():
-        scene = load_scene(args.scene, scale=args.scale, views=parse_views(args.views))
+        scene = load_scene(args.scene, scale=args.scale, views=args.views)
     try:
         print(describe(scene), flush=True)
     except BrokenPipeError:  # `vibr info ... | head`: the reader has gone, not an error

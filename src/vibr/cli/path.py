@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import add_quiet
+from ._options import names
 
 _DESC = """\
 Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json schema
@@ -49,7 +50,7 @@ def register(sub) -> None:
     p.add_argument("--fps", type=float, default=24.0, help="frames per second (default 24)")
     p.add_argument("--size", type=_size, metavar="WxH", help="frame size (default: the first view's, after --scale)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.25 (default 1)")
-    p.add_argument("--views", help="interpolate: comma-separated views to pass through, in order (default: all)")
+    p.add_argument("--views", type=names, help="interpolate: comma-separated views to pass through, in order (default: all)")
     p.add_argument("--order", choices=["given", "proximity"], default=None,
                    help="interpolate: keep the given order or reorder the views by proximity (default: "
                         "proximity through all the scene's views, the given order with --views)")
@@ -81,8 +82,7 @@ def run(args) -> int:
     w, h = args.size if args.size else (None, None)
     kw = dict(n_frames=args.frames, seconds=seconds, fps=args.fps, width=w, height=h)
     if args.kind == "interpolate":
-        views = [v.strip() for v in args.views.split(",") if v.strip()] if args.views else None
-        path = P.interpolate(scene, views, order=args.order, **kw)
+        path = P.interpolate(scene, args.views, order=args.order, **kw)
     elif args.kind == "orbit":
         path = P.orbit(scene, full=True if args.full else None, **kw)
     else:

@@ -132,7 +132,7 @@ def run(args) -> int:
                 f"{t.get('total', 0):.2f} s (geometry {t.get('geometry', 0):.2f}, solve {t.get('solve', 0):.2f})")
     if res.metrics:
         print(f"PSNR {res.metrics['psnr']:.2f} dB  DSSIM {res.metrics['dssim']:.1f}  "
-              f"(SSIM {res.metrics['ssim']:.4f}; {METRIC_RULE})")
+              f"(SSIM {res.metrics['ssim']:.4f}; {METRIC_RULE})".replace("nan", "n/a"))
     print(f"wrote {args.output}")
     return 0
 

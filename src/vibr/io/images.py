@@ -25,6 +25,10 @@ from .atomic import atomic_path
 #: Set by :func:`headers_only`: :func:`build_views` then reads image headers, not pixels.
 _HEADERS_ONLY = contextvars.ContextVar("vibr_headers_only", default=False)
 
+#: The smallest image side vibr loads, after ``--scale``: the depth estimate's gradients and
+#: the solver's stencils need a few pixels (DSSIM needs 11 + 2·border: see vibr.metrics).
+MIN_SIDE = 8
+
 #: Image file extensions recognised when scanning folders.
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".webp")
 
@@ -402,6 +406,8 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
         depth, sz = e.get("depth"), e.get("sigma_z")
         if scale != 1.0:
             cam = cam.scaled(scale)
+        _check_side(size, cam, scale, e["path"])
+        if scale != 1.0:
             img = None if img is None else resize_image(img, cam.shape)
             if depth is not None:
                 depth = resize_depth(depth, cam.shape)
@@ -414,6 +420,17 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     with ThreadPoolExecutor(max_workers=workers) as ex:
         views = list(progress(ex.map(work, entries), desc=desc, total=n, unit="img"))
     return views
+
+
+def _check_side(size, cam, scale, path) -> None:
+    """A view smaller than :data:`MIN_SIDE` pixels a side (after ``scale``) is refused at
+    load, before any work (it would fail later, deep in the depth estimate or the metrics)."""
+    if min(cam.width, cam.height) >= MIN_SIDE:
+        return
+    at = f" at scale {scale:g}" if scale != 1.0 else ""
+    raise VibrInputError(
+        f"image of {size[1]}x{size[0]} is {cam.width}x{cam.height}{at}: vibr needs at least "
+        f"{MIN_SIDE} pixels a side" + (" (use a larger --scale)" if scale < 1.0 else ""), path)
 
 
 @contextlib.contextmanager

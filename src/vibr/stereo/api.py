@@ -591,6 +591,11 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
     n = len(scene)
     excl = {scene.index(k) for k in exclude}
     targets = [i for i in range(n) if i not in excl] if views is None else [scene.index(k) for k in views]
+    if not targets:
+        raise VibrInputError("no views to estimate depth for" + (" (every view is excluded)" if views is None
+                                                                   else " (the list of views is empty)"), scene.root)
+    if len(set(targets)) < len(targets):
+        raise VibrInputError("a view is listed twice in the views to estimate", scene.root)
     for i in targets:
         if i in excl:
             raise VibrInputError(f"view {scene.views[i].name} is both requested and excluded", scene.root)
