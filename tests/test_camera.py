@@ -50,3 +50,12 @@ def test_bad_rotation_is_rejected():
 def test_reflection_is_rejected():
     with pytest.raises(VibrInputError, match="not a rotation"):
         Camera(Camera.intrinsics(100, 10, 10), np.diag([1.0, 1.0, -1.0]), np.zeros(3), 10, 10)
+
+
+@pytest.mark.parametrize("bad", [64.5, True, "64", float("nan"), None])
+def test_image_size_must_be_an_integer(bad):
+    """A camera file's width of 64.5 was truncated to 64, true read as 1 and "64" as 64."""
+    K = Camera.intrinsics(50.0, 64, 48)
+    with pytest.raises(VibrInputError, match="width must be an integer number of pixels"):
+        Camera(K, np.eye(3), np.zeros(3), bad, 48)
+    assert Camera(K, np.eye(3), np.zeros(3), 64.0, np.int64(48)).shape == (48, 64)

@@ -271,6 +271,8 @@ def test_bad_path_timing_is_one_line(grid_dir, tmp_path, capsys, extra, msg):
      '[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": 0}]}', "fov"),
     ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '
      '[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": -30}]}', "fov"),
+    ('{"render_width": 8.5, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '
+     '[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": 30}]}', "render_width must be an integer"),
 ])
 def test_bad_path_files_exit_2_one_line_no_output(grid_dir, tmp_path, capsys, content, msg):
     from vibr.cli import main

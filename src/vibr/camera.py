@@ -36,6 +36,16 @@ def _as_matrix(a, shape, name, source):
     return m
 
 
+def image_side(v, name, source) -> int:
+    """An image side: an integer (or an integral float, as JSON writers give); a bool, a
+    string or 64.5 is refused rather than truncated."""
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise VibrInputError(f"{name} must be an integer number of pixels, got {v!r}", source)
+    if not (np.isfinite(v) and float(v) == int(v)):
+        raise VibrInputError(f"{name} must be an integer number of pixels, got {v!r}", source)
+    return int(v)
+
+
 @dataclass(frozen=True, eq=False)
 class Camera:
     """A pinhole camera with its image size.
@@ -79,7 +89,7 @@ class Camera:
             raise VibrInputError(
                 f"R is not a rotation (|R Rᵀ - I| = {err:.2g}, det = {np.linalg.det(R):.3g})", src
             )
-        w, h = int(self.width), int(self.height)
+        w, h = image_side(self.width, "width", src), image_side(self.height, "height", src)
         if w <= 0 or h <= 0:
             raise VibrInputError(f"image size must be positive, got {w}x{h}", src)
         for name, val in (("K", K), ("R", R), ("t", t)):

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .camera import Camera, axes_meeting_point
+from .camera import Camera, axes_meeting_point, image_side
 from .errors import VibrInputError
 from .io.atomic import atomic_path
 
@@ -271,11 +271,9 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
     if ctype != "perspective":
         raise VibrInputError(f"camera_type {ctype!r} is not supported (only 'perspective')", p)
     try:
-        w, h = int(d["render_width"]), int(d["render_height"])
+        w, h = image_side(d["render_width"], "render_width", p), image_side(d["render_height"], "render_height", p)
     except KeyError as exc:
         raise VibrInputError(f"missing {exc.args[0]!r}", p) from None
-    except (TypeError, ValueError):
-        raise VibrInputError("render_width and render_height must be integers", p) from None
     if w <= 0 or h <= 0:
         raise VibrInputError(f"render size must be positive, got {w}x{h}", p)
     T = s = None

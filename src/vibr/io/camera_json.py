@@ -63,7 +63,7 @@ def read_camera_json(path) -> Camera:
             raise VibrInputError(f"camera is missing key {k!r}", p)
     try:
         R = as_rotation(np.asarray(d["R"], dtype=np.float64).reshape(3, 3), p)
-        return Camera(d["K"], R, d["t"], int(d["width"]), int(d["height"]), p)
+        return Camera(d["K"], R, d["t"], d["width"], d["height"], p)
     except (TypeError, ValueError) as exc:
         if isinstance(exc, VibrInputError):
             raise

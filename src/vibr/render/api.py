@@ -148,7 +148,8 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
 
         src = _ready_sources(sources, target)
         gkw = with_sample_fields(geometry_kw, (m, params))
-        check_render_memory([v.camera.shape for v in src.views], cam.shape, keep=gkw["keep"])  # before allocating
+        check_render_memory([v.camera.shape for v in src.views], cam.shape, cam.source,  # before allocating
+                            keep=gkw["keep"])
         samples = compute_samples(src, cam, **gkw)
     t_geo = time.perf_counter() - t0
     params = _resolve_auto(src, cam, m, params)
