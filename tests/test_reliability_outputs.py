@@ -152,3 +152,44 @@ def test_atomic_path_registers_its_temporary_file_before_creating_it(tmp_path, m
     with contextlib.suppress(BaseException):  # its file is gone: leaving the write fails
         cm.__exit__(None, None, None)
     assert not list(tmp_path.glob(".*.part*")) and not (tmp_path / "x.txt").exists()
+
+
+# ----------------------------------------------------------------------------- a full disk
+def _vibr_with_file_limit(args, limit_bytes, cwd):
+    """``python -m vibr ARGS`` whose files (and ffmpeg's) may not grow past ``limit_bytes``
+    (RLIMIT_FSIZE: a write past it fails with EFBIG, as on a full disk with ENOSPC)."""
+    import os
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write fails instead of killing
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+    env = dict(os.environ, VIBR_CACHE_DIR=str(cwd / "cache"))
+    return subprocess.run([sys.executable, "-m", "vibr", "-q", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300, preexec_fn=limit)
+
+
+def test_a_write_that_fails_is_one_line_and_leaves_nothing(tmp_path):
+    """A full disk gave a traceback (PNG, .npy, scene folders) or, for the video, exit 0
+    with a truncated file (ffmpeg's status was not read)."""
+    from vibr.synthetic import make_scene
+
+    scene = save_scene(make_scene("grid", n_views=4, width=64, height=48, seed=1), tmp_path / "s")
+    for args, out in ((["render", scene, "--target", "1", "-o", "x.png", "--bit-depth", "16"], "x.png"),
+                      (["convert", scene, "c"], "c")):
+        r = _vibr_with_file_limit(args, 2000, tmp_path)
+        assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+        assert r.stderr.strip().splitlines()[-1].startswith(f"vibr {args[0]}: error: ")
+        assert "cannot write: File too large" in r.stderr and not (tmp_path / out).exists()
+        assert not list(tmp_path.glob(".*part*"))
+    # the frames are written (no limit), then the video cannot be: one line, no video
+    assert main(["path", "orbit", str(scene), "--frames", "4", "-o", str(tmp_path / "p.json"), "-q"]) == 0
+    assert main(["render", str(scene), "--path", str(tmp_path / "p.json"), "-o", str(tmp_path / "f"), "-q"]) == 0
+    r = _vibr_with_file_limit(["render", scene, "--path", "p.json", "-o", "v.mp4", "--frames-dir", "f"], 1500, tmp_path)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("vibr render: error: v.mp4: cannot write the video: ffmpeg:")
+    assert not (tmp_path / "v.mp4").exists()

@@ -172,7 +172,7 @@ def _save(path: Path, scene: Scene) -> None:
             with open(tmp, "wb") as f:
                 np.savez(f, **arrays)
     except OSError as exc:  # a cache that cannot be written only costs time next run
-        logger.warning("could not write the depth cache %s (%s)", path, exc)
+        logger.warning("could not write the depth cache %s (%s)", path, getattr(exc, "problem", exc))
 
 
 def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | None = None,
@@ -330,5 +330,5 @@ def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
                 pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
         prune_cache(folder, keep=[cpath])
     except OSError as exc:
-        logger.warning("could not write the scene cache %s (%s)", cpath, exc)
+        logger.warning("could not write the scene cache %s (%s)", cpath, getattr(exc, "problem", exc))
     return scene

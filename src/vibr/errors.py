@@ -23,6 +23,12 @@ class OutputExists(VibrInputError):
     """An output that exists and is not to be replaced (``overwrite=False``)."""
 
 
+class OutputFailed(VibrInputError, OSError):
+    """An output that could not be written: the disk is full, the folder read-only or not
+    ours (the message names the file and the system's reason). Also an :class:`OSError`,
+    so that writers of optional files (the caches) that skip a failed write still do."""
+
+
 def require_file(path: str | os.PathLike) -> str:
     """Return ``path`` as a string, or raise :class:`VibrInputError` if it is not a file."""
     p = os.fspath(path)

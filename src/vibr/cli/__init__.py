@@ -9,6 +9,7 @@ line on stderr and exit with status 2; no traceback.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import importlib.util
 import signal
@@ -118,6 +119,10 @@ def interrupt_on_sigterm():
     return signal.signal(signal.SIGTERM, _interrupt)
 
 
+#: Errors of the machine rather than of vibr (a full disk, a read-only folder): one line.
+_MACHINE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG}
+
+
 def main(argv=None) -> int:
     setup = _BEFORE_NUMBA.get(_command_in(sys.argv[1:] if argv is None else argv))
     if setup is not None:
@@ -141,6 +146,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"vibr {args.command}: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # a write outside vibr.io.atomic: the machine's state, not a bug
+        if exc.errno not in _MACHINE_ERRNOS:
+            raise
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"vibr {args.command}: error: {where}{exc.strerror}", file=sys.stderr)
+        return 2
     finally:
         vio.ALLOW_OUTSIDE_PATHS = False
         if before is not None:

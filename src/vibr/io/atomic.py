@@ -6,6 +6,8 @@ import contextlib
 import os
 import secrets
 
+from ..errors import OutputFailed, VibrInputError
+
 #: temporary files of the writes in progress in this process (:func:`remove_partial`)
 _ACTIVE: set = set()
 
@@ -41,10 +43,13 @@ def atomic_path(path, suffix: str | None = None):
     """
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
     if suffix is None:
         suffix = os.path.splitext(path)[1]
-    tmp = _new_temporary(folder, os.path.basename(path), suffix)
+    try:
+        os.makedirs(folder, exist_ok=True)
+        tmp = _new_temporary(folder, os.path.basename(path), suffix)
+    except OSError as exc:
+        raise write_failed(exc, path) from exc
     try:
         yield tmp
         # the temporary file is private (0600); give it the mode a plain open() would
@@ -52,12 +57,30 @@ def atomic_path(path, suffix: str | None = None):
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.remove(tmp)
+        if isinstance(exc, OSError) and not isinstance(exc, VibrInputError):
+            raise write_failed(exc, path) from exc
         raise
     finally:
         _ACTIVE.discard(tmp)
+
+
+def write_failed(exc: OSError, path) -> OutputFailed:
+    """The one-line error for an output that could not be written: the system's reason
+    (``No space left on device``, ``Read-only file system``, ...), or, for a short write
+    that set no error number (numpy's ``tofile``), the free space left."""
+    if exc.strerror:
+        reason = exc.strerror
+    else:
+        import shutil
+
+        with contextlib.suppress(OSError):
+            free = shutil.disk_usage(os.path.dirname(os.path.abspath(path)) or ".").free
+            exc = f"{exc}; {free / 2**20:.1f} MiB free on its disk"
+        reason = str(exc)
+    return OutputFailed(f"cannot write: {reason}", path)
 
 
 def remove_partial() -> None:

@@ -99,7 +99,7 @@ class ViewCheckpoint:
         except OSError as exc:
             self.unwritable = True
             logger.warning("cannot keep per-view results in %s (%s): an interrupted run will start over",
-                           self.folder, exc.strerror or exc)
+                           self.folder, exc.strerror or getattr(exc, "problem", exc))
 
     def remove(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)

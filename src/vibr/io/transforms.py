@@ -40,8 +40,9 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera
-from ..errors import OutputExists, VibrInputError
+from ..errors import OutputExists, OutputFailed, VibrInputError
 from ..scene import Scene
+from .atomic import write_failed
 from .camera_json import as_rotation, parse_json
 from .depthfiles import read_depth, write_depth
 from .images import build_views, image_size, write_image
@@ -325,6 +326,37 @@ def _safe_name(name: str) -> str:
     return out or "view"
 
 
+def _frame_entries(scene: Scene, files: list) -> list:
+    """The transforms.json frame of each view (OpenGL camera-to-world, pixel corner at 0),
+    its files named ``files`` (stems)."""
+    frames = []
+    for v, fn in zip(scene.views, files):
+        cam = v.camera
+        K = cam.K
+        M = np.eye(4)
+        M[:3, :3] = cam.R.T @ _GL_TO_CV
+        M[:3, 3] = cam.centre
+        fr = {"file_path": f"images/{fn}.png", "transform_matrix": M.tolist(),
+              "fl_x": float(K[0, 0]), "fl_y": float(K[1, 1]),
+              "cx": float(K[0, 2]) + 0.5, "cy": float(K[1, 2]) + 0.5,
+              "w": cam.width, "h": cam.height, "vibr_name": v.name}
+        if K[0, 1] != 0:
+            fr["vibr_skew"] = float(K[0, 1])
+        if v.depth is not None:
+            fr["depth_file_path"] = f"depth/{fn}.npy"
+            fr["depth_unit_scale_factor"] = 1.0
+        if v.sigma_z is not None:
+            if np.ndim(v.sigma_z) == 2:
+                fr["sigma_z_file_path"] = f"sigma_z/{fn}.npy"
+            else:
+                fr["sigma_z"] = float(v.sigma_z)
+        gp = scene.meta.get("grid_pos", {}).get(v.name)
+        if gp is not None:
+            fr["vibr_grid_pos"] = [int(gp[0]), int(gp[1])]
+        frames.append(fr)
+    return frames
+
+
 def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool = False) -> Path:
     """Write ``scene`` as a nerfstudio ``transforms.json`` folder (see the module docstring).
 
@@ -366,8 +398,11 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
     for v in scene.views:
         if v.image is None:
             raise VibrInputError(f"view {v.name} has no image to save", v.path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    except OSError as exc:
+        raise write_failed(exc, out) from exc
     try:
         files, used = [], set()
         for v in scene.views:
@@ -382,31 +417,7 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
         if any(v.sigma_z is not None and np.ndim(v.sigma_z) == 2 for v in scene.views):
             (tmp / "sigma_z").mkdir()
 
-        frames = []
-        for v, fn in zip(scene.views, files):
-            cam = v.camera
-            K = cam.K
-            M = np.eye(4)
-            M[:3, :3] = cam.R.T @ _GL_TO_CV
-            M[:3, 3] = cam.centre
-            fr = {"file_path": f"images/{fn}.png", "transform_matrix": M.tolist(),
-                  "fl_x": float(K[0, 0]), "fl_y": float(K[1, 1]),
-                  "cx": float(K[0, 2]) + 0.5, "cy": float(K[1, 2]) + 0.5,
-                  "w": cam.width, "h": cam.height, "vibr_name": v.name}
-            if K[0, 1] != 0:
-                fr["vibr_skew"] = float(K[0, 1])
-            if v.depth is not None:
-                fr["depth_file_path"] = f"depth/{fn}.npy"
-                fr["depth_unit_scale_factor"] = 1.0
-            if v.sigma_z is not None:
-                if np.ndim(v.sigma_z) == 2:
-                    fr["sigma_z_file_path"] = f"sigma_z/{fn}.npy"
-                else:
-                    fr["sigma_z"] = float(v.sigma_z)
-            gp = scene.meta.get("grid_pos", {}).get(v.name)
-            if gp is not None:
-                fr["vibr_grid_pos"] = [int(gp[0]), int(gp[1])]
-            frames.append(fr)
+        frames = _frame_entries(scene, files)
 
         def write_one(args):
             v, fn = args
@@ -436,7 +447,11 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
 
         write_marker(tmp)
         replace_folder(tmp, out, overwrite=overwrite)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OutputFailed):  # name the output, not its temporary folder
+            raise OutputFailed(exc.problem, out) from exc
+        if isinstance(exc, OSError) and not isinstance(exc, VibrInputError):
+            raise write_failed(exc, out) from exc
         raise
     return out

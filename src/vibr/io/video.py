@@ -10,8 +10,13 @@ The file is written under a temporary name and renamed when complete.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import re
+import signal
+import subprocess
+import tempfile
 
 import numpy as np
 
@@ -59,36 +64,69 @@ def write_video(path, frames, *, fps: float, crf: int = 18, preset: str = "mediu
 
     Returns ``(n_frames, width, height)`` of the encoded video (sizes after padding).
     Raises :class:`VibrInputError` for no frames, frames of different sizes, a bad
-    ``crf`` or ``fps``.
+    ``crf`` or ``fps``, and :class:`vibr.errors.OutputFailed` when ffmpeg fails (a full
+    disk: ffmpeg's exit status is checked, and its messages are kept for the error line
+    rather than printed).
     """
-    import imageio_ffmpeg
-
     p = os.fspath(path)
     check_video_options(p, fps=fps, crf=crf)
     n = 0
     size = None
-    with atomic_path(p) as tmp:
-        gen = None
+    with atomic_path(p) as tmp, tempfile.TemporaryFile() as log:
+        proc = None
         try:
             for img in frames:
                 f = even_pad(_as_uint8(img))
                 if size is None:
                     size = (f.shape[1], f.shape[0])
-                    gen = imageio_ffmpeg.write_frames(
-                        tmp, size, fps=float(fps), codec="libx264", quality=None, macro_block_size=1,
-                        pix_fmt_in="rgb24", pix_fmt_out="yuv420p", ffmpeg_log_level="error",
-                        output_params=["-crf", str(int(crf)), "-preset", preset, "-movflags", "+faststart"])
-                    gen.send(None)
+                    proc = _start_ffmpeg(tmp, size, fps, crf, preset, log)
                 elif (f.shape[1], f.shape[0]) != size:
                     raise VibrInputError(f"frame {n} is {f.shape[1]}x{f.shape[0]}, the video {size[0]}x{size[1]}", p)
-                gen.send(f)
+                try:
+                    proc.stdin.write(f.tobytes())
+                except BrokenPipeError:  # ffmpeg stopped: its status and message say why
+                    break
                 n += 1
-            if n == 0:
+            if n == 0 and proc is None:
                 raise VibrInputError("no frames to write", p)
+            _finish_ffmpeg(proc, log, p)
         finally:
-            if gen is not None:
-                gen.close()
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait()
     return n, size[0], size[1]
+
+
+def _start_ffmpeg(out, size, fps, crf, preset, log):
+    """ffmpeg reading raw RGB frames of ``size`` on its stdin, writing H.264 to ``out``
+    (its own session: a Ctrl-C reaches vibr, which stops it and removes the file)."""
+    import imageio_ffmpeg
+
+    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-f", "rawvideo", "-vcodec", "rawvideo",
+           "-s", f"{size[0]}x{size[1]}", "-pix_fmt", "rgb24", "-r", f"{float(fps):.10g}", "-i", "-",
+           "-an", "-vcodec", "libx264", "-pix_fmt", "yuv420p", "-crf", str(int(crf)), "-preset", preset,
+           "-movflags", "+faststart", "-v", "error", "-f", "mp4", out]
+    return subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log,
+                            start_new_session=True)
+
+
+def _finish_ffmpeg(proc, log, path) -> None:
+    """Close ffmpeg's input, wait, and raise :class:`OutputFailed` with its last message
+    when it did not end well."""
+    from ..errors import OutputFailed
+
+    with contextlib.suppress(BrokenPipeError):
+        proc.stdin.close()
+    if proc.wait() == 0:
+        return
+    log.seek(0)
+    lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+    rc = proc.returncode
+    if lines:
+        why = re.sub(r"^\[[^\]]*\]\s*", "", lines[-1])
+    else:
+        why = f"stopped by {signal.Signals(-rc).name}" if -rc in signal.valid_signals() else f"exit status {rc}"
+    raise OutputFailed(f"cannot write the video: ffmpeg: {why}", path)
 
 
 def read_video_info(path) -> tuple[int, int, int, float]:
