@@ -330,3 +330,22 @@ def test_photos_are_turned_upright_by_their_exif_orientation(tmp_path):
     assert _downscale_photos([tmp_path / "p.jpg"], tmp_path / "out", 1.0) == [(40, 60)]
     up = iio.imread(tmp_path / "out" / "p.png").astype(float).mean(axis=(1, 2))
     assert up.shape == (60,) and up[:25].min() > 200 and up[35:].max() < 50  # the white half on top
+
+
+def test_a_work_folder_without_room_is_refused_before_colmap(synthetic_photos, tmp_path, monkeypatch):
+    """COLMAP aborts the process when its disk fills up (a C++ stack dump, exit 134, seen
+    with a 3 MiB --work folder): too little free space is refused first, naming the folder."""
+    import collections
+    import shutil
+
+    real = shutil.disk_usage
+    usage = collections.namedtuple("usage", "total used free")
+
+    def small(path):
+        return usage(10 * 2**20, 9 * 2**20, 2**20) if str(path).startswith(str(tmp_path)) else real(path)
+
+    photos, _ = synthetic_photos
+    monkeypatch.setattr(shutil, "disk_usage", small)
+    with pytest.raises(VibrInputError, match=r"1 MiB free, calibrating \d+ photos needs about \d+ MiB"):
+        calibrate_scene(photos, work_dir=tmp_path / "w")
+    assert list((tmp_path / "w").iterdir()) == []

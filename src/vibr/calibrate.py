@@ -77,9 +77,7 @@ class CalibrationReport:
             f"{self.mean_reprojection_error_px:.3f} px",
             f"time: {t}",
         ]
-        if self.unregistered:
-            lines.append("not registered: " + ", ".join(self.unregistered))
-        return "\n".join(lines)
+        return "\n".join(lines)  # the photos left out: a warning at the mapping stage
 
 
 # ---------------------------------------------------------------------------- inputs
@@ -106,6 +104,27 @@ def list_photos(photos_dir) -> list[Path]:
     if dup:
         raise VibrInputError(f"several photos share a name stem: {', '.join(dup)}", d)
     return files
+
+
+def _check_work_space(work: Path, files: list[Path], opt, own_work: bool) -> None:
+    """Refuse a work folder without room for the calibration: COLMAP aborts the whole process
+    when its disk fills up (a C++ stack dump, no error line). The need, about: the resized
+    copies and the undistorted images (PNG, taken as half their 3 bytes a pixel each) and the
+    database (each photo's features, taken as half of ``max_features`` × 128 bytes)."""
+    import shutil
+
+    from .io.images import image_size
+
+    try:
+        px = sum(w * h for w, h in map(image_size, files)) * opt.scale ** 2
+        free = shutil.disk_usage(work).free
+    except (OSError, ValueError, VibrInputError):  # an unreadable header fails later, named
+        return
+    need = 3.0 * px + len(files) * opt.max_features * 64.0
+    if free < need:
+        where = "the temporary folder (set TMPDIR, or --work DIR on another disk)" if own_work else "--work"
+        raise VibrInputError(f"{free / 2**20:.0f} MiB free, calibrating {len(files)} photos needs about "
+                             f"{need / 2**20:.0f} MiB: free some space or choose another {where}", work)
 
 
 def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> list[tuple[int, int]]:
@@ -306,6 +325,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
     work.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}
     try:
+        _check_work_space(work, files, opt, own_work)
         img_dir, db, sparse, undist = _clean_work(work)
         t0 = time.perf_counter()
         logger.info(f"calibrate [1/5] resizing {len(files)} photos by {opt.scale:g}")
@@ -491,8 +511,9 @@ def _kept_model(recs, names: list[str], stem: dict, photos_dir: Path, opt: Calib
             + ", ".join(stem[n] for n in unregistered),
             photos_dir,
         )
-    if unregistered:
-        logger.info("calibrate: not registered (left out): " + ", ".join(stem[n] for n in unregistered))
+    if unregistered:  # a warning: the scene lacks them, which -q must not hide
+        logger.warning(f"calibrate: {len(unregistered)} of {len(names)} photos not registered (left out): "
+                       + ", ".join(stem[n] for n in unregistered))
     return best_key, rec, registered, unregistered
 
 
