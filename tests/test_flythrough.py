@@ -248,9 +248,12 @@ def test_bad_render_path_options_are_refused_before_any_frame(grid_dir, tmp_path
 
 @pytest.mark.parametrize("extra,msg", [(["--fps", "nan"], "fps must be positive and finite"),
                                        (["--seconds", "-1"], "the duration must be positive"),
-                                       (["--seconds", "inf"], "the duration must be positive")])
+                                       (["--seconds", "inf"], "the duration must be positive"),
+                                       (["--seconds", "1e9"], "is more than the 100000 frames"),
+                                       (["--frames", "100000000"], "is more than the 100000 frames")])
 def test_bad_path_timing_is_one_line(grid_dir, tmp_path, capsys, extra, msg):
-    """(--fps nan was a traceback; --seconds -1 read 'at least one frame, got -24'.)"""
+    """(--fps nan was a traceback; --seconds -1 read 'at least one frame, got -24'; --seconds
+    1e9 was a MemoryError traceback and --frames 100000000 ran until killed.)"""
     from vibr.cli import main
 
     pj = tmp_path / "p.json"

@@ -376,6 +376,10 @@ def scene_points(scene, max_points: int = 4096) -> np.ndarray | None:
     return None
 
 
+#: The most frames a generated path has: 100 000 frames are 69 minutes at 24 fps.
+MAX_FRAMES = 100_000
+
+
 def _frame_count(n_frames, seconds, fps) -> int:
     if not (math.isfinite(float(fps)) and float(fps) > 0):
         raise VibrInputError(f"fps must be positive and finite, got {fps}")
@@ -388,6 +392,9 @@ def _frame_count(n_frames, seconds, fps) -> int:
     n = int(n_frames)
     if n < 1:
         raise VibrInputError(f"a path needs at least one frame, got {n}")
+    if n > MAX_FRAMES:  # a typo (--seconds 1e9), not a video: it would fill the memory
+        raise VibrInputError(f"a path of {n} frames ({n / float(fps) / 3600:.3g} hours at {float(fps):g} fps) "
+                             f"is more than the {MAX_FRAMES} frames vibr path makes")
     return n
 
 
