@@ -57,7 +57,8 @@ def test_never_reads_the_target_image(grid, monkeypatch):
     monkeypatch.setattr(autotune, "tune", spy)
     import vibr.metrics
 
-    nan_target = tv.replace(image=np.full_like(tv.image, np.nan))
+    nan_target = tv.replace()
+    nan_target.image = np.full_like(tv.image, np.nan)  # after the View's checks, which refuse NaN
     monkeypatch.setattr(vibr.metrics, "view_metrics", lambda *a, **k: {})  # no metric of a NaN image
     r1 = render(src, nan_target, gamma="auto", lam="auto")
     r2 = render(src, tv, gamma="auto", lam="auto")

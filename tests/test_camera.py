@@ -59,3 +59,38 @@ def test_image_size_must_be_an_integer(bad):
     with pytest.raises(VibrInputError, match="width must be an integer number of pixels"):
         Camera(K, np.eye(3), np.zeros(3), bad, 48)
     assert Camera(K, np.eye(3), np.zeros(3), 64.0, np.int64(48)).shape == (48, 64)
+
+
+# ----------------------------------------------------------------------------- View's checks
+def _view(**kw):
+    from vibr import View
+
+    cam = Camera(Camera.intrinsics(20.0, 16, 12), np.eye(3), np.zeros(3), 16, 12)
+    return View("v", kw.pop("image", np.full((12, 16, 3), 0.5, np.float32)), cam, **kw)
+
+
+@pytest.mark.parametrize("image,msg", [
+    (np.full((12, 16, 3), np.nan, np.float32), "found nan"),
+    (np.full((12, 16, 3), 200.0), "divide by 255"),
+    (np.full((12, 16, 3), -0.5), "must lie in \\[0, 1\\]"),
+    (np.full((12, 16, 3), 3, np.int32), "got int32"),
+])
+def test_a_view_refuses_images_it_would_render_as_nonsense(image, msg):
+    """An 8-bit image passed as floats rendered at 3 dB without a word; NaN failed in SSIM."""
+    with pytest.raises(VibrInputError, match=msg):
+        _view(image=image)
+
+
+def test_a_view_scales_unsigned_integer_images_as_scikit_image():
+    assert _view(image=np.full((12, 16, 3), 255, np.uint8)).image.max() == 1.0
+    v = _view(image=np.full((12, 16, 3), 65535 // 5, np.uint16))
+    assert v.image.dtype == np.float32 and abs(v.image[0, 0, 0] - 0.2) < 1e-6
+
+
+@pytest.mark.parametrize("sz", [-1.0, float("inf"), float("nan"), np.full((12, 16), -0.1), np.full((12, 16), np.inf)])
+def test_a_view_refuses_negative_or_infinite_sigma_z(sz):
+    """(-1 and inf were accepted and rendered as if 0.)"""
+    with pytest.raises(VibrInputError, match="sigma_z"):
+        _view(sigma_z=sz)
+    assert _view(sigma_z=0.0).sigma_z == 0.0
+    assert np.isnan(_view(sigma_z=np.full((12, 16), np.nan)).sigma_z).all()

@@ -12,6 +12,7 @@ or a bare :class:`Camera` (intrinsics, pose and size).
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -45,6 +46,45 @@ def check_depth(depth, shape, source=None, what="depth") -> np.ndarray:
             source,
         )
     return d
+
+
+#: How far outside [0, 1] a float image may stray (resampling overshoot) before it is taken
+#: for an image in other units (0..255) and refused.
+IMAGE_RANGE_TOL = 1e-3
+
+
+def check_image(img, source=None) -> np.ndarray:
+    """An H×W×3 image as vibr holds it: contiguous float32 in [0, 1]. Unsigned integers are
+    scaled by their type's range (uint8 / 255, uint16 / 65535), as scikit-image's
+    ``img_as_float`` does; a float image outside [0, 1] (values in 0..255, NaN) or of another
+    type is refused rather than rendered as nonsense."""
+    a = np.asarray(img)
+    if a.dtype.kind == "u":
+        return np.ascontiguousarray(a, dtype=np.float32) / np.float32(np.iinfo(a.dtype).max)
+    if a.dtype.kind != "f":
+        raise VibrInputError(f"image must be float in [0, 1] or unsigned integers, got {a.dtype}", source)
+    a = np.ascontiguousarray(a, dtype=np.float32)
+    lo, hi = (float(a.min()), float(a.max())) if a.size else (0.0, 0.0)
+    if not (lo >= -IMAGE_RANGE_TOL and hi <= 1.0 + IMAGE_RANGE_TOL):  # NaN fails too
+        hint = " (an 8-bit image as floats? divide by 255)" if hi > 2.0 else ""
+        raise VibrInputError(f"image values must lie in [0, 1], found {lo:.4g} .. {hi:.4g}{hint}", source)
+    return a
+
+
+def check_sigma_z(sigma_z, shape, source=None):
+    """Depth uncertainty (scene units): a finite scalar >= 0, or an H×W map of values >= 0
+    (NaN where unknown). Negative or infinite values are refused (the weights square them)."""
+    if np.ndim(sigma_z) == 0:
+        s = float(sigma_z)
+        if not (math.isfinite(s) and s >= 0):
+            raise VibrInputError(f"sigma_z must be finite and >= 0, got {s}", source)
+        return s
+    m = np.asarray(sigma_z, dtype=np.float32)
+    if m.shape != tuple(shape):
+        raise VibrInputError(f"sigma_z has shape {m.shape}, image has {tuple(shape)}", source)
+    if np.any(np.isinf(m)) or np.any(m[np.isfinite(m)] < 0):
+        raise VibrInputError("sigma_z map has negative or infinite values", source)
+    return m
 
 
 def depth_from_file_values(values, shape, source=None, what="depth") -> np.ndarray:
@@ -114,14 +154,11 @@ class View:
                     f"{self.camera.width}x{self.camera.height}",
                     src,
                 )
-            self.image = np.ascontiguousarray(img, dtype=np.float32)
+            self.image = check_image(img, src)
         if self.depth is not None:
             self.depth = check_depth(self.depth, self.camera.shape, src)
-        if self.sigma_z is not None and np.ndim(self.sigma_z) > 0:
-            s = np.asarray(self.sigma_z, dtype=np.float32)
-            if s.shape != self.camera.shape:
-                raise VibrInputError(f"sigma_z has shape {s.shape}, image has {self.camera.shape}", src)
-            self.sigma_z = s
+        if self.sigma_z is not None:
+            self.sigma_z = check_sigma_z(self.sigma_z, self.camera.shape, src)
         if self.fallback is not None:
             m = np.asarray(self.fallback, dtype=bool)
             if m.shape != self.camera.shape:

@@ -134,7 +134,11 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     t_all = time.perf_counter()
     cam = target.camera if isinstance(target, View) else target
     if not isinstance(cam, Camera):
-        raise VibrInputError("target must be a View or a Camera")
+        hint = ("; a view of a scene by name or index: vibr.pipeline.prepare(scene, target)"
+                if isinstance(target, (str, int)) else "")
+        raise VibrInputError(f"target must be a View or a Camera, got {type(target).__name__}{hint}")
+    if not isinstance(sources, Scene):
+        raise VibrInputError(f"sources must be a Scene, got {type(sources).__name__}")
     t0 = time.perf_counter()
     src = sources
     if samples is not None and isinstance(target, View) and target.name in sources.names:
