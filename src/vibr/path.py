@@ -399,8 +399,8 @@ def _frame_count(n_frames, seconds, fps) -> int:
 
 
 def _output_size(cameras, width, height, scale):
-    w = cameras[0].width if width is None else int(width)
-    h = cameras[0].height if height is None else int(height)
+    w = cameras[0].width if width is None else image_side(width, "width", None)
+    h = cameras[0].height if height is None else image_side(height, "height", None)
     if width is None and height is None and scale != 1.0:
         w, h = max(1, round(w * scale)), max(1, round(h * scale))
     if w <= 0 or h <= 0:

@@ -216,6 +216,9 @@ class Scene:
     def __post_init__(self):
         if len(self.views) == 0:
             raise VibrInputError("scene has no views", self.root)
+        bad = next((v for v in self.views if not isinstance(v, View)), None)
+        if bad is not None:
+            raise VibrInputError(f"a scene holds View objects, got {type(bad).__name__}", self.root)
         names = [v.name for v in self.views]
         dup = {n for n in names if names.count(n) > 1}
         if dup:
