@@ -71,6 +71,13 @@ def test_unrecognised_folder(capsys, tmp_path):
     code, err = run_cli(capsys, "info", tmp_path)
     assert_one_line_error(code, err, tmp_path, "no supported scene", "vibr calibrate")
 
+    # a Blender / NeRF-synthetic folder: its split files are named, and the way to use them
+    root = make_transforms(tmp_path / "blender")
+    (root / "transforms.json").rename(root / "transforms_train.json")
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, "found transforms_train.json", "give one of these files as SCENE")
+    assert run_cli(capsys, "info", root / "transforms_train.json")[0] == 0
+
 
 def test_garbage_png_in_light_field(capsys, tmp_path, cotton_dir):
     os.symlink(cotton_dir / "input_Cam040.png", tmp_path / "input_Cam040.png")

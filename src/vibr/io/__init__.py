@@ -69,10 +69,16 @@ def detect_format(path) -> str:
     if is_strecha_folder(p):
         return "strecha"
     photos = any(is_image_file(f) for f in p.iterdir())
+    # a Blender / NeRF-synthetic folder: transforms_train.json, transforms_test.json, ...
+    splits = sorted(f.name for f in p.glob("transforms_*.json") if f.is_file())
+    hint = ""
+    if splits:
+        hint = f"; found {', '.join(splits)}: give one of these files as SCENE, e.g. {p / splits[0]}"
+    elif photos:
+        hint = "; photos without cameras are calibrated first: vibr calibrate (COLMAP)"
     raise VibrInputError(
         "no supported scene found (looked for transforms.json, input_CamNNN.png light-field views, "
-        "a COLMAP sparse model, a *_par.txt file, or images with .camera files)"
-        + ("; photos without cameras are calibrated first: vibr calibrate (COLMAP)" if photos else ""), p)
+        "a COLMAP sparse model, a *_par.txt file, or images with .camera files)" + hint, p)
 
 
 def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | None = None, **options):
