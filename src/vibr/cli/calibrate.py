@@ -79,5 +79,5 @@ def run(args) -> int:
         work_dir=args.work,
         verbose=verbosity(args) > 0,  # -v shows COLMAP's own log
     )
-    print(f"calibrate: wrote {len(scene)} views to {args.out}")
+    print(f"calibrate: wrote {len(scene)} view{'s' if len(scene) != 1 else ''} to {args.out}")
     return 0

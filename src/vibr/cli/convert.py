@@ -51,6 +51,6 @@ def run(args) -> int:
     scene = load_scene(args.scene, scale=args.scale, views=args.views)
     out = save_scene(scene, out, overwrite=args.overwrite)
     nd = sum(v.depth is not None for v in scene.views)
-    print(f"wrote {out}/transforms.json: {len(scene)} views ({scene.meta.get('format', '?')}), "
+    print(f"wrote {out}/transforms.json: {len(scene)} view{'s' if len(scene) != 1 else ''} ({scene.meta.get('format', '?')}), "
           f"{nd} with depth" + (f", {len(scene.points)} sparse points" if scene.points is not None else ""))
     return 0

@@ -103,7 +103,7 @@ def run(args) -> int:
         logger.warning("listening on %s: anyone who reaches this machine at %s can use the viewer "
                        "(its photographs, and keyframe paths written beside --path-out)", args.host, url)
     try:
-        print(f"vibr view: {scene.name} ({len(scene)} views) at {url}  (Ctrl-C to stop)", flush=True)
+        print(f"vibr view: {scene.name} ({len(scene)} view{'s' if len(scene) != 1 else ''}) at {url}  (Ctrl-C to stop)", flush=True)
         while True:
             time.sleep(0.5)
     except KeyboardInterrupt:

@@ -89,8 +89,8 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
         wd = _target_depths(sources, cam)
     if depth is None:
         if wd.size == 0:
-            raise VibrInputError("planar proxy: no depth or sparse points to choose the plane depth; "
-                                 "pass depth=", sources.root)
+            raise VibrInputError("planar proxy: the sources have no depth maps or sparse points seen from the "
+                                 "target to place the plane at (planar_proxy(depth=D) places it)", sources.root)
         depth = float(np.median(wd))
     depth = float(depth)
     if not depth > 0:
