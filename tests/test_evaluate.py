@@ -185,6 +185,21 @@ def test_eval_on_a_middlebury_layout_folder(scene, tmp_path, capsys):
                  "--json", str(tmp_path / "m2.json"), "-q"]) == 2
     err = capsys.readouterr().err
     assert "planar" in err and len(err.strip().splitlines()) == 1
+    # depth files at the photographs' size serve a scene loaded at --scale 0.5 (resized,
+    # nearest neighbour; they were refused), and give nearly the same result
+    out2 = tmp_path / "m3.json"
+    assert main(["eval", str(d), "--target", "obj0005", "--depth", "files", "--depth-files", str(d / "depth"),
+                 "--method", "ulr", "--scale", "0.5", "--json", str(out2), "-q"]) == 0
+    assert json.loads(out2.read_text())["results"][0]["psnr"] > 30
+    # a map of another aspect, or a file that is no .npy, is one line naming the file
+    np.save(d / "depth" / "obj0001.npy", np.ones((10, 10), np.float32))
+    (d / "depth" / "obj0002.npy").write_bytes(b"garbage")
+    for view, msg in (("obj0001", "another aspect"), ("obj0002", "not a .npy file")):
+        capsys.readouterr()
+        assert main(["render", str(d), "--target", "obj0005", "--sources", view, "--depth", "files",
+                     "--depth-files", str(d / "depth"), "-o", str(tmp_path / "r.png"), "-q"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert msg in err and f"{view}.npy" in err and len(err.splitlines()) == 1, err
 
 
 def test_figures_downscale_and_crop_inside_mask(tmp_path):

@@ -207,12 +207,27 @@ def _files_depth(src: Scene, depth_files) -> Scene:
     folder = Path(depth_files)
     if not folder.is_dir():
         raise VibrInputError("depth folder not found", folder)
-    views = []
+    views, resized = [], []
     for v in src.views:
         p = _depth_file_for(folder, v.name)
         d = read_depth(p)
         if d.shape != v.shape:
-            raise VibrInputError(f"depth is {d.shape[1]}x{d.shape[0]}, view {v.name} is "
-                                 f"{v.shape[1]}x{v.shape[0]}", p)
+            d = _depth_at_view_size(d, v, p)
+            resized.append(v.name)
         views.append(v.replace(depth=d))
+    if resized:
+        logger.info("depth files of another size than their views (--scale, or depth computed at another "
+                    "resolution) resized to them, nearest neighbour: %s", ", ".join(resized))
     return src.replace(views=views)
+
+
+def _depth_at_view_size(d, v, path):
+    """A depth map of the view's aspect at another resolution (a full-size map for a view
+    loaded at ``--scale``): resized by nearest neighbour, which never mixes depths across an
+    edge. Another aspect is an error (the map is of another image)."""
+    from .io.images import resize_depth
+
+    (h, w), (H, W) = d.shape, v.shape
+    if abs(w * H - h * W) > max(w, W):  # aspects differ by more than a pixel's rounding
+        raise VibrInputError(f"depth is {w}x{h}, view {v.name} is {W}x{H} (another aspect)", path)
+    return resize_depth(d, v.shape)

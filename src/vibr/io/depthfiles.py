@@ -128,6 +128,9 @@ def read_depth_values(path, scale: float | None = None) -> np.ndarray:
     elif ext == ".bin":
         a = read_colmap_bin(p)
     elif ext == ".npy":
+        with open(p, "rb") as fh:
+            if fh.read(6) != b"\x93NUMPY":  # else numpy's message is about pickles
+                raise VibrInputError("not a .npy file (no NumPy header)", p)
         try:
             a = np.load(p, allow_pickle=False)
         except Exception as exc:
