@@ -228,3 +228,18 @@ def test_optional_fields_are_computed_only_when_kept():
     b = render_samples(full, "bvs", psf="footprint", source_centres=np.zeros((1, 3)),
                        target_centre=np.array([0.1, 0, 0])).image
     np.testing.assert_array_equal(a, b)
+
+
+def test_a_target_one_pixel_high_is_refused_by_name():
+    """(It read 'no source view sees the target': no bilinear cell fits in one row.)"""
+    import pytest
+
+    from vibr.camera import Camera
+    from vibr.errors import VibrInputError
+    from vibr.geometry import compute_samples
+    from vibr.synthetic import make_scene
+
+    s = make_scene("grid", n_views=3, width=48, height=32, seed=1)
+    c = s.views[1].camera
+    with pytest.raises(VibrInputError, match="768x1: at least 2 pixels a side"):
+        compute_samples(s.subset([0, 2]), Camera(Camera.intrinsics(50.0, 768, 1), c.R, c.t, 768, 1))

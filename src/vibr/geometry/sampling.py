@@ -235,6 +235,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     if not isinstance(cam, Camera):
         raise VibrInputError("target must be a Camera or a View", None)
     tname = cam.source or (target.name if isinstance(target, View) else "target camera")
+    if min(cam.width, cam.height) < 2:  # a sample's bilinear cell needs two rows and columns
+        raise VibrInputError(f"the target is {cam.width}x{cam.height}: at least 2 pixels a side", tname)
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
