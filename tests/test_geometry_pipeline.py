@@ -232,11 +232,6 @@ def test_optional_fields_are_computed_only_when_kept():
 
 def test_a_target_one_pixel_high_is_refused_by_name():
     """(It read 'no source view sees the target': no bilinear cell fits in one row.)"""
-    import pytest
-
-    from vibr.camera import Camera
-    from vibr.errors import VibrInputError
-    from vibr.geometry import compute_samples
     from vibr.synthetic import make_scene
 
     s = make_scene("grid", n_views=3, width=48, height=32, seed=1)
