@@ -134,6 +134,14 @@ def test_malformed_json(capsys, tmp_path):
     assert_one_line_error(code, err, root / "transforms.json", "malformed JSON", "line 1")
 
 
+def test_json_from_a_windows_editor_loads(capsys, tmp_path):
+    """A UTF-8 byte-order mark and CRLF line ends (Notepad) were 'malformed JSON'."""
+    root = make_transforms(tmp_path / "s")
+    text = (root / "transforms.json").read_bytes()
+    (root / "transforms.json").write_bytes(b"\xef\xbb\xbf" + text.replace(b"\n", b"\r\n"))
+    assert run_cli(capsys, "info", root)[0] == 0
+
+
 def _strecha(tmp_path, fountain_dir, names=("0000", "0001")):
     (tmp_path / "images").mkdir()
     (tmp_path / "gt_dense_cameras").mkdir()

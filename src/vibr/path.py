@@ -653,7 +653,7 @@ def scene_applied_transform(scene_path):
     if tj is None:
         return None
     try:
-        with open(tj, encoding="utf-8") as f:
+        with open(tj, encoding="utf-8-sig") as f:
             d = json.load(f)
         A = d.get("applied_transform") if isinstance(d, dict) else None
         return None if A is None else np.asarray(A, np.float64).reshape(3, 4)

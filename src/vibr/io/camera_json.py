@@ -41,10 +41,11 @@ def as_rotation(R, source=None, what: str = "R") -> np.ndarray:
 
 
 def parse_json(path) -> object:
-    """Load a JSON file; syntax errors become one-line :class:`VibrInputError` s."""
+    """Load a JSON file; syntax errors become one-line :class:`VibrInputError` s. A UTF-8
+    byte-order mark (what Windows editors write) is accepted."""
     p = require_file(path)
     try:
-        with open(p, encoding="utf-8") as f:
+        with open(p, encoding="utf-8-sig") as f:
             return json.load(f)
     except json.JSONDecodeError as exc:
         raise VibrInputError(f"malformed JSON: {exc.msg} at line {exc.lineno} column {exc.colno}", p) from None
