@@ -112,6 +112,25 @@ def test_read_image_grey_and_rgba(tmp_path):
     assert read_image(tmp_path / "a.png").shape == (3, 4, 3)
 
 
+def test_read_image_cmyk_grey_alpha_and_float_range(tmp_path):
+    """A CMYK JPEG read as its C, M, Y planes (mean error 0.78), grey + alpha was refused, and
+    a float TIFF of 0..255 was clipped to a white image without a word."""
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    rgb = (rng.random((32, 48, 3)) * 255).astype(np.uint8)
+    rgb = np.repeat(np.repeat(rgb[::8, ::8], 8, 0), 8, 1)[:32, :48]  # flat blocks: JPEG keeps them
+    Image.fromarray(rgb).convert("CMYK").save(tmp_path / "c.jpg", quality=100)
+    assert np.abs(read_image(tmp_path / "c.jpg") - rgb / 255.0).mean() < 0.02
+    Image.fromarray(rgb[..., 0]).convert("LA").save(tmp_path / "la.png")
+    np.testing.assert_allclose(read_image(tmp_path / "la.png")[..., 1], rgb[..., 0] / 255.0, atol=1e-6)
+    Image.fromarray(rgb[..., 0].astype(np.float32)).save(tmp_path / "f255.tif")
+    with pytest.raises(VibrInputError, match=r"f255.tif: float image with values \d+ .. \d+: vibr reads float images"):
+        read_image(tmp_path / "f255.tif")
+    Image.fromarray(rgb[..., 0].astype(np.float32) / 255).save(tmp_path / "f1.tif")
+    np.testing.assert_allclose(read_image(tmp_path / "f1.tif")[..., 2], rgb[..., 0] / 255.0, atol=1e-6)
+
+
 def test_garbage_image_raises_naming_file(tmp_path):
     p = tmp_path / "junk.png"
     p.write_bytes(b"\x00garbage" * 20)

@@ -164,6 +164,22 @@ def decode_png16(path) -> np.ndarray:
     return a[..., 0] if ch == 1 else a
 
 
+#: Pillow modes that are not RGB channels: converted to RGB when read (CMYK JPEGs from print
+#: workflows read as C, M, Y otherwise; grey with alpha has two channels).
+_CONVERT_MODES = {"CMYK", "YCbCr", "LAB", "HSV", "LA", "La", "PA"}
+
+
+def _colour_mode(path) -> str | None:
+    """The file's Pillow mode from its header, or None (not a Pillow format)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return im.mode
+    except Exception:  # noqa: BLE001 - imageio reads it, or names the problem
+        return None
+
+
 def read_image(path) -> np.ndarray:
     """Read an image file as an H×W×3 float32 array in [0, 1].
 
@@ -180,12 +196,14 @@ def read_image(path) -> np.ndarray:
         try:
             with warnings.catch_warnings():  # imageio's legacy plugins warn while probing bad files
                 warnings.simplefilter("ignore")
-                a = iio.imread(p, extension=os.path.splitext(p)[1].lower() or None)
+                mode = _colour_mode(p)
+                a = iio.imread(p, extension=os.path.splitext(p)[1].lower() or None,
+                               **({"mode": "RGB"} if mode in _CONVERT_MODES else {}))
         except Exception as exc:  # imageio raises many types for corrupt files
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise VibrInputError(f"cannot read image ({msg})", p) from None
     a = np.asarray(a)
-    if a.ndim == 3 and a.shape[2] == 1:
+    if a.ndim == 3 and a.shape[2] in (1, 2):  # grey, grey + alpha (16-bit PNG)
         a = a[..., 0]
     if a.ndim == 2:
         a = np.repeat(a[..., None], 3, axis=2)
@@ -198,6 +216,12 @@ def read_image(path) -> np.ndarray:
         a = a.astype(np.float32)
         if not np.all(np.isfinite(a)):
             raise VibrInputError("image has non-finite pixel values", p)
+        from ..scene import IMAGE_RANGE_TOL
+
+        lo, hi = float(a.min()), float(a.max())
+        if lo < -IMAGE_RANGE_TOL or hi > 1.0 + IMAGE_RANGE_TOL:  # clipped, it would be mostly white
+            raise VibrInputError(f"float image with values {lo:.4g} .. {hi:.4g}: vibr reads float images "
+                                 "as intensities in [0, 1] (save it as 8- or 16-bit, or scale it)", p)
         return np.ascontiguousarray(np.clip(a, 0.0, 1.0))
     if np.issubdtype(a.dtype, np.integer):
         return np.ascontiguousarray(a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max))
