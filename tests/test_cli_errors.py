@@ -259,3 +259,11 @@ def test_a_path_too_large_for_memory_is_refused_before_the_depth(capsys, tmp_pat
                         "-o", tmp_path / "v", "--no-cache")
     assert_one_line_error(code, err, "p.json", "100000x100000", "vibr path --size")
     assert not (tmp_path / "v").exists()
+
+
+def test_one_source_with_estimated_depth_says_why(capsys, tmp_path, temple_dir):
+    """(--views 1 read 'depth estimation needs at least two input views' of a 16-view scene.)"""
+    code, err = run_cli(capsys, "render", temple_dir, "--scale", "0.1", "--target", "3", "--views", "1",
+                        "-o", tmp_path / "x.png")
+    assert_one_line_error(code, err, "one source is too few", "--views K")
+    assert not (tmp_path / "x.png").exists()

@@ -123,6 +123,9 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     elif depth == "estimated":
         from .depthcache import estimated_depth
 
+        if len(src) < 2:  # the target takes no part in its sources' depth
+            raise VibrInputError("depth is estimated from the sources alone and one source is too few: "
+                                 "use two or more (--views K, --sources), or --depth planar / files", scene.root)
         if len(src) > MANY_SOURCES and n_views is None and sources is None:
             logger.warning(f"estimating depth for all {len(src)} source views, one after the other: "
                            f"n_views=K (--views K) renders from the K best views only")
