@@ -30,3 +30,12 @@ def test_demo_bad_size_is_a_one_line_error(capsys):
     code = main(["demo", "--size", "0", "-q"])
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1, err
+
+
+def test_demo_negative_seed_is_a_one_line_error(capsys):
+    """(--seed -1 was numpy's traceback.)"""
+    from vibr.cli import main
+
+    code = main(["demo", "--seed", "-1", "--no-video", "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err == "vibr demo: error: seed must be an integer >= 0 (numpy's rule), got -1"

@@ -782,6 +782,8 @@ def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 12
     the layout, seed and baseline; the grid layout sets ``scene.grid`` and
     ``meta["grid_pos"]`` (name → (row, col)).
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise VibrInputError(f"seed must be an integer >= 0 (numpy's rule), got {seed!r}")
     world = default_world(seed) if world is None else world
     kw = dict(width=width, height=height, fov_deg=fov_deg)
     gshape = None
