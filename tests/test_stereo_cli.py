@@ -84,3 +84,24 @@ def test_estimate_depth_refuses_an_empty_or_repeated_request():
         estimate_depth(s, exclude=[0, 1, 2])
     with pytest.raises(VibrInputError, match="listed twice"):
         estimate_depth(s, views=[1, "view_001"])
+
+
+def test_an_estimate_that_keeps_little_warns():
+    """A depth range that misses the scene kept 0 % of pixels without a word."""
+    import io
+    import logging
+
+    from vibr.progress import configure_logging
+    from vibr.stereo import estimate_depth
+    from vibr.synthetic import make_scene
+
+    lg = logging.getLogger("vibr")
+    saved = (list(lg.handlers), lg.level, lg.propagate)  # whatever earlier CLI tests left
+    buf = io.StringIO()
+    try:
+        configure_logging(0, stream=buf)
+        s = make_scene("arc", n_views=4, width=48, height=32, seed=2)  # plane sweep
+        estimate_depth(s, views=[0], depth_range=(100.0, 200.0))
+    finally:
+        lg.handlers[:], lg.level, lg.propagate = saved
+    assert "% of pixels kept" in buf.getvalue() and "--depth-range" in buf.getvalue(), buf.getvalue()

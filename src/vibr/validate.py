@@ -11,7 +11,7 @@ parameter, its value and the allowed range, before any work.
   intensity scale) > 0, all finite; ``max_iter`` ≥ 1, ``n_outer`` ≥ 0, ``tv_iter`` ≥ 1,
   ``ulr_k`` ≥ 1 integers.
 * :func:`check_depth_params` — called by :func:`vibr.stereo.estimate_depth` on its keyword
-  arguments: ``step_px`` > 0, ``max_planes`` ≥ 1, ``n_planes`` ≥ 2 or None,
+  arguments: ``step_px`` > 0, ``max_planes`` ≥ 2, ``n_planes`` ≥ 2 or None,
   ``median_radius`` ≥ 0 or None, ``refine_iter`` ≥ 0, ``n_neighbours`` ≥ 1, ``radius`` ≥ 1
   or None, ``max_cost``, ``eps``, ``rel_tol``, ``px_tol`` finite and > 0, ``mem_bytes`` > 0.
 """
@@ -74,7 +74,7 @@ def check_depth_params(**kw) -> None:
     """Check :func:`vibr.stereo.estimate_depth`'s numeric keyword arguments (module docstring)."""
     checks = {
         "step_px": lambda v: _real("step_px", v, lo=0.0, lo_open=True),
-        "max_planes": lambda v: _int("max_planes", v, lo=1),
+        "max_planes": lambda v: _int("max_planes", v, lo=2),  # one plane is no sweep
         "n_planes": lambda v: _int("n_planes", v, lo=2, none_ok=True),
         "median_radius": lambda v: _int("median_radius", v, lo=0, none_ok=True),
         "refine_iter": lambda v: _int("refine_iter", v, lo=0),

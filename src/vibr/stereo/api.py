@@ -571,7 +571,22 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
                                 "excluded": [scene.views[i].name for i in sorted(excl)],
                                 "time_s": time.perf_counter() - t_all}
     logger.info(f"depth: {len(targets)} view(s) by {method} in {time.perf_counter() - t_all:.1f} s")
+    _warn_if_little_kept(stats)
     return replace(scene, views=new_views, meta=meta)
+
+
+#: Below this fraction of pixels kept (mean over the views), the estimate is said to be poor.
+FEW_KEPT = 0.1
+
+
+def _warn_if_little_kept(stats: dict) -> None:
+    """A warning when the estimate kept little: the depth maps are then mostly holes, which
+    a render fills from the fallback proxy or leaves empty."""
+    kept = [v["kept"] for v in stats.values() if v.get("role") == "target" and "kept" in v]
+    if kept and float(np.mean(kept)) < FEW_KEPT:
+        logger.warning(f"depth: only {100 * float(np.mean(kept)):.1f} % of pixels kept: the views may "
+                       f"barely overlap, or the depth range (--depth-range) or the planes "
+                       f"(--max-planes, --step-px) may miss the scene")
 
 
 def depth_method(scene: Scene, method: str = "auto") -> str:
