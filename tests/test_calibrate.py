@@ -232,7 +232,10 @@ def test_bad_options(synthetic_photos):
         calibrate_scene(photos, scale=0)
     # COLMAP's own checks raised a ValueError with a traceback for these
     for kw, word in ((dict(max_features=0), "max_features"), (dict(num_threads=-5), "num_threads"),
-                     (dict(num_threads=0), "num_threads")):
+                     (dict(num_threads=0), "num_threads"),
+                     # raised to 2 without a word; photos of 1x0 pixels failed in COLMAP's mapper
+                     (dict(min_registered=0), "min_registered must be an integer >= 2"),
+                     (dict(scale=0.001), "would be 0x0 pixels: SIFT needs at least 32")):
         with pytest.raises(VibrInputError, match=word):
             calibrate_scene(photos, **kw)
     # a misspelt option is an error, not a silent default

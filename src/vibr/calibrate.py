@@ -106,6 +106,25 @@ def list_photos(photos_dir) -> list[Path]:
     return files
 
 
+#: The smallest photo side (pixels, after ``--scale``) SIFT is given: below it a photo yields
+#: too few features to register (a 640×480 photo at --scale 0.001 was 1×0 pixels).
+MIN_PHOTO_SIDE = 32
+
+
+def _check_photo_sides(files: list[Path], scale: float, photos_dir: Path) -> None:
+    """Refuse a ``scale`` that makes a photo smaller than :data:`MIN_PHOTO_SIDE` a side."""
+    from .io.images import image_size
+
+    try:
+        w, h, f = min(((*image_size(f), f) for f in files), key=lambda t: min(t[0], t[1]))
+    except (OSError, ValueError, VibrInputError):  # an unreadable header fails later, named
+        return
+    if min(w, h) * scale < MIN_PHOTO_SIDE:
+        raise VibrInputError(f"at --scale {scale:g} photo {f.name} ({w}x{h}) would be "
+                             f"{round(w * scale)}x{round(h * scale)} pixels: SIFT needs at least "
+                             f"{MIN_PHOTO_SIDE} a side (use a larger --scale)", photos_dir)
+
+
 def _check_work_space(work: Path, files: list[Path], opt, own_work: bool) -> None:
     """Refuse a work folder without room for the calibration: COLMAP aborts the whole process
     when its disk fills up (a C++ stack dump, no error line). The need, about: the resized
@@ -325,6 +344,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
     work.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}
     try:
+        _check_photo_sides(files, opt.scale, photos_dir)
         _check_work_space(work, files, opt, own_work)
         img_dir, db, sparse, undist = _clean_work(work)
         t0 = time.perf_counter()
@@ -379,8 +399,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
 
 
 def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> CalibrateOptions:
-    """``opt`` checked (:class:`VibrInputError` naming ``photos_dir``), ``min_registered``
-    at least 2."""
+    """``opt`` checked (:class:`VibrInputError` naming ``photos_dir``)."""
     if not (0 < opt.scale <= 4):
         raise VibrInputError(f"scale must be in (0, 4], got {opt.scale}", photos_dir)
     if opt.matcher not in MATCHERS:
@@ -394,7 +413,10 @@ def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> Ca
     if int(opt.num_threads) != opt.num_threads or not (opt.num_threads >= 1 or opt.num_threads == -1):
         raise VibrInputError(f"num_threads must be an integer >= 1 (or -1: every core), got {opt.num_threads}",
                              photos_dir)
-    opt = replace(opt, min_registered=max(2, int(opt.min_registered)))
+    if int(opt.min_registered) != opt.min_registered or opt.min_registered < 2:  # refused, not raised to 2
+        raise VibrInputError(f"min_registered must be an integer >= 2 (a model needs two photos), "
+                             f"got {opt.min_registered}", photos_dir)
+    opt = replace(opt, min_registered=int(opt.min_registered))
     if n_photos < opt.min_registered:
         raise VibrInputError(
             f"{n_photos} photos found, calibrate needs at least {opt.min_registered}", photos_dir

@@ -47,7 +47,7 @@ def register(sub) -> None:
                    help="fail if fewer photos register (default 3)")
     p.add_argument("--max-features", type=int, default=8192, help="SIFT features per photo (default 8192)")
     p.add_argument("--threads", type=int, default=2, help="COLMAP threads, -1 for every core (default 2)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of COLMAP's RANSAC and mapper (default 0)")
     p.add_argument("--work", metavar="DIR", default=None,
                    help="keep COLMAP's database, model and undistorted images here")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_SCENE if it exists")
