@@ -149,11 +149,25 @@ def depth_mode(scene: Scene, depth: str = "auto") -> str:
     return depth
 
 
+def missing_view_camera(scene: Scene, name) -> Camera | None:
+    """The camera of a light field's absent grid position named ``name``
+    (``scene.meta["missing_views"]``, :func:`vibr.io.hci.load_hci`): a novel view, with no
+    photograph to compare with. None for any other name."""
+    missing = scene.meta.get("missing_views") or {}
+    if not isinstance(name, str) or name in scene.names or Path(name).stem not in missing:
+        return None
+    stem = Path(name).stem
+    logger.info(f"{stem} is missing from the light field: rendered at its grid position, "
+                "with no photograph to compare with")
+    return Camera.from_dict(missing[stem], source=f"{stem} (missing from the light field)")
+
+
 def _hold_out(scene: Scene, target, sources, n_views):
     """(sources, target View or Camera, target index or None): the target held out, the
     sources listed or the ``n_views`` best (:func:`vibr.selection.select_views`)."""
     from .selection import select_views
 
+    target = missing_view_camera(scene, target) or target
     if isinstance(target, Camera):
         src = scene if sources is None else scene.subset(sources)
         tview, tcam, ti = target, target, None

@@ -257,6 +257,9 @@ class Scene:
             return names.index(stem)
         if key.lstrip("-").isdigit():
             return self.index(int(key))
+        if stem in (self.meta.get("missing_views") or {}):
+            raise VibrInputError(f"{stem} is missing from this light field: there is no photograph of it "
+                                 f"(vibr render --target {stem} renders it at its grid position)", self.root)
         raise VibrInputError(
             f"no view named {key!r} (views: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''})",
             self.root,

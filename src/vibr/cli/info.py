@@ -52,6 +52,10 @@ def describe(scene) -> str:
         if m.get("centre_view"):
             line += f"; centre view {m['centre_view']} (row {rows // 2}, col {cols // 2})"
         extra.append(line)
+        missing = sorted(m.get("missing_views") or {})
+        if missing:
+            shown = ", ".join(missing[:8]) + (", ..." if len(missing) > 8 else "")
+            extra.append(f"missing  {shown} (no photograph; 'vibr render --target NAME' renders one)")
     if "focal_px" in m:
         extra.append(f"camera   f = {m['focal_px']:.6g} px, baseline {m['baseline']:.6g}, "
                      f"focus distance Z0 = {m['focus_distance']:.6g} ({m.get('camera_rule')})")

@@ -79,7 +79,7 @@ def _add_path_options(p) -> None:
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, read_camera_json, write_image
-    from ..pipeline import prepare
+    from ..pipeline import missing_view_camera, prepare
     from ..io.outputs import check_output
     from ..render import render
     from ..render.methods import method_params
@@ -109,6 +109,8 @@ def run(args) -> int:
         target = read_camera_json(tgt)
         if args.scale != 1.0:
             target = target.scaled(args.scale)
+    elif missing_view_camera(scene, tgt) is not None:  # a light field's absent position: a novel view
+        target = tgt
     else:
         target = scene[tgt].name
         if args.sources and target in [scene[s].name for s in args.sources]:

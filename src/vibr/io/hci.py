@@ -210,15 +210,19 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
     f, b, Z0, rule = _grid_model(cfg, W, H, disp, depth_gt)
     depth_c = _centre_depth(disp, depth_gt, f, b, Z0, disp_path)
 
-    cx0, cy0 = (W - 1) / 2.0, (H - 1) / 2.0
-    entries, grid_pos = [], {}
-    for i, p in sorted(files.items()):
+    def grid_camera(i, source):
         r, c = divmod(i, cols)
         K = np.array([[f, 0.0, cx0 + (c - cc) * f * b / Z0],
                       [0.0, f, cy0 + (r - rc) * f * b / Z0],
                       [0.0, 0.0, 1.0]])
         C = np.array([(c - cc) * b, (r - rc) * b, 0.0])
-        cam = Camera.from_centre(K, np.eye(3), C, W, H, source=str(p))
+        return Camera.from_centre(K, np.eye(3), C, W, H, source=source)
+
+    cx0, cy0 = (W - 1) / 2.0, (H - 1) / 2.0
+    entries, grid_pos = [], {}
+    for i, p in sorted(files.items()):
+        r, c = divmod(i, cols)
+        cam = grid_camera(i, str(p))
         name = p.stem
         grid_pos[name] = (r, c)
         entries.append({"name": name, "path": p, "camera": cam,
@@ -236,4 +240,8 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
     }
     if cfg is not None and cfg["pose"]:
         meta["centre_pose_cfg"] = cfg["pose"]
+    # the grid positions without a photograph: their cameras are known, so they can be rendered
+    # (``vibr render LF --target input_Cam040``; Camera.to_dict: the meta stays JSON)
+    meta["missing_views"] = {f"input_Cam{i:03d}": grid_camera(i, None).scaled(scale).to_dict()
+                             for i in range(rows * cols) if i not in files}
     return Scene(vs, name=root.name, root=root, grid=(rows, cols), meta=meta)

@@ -486,4 +486,9 @@ def scaled_scene(scene, s: float):
         views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
                                depth=None if v.depth is None else resize_depth(v.depth, cam.shape), sigma_z=sz,
                                fallback=fb))
-    return scene.replace(views=views)
+    meta = dict(scene.meta)
+    if meta.get("missing_views"):  # a light field's absent positions (vibr.io.hci)
+        from ..camera import Camera
+
+        meta["missing_views"] = {n: Camera.from_dict(d).scaled(s).to_dict() for n, d in meta["missing_views"].items()}
+    return scene.replace(views=views, meta=meta)
