@@ -120,7 +120,8 @@ def interrupt_on_sigterm():
 
 
 #: Errors of the machine rather than of vibr (a full disk, a read-only folder): one line.
-_MACHINE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG}
+_FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG}
+_MACHINE_ERRNOS = _FULL_ERRNOS | {errno.EACCES, errno.EPERM}
 
 
 def main(argv=None) -> int:
@@ -150,7 +151,8 @@ def main(argv=None) -> int:
         if exc.errno not in _MACHINE_ERRNOS:
             raise
         where = f"{exc.filename}: " if exc.filename else ""
-        print(f"vibr {args.command}: error: {where}{exc.strerror}", file=sys.stderr)
+        what = "cannot write: " if exc.errno in _FULL_ERRNOS else ""  # numba's cache, a temporary file
+        print(f"vibr {args.command}: error: {where}{what}{exc.strerror}", file=sys.stderr)
         return 2
     finally:
         vio.ALLOW_OUTSIDE_PATHS = False
