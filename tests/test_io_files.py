@@ -125,7 +125,7 @@ def test_read_image_cmyk_grey_alpha_and_float_range(tmp_path):
     Image.fromarray(rgb[..., 0]).convert("LA").save(tmp_path / "la.png")
     np.testing.assert_allclose(read_image(tmp_path / "la.png")[..., 1], rgb[..., 0] / 255.0, atol=1e-6)
     Image.fromarray(rgb[..., 0].astype(np.float32)).save(tmp_path / "f255.tif")
-    with pytest.raises(VibrInputError, match=r"f255.tif: float image with values \d+ .. \d+: vibr reads float images"):
+    with pytest.raises(VibrInputError, match=r"f255.tif: float image values must lie in \[0, 1\], found \d+ .. \d+ \(8-bit values as floats"):
         read_image(tmp_path / "f255.tif")
     Image.fromarray(rgb[..., 0].astype(np.float32) / 255).save(tmp_path / "f1.tif")
     np.testing.assert_allclose(read_image(tmp_path / "f1.tif")[..., 2], rgb[..., 0] / 255.0, atol=1e-6)

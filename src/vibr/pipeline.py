@@ -157,8 +157,6 @@ def missing_view_camera(scene: Scene, name) -> Camera | None:
     if not isinstance(name, str) or name in scene.names or Path(name).stem not in missing:
         return None
     stem = Path(name).stem
-    logger.info(f"{stem} is missing from the light field: rendered at its grid position, "
-                "with no photograph to compare with")
     return Camera.from_dict(missing[stem], source=f"{stem} (missing from the light field)")
 
 
@@ -167,7 +165,10 @@ def _hold_out(scene: Scene, target, sources, n_views):
     sources listed or the ``n_views`` best (:func:`vibr.selection.select_views`)."""
     from .selection import select_views
 
-    target = missing_view_camera(scene, target) or target
+    absent = missing_view_camera(scene, target)
+    if absent is not None:
+        logger.info(f"{absent.source}: rendered at its grid position, with no photograph to compare with")
+        target = absent
     if isinstance(target, Camera):
         src = scene if sources is None else scene.subset(sources)
         tview, tcam, ti = target, target, None

@@ -65,9 +65,9 @@ def check_image(img, source=None) -> np.ndarray:
         raise VibrInputError(f"image must be float in [0, 1] or unsigned integers, got {a.dtype}", source)
     a = np.ascontiguousarray(a, dtype=np.float32)
     lo, hi = (float(a.min()), float(a.max())) if a.size else (0.0, 0.0)
-    if not (lo >= -IMAGE_RANGE_TOL and hi <= 1.0 + IMAGE_RANGE_TOL):  # NaN fails too
-        hint = " (an 8-bit image as floats? divide by 255)" if hi > 2.0 else ""
-        raise VibrInputError(f"image values must lie in [0, 1], found {lo:.4g} .. {hi:.4g}{hint}", source)
+    if not (lo >= -IMAGE_RANGE_TOL and hi <= 1.0 + IMAGE_RANGE_TOL):  # NaN and inf fail too
+        hint = " (8-bit values as floats? divide by 255)" if hi > 2.0 else ""
+        raise VibrInputError(f"float image values must lie in [0, 1], found {lo:.4g} .. {hi:.4g}{hint}", source)
     return a
 
 

@@ -213,16 +213,9 @@ def read_image(path) -> np.ndarray:
     if a.dtype in (np.uint8, np.uint16):
         return np.ascontiguousarray(from_uint(a))
     if np.issubdtype(a.dtype, np.floating):
-        a = a.astype(np.float32)
-        if not np.all(np.isfinite(a)):
-            raise VibrInputError("image has non-finite pixel values", p)
-        from ..scene import IMAGE_RANGE_TOL
+        from ..scene import check_image  # NaN, or 0..255 as floats: refused, not clipped to white
 
-        lo, hi = float(a.min()), float(a.max())
-        if lo < -IMAGE_RANGE_TOL or hi > 1.0 + IMAGE_RANGE_TOL:  # clipped, it would be mostly white
-            raise VibrInputError(f"float image with values {lo:.4g} .. {hi:.4g}: vibr reads float images "
-                                 "as intensities in [0, 1] (save it as 8- or 16-bit, or scale it)", p)
-        return np.ascontiguousarray(np.clip(a, 0.0, 1.0))
+        return np.clip(check_image(a, p), 0.0, 1.0)
     if np.issubdtype(a.dtype, np.integer):
         return np.ascontiguousarray(a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max))
     raise VibrInputError(f"unsupported pixel type {a.dtype}", p)
