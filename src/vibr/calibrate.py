@@ -111,38 +111,41 @@ def list_photos(photos_dir) -> list[Path]:
 MIN_PHOTO_SIDE = 32
 
 
-def _check_photo_sides(files: list[Path], scale: float, photos_dir: Path) -> None:
-    """Refuse a ``scale`` that makes a photo smaller than :data:`MIN_PHOTO_SIDE` a side."""
+def _header_sizes(files: list[Path]) -> list[tuple[int, int]] | None:
+    """(width, height) of each photo from its header, or None if one is unreadable."""
     from .io.images import image_size
 
     try:
-        w, h, f = min(((*image_size(f), f) for f in files), key=lambda t: min(t[0], t[1]))
-    except (OSError, ValueError, VibrInputError):  # an unreadable header fails later, named
-        return
+        return [image_size(f) for f in files]
+    except (OSError, ValueError, VibrInputError):
+        return None
+
+
+def _check_photo_sides(files: list[Path], sizes, scale: float, photos_dir: Path) -> None:
+    """Refuse a ``scale`` that makes a photo smaller than :data:`MIN_PHOTO_SIDE` a side."""
+    (w, h), f = min(zip(sizes, files), key=lambda t: min(t[0]))
     if min(w, h) * scale < MIN_PHOTO_SIDE:
         raise VibrInputError(f"at --scale {scale:g} photo {f.name} ({w}x{h}) would be "
                              f"{round(w * scale)}x{round(h * scale)} pixels: SIFT needs at least "
                              f"{MIN_PHOTO_SIDE} a side (use a larger --scale)", photos_dir)
 
 
-def _check_work_space(work: Path, files: list[Path], opt, own_work: bool) -> None:
+def _check_work_space(work: Path, sizes, opt, own_work: bool) -> None:
     """Refuse a work folder without room for the calibration: COLMAP aborts the whole process
     when its disk fills up (a C++ stack dump, no error line). The need, about: the resized
     copies and the undistorted images (PNG, taken as half their 3 bytes a pixel each) and the
     database (each photo's features, taken as half of ``max_features`` × 128 bytes)."""
     import shutil
 
-    from .io.images import image_size
-
     try:
-        px = sum(w * h for w, h in map(image_size, files)) * opt.scale ** 2
         free = shutil.disk_usage(work).free
-    except (OSError, ValueError, VibrInputError):  # an unreadable header fails later, named
+    except OSError:
         return
-    need = 3.0 * px + len(files) * opt.max_features * 64.0
+    px = sum(w * h for w, h in sizes) * opt.scale ** 2
+    need = 3.0 * px + len(sizes) * opt.max_features * 64.0
     if free < need:
         where = "the temporary folder (set TMPDIR, or --work DIR on another disk)" if own_work else "--work"
-        raise VibrInputError(f"{free / 2**20:.0f} MiB free, calibrating {len(files)} photos needs about "
+        raise VibrInputError(f"{free / 2**20:.0f} MiB free, calibrating {len(sizes)} photos needs about "
                              f"{need / 2**20:.0f} MiB: free some space or choose another {where}", work)
 
 
@@ -344,8 +347,10 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
     work.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}
     try:
-        _check_photo_sides(files, opt.scale, photos_dir)
-        _check_work_space(work, files, opt, own_work)
+        sizes = _header_sizes(files)  # None when a header is unreadable: named later
+        if sizes is not None:
+            _check_photo_sides(files, sizes, opt.scale, photos_dir)
+            _check_work_space(work, sizes, opt, own_work)
         img_dir, db, sparse, undist = _clean_work(work)
         t0 = time.perf_counter()
         logger.info(f"calibrate [1/5] resizing {len(files)} photos by {opt.scale:g}")

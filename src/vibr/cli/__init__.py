@@ -119,6 +119,11 @@ def interrupt_on_sigterm():
     return signal.signal(signal.SIGTERM, _interrupt)
 
 
+def count(n: int, noun: str) -> str:
+    """'1 view', '3 views': the number and the noun, singular for one."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 #: Errors of the machine rather than of vibr (a full disk, a read-only folder): one line.
 _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG}
 _MACHINE_ERRNOS = _FULL_ERRNOS | {errno.EACCES, errno.EPERM}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_quiet
+from . import add_quiet, count
 
 _EPILOG = """\
 stages: resize -> SIFT features -> matching -> incremental mapping -> undistortion to pinhole;
@@ -79,5 +79,5 @@ def run(args) -> int:
         work_dir=args.work,
         verbose=verbosity(args) > 0,  # -v shows COLMAP's own log
     )
-    print(f"calibrate: wrote {len(scene)} view{'s' if len(scene) != 1 else ''} to {args.out}")
+    print(f"calibrate: wrote {count(len(scene), 'view')} to {args.out}")
     return 0

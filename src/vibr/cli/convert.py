@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_quiet
+from . import add_quiet, count
 from ._options import add_overwrite_option, names
 
 _DESC = """\
@@ -51,6 +51,6 @@ def run(args) -> int:
     scene = load_scene(args.scene, scale=args.scale, views=args.views)
     out = save_scene(scene, out, overwrite=args.overwrite)
     nd = sum(v.depth is not None for v in scene.views)
-    print(f"wrote {out}/transforms.json: {len(scene)} view{'s' if len(scene) != 1 else ''} ({scene.meta.get('format', '?')}), "
+    print(f"wrote {out}/transforms.json: {count(len(scene), 'view')} ({scene.meta.get('format', '?')}), "
           f"{nd} with depth" + (f", {len(scene.points)} sparse points" if scene.points is not None else ""))
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_quiet
+from . import add_quiet, count
 from ._options import names
 
 _DESC = """\
@@ -90,6 +90,6 @@ def run(args) -> int:
     path.meta["scene"] = str(args.scene)
     path.meta["scale"] = args.scale
     P.write_camera_path(args.output, path)
-    print(f"wrote {args.output}: {args.kind} path, {len(path)} frame{'s' if len(path) != 1 else ''} of {path.width}x{path.height} "
+    print(f"wrote {args.output}: {args.kind} path, {count(len(path), 'frame')} of {path.width}x{path.height} "
           f"at {path.fps:g} fps ({path.seconds:.2f} s)")
     return 0

@@ -7,7 +7,7 @@ import logging
 import math
 import time
 
-from . import add_quiet
+from . import add_quiet, count
 from ._options import add_cache_options, add_method_option, cache_dir_from_args
 
 logger = logging.getLogger(__name__)
@@ -103,7 +103,7 @@ def run(args) -> int:
         logger.warning("listening on %s: anyone who reaches this machine at %s can use the viewer "
                        "(its photographs, and keyframe paths written beside --path-out)", args.host, url)
     try:
-        print(f"vibr view: {scene.name} ({len(scene)} view{'s' if len(scene) != 1 else ''}) at {url}  (Ctrl-C to stop)", flush=True)
+        print(f"vibr view: {scene.name} ({count(len(scene), 'view')}) at {url}  (Ctrl-C to stop)", flush=True)
         while True:
             time.sleep(0.5)
     except KeyboardInterrupt:
