@@ -71,15 +71,13 @@ def write_failed(exc: OSError, path) -> OutputFailed:
     """The one-line error for an output that could not be written: the system's reason
     (``No space left on device``, ``Read-only file system``, ...), or, for a short write
     that set no error number (numpy's ``tofile``), the free space left."""
-    if exc.strerror:
-        reason = exc.strerror
-    else:
+    reason = exc.strerror or str(exc)
+    if not exc.strerror:
         import shutil
 
         with contextlib.suppress(OSError):
             free = shutil.disk_usage(os.path.dirname(os.path.abspath(path)) or ".").free
-            exc = f"{exc}; {free / 2**20:.1f} MiB free on its disk"
-        reason = str(exc)
+            reason += f"; {free / 2**20:.1f} MiB free on its disk"
     return OutputFailed(f"cannot write: {reason}", path)
 
 
