@@ -76,3 +76,17 @@ def test_colmap_distortion_is_an_error(tmp_path):
     write_model(tmp_path, model="OPENCV", params=(100.0, 110.0, 32.0, 24.0, 0.1, 0, 0, 0))
     with pytest.raises(VibrInputError, match="image_undistorter"):
         load_scene(tmp_path)
+
+
+def test_colmap_dense_depth_at_its_max_image_size_is_resized(tmp_path):
+    """COLMAP's dense maps at a max_image_size below the images' (a common setting) made
+    the whole scene fail to load: maps of the image's aspect are resized (nearest)."""
+    write_model(tmp_path)
+    d = np.full((24, 32), 2.0, np.float32)
+    d[:3] = 0.0  # unknown: the top 6 rows at full size
+    write_colmap_bin(tmp_path / "stereo" / "depth_maps" / "img1.png.geometric.bin", d)
+    depth = load_scene(tmp_path)["img1"].depth
+    assert depth.shape == (48, 64) and np.isnan(depth[:6]).all() and np.all(depth[6:] == 2.0)
+    write_colmap_bin(tmp_path / "stereo" / "depth_maps" / "img1.png.geometric.bin", np.ones((24, 24), np.float32))
+    with pytest.raises(VibrInputError, match="img1.png.geometric.bin: depth is 24x24, image img1 is 64x48"):
+        load_scene(tmp_path)

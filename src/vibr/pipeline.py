@@ -219,6 +219,7 @@ def _planar_depth(scene: Scene, src: Scene, tcam) -> Scene:
 def _files_depth(src: Scene, depth_files) -> Scene:
     """Depth read from ``NAME.npy/.pfm/.png/.bin`` files in the folder ``depth_files``."""
     from .io import read_depth
+    from .io.depthfiles import fit_depth
 
     if depth_files is None:
         raise VibrInputError("depth 'files' needs a folder of depth files (depth_files)")
@@ -230,7 +231,7 @@ def _files_depth(src: Scene, depth_files) -> Scene:
         p = _depth_file_for(folder, v.name)
         d = read_depth(p)
         if d.shape != v.shape:
-            d = _depth_at_view_size(d, v, p)
+            d = fit_depth(d, v.shape, p, f"view {v.name}")
             resized.append(v.name)
         views.append(v.replace(depth=d))
     if resized:
@@ -238,14 +239,3 @@ def _files_depth(src: Scene, depth_files) -> Scene:
                     "resolution) resized to them, nearest neighbour: %s", ", ".join(resized))
     return src.replace(views=views)
 
-
-def _depth_at_view_size(d, v, path):
-    """A depth map of the view's aspect at another resolution (a full-size map for a view
-    loaded at ``--scale``): resized by nearest neighbour, which never mixes depths across an
-    edge. Another aspect is an error (the map is of another image)."""
-    from .io.images import resize_depth
-
-    (h, w), (H, W) = d.shape, v.shape
-    if abs(w * H - h * W) > max(w, W):  # aspects differ by more than a pixel's rounding
-        raise VibrInputError(f"depth is {w}x{h}, view {v.name} is {W}x{H} (another aspect)", path)
-    return resize_depth(d, v.shape)

@@ -26,7 +26,7 @@ from ..errors import VibrInputError
 from ..scene import Scene
 from .camera_json import as_rotation
 from .colmap_check import check_colmap_model
-from .depthfiles import read_depth
+from .depthfiles import fit_depth, read_depth
 from .images import build_views
 
 _MODEL_FILES = ("cameras", "images")
@@ -112,7 +112,8 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     for e in entries:
         dp = e.pop("depth_path")
         if dp.is_file():
-            e["depth"] = read_depth(dp, shape=e["camera"].shape)
+            # COLMAP's dense maps are at its max_image_size (often smaller than the images)
+            e["depth"] = fit_depth(read_depth(dp), e["camera"].shape, dp, f"image {e['name']}")
             n_depth += 1
     vs = build_views(entries, scale, desc="reading images")
     pts = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)

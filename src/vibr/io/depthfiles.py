@@ -157,6 +157,21 @@ def read_depth_values(path, scale: float | None = None) -> np.ndarray:
     return a
 
 
+def fit_depth(depth: np.ndarray, shape, path=None, what: str = "the view") -> np.ndarray:
+    """A depth map of the view's aspect at another resolution (a full-size map for a view
+    loaded at ``--scale``, COLMAP's dense maps at its ``max_image_size``) resized to
+    ``shape`` = (H, W) by nearest neighbour, which never mixes depths across an edge. Another
+    aspect is an error naming ``path`` (the map is of another image)."""
+    from .images import resize_depth
+
+    (h, w), (H, W) = depth.shape[:2], tuple(shape)
+    if (h, w) == (H, W):
+        return depth
+    if abs(w * H - h * W) > max(w, W):  # aspects differ by more than a pixel's rounding
+        raise VibrInputError(f"depth is {w}x{h}, {what} is {W}x{H} (another aspect)", path)
+    return resize_depth(depth, (H, W))
+
+
 def read_depth(path, scale: float | None = None, shape=None) -> np.ndarray:
     """Read an orthogonal depth map: H×W float32, NaN where unknown (0 in the file).
 
