@@ -267,3 +267,17 @@ def test_one_source_with_estimated_depth_says_why(capsys, tmp_path, temple_dir):
                         "-o", tmp_path / "x.png")
     assert_one_line_error(code, err, "one source is too few", "--views K")
     assert not (tmp_path / "x.png").exists()
+
+
+def test_transforms_depth_at_another_resolution(capsys, tmp_path):
+    """A depth_file_path map at half the image's size (depth networks, dense MVS at a lower
+    resolution) was refused: maps of the image's aspect are resized; another aspect is named."""
+    from vibr.io import load_scene
+
+    d = np.full((6, 8), 2.0, np.float32)
+    d[:1] = 0.0  # unknown: two rows at full size
+    s = load_scene(make_transforms(tmp_path / "half", depth=d))
+    assert s.views[0].depth.shape == (12, 16) and np.isnan(s.views[0].depth[:2]).all()
+    root = make_transforms(tmp_path / "square", depth=np.full((5, 5), 2.0, np.float32))
+    code, err = run_cli(capsys, "info", root)
+    assert_one_line_error(code, err, "a_depth.npy", "depth is 5x5, frame 0's image is 16x12 (another aspect)")

@@ -44,7 +44,7 @@ from ..errors import OutputExists, OutputFailed, VibrInputError
 from ..scene import Scene
 from .atomic import write_failed
 from .camera_json import as_rotation, parse_json
-from .depthfiles import read_depth, write_depth
+from .depthfiles import fit_depth, read_depth, write_depth
 from .images import build_views, image_size, write_image
 
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0])
@@ -288,12 +288,12 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
             dpath = _resolve(base, dp, "depth_file_path", src, i, allow_outside)
             fac = _get(fr, meta, "depth_unit_scale_factor")
             fac = None if fac is None else _number(fac, f"frame {i}: depth_unit_scale_factor", src, positive=True)
-            e["depth"] = read_depth(dpath, fac, shape=cam.shape)
+            e["depth"] = fit_depth(read_depth(dpath, fac), cam.shape, dpath, f"frame {i}'s image")
         sz = _get(fr, meta, "sigma_z")
         szp = fr.get("sigma_z_file_path")
         if szp is not None:
             spath = _resolve(base, szp, "sigma_z_file_path", src, i, allow_outside)
-            s = read_depth(spath, 1.0, shape=cam.shape)  # same validation: finite, >= 0
+            s = fit_depth(read_depth(spath, 1.0), cam.shape, spath, f"frame {i}'s image")  # finite, >= 0
             e["sigma_z"] = np.nan_to_num(s, nan=0.0)
         elif sz is not None:
             sz = _number(sz, f"frame {i}: sigma_z", src)
