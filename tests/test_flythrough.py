@@ -432,7 +432,7 @@ def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     mtime = frames[0].stat().st_mtime_ns
     assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(out), "--views", "4"]) == 0
     cap = capsys.readouterr()
-    assert "rendered 1 frames (4 already there)" in cap.out
+    assert "rendered 1 frame (4 already there)" in cap.out
     assert "frames: 1/1 in" in cap.err  # the progress counts only the frame still to render
     assert frames[0].stat().st_mtime_ns == mtime and frames[2].exists()
     assert read_video_info(out)[:3] == (5, 48, 34)

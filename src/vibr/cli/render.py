@@ -7,7 +7,7 @@ import logging
 import os
 
 from ._executor import add_executor_args, executor_from_args
-from . import add_quiet
+from . import add_quiet, count
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
                        add_render_params, add_source_options, cache_dir_from_args, check_depth_args, names,
                        refuse_ignored_params, render_params)
@@ -186,7 +186,7 @@ def _run_path(args) -> int:
     what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
     per = f", {res.seconds_per_frame:.2f} s per frame" if res.rendered else ""
-    print(f"rendered {res.rendered} frames ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}"
+    print(f"rendered {count(res.rendered, 'frame')} ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}"
           f"{per}; total {t['total']:.1f} s (depth: {res.depth_source} "
           f"({t['depth']:.1f} s); video {t['video']:.1f} s); wrote {what}")
     return 0
