@@ -281,3 +281,11 @@ def test_transforms_depth_at_another_resolution(capsys, tmp_path):
     root = make_transforms(tmp_path / "square", depth=np.full((5, 5), 2.0, np.float32))
     code, err = run_cli(capsys, "info", root)
     assert_one_line_error(code, err, "a_depth.npy", "depth is 5x5, frame 0's image is 16x12 (another aspect)")
+
+
+def test_render_output_that_is_no_image_format(capsys, tmp_path):
+    """(-o view.npy rendered, then wrote a TIFF under that name.)"""
+    root = make_transforms(tmp_path / "s", depth=np.full((12, 16), 2.0, np.float32))
+    code, err = run_cli(capsys, "render", root, "--target", "0", "-o", tmp_path / "v.npy")
+    assert_one_line_error(code, err, "v.npy", ".npy is not an image format vibr writes")
+    assert not (tmp_path / "v.npy").exists()

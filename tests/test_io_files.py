@@ -199,3 +199,20 @@ def test_atomic_output_has_the_usual_file_mode(tmp_path):
     finally:
         os.umask(umask)
     assert (os.stat(tmp_path / "out.txt").st_mode & 0o777) == 0o644
+
+
+def test_write_image_formats(tmp_path):
+    """-o out.npy wrote a TIFF under that name; WebP and PPM of a 16-bit image failed in Pillow."""
+    from vibr.io.images import WRITE_EXTS
+
+    img = np.random.default_rng(0).random((12, 16, 3)).astype(np.float32)
+    for ext in WRITE_EXTS:
+        write_image(tmp_path / f"w{ext}", img)
+        back = read_image(tmp_path / f"w{ext}")
+        assert back.shape == img.shape
+        if ext in (".png", ".tif", ".tiff"):
+            assert np.abs(back - img).max() < 1e-4  # 16-bit
+    for ext in (".npy", ".exr", ".pgm"):
+        with pytest.raises(VibrInputError, match=f"{ext} is not an image format vibr writes"):
+            write_image(tmp_path / f"w{ext}", img)
+        assert not (tmp_path / f"w{ext}").exists()

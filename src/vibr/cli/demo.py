@@ -52,10 +52,12 @@ def run(args) -> int:
     from ..synthetic import make_scene
 
     from ..errors import VibrInputError
+    from ..io.images import check_image_ext
     from ..io.outputs import check_output
 
     if args.output is not None:
         check_output(args.output, "file", what="-o")
+        check_image_ext(args.output)
     elif args.bit_depth is not None:
         raise VibrInputError("--bit-depth applies to the PNG of -o only (the video is 8-bit)")
     if not 16 <= args.size <= 4096:

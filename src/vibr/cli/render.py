@@ -40,7 +40,7 @@ def register(sub) -> None:
                    help="view name / index to hold out and render, or a camera JSON file (K, R, t, "
                         "width, height at the scene's original resolution: --scale applies to it too)")
     p.add_argument("-o", "--output", required=True,
-                   help="output image (PNG); with --path a video (.mp4) or a folder for the frames")
+                   help="output image (.png; .tif, .jpg, .webp, .bmp or .ppm by its extension); with --path a video (.mp4) or a folder for the frames")
     add_bit_depth_option(p)
     add_method_option(p)
     add_render_params(p)
@@ -80,6 +80,7 @@ def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, read_camera_json, write_image
     from ..pipeline import missing_view_camera, prepare
+    from ..io.images import check_image_ext
     from ..io.outputs import check_output
     from ..render import render
     from ..render.methods import method_params
@@ -100,6 +101,7 @@ def run(args) -> int:
         return _run_path(args)
     _refuse_path_options(args)
     check_output(args.output, "file", what="-o")
+    check_image_ext(args.output)  # before the work: out.npy was a TIFF under that name
     check_depth_args(args)
     if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
         raise VibrInputError("--uncertainty output must end in .png or .npy", args.uncertainty)

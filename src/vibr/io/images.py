@@ -258,12 +258,26 @@ def to_uint(img: np.ndarray, bits: int | None = None) -> np.ndarray:
     return q.astype(np.uint8 if bits == 8 else np.uint16)
 
 
+#: Image formats :func:`write_image` writes (PNG and TIFF in 8 or 16 bits, the others 8).
+WRITE_EXTS = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".webp", ".ppm")
+_EIGHT_BIT_EXTS = (".jpg", ".jpeg", ".bmp", ".webp", ".ppm")
+
+
+def check_image_ext(path) -> str:
+    """The lower-case extension of an image file to write (``""``: PNG), one of
+    :data:`WRITE_EXTS`; another (``out.npy``, written as a TIFF under that name) is refused."""
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    if ext and ext not in WRITE_EXTS:
+        raise VibrInputError(f"{ext} is not an image format vibr writes ({', '.join(WRITE_EXTS)})", path)
+    return ext
+
+
 def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | None = None) -> None:
     """Write an H×W×3 (or H×W) float image in [0, 1] atomically.
 
     PNG files are 8-bit when the image is exactly representable in 8 bits, else 16-bit
-    (``bits`` = 8 or 16 forces one: a rendered view is 8-bit unless asked); JPEG is always
-    8-bit. ``text``: key → value strings stored in an 8-bit PNG's text chunks
+    (``bits`` = 8 or 16 forces one: a rendered view is 8-bit unless asked); JPEG, BMP, WebP
+    and PPM are always 8-bit. ``text``: key → value strings stored in an 8-bit PNG's text chunks
     (:func:`read_png_text` reads them back).
     """
     if bits not in (None, 8, 16):
@@ -271,8 +285,8 @@ def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | Non
     import imageio.v3 as iio
 
     path = os.fspath(path)
-    ext = os.path.splitext(path)[1].lower()
-    if ext in (".jpg", ".jpeg", ".bmp"):
+    ext = check_image_ext(path)
+    if ext in _EIGHT_BIT_EXTS:
         bits = 8
     q = to_uint(img, bits)
     if text and (q.dtype != np.uint8 or ext not in (".png", "")):
