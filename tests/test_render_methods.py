@@ -165,6 +165,7 @@ def test_ignored_params_are_really_ignored(name):
     ("render", ["--method", "savsr", "--sigma-z", "0.01"], "--sigma-z does not apply to --method savsr"),
     ("eval", ["--method", "ulr,bvs", "--gamma", "0.5"], "--gamma applies to gradient only, not to --method ulr,bvs"),
     ("eval", ["--method", "ulr", "--lam", "1"], "--lam applies to savsr, bvs, gradient only, not to --method ulr"),
+    ("eval", ["--method", "ulr", "--psf", "footprint"], "--psf applies to savsr, bvs, gradient only, not to --method ulr"),
 ])
 def test_cli_refuses_a_parameter_the_methods_ignore(tmp_path, capsys, cmd, extra, msg):
     """``vibr render`` (one method) and ``vibr eval`` (a grid: no method of the list reads it)."""

@@ -98,16 +98,16 @@ def register(sub) -> None:
 
 
 def _refuse_unused_grid(args) -> None:
-    """--gamma without a method that has the gradient term, --alpha or --lam without a
-    variational method: refused, not ignored."""
+    """A parameter that none of the --method methods reads (Method.ignored_params: --gamma
+    without the gradient term; --alpha, --lam, --psf with ulr alone): refused, not ignored."""
     from ..errors import VibrInputError
     from ..render.methods import REGISTRY, get_method
 
     specs = [get_method(m) for m in args.method]  # an unknown name gives get_method's error
-    for flag, value, needs in (("--gamma", args.gamma, lambda m: m.gradient),
-                               ("--alpha", args.alpha, lambda m: m.solve), ("--lam", args.lam, lambda m: m.solve)):
-        if value is not None and not any(needs(m) for m in specs):
-            users = ", ".join(m.name for m in REGISTRY.values() if needs(m))
+    for flag, param, value in (("--gamma", "gamma", args.gamma), ("--alpha", "alpha", args.alpha),
+                               ("--lam", "lam", args.lam), ("--psf", "psf", args.psf)):
+        if value is not None and all(param in m.ignored_params() for m in specs):
+            users = ", ".join(m.name for m in REGISTRY.values() if param not in m.ignored_params())
             raise VibrInputError(f"{flag} applies to {users} only, not to --method {','.join(args.method)}")
 
 
