@@ -196,3 +196,21 @@ def test_a_write_that_fails_is_one_line_and_leaves_nothing(tmp_path):
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
     assert r.stderr.strip().splitlines()[-1].startswith("vibr render: error: v.mp4: cannot write the video: ffmpeg:")
     assert not (tmp_path / "v.mp4").exists()
+
+
+# ----------------------------------------------------------------------------- inputs as outputs
+@pytest.mark.parametrize("args,what", [
+    (["eval", "{s}", "--target", "0", "--method", "ulr", "--json", "{s}/transforms.json"], "--json"),
+    (["render", "{s}", "--target", "0", "-o", "{s}/a.png"], "-o"),
+    (["render", "{s}", "--target", "0", "-o", "{t}/x.png", "--uncertainty", "{s}/a_depth.npy"], "--uncertainty"),
+    (["path", "orbit", "{s}", "--frames", "3", "-o", "{s}/transforms.json"], "-o"),
+])
+def test_an_output_that_is_a_file_of_the_scene_is_refused(capsys, tmp_path, args, what):
+    """`vibr eval SCENE --json SCENE/transforms.json` replaced the scene's cameras with the
+    report (the scene was lost). Every file output is checked against the scene's files."""
+    root = make_transforms(tmp_path / "s", depth=np.full((12, 16), 2.0, np.float32))
+    before = {f.name: f.read_bytes() for f in root.iterdir()}
+    code, err = run_cli(capsys, *[a.format(s=root, t=tmp_path) for a in args])
+    assert_one_line_error(code, err, f"{what} would overwrite a file of the input scene")
+    assert {f.name: f.read_bytes() for f in root.iterdir()} == before
+    assert not (tmp_path / "x.png").exists()

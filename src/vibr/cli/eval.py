@@ -137,7 +137,7 @@ def run(args) -> int:
 
     from ..errors import VibrInputError
 
-    from ..io.outputs import check_output
+    from ..io.outputs import check_not_scene_file, check_output
 
     check_output(args.json, "file", what="--json")
     if args.figures is not None:
@@ -160,6 +160,7 @@ def run(args) -> int:
     if args.views is not None and args.views < 1:
         raise VibrInputError(f"--views must be at least 1, got {args.views}")
     scene = load_scene(args.scene, scale=args.scale)
+    check_not_scene_file(args.json, scene, "--json")
     scene.meta.setdefault("scale", args.scale)
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                                      ("depth_range", args.depth_range)) if v is not None}

@@ -66,7 +66,7 @@ def run(args) -> int:
 
     if not args.output.lower().endswith(".json"):
         raise VibrInputError("the camera path file must end in .json", args.output)
-    from ..io.outputs import check_output
+    from ..io.outputs import check_not_scene_file, check_output
 
     check_output(args.output, "file", what="-o")  # as every command: its folder must exist
     if args.frames is not None and args.seconds is not None:
@@ -79,6 +79,7 @@ def run(args) -> int:
             raise VibrInputError(f"{flag} applies to 'vibr path {kind}' only, not to {args.kind}")
     seconds = 4.0 if args.frames is None and args.seconds is None else args.seconds
     scene = load_scene_cached(args.scene, scale=args.scale)  # the same cache as render --path
+    check_not_scene_file(args.output, scene, "-o")
     w, h = args.size if args.size else (None, None)
     kw = dict(n_frames=args.frames, seconds=seconds, fps=args.fps, width=w, height=h)
     if args.kind == "interpolate":

@@ -81,7 +81,7 @@ def run(args) -> int:
     from ..io import load_scene, read_camera_json, write_image
     from ..pipeline import missing_view_camera, prepare
     from ..io.images import check_image_ext
-    from ..io.outputs import check_output
+    from ..io.outputs import check_not_scene_file, check_output
     from ..render import render
     from ..render.methods import method_params
 
@@ -106,6 +106,8 @@ def run(args) -> int:
     if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
         raise VibrInputError("--uncertainty output must end in .png or .npy", args.uncertainty)
     scene = load_scene(args.scene, scale=args.scale)
+    check_not_scene_file(args.output, scene, "-o")  # before the work, as every output check
+    check_not_scene_file(args.uncertainty, scene, "--uncertainty")
     tgt = args.target
     if tgt.lower().endswith(".json") or (os.path.isfile(tgt) and not tgt.isdigit()):
         target = read_camera_json(tgt)

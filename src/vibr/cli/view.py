@@ -77,7 +77,7 @@ def run(args) -> int:
     if args.views < 1 or args.max_points < 0:
         raise VibrInputError("--views must be >= 1 and --max-points >= 0")
     settings = ViewSettings(method=args.method, n_views=args.views)
-    from ..io.outputs import check_output
+    from ..io.outputs import check_not_scene_file, check_output
 
     if args.path_out is not None:  # given: checked now, not at the first 'export path'
         check_output(args.path_out, "file", overwrite=True, what="--path-out")
@@ -85,6 +85,7 @@ def run(args) -> int:
     # the resized photographs and the estimated depth come from the on-disk cache when there
     cache_dir = cache_dir_from_args(args)
     scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
+    check_not_scene_file(args.path_out or "camera_path.json", scene, "--path-out")
     _hint_large_views(scene, args.scale)
     if not scene.has_depth:
         t0 = time.perf_counter()

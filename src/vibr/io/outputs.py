@@ -143,6 +143,57 @@ def check_not_input(out, inputs=()) -> None:
                                  "choose an output folder outside the scene", out)
 
 
+#: Files a scene folder of each format may hold besides its images (vibr.io's loaders).
+_SCENE_FILE_GLOBS = ("transforms*.json", "*_par.txt", "*_ang.txt", "parameters.cfg", "gt_*.pfm", "*.camera",
+                     "*.geometric.bin", "cameras.*", "images.bin", "images.txt", "points3D.*", "frames.*",
+                     "rigs.*", "sparse_pc.ply")
+
+
+def is_scene_file(path, scene) -> bool:
+    """Whether the existing file ``path`` is one ``scene`` was, or may have been, read from:
+    one of its views' images, or, inside its folder, a file a scene format reads (by name:
+    definitions, cameras, depth maps; a generous list)."""
+    import fnmatch
+
+    p = Path(path).resolve()
+    if not p.is_file():
+        return False
+    if any(v.path and Path(v.path).resolve() == p for v in scene.views):
+        return True
+    for key in ("transforms", "par_file"):
+        if scene.meta.get(key) and Path(scene.meta[key]).resolve() == p:
+            return True
+    roots = [Path(r).resolve() for r in (scene.root, scene.meta.get("model")) if r]
+    if not any(_inside(p, r) for r in roots):
+        return False
+    if any(fnmatch.fnmatch(p.name, g) for g in _SCENE_FILE_GLOBS) or p.parent.name in ("depth", "sigma_z"):
+        return True
+    return p in _transforms_references(scene.meta.get("transforms"))
+
+
+def _transforms_references(tf) -> set:
+    """The files a transforms.json names (images, depth, sigma_z, masks, points), resolved."""
+    if not tf:
+        return set()
+    try:
+        with open(tf, encoding="utf-8-sig") as f:
+            doc = json.load(f)
+        base = Path(tf).parent
+        refs = [fr.get(k) for fr in doc.get("frames", []) for k in fr if k.endswith("_path")]
+        refs += [v for k, v in doc.items() if k.endswith("_path")]
+        return {(base / r).resolve() for r in refs if isinstance(r, str)}
+    except (OSError, ValueError, AttributeError):
+        return set()
+
+
+def check_not_scene_file(out, scene, what: str = "-o") -> None:
+    """Refuse an output file that is one of the files ``scene`` was read from
+    (:func:`is_scene_file`): ``vibr eval SCENE --json SCENE/transforms.json`` replaced the
+    scene's cameras with a report."""
+    if out is not None and is_scene_file(out, scene):
+        raise VibrInputError(f"{what} would overwrite a file of the input scene: choose another name", out)
+
+
 def check_replaceable(out) -> None:
     """Refuse to replace ``out`` unless vibr wrote it and it holds only vibr's files."""
     out = Path(out)

@@ -416,9 +416,10 @@ class Viewer:
             raise VibrInputError("no keyframes to export: add some first")
         if path is None:
             path = self._gui_path_file()
-        from ..io.outputs import check_output
+        from ..io.outputs import check_not_scene_file, check_output
 
         out = check_output(path, "file", overwrite=True, what="path file")  # said in the panel, not a traceback
+        check_not_scene_file(out, self.scene, "the path file")
         fps = self.options.fps
         if seconds is None:
             seconds = max(len(self.keyframes) - 1, 1) * self.options.seconds_per_keyframe
