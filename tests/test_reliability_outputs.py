@@ -214,3 +214,16 @@ def test_an_output_that_is_a_file_of_the_scene_is_refused(capsys, tmp_path, args
     assert_one_line_error(code, err, f"{what} would overwrite a file of the input scene")
     assert {f.name: f.read_bytes() for f in root.iterdir()} == before
     assert not (tmp_path / "x.png").exists()
+
+
+def test_fly_through_frames_are_not_written_among_the_photographs(capsys, tmp_path):
+    """(`vibr render SCENE --path P -o SCENE/images` put frame_*.png among the photographs: in
+    an image-folder scene they would be views without cameras on the next load.)"""
+    root = make_transforms(tmp_path / "s", depth=np.full((12, 16), 2.0, np.float32))
+    assert main(["path", "orbit", str(root), "--frames", "2", "-o", str(tmp_path / "p.json"), "-q"]) == 0
+    capsys.readouterr()
+    for out in (root, tmp_path):
+        code, err = run_cli(capsys, "render", root, "--path", tmp_path / "p.json", "-o", out)
+        assert_one_line_error(code, err, "the output folder contains the input")
+    assert sorted(f.name for f in root.iterdir()) == ["a.png", "a_depth.npy", "transforms.json"]
+    assert run_cli(capsys, "render", root, "--path", tmp_path / "p.json", "-o", root / "frames")[0] == 0

@@ -356,6 +356,10 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         raise VibrInputError(f"n_views must be at least 1, got {n_views}")
     out = Path(out)
     fdir, video = _frames_dir_for(out, frames_dir)
+    from .io.outputs import check_not_input
+
+    # frames among the photographs would become views of an image-folder scene (Strecha)
+    check_not_input(fdir, [v.path for v in scene.views if v.path] + ([scene.root] if scene.root else []))
     fps = camera_path.fps if fps is None else fps
     if video is not None:
         from .io.video import check_video_options
