@@ -247,7 +247,7 @@ def test_an_empty_list_is_refused(capsys, tmp_path, temple_dir, cmd):
     with pytest.raises(SystemExit) as e:
         main(args + ["-q"])
     err = capsys.readouterr().err.strip()
-    assert e.value.code == 2 and "expected comma-separated" in err or "expected a comma-separated" in err, err
+    assert e.value.code == 2 and ("expected comma-separated" in err or "expected a comma-separated" in err), err
     assert list(tmp_path.iterdir()) == []
 
 

@@ -39,9 +39,8 @@ def _as_matrix(a, shape, name, source):
 def image_side(v, name, source) -> int:
     """An image side: an integer (or an integral float, as JSON writers give); a bool, a
     string or 64.5 is refused rather than truncated."""
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
-        raise VibrInputError(f"{name} must be an integer number of pixels, got {v!r}", source)
-    if not (np.isfinite(v) and float(v) == int(v)):
+    number = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+    if not (number and np.isfinite(v) and float(v) == int(v)):
         raise VibrInputError(f"{name} must be an integer number of pixels, got {v!r}", source)
     return int(v)
 

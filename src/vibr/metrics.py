@@ -170,17 +170,21 @@ def view_metrics(img, ref, mask=None, border: int = METRIC_BORDER) -> dict:
     over the pixels of ``mask`` (the reconstructed pixels) with ``border`` pixels at each
     edge excluded. ``ssim`` and ``dssim`` are NaN for an image too small for SSIM's window
     (:func:`check_measurable`): the PSNR of a tiny render is still worth reporting."""
-    H, W = np.shape(img)[:2]
-    s = ssim(img, ref, mask, border) if min(H, W) - 2 * int(border) >= SSIM_WINDOW else float("nan")
+    s = ssim(img, ref, mask, border) if _measurable(np.shape(img), border) else float("nan")
     return {"psnr": psnr(img, ref, mask, border), "ssim": s, "dssim": 1e4 * (1.0 - s)}
+
+
+def _measurable(shape, border: int) -> bool:
+    """Whether SSIM's window fits in an image of ``shape`` less ``border`` on each edge."""
+    return min(shape[:2]) >= SSIM_WINDOW + 2 * int(border)
 
 
 def check_measurable(shape, border: int = METRIC_BORDER, source=None) -> None:
     """Refuse, before any work, to measure a view of ``shape`` (H, W, ...) on which DSSIM
     is undefined: its side, less the ``border`` on each edge, under SSIM's window."""
-    H, W = shape[:2]
-    need = SSIM_WINDOW + 2 * int(border)
-    if min(H, W) < need:
+    if not _measurable(shape, border):
+        H, W = shape[:2]
+        need = SSIM_WINDOW + 2 * int(border)
         raise VibrInputError(f"the held-out view is {W}x{H}: DSSIM needs at least {need} pixels a side "
                              f"({SSIM_WINDOW}-px window, {int(border)}-px border; use a larger --scale"
                              f"{' or a smaller --border' if border else ''})", source)

@@ -87,7 +87,7 @@ def write_video(path, frames, *, fps: float, crf: int = 18, preset: str = "mediu
                 except BrokenPipeError:  # ffmpeg stopped: its status and message say why
                     break
                 n += 1
-            if n == 0 and proc is None:
+            if proc is None:
                 raise VibrInputError("no frames to write", p)
             _finish_ffmpeg(proc, log, p)
         finally:
