@@ -187,7 +187,7 @@ def _run_path(args) -> int:
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
                       crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor)
     t = res.times
-    what = f"{res.video} ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]})" if res.video \
+    what = f"{res.video} ({count(res.video_frames, 'frame')}, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
     per = f", {res.seconds_per_frame:.2f} s per frame" if res.rendered else ""
     print(f"rendered {count(res.rendered, 'frame')} ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}"
