@@ -3,12 +3,11 @@
 :data:`FASTMATH` is False: IEEE arithmetic. With fast-math (even without FMA contraction)
 LLVM compiles a loop into variants that round differently (a vectorised body, a scalar
 remainder, specialisations), and which elements take which variant depended on the arrays'
-addresses: renders of the same view differed in the last bits from run to run (issue 24:
-3 distinct images in 12 renders of cotton at 256²; measured again with ``reassoc`` kept:
-3 in 14). With IEEE arithmetic every element is rounded the same way wherever it lies in
+addresses: renders of the same view differed in the last bits from run to run (issue 24;
+measured in docs/ERRORS.md, "Bit-identical renders"). With IEEE arithmetic every element is rounded the same way wherever it lies in
 memory, and the reductions' partial sums are combined in a fixed order by the kernels
 (per-band or per-row partials), so a render is bit-identical from run to run. The images
-differ from the fast-math ones by rounding only (cotton 256²: PSNR 48.3429 dB both).
+differ from the fast-math ones by rounding only.
 """
 
 FASTMATH = False

@@ -113,9 +113,9 @@ FALLBACK_FACTOR = 1.03
 FALLBACK_PERCENTILE = 99.0
 FALLBACK_SIGMA_Z_REL = 0.25
 #: ``fallback="auto"``: the views of which at least this fraction has no depth get the proxy.
-#: A view that stereo leaves mostly unknown shows a backdrop (temple ring: 76–91 % of each
-#: view); a few unknown patches are stereo failures on the object, where the plane would be
-#: wrong (fountain: 7–25 %, and the proxy costs 0.6–5 dB there). docs/RENDERER.md "Fallback proxy".
+#: A view that stereo leaves mostly unknown shows a backdrop (the temple ring); a few unknown
+#: patches are stereo failures on the object, where the plane would be wrong (fountain): the
+#: fractions and what the proxy costs are in docs/RENDERER.md, "Fallback proxy".
 FALLBACK_MIN_FRACTION = 0.5
 #: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown), ``"always"`` (every view with
 #: unknown pixels), ``"never"``.
