@@ -103,6 +103,83 @@ def test_dataparser_transforms_map_back(arc_scene, tmp_path):
         check_path_sees_scene(arc_scene, P.read_camera_path(f).cameras)
 
 
+def _nerfstudio_normalised(cameras, T_saved, sf, A, applied_scale, tmp_path):
+    """nerfstudio's data parser on poses saved in transforms.json: ``poses = T @ poses``,
+    positions × sf; its dataparser_transforms.json holds ``T @ A`` and ``sf · applied_scale``
+    (nerfstudio_dataparser.py). Returns the camera path file and that json."""
+    from vibr import path as P
+
+    frames = []
+    for c in cameras:
+        M = P.c2w_opengl_from_camera(c)
+        M[:3, :3] = T_saved[:, :3] @ M[:3, :3]
+        M[:3, 3] = sf * (T_saved[:, :3] @ M[:3, 3] + T_saved[:, 3])
+        frames.append({"camera_to_world": M.ravel().tolist(), "fov": P.fov_from_focal(c.K[1, 1], c.height)})
+    f = tmp_path / "ns_path.json"
+    f.write_text(json.dumps({"camera_type": "perspective", "render_width": cameras[0].width,
+                             "render_height": cameras[0].height, "fps": 5, "camera_path": frames}))
+    A4 = np.vstack([A, [0, 0, 0, 1]])
+    T4 = np.vstack([T_saved, [0, 0, 0, 1]])
+    dp = tmp_path / "dataparser_transforms.json"
+    dp.write_text(json.dumps({"transform": (T4 @ A4)[:3].tolist(), "scale": sf * applied_scale}))
+    return f, dp
+
+
+@pytest.mark.parametrize("legacy", [False, True])
+def test_dataparser_transforms_with_applied_transform_and_scale(arc_scene, tmp_path, legacy):
+    """A transforms.json scene processed with an ``applied_transform`` and an ``applied_scale``
+    (or, legacy, with neither recorded but a colmap/sparse/0 folder beside it, for which
+    nerfstudio assumes a fixed axis swap): the path maps back to the file's own frame."""
+    from scipy.spatial.transform import Rotation
+
+    from vibr import path as P
+    from vibr.io.transforms import save_scene as save_scene_transforms
+
+    scene_dir = tmp_path / "scene"
+    save_scene_transforms(arc_scene, scene_dir)
+    tj = scene_dir / "transforms.json"
+    d = json.loads(tj.read_text())
+    if legacy:
+        (scene_dir / "colmap" / "sparse" / "0").mkdir(parents=True)
+        A, a_s = np.array(P.LEGACY_COLMAP_APPLIED), 1.0
+    else:
+        A = np.hstack([Rotation.from_rotvec([0.3, 1.1, -0.2]).as_matrix(), [[0.5], [2.0], [-1.0]]])
+        a_s = 2.5
+        d.update(applied_transform=A.tolist(), applied_scale=a_s)
+    tj.write_text(json.dumps(d))
+    T = np.hstack([Rotation.from_rotvec([0.9, -0.4, 1.2]).as_matrix(), [[5.0], [-8.0], [3.0]]])
+    p = P.orbit(arc_scene, n_frames=5)
+    f, dp = _nerfstudio_normalised(p.cameras, T, 0.2, A, a_s, tmp_path)
+    got_A, got_scale = P.scene_processing_transform(scene_dir)
+    assert np.array_equal(got_A, A) and got_scale == a_s
+    back = P.read_camera_path(f, dataparser_transforms=dp, applied_transform=got_A, applied_scale=got_scale)
+    _same_cameras(p.cameras, back.cameras, tol=1e-8)
+    if not legacy:  # without the scale the positions land elsewhere
+        off = P.read_camera_path(f, dataparser_transforms=dp, applied_transform=got_A)
+        assert max(np.linalg.norm(a.centre - b.centre) for a, b in zip(p.cameras, off.cameras)) > 0.1
+        from vibr.cli import main
+
+        frames = tmp_path / "frames"
+        assert main(["render", str(scene_dir), "--path", str(f), "--dataparser-transforms", str(dp),
+                     "-o", str(frames), "--method", "ulr", "--workers", "1", "-q"]) == 0
+        assert len(list(frames.glob("*.png"))) == 5
+
+
+def test_scene_processing_transform_refuses_bad_values(tmp_path, arc_scene):
+    from vibr.io.transforms import save_scene as save_scene_transforms
+    from vibr.path import scene_processing_transform
+
+    assert scene_processing_transform(tmp_path) == (None, 1.0)  # not a transforms.json scene
+    save_scene_transforms(arc_scene, tmp_path / "s")
+    tj = tmp_path / "s" / "transforms.json"
+    assert scene_processing_transform(tmp_path / "s") == (None, 1.0)
+    d = json.loads(tj.read_text())
+    for bad in ({"applied_transform": [[1, 0, 0]]}, {"applied_scale": 0}, {"applied_scale": "x"}):
+        tj.write_text(json.dumps(dict(d, **bad)))
+        with pytest.raises(VibrInputError, match="applied_"):
+            scene_processing_transform(tj)
+
+
 # ----------------------------------------------------------------------------- generators
 def _second_third_differences(P, n):
     d2 = np.diff(P, 2, axis=0)

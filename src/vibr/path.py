@@ -28,6 +28,7 @@ import logging
 import math
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -39,7 +40,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
-           "scene_centre", "scene_up", "scene_points", "scene_applied_transform", "PATH_KINDS"]
+           "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED", "PATH_KINDS"]
 
 PATH_KINDS = ("interpolate", "orbit", "spiral")
 
@@ -231,7 +232,8 @@ def _unnormalise(M: np.ndarray, T: np.ndarray, s: float, applied: np.ndarray | N
     return out
 
 
-def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None) -> CameraPath:
+def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None,
+                     applied_scale: float = 1.0) -> CameraPath:
     """Read nerfstudio's ``camera_path.json`` (written by its viewer or by vibr).
 
     Parameters
@@ -243,6 +245,10 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
     applied_transform : (3, 4) array, optional
         The ``applied_transform`` of the scene's transforms.json, if any (nerfstudio folds
         it into the dataparser transform); only used with ``dataparser_transforms``.
+    applied_scale : float
+        The ``applied_scale`` of the scene's transforms.json (default 1): nerfstudio folds it
+        into the dataparser scale, while the file's poses already carry it.
+        :func:`scene_processing_transform` reads both.
 
     Returns
     -------
@@ -277,6 +283,8 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
     if w <= 0 or h <= 0:
         raise VibrInputError(f"render size must be positive, got {w}x{h}", p)
     T = s = None
+    if not (math.isfinite(applied_scale) and applied_scale > 0):
+        raise VibrInputError(f"applied_scale must be positive, got {applied_scale!r}", p)
     if dataparser_transforms is not None:
         T, s = read_dataparser_transforms(dataparser_transforms)
     applied = None if applied_transform is None else np.asarray(applied_transform, np.float64).reshape(3, 4)
@@ -293,7 +301,7 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
             raise VibrInputError(f"camera_to_world must hold 16 numbers, got {M.size}", where)
         M = M.reshape(4, 4)
         if T is not None and np.all(np.isfinite(M)):
-            M = _unnormalise(M, T, s, applied)
+            M = _unnormalise(M, T, s / applied_scale, applied)
         cams.append(camera_from_c2w_opengl(M, fr["fov"], w, h, source=where))
     seconds = d.get("seconds")
     fps = d.get("fps")
@@ -637,25 +645,44 @@ def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, 
                       {"kind": "spiral", "centre": X.tolist(), "radii": rad.tolist()})
 
 
-def scene_applied_transform(scene_path):
-    """The ``applied_transform`` (3×4) recorded in a scene's transforms.json, or None.
+#: The ``applied_transform`` nerfstudio assumes for a transforms.json that has none but a
+#: ``colmap/sparse/0`` folder beside it: what ns-process-data applied to COLMAP's poses
+#: before it recorded the transform (nerfstudio_dataparser.py).
+LEGACY_COLMAP_APPLIED = ((0.0, 1.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, -1.0, 0.0))
 
-    nerfstudio composes it into its dataparser transform (``nerfstudio_dataparser.py``:
-    ``transform_matrix @ applied_transform``), so a path in nerfstudio's normalised frame
-    maps back to the frame *before* it; vibr reads transforms.json poses as they are, so
-    it is applied again (:func:`read_camera_path`)."""
+
+def scene_processing_transform(scene_path) -> tuple[np.ndarray | None, float]:
+    """``(applied_transform, applied_scale)`` of a transforms.json scene, as nerfstudio's
+    data parser reads them: the 3×4 ``applied_transform`` (else
+    :data:`LEGACY_COLMAP_APPLIED` when a ``colmap/sparse/0`` folder lies beside the file,
+    else None) and ``applied_scale`` (default 1). ``(None, 1.0)`` for another format.
+
+    nerfstudio composes both into its dataparser transform and scale, so a path in its
+    normalised frame maps back to the frame *before* them; vibr reads the transforms.json
+    poses as they are, so :func:`read_camera_path` applies them again.
+
+    Raises
+    ------
+    VibrInputError
+        A transforms.json whose ``applied_transform`` is not 3×4 finite numbers or whose
+        ``applied_scale`` is not a positive number (the path would land elsewhere).
+    """
+    from .io.camera_json import parse_json
     from .io.transforms import find_transforms
 
+    tj = find_transforms(scene_path)
+    if tj is None:  # not a transforms.json scene
+        return None, 1.0
+    d = parse_json(tj)
+    d = d if isinstance(d, dict) else {}
+    A = d.get("applied_transform")
+    if A is None and (Path(tj).parent / "colmap" / "sparse" / "0").is_dir():
+        A = LEGACY_COLMAP_APPLIED
     try:
-        tj = find_transforms(scene_path)
-    except Exception:  # noqa: BLE001 - not a transforms.json scene
-        return None
-    if tj is None:
-        return None
-    try:
-        with open(tj, encoding="utf-8-sig") as f:
-            d = json.load(f)
-        A = d.get("applied_transform") if isinstance(d, dict) else None
-        return None if A is None else np.asarray(A, np.float64).reshape(3, 4)
-    except (OSError, ValueError, TypeError):
-        return None
+        A = None if A is None else np.asarray(A, np.float64).reshape(3, 4)
+        scale = float(d.get("applied_scale", 1.0))
+    except (TypeError, ValueError):
+        raise VibrInputError("'applied_transform' must be 3x4 numbers and 'applied_scale' a number", tj) from None
+    if (A is not None and not np.all(np.isfinite(A))) or not (math.isfinite(scale) and scale > 0):
+        raise VibrInputError("'applied_transform' must be finite and 'applied_scale' positive", tj)
+    return A, scale

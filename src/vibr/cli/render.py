@@ -164,7 +164,7 @@ def _run_path(args) -> int:
     from ..errors import VibrInputError
     from ..depthcache import load_scene_cached
     from ..flythrough import render_path
-    from ..path import read_camera_path, scene_applied_transform
+    from ..path import read_camera_path, scene_processing_transform
 
     out = args.output
     if not (out.lower().endswith(".mp4") or not os.path.splitext(out)[1]):
@@ -174,9 +174,10 @@ def _run_path(args) -> int:
             raise VibrInputError(f"--{flag.replace('_', '-')} does not apply to --path")
     if args.depth not in ("auto", "gt", "given", "estimated"):
         raise VibrInputError(f"--depth {args.depth} does not apply to --path (auto, gt or estimated)")
-    applied = scene_applied_transform(args.scene) if args.dataparser_transforms else None
+    applied, applied_scale = (scene_processing_transform(args.scene) if args.dataparser_transforms
+                              else (None, 1.0))
     cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
-                             applied_transform=applied)
+                             applied_transform=applied, applied_scale=applied_scale)
     executor = executor_from_args(args, default="auto")  # a bad scheduler fails before the work
     cache_dir = cache_dir_from_args(args)
     scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
