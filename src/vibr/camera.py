@@ -242,6 +242,26 @@ class Camera:
         return f"Camera({self.width}x{self.height}, f={f:.1f}px, C={C})"
 
 
+#: Cameras share one centre when every centre lies within ``SHARED_CENTRE_REL`` times the
+#: scene's scale of their mean (the scale: the median distance of the sparse points to that
+#: mean, else 1 scene unit or the mean's norm if larger). At that spread the parallax is
+#: below a millionth of the focal length: no depth can be estimated, and none is needed.
+SHARED_CENTRE_REL = 1e-6
+
+
+def shared_centre(cameras, points=None, rel_tol: float = SHARED_CENTRE_REL) -> np.ndarray | None:
+    """The common centre of cameras that all sit at one point (a rotation-only capture:
+    a panorama from a tripod), else None (:data:`SHARED_CENTRE_REL`)."""
+    C = np.array([c.centre for c in cameras], dtype=np.float64)
+    if len(C) < 2:
+        return None
+    mean = C.mean(axis=0)
+    scale = max(1.0, float(np.linalg.norm(mean)))
+    if points is not None and len(points):
+        scale = float(np.median(np.linalg.norm(np.asarray(points, np.float64) - mean, axis=1))) or scale
+    return mean if float(np.linalg.norm(C - mean, axis=1).max()) <= rel_tol * scale else None
+
+
 def axes_meeting_point(cameras, max_cond: float = 1e6) -> np.ndarray | None:
     """The point nearest to every camera's optical axis (least squares), or None.
 

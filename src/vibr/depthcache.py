@@ -243,11 +243,20 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
     ``meta["depth_time_s"]`` the time spent, ``meta["depth_estimation"]`` the estimator's
     statistics (kept from the run that filled the cache).
     """
+    from .camera import shared_centre
+    from .geometry import sphere_proxy
     from .stereo import estimate_depth
 
     t0 = time.perf_counter()
     bare = Scene([v.replace(depth=None, sigma_z=None) for v in scene.views], scene.name, scene.root,
                  scene.grid, scene.points, dict(scene.meta))
+    centre = shared_centre([v.camera for v in bare.views], bare.points)
+    if centre is not None:  # no parallax to estimate depth from, and none needed
+        out = sphere_proxy(bare, centre)
+        logger.info("the %d views share one centre (rotation only): their images do not depend on depth, "
+                    "a sphere of radius %.3g around it stands in for it", len(out), out.meta["proxy"]["radius"])
+        out.meta.update(depth_source="shared centre", depth_time_s=time.perf_counter() - t0)
+        return out
     kw = dict(estimate_kw or {})
     cpath = None
     if cache_dir is not False:

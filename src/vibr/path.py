@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera, axes_meeting_point, image_side
+from .camera import Camera, axes_meeting_point, image_side, shared_centre
 from .errors import VibrInputError
 from .io.atomic import atomic_path
 
@@ -434,10 +434,22 @@ def _vertical_focal(cam: Camera) -> float:
 
 
 # ----------------------------------------------------------------------------- generators
+def _check_not_one_centre(scene, what: str) -> None:
+    """An orbit or a spiral moves the camera; from a rotation-only capture (every camera at
+    one centre) it would look from where no photograph did."""
+    if shared_centre([v.camera for v in scene.views], scene.points) is not None:
+        raise VibrInputError(f"the cameras share one centre (a rotation-only capture): {what} would move the camera "
+                             f"where no photograph looked from; 'interpolate' turns between the views")
+
+
 def order_by_proximity(cameras) -> list[int]:
     """A visiting order of cameras: start at the camera farthest from the centroid of the
-    centres (an end of the sequence), then always the nearest camera not yet visited."""
+    centres (an end of the sequence), then always the nearest camera not yet visited. Cameras
+    that share one centre (:func:`vibr.camera.shared_centre`) are ordered by their optical
+    axes instead (the points those axes reach at unit distance)."""
     C = np.array([c.centre for c in cameras])
+    if shared_centre(cameras) is not None:
+        C = np.array([c.optical_axis for c in cameras])
     left = list(range(len(C)))
     cur = int(np.argmax(np.linalg.norm(C - C.mean(0), axis=1)))
     order = [cur]
@@ -457,7 +469,8 @@ def _key_steps(cams, X):
 
     C = np.array([c.centre for c in cams])
     rots = Rotation.from_matrix(np.array([c.R.T for c in cams]))
-    r = float(np.mean(np.linalg.norm(C - X, axis=1)))
+    # cameras turning on one spot look at nothing in particular: a radian counts as a unit
+    r = 1.0 if shared_centre(cams) is not None else float(np.mean(np.linalg.norm(C - X, axis=1)))
     return np.linalg.norm(np.diff(C, axis=0), axis=1) + r * (rots[:-1].inv() * rots[1:]).magnitude(), r
 
 
@@ -556,6 +569,7 @@ def orbit(scene, *, n_frames: int | None = None, seconds: float | None = None, f
     ``full=True`` forces a full turn). Focal length: the cameras' mean ``fy / H``.
     """
     cams = [v.camera for v in scene.views]
+    _check_not_one_centre(scene, "an orbit")
     n = _frame_count(n_frames, seconds, fps)
     w, h = _output_size(cams, width, height, scale)
     X = scene_centre(cams, scene_points(scene))
@@ -616,6 +630,7 @@ def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, 
     from scipy.spatial.transform import Rotation
 
     cams = [v.camera for v in scene.views]
+    _check_not_one_centre(scene, "a spiral")
     n = _frame_count(n_frames, seconds, fps)
     w, h = _output_size(cams, width, height, scale)
     X = scene_centre(cams, scene_points(scene))

@@ -691,6 +691,24 @@ def arc_cameras(n: int = 5, *, arc_deg: float = 30.0, radius: float = 3.6, width
     return cams
 
 
+def pan_cameras(n: int = 5, *, pan_deg: float = 24.0, width: int = 128, height: int = 128,
+                fov_deg: float = 55.0, eye=(0.0, -0.3, 0.0), target=SCENE_CENTRE) -> list[Camera]:
+    """``n`` cameras at one centre ``eye`` turned about the vertical by ``pan_deg`` degrees in
+    all, the middle one looking at ``target``: a rotation-only capture (a panorama from a
+    tripod), whose views are related by homographies whatever the depth."""
+    if n < 1:
+        raise ValueError("pan_cameras: n must be >= 1")
+    e = np.asarray(eye, dtype=np.float64)
+    d = np.asarray(target, dtype=np.float64) - e
+    K = Camera.intrinsics(_focal(width, fov_deg), width, height)
+    angles = np.radians(np.linspace(-pan_deg / 2, pan_deg / 2, n)) if n > 1 else np.zeros(1)
+    cams = []
+    for a in angles:
+        c, s_ = math.cos(a), math.sin(a)
+        cams.append(_look_at(e, e + np.array([c * d[0] + s_ * d[2], d[1], -s_ * d[0] + c * d[2]]), K, width, height))
+    return cams
+
+
 def _aimed_rolled(eye, target, rng, aim_jitter, roll_deg, K, width, height) -> Camera:
     """Camera at ``eye`` looking at ``target`` ± ``aim_jitter`` per axis, rolled about its
     optical axis by ± ``roll_deg`` (uniform draws from ``rng``, in that order)."""
@@ -758,12 +776,12 @@ def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 12
 
     Parameters
     ----------
-    layout : "grid" | "arc" | "free" | "handheld"
+    layout : "grid" | "arc" | "free" | "handheld" | "pan"
         Camera layout (:func:`grid_cameras`, :func:`arc_cameras`, :func:`free_cameras`,
-        :func:`handheld_cameras`).
+        :func:`handheld_cameras`, :func:`pan_cameras`).
     n_views : int, optional
         Number of views. Grid: a perfect square gives a square grid, otherwise one row
-        (overridden by ``grid``); default 3×3. Arc and free: default 5; handheld: 7.
+        (overridden by ``grid``); default 3×3. Arc, free and pan: default 5; handheld: 7.
     width, height : int
         Image size; the default 128×128 renders in a fraction of a second, 768×768 is a
         large scene.
@@ -802,8 +820,10 @@ def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 12
         cams = free_cameras(5 if n_views is None else int(n_views), seed, **kw)
     elif layout == "handheld":
         cams = handheld_cameras(7 if n_views is None else int(n_views), seed, **kw)
+    elif layout == "pan":
+        cams = pan_cameras(5 if n_views is None else int(n_views), **kw)
     else:
-        raise VibrInputError(f"unknown synthetic layout {layout!r} (grid, arc, free or handheld)")
+        raise VibrInputError(f"unknown synthetic layout {layout!r} (grid, arc, free, handheld or pan)")
     views = []
     for i, cam in enumerate(cams):
         img, depth = render_view(world, cam, supersample)

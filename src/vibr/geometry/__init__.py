@@ -15,7 +15,8 @@ Modules: ``depth`` (radial/disparity → orthogonal depth, slopes, bilateral hol
 from .depth import (depth_derivatives, disparity_to_depth, fill_depth_holes, radial_to_orthogonal,
                     radial_to_orthogonal_derivatives)
 from .sampling import compute_samples, prepare_depth
-from .proxy import FALLBACK_MODES, apply_fallback, fallback_depth, planar_proxy, plane_depth
+from .proxy import (FALLBACK_MODES, apply_fallback, fallback_depth, planar_proxy, plane_depth,
+                    sphere_proxy)
 from .samples import Samples
 from .transfer import ensure_source_depth, transfer_depth
 from .visibility import new_zbuffers, reduce_zbuffers, splat_mesh, splat_zbuffer, visibility_mask
@@ -23,7 +24,7 @@ from .warp import warp_constants, warp_points, warp_view
 
 __all__ = [
     "Samples", "compute_samples", "prepare_depth", "ensure_source_depth", "transfer_depth",
-    "planar_proxy", "plane_depth", "fallback_depth", "apply_fallback", "FALLBACK_MODES", "depth_derivatives", "disparity_to_depth", "fill_depth_holes",
+    "planar_proxy", "plane_depth", "sphere_proxy", "fallback_depth", "apply_fallback", "FALLBACK_MODES", "depth_derivatives", "disparity_to_depth", "fill_depth_holes",
     "radial_to_orthogonal", "radial_to_orthogonal_derivatives", "warp_constants", "warp_points",
     "warp_view", "new_zbuffers", "splat_zbuffer", "splat_mesh", "reduce_zbuffers", "visibility_mask",
 ]

@@ -18,7 +18,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
 
-__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "fallback_depth", "apply_fallback", "FALLBACK_MODES",
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "sphere_proxy", "fallback_depth", "apply_fallback", "FALLBACK_MODES",
            "FALLBACK_MIN_FRACTION", "FALLBACK_FACTOR",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
@@ -42,6 +42,47 @@ def plane_depth(camera: Camera, target: Camera, D: float) -> np.ndarray:
         s = num / den
     s[~(np.isfinite(s) & (s > 0))] = np.nan
     return s.astype(np.float32)
+
+
+def sphere_proxy(scene: Scene, centre, radius: float | None = None,
+                 sigma_rel: float = 0.25) -> Scene:
+    """Every view's depth: the sphere of ``radius`` around ``centre``, the cameras' shared
+    centre (:func:`vibr.camera.shared_centre`).
+
+    From one centre the images do not depend on depth (the warp between two views is a
+    homography: ``∂τ/∂z = 0``), so any surface renders a view from that centre exactly; a
+    sphere around it is one surface that every view agrees on, so the visibility test keeps
+    all their samples (a plane per view would put each view's surface at its own depth as
+    the target sees it, and the nearest would hide the others). Orthogonal depth of pixel
+    ``x̄``: ``z = radius / ‖K⁻¹ x̄‖`` (a camera at the centre).
+
+    Parameters
+    ----------
+    radius : float, optional
+        Scene units; default the median distance of the scene's sparse points to the centre,
+        else 1.
+    sigma_rel : float
+        ``sigma_z = sigma_rel · radius`` (only a target away from the centre sees it).
+
+    Returns
+    -------
+    Scene with ``meta["proxy"] = {"kind": "sphere", "centre", "radius", "sigma_z"}``.
+    """
+    centre = np.asarray(centre, np.float64)
+    if radius is None:
+        pts = scene.points
+        radius = float(np.median(np.linalg.norm(pts - centre, axis=1))) if pts is not None and len(pts) else 1.0
+    radius = float(radius)
+    if not (np.isfinite(radius) and radius > 0):
+        raise VibrInputError(f"sphere proxy: radius must be positive, got {radius}", scene.root)
+    views = []
+    for v in scene.views:
+        rays = v.camera.pixel_rays(v.camera.pixel_grid())
+        views.append(v.replace(depth=(radius / np.linalg.norm(rays, axis=-1)).astype(np.float32),
+                               sigma_z=sigma_rel * radius))
+    meta = dict(scene.meta, proxy={"kind": "sphere", "centre": centre.tolist(), "radius": radius,
+                                   "sigma_z": sigma_rel * radius})
+    return scene.replace(views=views, meta=meta)
 
 
 def _target_depths(sources: Scene, target: Camera, stride: int = 4) -> np.ndarray:

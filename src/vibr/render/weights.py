@@ -455,6 +455,7 @@ def _buehler_weights(a, k, eps, p, srt):
     thresh = srt[kk] if V > k else np.inf
     if not math.isfinite(thresh):  # fewer than k+1 views: the largest present, inflated
         thresh = srt[max(nfin - 1, 0)] * 1.01 + eps
+    thresh = max(thresh, eps)  # k+1 views tied at zero penalty (at the target's centre): alike
     top = 0.0
     for v in range(V):
         w = 0.0

@@ -733,13 +733,25 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
     return depths, sigmas, stats
 
 
+def _why_no_partner(cams, i, inputs) -> str:
+    from ..camera import shared_centre
+
+    others = [j for j in inputs if j != i]
+    if others and shared_centre([cams[i]] + [cams[j] for j in others]) is not None:
+        return (": every view shares its centre (a rotation-only capture), so there is no parallax to "
+                "estimate depth from; rendering needs none (vibr render / eval / view put a sphere around "
+                "that centre)")
+    return " (none within 60 degrees of its viewing direction at another centre)"
+
+
 def _mvs_views(scene, cams, targets, inputs, opt: DepthOptions):
     """The views to estimate (the targets, then their consistency partners) and the
     nearest-first stereo partners of each."""
     nbrs = {i: select_neighbours(cams, i, inputs, opt.n_neighbours) for i in targets}
     for i in targets:
         if not nbrs[i]:
-            raise VibrInputError(f"view {scene.views[i].name} has no usable stereo partner", scene.root)
+            raise VibrInputError(f"view {scene.views[i].name} has no usable stereo partner{_why_no_partner(cams, i, inputs)}",
+                                 scene.root)
     est = list(targets)
     if opt.consistency:
         for i in targets:

@@ -78,7 +78,7 @@ def scene_scale(scene: Scene, points: np.ndarray | None = None) -> float:
     if len(C) > 1:
         d = np.linalg.norm(C[:, None] - C[None], axis=2)[np.triu_indices(len(C), 1)]
         s = float(np.median(d))
-        if s > 0:
+        if s > 1e-6 * max(1.0, float(np.linalg.norm(C.mean(axis=0)))):  # not one centre
             return s
     return 1.0
 
@@ -93,7 +93,7 @@ def frustum_size(scene: Scene, scale: float) -> float:
         d = np.linalg.norm(C[:, None] - C[None], axis=2)
         np.fill_diagonal(d, np.inf)
         nn = float(np.median(d.min(axis=1)))
-        if nn > 0:
+        if nn > 1e-6 * scale:  # not cameras at one centre (a rotation-only capture)
             size = min(size, 0.5 * nn)
     return size
 
