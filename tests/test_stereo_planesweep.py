@@ -813,3 +813,33 @@ def test_views_side_by_side_stop_at_the_first_error(monkeypatch):
     with pytest.raises(ValueError, match="view 0"):
         api.map_views(fn, list(range(10)))
     assert len(ran) <= 4 and 9 not in ran
+
+
+def test_a_view_without_stereo_partner_gets_unknown_depth():
+    """A view turned more than 60 degrees from every other (a sparse ring) has no partner:
+    its depth is left unknown with a warning naming it, and the others are estimated (until
+    2026-11-27 the whole estimate, and every render of the scene, stopped there). With no
+    partner anywhere it is still an error."""
+    import io
+    import logging
+
+    from vibr.progress import configure_logging
+    from vibr.scene import Scene, View
+    from vibr.synthetic import arc_cameras, default_world, render_view
+
+    cams = arc_cameras(3, arc_deg=20, width=64, height=48) + arc_cameras(3, arc_deg=180, width=64, height=48)[2:]
+    world = default_world(0)
+    s = Scene([View(f"v{i}", render_view(world, c)[0], c) for i, c in enumerate(cams)], "sparse")
+    lg = logging.getLogger("vibr")
+    saved = (list(lg.handlers), lg.level, lg.propagate)
+    buf = io.StringIO()
+    configure_logging(0, stream=buf)  # the CLI's lines, whatever earlier tests left
+    try:
+        e = estimate_depth(s, n_planes=32, method="mvs")
+    finally:
+        lg.handlers[:], lg.level, lg.propagate = saved
+    assert "view v3 has no usable stereo partner" in buf.getvalue()
+    assert np.isnan(e["v3"].depth).all() and e.meta["depth_estimation"]["views"]["v3"]["kept"] == 0.0
+    assert all(np.isfinite(e[f"v{i}"].depth).mean() > 0.3 for i in range(3))
+    with pytest.raises(VibrInputError, match="no usable stereo partner"):
+        estimate_depth(s.subset(["v1", "v3"]), n_planes=32, method="mvs")

@@ -716,6 +716,11 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
             bar.update(1)
     depths, sigmas = {}, {}
     for i in targets:
+        if i not in raw:  # no stereo partner (_mvs_views): nothing known
+            depths[i] = np.full(cams[i].shape, np.nan, np.float32)
+            sigmas[i] = np.zeros(cams[i].shape, np.float32)
+            stats[scene.views[i].name] = {"role": "target", "kept": 0.0, "neighbours": [], "time_s": 0.0}
+            continue
         d, s, grad, dr = raw[i]
         st = stats[scene.views[i].name]
         if opt.consistency:
@@ -748,10 +753,14 @@ def _mvs_views(scene, cams, targets, inputs, opt: DepthOptions):
     """The views to estimate (the targets, then their consistency partners) and the
     nearest-first stereo partners of each."""
     nbrs = {i: select_neighbours(cams, i, inputs, opt.n_neighbours) for i in targets}
-    for i in targets:
-        if not nbrs[i]:
-            raise VibrInputError(f"view {scene.views[i].name} has no usable stereo partner{_why_no_partner(cams, i, inputs)}",
-                                 scene.root)
+    lonely = [i for i in targets if not nbrs[i]]
+    if len(lonely) == len(targets):
+        i = lonely[0]
+        raise VibrInputError(f"view {scene.views[i].name} has no usable stereo partner{_why_no_partner(cams, i, inputs)}",
+                             scene.root)
+    for i in lonely:  # the others' depth is still worth having (the fallback proxy covers these)
+        logger.warning(f"depth: view {scene.views[i].name} has no usable stereo partner"
+                       f"{_why_no_partner(cams, i, inputs)}: its depth is left unknown")
     est = list(targets)
     if opt.consistency:
         for i in targets:
