@@ -110,6 +110,24 @@ def test_transforms_conventions(tmp_path):
     np.testing.assert_allclose(cam.K, [[40, 0, 14.5], [0, 40, 9.5], [0, 0, 1]])
 
 
+def test_transforms_windows_separators(tmp_path):
+    """A transforms.json written on Windows names ``images\\a.png``: read on Linux as the
+    file it means; a backslash path out of the folder is still refused."""
+    import imageio.v3 as iio
+
+    (tmp_path / "images").mkdir()
+    iio.imwrite(tmp_path / "images" / "a.png", np.full((20, 30, 3), 200, np.uint8))
+    M = np.eye(4).tolist()
+    doc = {"fl_x": 40.0, "w": 30, "h": 20, "frames": [{"file_path": "images\\a.png", "transform_matrix": M}]}
+    (tmp_path / "transforms.json").write_text(json.dumps(doc))
+    sc = load_scene(tmp_path)
+    assert sc.views[0].image.shape == (20, 30, 3) and sc.views[0].image.max() > 0.7
+    doc["frames"][0]["file_path"] = "..\\outside\\a.png"
+    (tmp_path / "transforms.json").write_text(json.dumps(doc))
+    with pytest.raises(VibrInputError, match="outside"):
+        load_scene(tmp_path)
+
+
 def test_transforms_distortion_rejected(tmp_path):
     import imageio.v3 as iio
 

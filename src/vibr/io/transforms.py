@@ -13,7 +13,8 @@ nerfstudio puts the centre of the top-left pixel at (0.5, 0.5): vibr ``cx = cx_n
 (same for y). Non-zero distortion (k1..k4, p1, p2) or a fisheye / equirectangular
 ``camera_model`` raise :class:`VibrInputError`. ``depth_file_path`` (orthogonal depth, 0 =
 unknown) is read by :func:`vibr.io.read_depth` and multiplied by ``depth_unit_scale_factor``
-(default 1e-3 for 16-bit PNG, 1 otherwise).
+(default 1e-3 for 16-bit PNG, 1 otherwise). A path written on Windows (``images\\a.png``)
+that names no file as it stands is read with ``/`` for its backslashes.
 
 vibr extras (ignored by other tools): top level ``vibr_grid: [rows, cols]``, ``vibr_name``
 (scene name), ``ply_file_path`` (sparse points, nerfstudio's key), ``sigma_z`` (scalar, may be
@@ -208,6 +209,8 @@ def _resolve(base: Path, rel: str, what: str, src: str, i: int, allow_outside: b
         raise VibrInputError(f"{where}{what} must be a non-empty string", src)
     p = Path(rel)
     p = p if p.is_absolute() else base / p
+    if "\\" in rel and not p.exists():  # written on Windows: "images\\frame_00001.png"
+        p = base / Path(rel.replace("\\", "/"))
     if not allow_outside:
         try:
             inside = p.resolve().is_relative_to(base.resolve())
