@@ -103,6 +103,11 @@ def test_depth_estimation_says_why(pan):
         estimate_depth(pan)
 
 
+def test_info_says_one_centre(pan):
+    assert "one centre: a rotation-only capture" in pan.summary()
+    assert "bounding-box diagonal" in make_scene("arc", n_views=3, width=32, height=24).summary()
+
+
 def test_viewer_draws_the_frustums_of_one_centre(pan):
     from vibr.viewer.geometry import frustum_size, scene_scale
 

@@ -20,7 +20,7 @@ from typing import Iterable, Union
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, shared_centre
 from .errors import VibrInputError
 
 
@@ -324,7 +324,9 @@ class Scene:
             lines.append(f"points   {len(self.points)} sparse points")
         C = np.array([v.camera.centre for v in self.views])
         span = np.linalg.norm(C.max(0) - C.min(0))
-        lines.append(f"centres  bounding-box diagonal {span:.4g} scene units")
+        one = shared_centre([v.camera for v in self.views], self.points) is not None
+        lines.append("centres  one centre: a rotation-only capture (no parallax; renders need no depth)" if one
+                     else f"centres  bounding-box diagonal {span:.4g} scene units")
         lines.append("")
         lines.append(f"{'#':>3}  {'name':<16} {'size':>10} {'fx':>9} {'fy':>9} {'cx':>8} {'cy':>8}  centre")
         for i, v in enumerate(self.views):
