@@ -28,10 +28,16 @@ def test_shared_centre_closed_form():
     moved = [cams[0], Camera.from_centre(K, R2, C + [1e-3, 0, 0], 64, 48)]
     assert shared_centre(moved) is None
     assert shared_centre(cams[:1]) is None  # one camera is not a capture
-    # the scene's scale from its points: 1e-6 of a scene 1e-5 units across is not "one centre"
-    pts = C + 1e-5 * np.random.default_rng(0).normal(size=(50, 3))
-    tiny = [cams[0], Camera.from_centre(K, R2, C + 1e-10, 64, 48)]
-    assert shared_centre(tiny) is not None and shared_centre(tiny, pts) is None
+    # the scene's scale from its points: 1e-10 is a millionth of a scene 1e-4 units deep
+    pts = C + 1e-4 * np.random.default_rng(0).normal(size=(50, 3))
+    tiny = [cams[0], Camera.from_centre(K, R2, C + 3e-10, 64, 48)]
+    assert shared_centre(tiny, 1e3 * (pts - C) + C) is not None and shared_centre(tiny, pts) is None
+    # georeferenced coordinates: half a million units from the origin, a metre apart
+    far = np.array([5e5, -1.7e5, 7e4])
+    assert shared_centre([Camera.from_centre(K, np.eye(3), far, 64, 48),
+                          Camera.from_centre(K, R2, far + [0.3, 0, 0], 64, 48)]) is None
+    assert shared_centre([Camera.from_centre(K, np.eye(3), far, 64, 48),
+                          Camera.from_centre(K, R2, far, 64, 48)]) is not None
 
 
 def test_sphere_proxy_puts_every_pixel_at_the_radius(pan):

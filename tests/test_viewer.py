@@ -145,6 +145,27 @@ def test_point_cloud_lies_on_the_depth_maps(tiny_scene):
 
 
 # ------------------------------------------------------------------ keyframes → path
+def test_georeferenced_scene_is_drawn_relative_to_its_centre(tiny_scene):
+    """Half a million units from the origin, float32 (what the browser draws with) keeps
+    0.03 units: the viewer sends positions relative to the cameras' mean centre and adds it
+    back to the browser's camera, so points and cameras keep the scene's precision."""
+    off = np.array([5e5, -1.7e5, 7e4])
+    far = tiny_scene.replace(views=[v.replace(camera=Camera.from_centre(v.camera.K, v.camera.R, v.camera.centre + off,
+                                                                      v.camera.width, v.camera.height))
+                                    for v in tiny_scene.views])
+    v = Viewer(far, ViewerOptions(warm_up=False))
+    assert np.linalg.norm(v.origin - off) < 5.0
+    assert not np.any(Viewer(tiny_scene, ViewerOptions(warm_up=False)).origin)  # near the origin: none
+    P, _ = point_cloud(far, 5000, origin=v.origin)
+    P0, _ = point_cloud(tiny_scene, 5000)
+    np.testing.assert_allclose(P.astype(np.float64) + v.origin - off, P0, atol=1e-4)
+    cam = far.views[1].camera
+    wxyz, pos, fov, aspect = viser_pose_from_camera(cam)
+    st = CameraState(tuple(wxyz), tuple(pos - v.origin), fov, aspect)
+    assert max(abs(x) for x in st.position) < 10.0  # what the browser holds
+    assert st.camera(cam.width, v.origin).allclose(cam, atol=1e-6)
+
+
 def test_exported_path_renders_with_vibr_render(tiny_scene, tmp_path):
     import vibr.path as path_mod
     from vibr.io import save_scene

@@ -243,23 +243,30 @@ class Camera:
 
 
 #: Cameras share one centre when every centre lies within ``SHARED_CENTRE_REL`` times the
-#: scene's scale of their mean (the scale: the median distance of the sparse points to that
-#: mean, else 1 scene unit or the mean's norm if larger). At that spread the parallax is
-#: below a millionth of the focal length: no depth can be estimated, and none is needed.
+#: scene's depth scale (the median distance of its sparse points) of their mean: then the
+#: parallax is below a millionth of the focal length, no depth can be estimated and none is
+#: needed. Without points the scale of the scene is unknown, and the centres must agree to
+#: ``SHARED_CENTRE_ABS`` times their distance from the origin (at least 1): one point up to
+#: rounding, wherever the coordinates' origin lies (georeferenced scenes sit 10⁵–10⁶ units
+#: from it, with baselines of a metre).
 SHARED_CENTRE_REL = 1e-6
+SHARED_CENTRE_ABS = 1e-9
 
 
-def shared_centre(cameras, points=None, rel_tol: float = SHARED_CENTRE_REL) -> np.ndarray | None:
+def shared_centre(cameras, points=None) -> np.ndarray | None:
     """The common centre of cameras that all sit at one point (a rotation-only capture:
-    a panorama from a tripod), else None (:data:`SHARED_CENTRE_REL`)."""
+    a panorama from a tripod), else None (:data:`SHARED_CENTRE_REL`,
+    :data:`SHARED_CENTRE_ABS`)."""
     C = np.array([c.centre for c in cameras], dtype=np.float64)
     if len(C) < 2:
         return None
     mean = C.mean(axis=0)
-    scale = max(1.0, float(np.linalg.norm(mean)))
+    spread = float(np.linalg.norm(C - mean, axis=1).max())
+    scale = 0.0
     if points is not None and len(points):
-        scale = float(np.median(np.linalg.norm(np.asarray(points, np.float64) - mean, axis=1))) or scale
-    return mean if float(np.linalg.norm(C - mean, axis=1).max()) <= rel_tol * scale else None
+        scale = SHARED_CENTRE_REL * float(np.median(np.linalg.norm(np.asarray(points, np.float64) - mean, axis=1)))
+    tol = scale if scale > 0 else SHARED_CENTRE_ABS * max(1.0, float(np.linalg.norm(mean)))
+    return mean if spread <= tol else None
 
 
 def axes_meeting_point(cameras, max_cond: float = 1e6) -> np.ndarray | None:

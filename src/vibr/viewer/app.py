@@ -24,7 +24,7 @@ from ..errors import VibrInputError
 from ..render.methods import METHODS
 from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
-from .geometry import frustum_size, point_cloud, scene_scale, thumbnail, world_up
+from .geometry import display_origin, frustum_size, point_cloud, scene_scale, thumbnail, world_up
 from .renderer import RenderAbandoned, ViewRenderer, ViewSettings
 from .worker import LatestRequestWorker, Request
 
@@ -85,8 +85,11 @@ class CameraState:
         return cls(tuple(map(float, cam.wxyz)), tuple(map(float, cam.position)), float(cam.fov),
                    float(cam.aspect))
 
-    def camera(self, long_side: int) -> Camera:
-        return camera_from_viser(self.wxyz, self.position, self.fov, self.aspect, long_side)
+    def camera(self, long_side: int, origin=None) -> Camera:
+        """The vibr camera of this viewport, its long side ``long_side`` pixels; ``origin``:
+        the world point the viewer's positions are relative to (:func:`display_origin`)."""
+        pos = self.position if origin is None else np.add(self.position, origin)
+        return camera_from_viser(self.wxyz, pos, self.fov, self.aspect, long_side)
 
 
 @dataclass
@@ -182,6 +185,7 @@ class Viewer:
         self._hidden: set[str] = set()  # frustums hidden because the viewport is inside them
         self._scale = 1.0
         self._frustum_size = 0.1
+        self.origin = display_origin(scene)  # positions in the browser are relative to it
         self.gui: dict[str, object] = {}
         self._sent_event = threading.Condition()
         self.abandoned = 0  # renders stopped early because a newer camera arrived
@@ -260,8 +264,8 @@ class Viewer:
         sc = self.server.scene
         up = world_up(self.scene)
         sc.set_up_direction(tuple(up))
-        P, C = point_cloud(self.scene, self.options.max_points)
-        size = scene_scale(self.scene, P)
+        P, C = point_cloud(self.scene, self.options.max_points, origin=self.origin)
+        size = scene_scale(self.scene, P.astype(np.float64) + self.origin)
         self._scale = size
         if len(P):
             self._points = sc.add_point_cloud("/points", P, C, point_size=size * 0.004,
@@ -273,6 +277,7 @@ class Viewer:
         self._frustum_size = fsize
         for v in self.scene.views:
             wxyz, pos, fov, aspect = viser_pose_from_camera(v.camera)
+            pos = pos - self.origin
             h = sc.add_camera_frustum(f"/cameras/{v.name}", fov=fov, aspect=aspect, scale=fsize,
                                       thickness=2.0, thickness_units="screen",
                                       image=thumbnail(v.image), format="jpeg", jpeg_quality=85,
@@ -290,6 +295,7 @@ class Viewer:
     def move_client(self, client, camera: Camera) -> None:
         """Move ``client``'s viewport to ``camera`` (its pose and vertical field of view)."""
         wxyz, pos, fov, _ = viser_pose_from_camera(camera)
+        pos = pos - self.origin
         with client.atomic():
             client.camera.fov = fov
             client.camera.up_direction = tuple(-camera.R[1])
@@ -381,12 +387,12 @@ class Viewer:
         st = client_or_state if isinstance(client_or_state, CameraState) else CameraState.of(client_or_state.camera)
         if self.keyframes:
             w, h = self.keyframes[0].width, self.keyframes[0].height
-            cam = st.camera(max(w, h))
+            cam = st.camera(max(w, h), self.origin)
             if (cam.width, cam.height) != (w, h):
                 f = cam.K[1, 1] * h / cam.height
                 cam = Camera(Camera.intrinsics(f, w, h), cam.R, cam.t, w, h)
         else:
-            cam = st.camera(self.settings.full_long_side)
+            cam = st.camera(self.settings.full_long_side, self.origin)
         self.keyframes.append(cam)
         if "keyframes" in self.gui:
             self.gui["keyframes"].content = f"{len(self.keyframes)} keyframes"
@@ -475,7 +481,7 @@ class Viewer:
             with self._lock:
                 self._moving.add(cid)
             self._set_visible("points")
-        self._hide_frustums_at(st.position)
+        self._hide_frustums_at(np.add(st.position, self.origin))
 
     def request(self, client_id: int, state: CameraState, t_update: float | None = None) -> int:
         """Queue a render of ``state`` for a client as a camera update would (benchmarks)."""
@@ -489,7 +495,7 @@ class Viewer:
         long_side = settings.preview_long_side if kind == "preview" else settings.full_long_side
         if kind == "preview" and long_side >= settings.full_long_side:
             return  # the full render follows; a preview as large would only delay it
-        cam = st.camera(long_side)
+        cam = st.camera(long_side, self.origin)
         if kind == "full":  # the camera has been still for settle_s
             with self._lock:
                 self._moving.discard(client.client_id)

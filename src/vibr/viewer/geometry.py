@@ -7,12 +7,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..camera import shared_centre
 from ..scene import Scene
 
-__all__ = ["point_cloud", "scene_scale", "frustum_size", "world_up", "thumbnail", "points_in_view"]
+__all__ = ["point_cloud", "scene_scale", "frustum_size", "world_up", "thumbnail", "points_in_view",
+           "display_origin"]
 
 
-def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0,
+                origin=None) -> tuple[np.ndarray, np.ndarray]:
     """World points and their colours from the views' depth maps, at most ``max_points``.
 
     Every view contributes pixels on a regular grid of stride
@@ -20,17 +23,19 @@ def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0) -> tuple
     depth (``X = C + depth · Rᵀ K⁻¹ x̄``, :meth:`vibr.camera.Camera.backproject`); a random
     subset of ``max_points`` is kept when the grid gives more. Views without depth add
     nothing, nor do the pixels of a view's fallback proxy (:attr:`vibr.scene.View.fallback`);
-    when no view has depth the scene's sparse points (grey) are used.
+    when no view has depth the scene's sparse points (grey) are used. With ``origin``
+    (:func:`display_origin`) the points are relative to it, subtracted before the cast.
 
     Returns
     -------
     points : (N, 3) float32
     colours : (N, 3) uint8
     """
+    o = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
     views = [v for v in scene.views if v.depth is not None]
     if not views:
         if scene.points is not None and len(scene.points):
-            P = np.asarray(scene.points, dtype=np.float32)
+            P = (np.asarray(scene.points, dtype=np.float64) - o).astype(np.float32)
             P = _subsample(P, max_points, seed)
             return P, np.full(P.shape, 160, np.uint8)
         return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
@@ -47,7 +52,7 @@ def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0) -> tuple
         if not np.any(ok):
             continue
         xy = np.stack([xx[ok], yy[ok]], -1).astype(np.float64)
-        pts.append(v.camera.backproject(xy, z[ok]).astype(np.float32))
+        pts.append((v.camera.backproject(xy, z[ok]) - o).astype(np.float32))
         cols.append(np.clip(v.image[::step, ::step][ok] * 255 + 0.5, 0, 255).astype(np.uint8))
     if not pts:
         return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
@@ -78,9 +83,24 @@ def scene_scale(scene: Scene, points: np.ndarray | None = None) -> float:
     if len(C) > 1:
         d = np.linalg.norm(C[:, None] - C[None], axis=2)[np.triu_indices(len(C), 1)]
         s = float(np.median(d))
-        if s > 1e-6 * max(1.0, float(np.linalg.norm(C.mean(axis=0)))):  # not one centre
+        if s > 0 and shared_centre([v.camera for v in scene.views]) is None:
             return s
     return 1.0
+
+
+def display_origin(scene: Scene, max_ratio: float = 100.0) -> np.ndarray:
+    """The world point the viewer sends positions relative to: the cameras' mean centre when
+    it lies more than ``max_ratio`` scene scales (:func:`scene_scale`) from the world origin,
+    else the origin itself.
+
+    The browser draws in float32 (7 significant digits): a scene in georeferenced
+    coordinates, 5·10⁵ units from the origin, would have its points and frustums rounded to
+    0.03 units and shaking by as much as the camera moves. Relative to its own centre it is
+    drawn as precisely as any other; the viewer adds the origin back to the browser's
+    camera before rendering (:class:`vibr.viewer.Viewer`)."""
+    C = np.array([v.camera.centre for v in scene.views], np.float64)
+    m = C.mean(axis=0)
+    return m if float(np.linalg.norm(m)) > max_ratio * scene_scale(scene) else np.zeros(3)
 
 
 def frustum_size(scene: Scene, scale: float) -> float:
