@@ -843,3 +843,32 @@ def test_a_view_without_stereo_partner_gets_unknown_depth():
     assert all(np.isfinite(e[f"v{i}"].depth).mean() > 0.3 for i in range(3))
     with pytest.raises(VibrInputError, match="no usable stereo partner"):
         estimate_depth(s.subset(["v1", "v3"]), n_planes=32, method="mvs")
+
+
+def test_near_plane_closed_form_and_any_unit_of_length():
+    """The near plane of the default depth range is where the nearest partner sees half an
+    image width of parallax: ``w = p / (f b)`` for a sideways baseline ``b``. It was taken
+    from the parallax at depth 1, which with a scene in millimetres lies between the
+    cameras: there the estimate kept 0.4 % of the pixels (41 % in metres). The same scene in
+    any unit of length now gives the same maps, scaled."""
+    from vibr.camera import Camera
+    from vibr.stereo.api import _near_inverse_depth
+    from vibr.synthetic import make_scene
+
+    K = Camera.intrinsics(100.0, 64, 48)
+    a = Camera.from_centre(K, np.eye(3), [0.0, 0, 0], 64, 48)
+    b = Camera.from_centre(K, np.eye(3), [0.3, 0, 0], 64, 48)
+    assert _near_inverse_depth(a, b, 32.0) == pytest.approx(32.0 / (100.0 * 0.3), rel=1e-9)
+    sc = make_scene("handheld", n_views=5, width=96, height=72, seed=2)
+    out = []
+    for k in (1.0, 1000.0):
+        views = [v.replace(camera=Camera.from_centre(v.camera.K, v.camera.R, v.camera.centre * k,
+                                                     v.camera.width, v.camera.height), depth=None, sigma_z=None)
+                 for v in sc.views]
+        e = estimate_depth(sc.replace(views=views, points=None), views=[0], n_planes=None)
+        out.append((e.meta["depth_estimation"]["views"]["view_000"], e[0].depth / k))
+    (s1, d1), (s2, d2) = out
+    assert s1["kept"] > 0.3 and s2["kept"] == pytest.approx(s1["kept"], abs=1e-3)
+    np.testing.assert_allclose(np.array(s2["depth_range"]) / 1000.0, s1["depth_range"], rtol=1e-6)
+    both = np.isfinite(d1) & np.isfinite(d2)
+    assert both.mean() > 0.3 and np.nanmedian(np.abs(d2[both] / d1[both] - 1)) < 1e-4

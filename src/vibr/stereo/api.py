@@ -253,14 +253,36 @@ def complete_coverage(cameras: list[Camera], ref: int, chosen: list[int], candid
     return out
 
 
-def _parallax_rate(ref: Camera, src: Camera) -> float:
-    """Pixels of parallax in ``src`` per unit of inverse depth ``w`` of the reference
-    image centre's ray: ``|p(w=1) − p(w=0)|`` (the plane homography is affine in w)."""
+def _centre_ray_parallax(ref: Camera, src: Camera):
+    """``f(w)``: pixels in ``src`` between the reference image centre's ray at inverse depth
+    ``w`` and at infinity (inf where that point is not in front of ``src``). Exact (the
+    plane homography is projective in ``w``) and the same in any unit of length."""
     x = np.array([(ref.width - 1) / 2, (ref.height - 1) / 2])
     ray = ref.pixel_rays(x)
-    xy_inf = src.project(ref.camera_to_world(ray * 1e9))[0]
-    xy1 = src.project(ref.camera_to_world(ray * 1.0))[0]
-    return float(np.linalg.norm(xy1 - xy_inf))
+    b = max(float(np.linalg.norm(src.centre - ref.centre)), 1e-300)
+    xy_inf = src.project(ref.camera_to_world(ray * (1e12 * b)))[0]
+
+    def f(w: float) -> float:
+        if w <= 0:
+            return 0.0
+        xy, z = src.project(ref.camera_to_world(ray / w))
+        return float(np.linalg.norm(xy - xy_inf)) if z > 0 else np.inf
+
+    return f, b
+
+
+def _near_inverse_depth(ref: Camera, src: Camera, parallax_px: float) -> float:
+    """The inverse depth along the reference centre's ray at which ``src`` sees
+    ``parallax_px`` pixels of parallax (bisection on :func:`_centre_ray_parallax`; parallax
+    grows with ``w`` until the point leaves ``src``'s front)."""
+    f, b = _centre_ray_parallax(ref, src)
+    lo, hi = 0.0, 1e-6 / b
+    while f(hi) < parallax_px and hi < 1e12 / b:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if f(mid) < parallax_px else (lo, mid)
+    return hi
 
 
 def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: dict,
@@ -291,8 +313,7 @@ def default_depth_range(scene: Scene, ref: int, cameras: list[Camera], images: d
             lo, hi = np.percentile(z[inside], [2, 98])
             span = hi - lo
             return float(max(lo - margin * span, lo * 0.5)), float(hi + margin * span)
-    rate = _parallax_rate(cam, cameras[neighbours[0]])
-    w_max = max_parallax * cam.width / max(rate, 1e-12)
+    w_max = _near_inverse_depth(cam, cameras[neighbours[0]], max_parallax * cam.width)
     w_min = w_max / 100.0
     # Cameras that converge on an object (a ring, an arc) put it near the point their axes
     # meet. A wide baseline can put that point nearer than the half-image parallax limit
@@ -356,8 +377,11 @@ def _segment_completion(image, image_small, camera: Camera, d, s, grad, depth_ra
 def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo: int, hi: int) -> int:
     """Number of planes so that consecutive planes move the farthest neighbour's pixel by
     about ``step_px`` (the sub-label fit refines below that), clipped to [lo, hi]."""
-    rate = max(_parallax_rate(ref, c) for c in srcs)
-    span_px = rate * (1.0 / depth_range[0] - 1.0 / depth_range[1])
+    w_near, w_far = 1.0 / depth_range[0], 1.0 / depth_range[1]
+    span_px = 0.0
+    for c in srcs:
+        f, _ = _centre_ray_parallax(ref, c)
+        span_px = max(span_px, f(w_near) - f(w_far))  # inf (the near plane behind c): hi planes
     return int(np.clip(np.ceil(span_px / step_px) + 1, lo, hi))
 
 
