@@ -181,6 +181,25 @@ def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> list[tu
     return sizes
 
 
+def _lens_keys(files: list[Path]) -> list[tuple | None]:
+    """Each photo's camera and focal length from its EXIF header (make, model, focal length
+    in mm to 0.1 mm), or None where it has none: the copies COLMAP reads are PNGs without
+    EXIF, so this is what tells a zoom or a second camera apart."""
+    from PIL import Image
+
+    keys = []
+    for f in files:
+        try:
+            with Image.open(f) as im:
+                ex = im.getexif()
+                focal = ex.get_ifd(0x8769).get(0x920A)  # Exif IFD: FocalLength
+                key = (ex.get(0x010F), ex.get(0x0110), None if focal is None else round(float(focal), 1))
+        except (OSError, ValueError, TypeError, ZeroDivisionError):
+            key = None
+        keys.append(None if key is None or key == (None, None, None) else key)
+    return keys
+
+
 def _to8bit(im):
     from PIL import Image
 
@@ -281,7 +300,8 @@ class CalibrateOptions:
         SIMPLE_PINHOLE, PINHOLE). Distorted models are undistorted to PINHOLE in step 5.
     single_camera : bool
         One shared intrinsic camera for all photos (same camera and zoom) or one per photo.
-        Photos of several sizes get one camera each whatever this says.
+        Photos of several sizes, or whose EXIF names several cameras or focal lengths (a
+        zoom), get one camera each whatever this says.
     refine_principal_point : bool, optional
         True: bundle adjustment refines the principal point throughout the mapping.
         False: it stays at the image centre (COLMAP's default). None ("auto"): map with it
@@ -355,9 +375,15 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
         t0 = time.perf_counter()
         logger.info(f"calibrate [1/5] resizing {len(files)} photos by {opt.scale:g}")
         sizes = _downscale_photos(files, img_dir, opt.scale)
+        lenses = _lens_keys(files)
         if opt.single_camera and len(set(sizes)) > 1:
             # One shared camera needs one image size: photos of several sizes get one each.
             logger.info(f"calibrate: photos have {len(set(sizes))} different sizes: one camera per photo")
+            opt = replace(opt, single_camera=False)
+        elif opt.single_camera and len(set(lenses)) > 1:
+            # a zoom, or a second camera of the same resolution: one focal length would be wrong
+            logger.info(f"calibrate: the photos' EXIF names {len(set(lenses))} cameras or focal lengths: "
+                        "one camera per photo")
             opt = replace(opt, single_camera=False)
         times["resize"] = time.perf_counter() - t0
         names = [f"{f.stem}.png" for f in files]
