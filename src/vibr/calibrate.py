@@ -91,7 +91,10 @@ def list_photos(photos_dir) -> list[Path]:
     if not d.exists():
         raise VibrInputError("photo folder not found", d)
     if not d.is_dir():
-        raise VibrInputError("not a folder (calibrate takes a folder of photos)", d)
+        video = d.suffix.lower() in (".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm")
+        raise VibrInputError("not a folder (calibrate takes a folder of photos)"
+                             + ("; for a video, extract frames first, e.g. 'ffmpeg -i VIDEO -vf fps=2 "
+                                "FRAMES/%04d.png', then calibrate FRAMES with --matcher sequential" if video else ""), d)
     files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS)
     if not files:
         heic = any(p.suffix.lower() in (".heic", ".heif") for p in d.iterdir())
