@@ -598,3 +598,30 @@ def test_depth_cache_estimates_once(tmp_path, monkeypatch):
     c = scene_with_depth(bare, cache_dir=tmp_path, exclude=[s.names[0]])
     assert c.meta["depth_source"] == "estimated" and len(calls) == 3
     assert scene_with_depth(s, cache_dir=tmp_path).meta["depth_source"] == "scene"
+
+
+def test_video_colours_are_bt709_tagged(tmp_path):
+    """The video's colours as a player shows them: players read HD video as BT.709 (untagged
+    or tagged), so the frames are converted and tagged BT.709. Decoding with the BT.709
+    matrix forced (what an untagged file got in a browser: pure green came back as 215)
+    gives the colours back."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    from vibr.io.video import write_video
+
+    cols = [(255, 0, 0), (0, 255, 0), (0, 0, 255), (255, 255, 0), (200, 120, 60), (128, 128, 128)]
+    img = np.zeros((96, 96 * len(cols), 3), np.uint8)
+    for i, c in enumerate(cols):
+        img[:, 96 * i:96 * (i + 1)] = c
+    out = tmp_path / "c.mp4"
+    write_video(out, [img] * 3, fps=24)
+    ff = imageio_ffmpeg.get_ffmpeg_exe()
+    info = subprocess.run([ff, "-i", str(out)], capture_output=True, text=True).stderr
+    assert "yuv420p(tv, bt709, progressive)" in info
+    raw = subprocess.run([ff, "-i", str(out), "-vf", "scale=in_color_matrix=bt709", "-f", "rawvideo",
+                          "-pix_fmt", "rgb24", "-v", "error", "-"], capture_output=True, check=True).stdout
+    dec = np.frombuffer(raw, np.uint8)[:img.size].reshape(img.shape).astype(int)
+    for i, c in enumerate(cols):
+        assert np.abs(dec[48, 96 * i + 48] - np.array(c)).max() <= 4, (c, dec[48, 96 * i + 48])

@@ -4,7 +4,8 @@
 frame sizes: an odd width or height is **padded** by one row / column repeating the last
 one (never cropped; the decoded video is then one pixel larger, which
 :func:`write_video` reports). Quality: x264's constant rate factor ``crf`` (0 lossless,
-18 visually lossless — the default —, 23 x264's own default, 51 worst).
+18 visually lossless — the default —, 23 x264's own default, 51 worst). Colours are
+converted and tagged as BT.709 (:data:`BT709_FILTER`), what players assume.
 The file is written under a temporary name and renamed when complete.
 """
 
@@ -25,7 +26,15 @@ from .atomic import atomic_path
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["write_video", "read_video_info", "even_pad"]
+__all__ = ["write_video", "read_video_info", "even_pad", "BT709_FILTER", "BT709_TAGS"]
+
+#: RGB → YUV with the BT.709 matrix, and the stream tagged BT.709 (matrix, primaries,
+#: transfer, limited range): players read untagged HD video as BT.709 whatever matrix made
+#: it, and ffmpeg's default matrix is BT.601, so an untagged file showed saturated colours
+#: up to 40 grey levels off (pure green as 215) in a browser or a video player.
+BT709_FILTER = ("scale=out_color_matrix=bt709:out_range=tv,"
+                "setparams=color_primaries=bt709:color_trc=bt709:colorspace=bt709:range=tv")
+BT709_TAGS = ("-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "bt709", "-color_range", "tv")
 
 
 def even_pad(frame: np.ndarray) -> np.ndarray:
@@ -104,8 +113,8 @@ def _start_ffmpeg(out, size, fps, crf, preset, log):
 
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-f", "rawvideo", "-vcodec", "rawvideo",
            "-s", f"{size[0]}x{size[1]}", "-pix_fmt", "rgb24", "-r", f"{float(fps):.10g}", "-i", "-",
-           "-an", "-vcodec", "libx264", "-pix_fmt", "yuv420p", "-crf", str(int(crf)), "-preset", preset,
-           "-movflags", "+faststart", "-v", "error", "-f", "mp4", out]
+           "-an", "-vf", BT709_FILTER, "-vcodec", "libx264", "-pix_fmt", "yuv420p", *BT709_TAGS,
+           "-crf", str(int(crf)), "-preset", preset, "-movflags", "+faststart", "-v", "error", "-f", "mp4", out]
     return subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log,
                             start_new_session=True)
 
