@@ -128,6 +128,30 @@ def test_transforms_windows_separators(tmp_path):
         load_scene(tmp_path)
 
 
+def test_transforms_camera_rig_names(tmp_path):
+    """A rig's frames share file stems (``images/cam0/0000.png``, ``images/cam1/0000.png``):
+    the views are named by their paths below the shared folders (until 2026-11-27 such a
+    scene was refused: "duplicate view names"), and keep those names through a save."""
+    import os
+
+    from vibr.synthetic import make_scene
+
+    save_scene(make_scene("arc", n_views=4, width=32, height=24), tmp_path / "s")
+    d = json.loads((tmp_path / "s" / "transforms.json").read_text())
+    for c in ("cam0", "cam1"):
+        (tmp_path / "s" / "images" / c).mkdir()
+    for i, f in enumerate(d["frames"]):
+        new = f"images/cam{i % 2}/{i // 2:04d}.png"
+        os.rename(tmp_path / "s" / f["file_path"], tmp_path / "s" / new)
+        f["file_path"] = new
+        del f["vibr_name"]
+    (tmp_path / "s" / "transforms.json").write_text(json.dumps(d))
+    sc = load_scene(tmp_path / "s")
+    assert sc.names == ["cam0/0000", "cam1/0000", "cam0/0001", "cam1/0001"]
+    save_scene(sc, tmp_path / "t")
+    assert load_scene(tmp_path / "t").names == sc.names
+
+
 def test_transforms_distortion_rejected(tmp_path):
     import imageio.v3 as iio
 

@@ -16,6 +16,10 @@ unknown) is read by :func:`vibr.io.read_depth` and multiplied by ``depth_unit_sc
 (default 1e-3 for 16-bit PNG, 1 otherwise). A path written on Windows (``images\\a.png``)
 that names no file as it stands is read with ``/`` for its backslashes.
 
+Views are named by their image's file stem; when two frames share one (a camera rig:
+``images/cam0/0001.png``, ``images/cam1/0001.png``) by the path without its extension below
+the folders every frame shares (``cam0/0001``).
+
 vibr extras (ignored by other tools): top level ``vibr_grid: [rows, cols]``, ``vibr_name``
 (scene name), ``ply_file_path`` (sparse points, nerfstudio's key), ``sigma_z`` (scalar, may be
 per frame); per frame ``vibr_name`` (view name), ``vibr_skew`` (K[0, 1]), ``vibr_grid_pos:
@@ -227,6 +231,21 @@ def _resolve(base: Path, rel: str, what: str, src: str, i: int, allow_outside: b
     return p
 
 
+def _frame_names(frames: list) -> list:
+    """Default view names: the image file stems, or, when two frames share a stem (a camera
+    rig: ``images/cam0/0001.png``, ``images/cam1/0001.png``), the paths without their
+    extension and without the folders every frame shares (``cam0/0001``)."""
+    paths = [Path(str(f.get("file_path", ""))) if isinstance(f, dict) else Path() for f in frames]
+    stems = [p.stem for p in paths]
+    if len(set(stems)) == len(stems):
+        return stems
+    parts = [p.with_suffix("").as_posix().removeprefix("./").split("/") for p in paths]
+    k = 0
+    while all(len(q) > k + 1 and q[k] == parts[0][k] for q in parts):
+        k += 1
+    return ["/".join(q[k:]) for q in parts]
+
+
 def _ints(v, n: int, what: str, src: str) -> tuple[int, ...]:
     """``v`` as ``n`` non-negative integers (grid sizes and positions)."""
     if not isinstance(v, (list, tuple)) or len(v) != n or not all(
@@ -265,13 +284,14 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         raise VibrInputError("transforms.json must be an object with a non-empty 'frames' list", src)
     base = tf.parent
     entries, grid_pos = [], {}
+    stems = _frame_names(meta["frames"])
     for i, fr in enumerate(meta["frames"]):
         if not isinstance(fr, dict):
             raise VibrInputError(f"frame {i} is not a JSON object", src)
         if "file_path" not in fr:
             raise VibrInputError(f"frame {i} is missing key 'file_path'", src)
         img = _resolve(base, fr["file_path"], "file_path", src, i, allow_outside)
-        name = fr.get("vibr_name", Path(fr["file_path"]).stem)
+        name = fr.get("vibr_name", stems[i])
         if not isinstance(name, str) or not name.strip():
             raise VibrInputError(f"frame {i}: vibr_name must be a non-empty string", src)
         e = {"name": name, "path": img, "frame": fr, "i": i}
