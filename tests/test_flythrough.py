@@ -163,6 +163,22 @@ def test_dataparser_transforms_with_applied_transform_and_scale(arc_scene, tmp_p
         assert main(["render", str(scene_dir), "--path", str(f), "--dataparser-transforms", str(dp),
                      "-o", str(frames), "--method", "ulr", "--workers", "1", "-q"]) == 0
         assert len(list(frames.glob("*.png"))) == 5
+    # the other way: a vibr path written in nerfstudio's frame (for ns-render) is the file
+    # nerfstudio's forward map gives, and reads back
+    out = tmp_path / "for_ns.json"
+    P.write_camera_path(out, p, dataparser_transforms=dp, applied_transform=got_A, applied_scale=got_scale)
+    want = json.loads(f.read_text())["camera_path"]
+    for a, b in zip(json.loads(out.read_text())["camera_path"], want):
+        np.testing.assert_allclose(a["camera_to_world"], b["camera_to_world"], atol=1e-9)
+    back = P.read_camera_path(out, dataparser_transforms=dp, applied_transform=got_A, applied_scale=got_scale)
+    _same_cameras(p.cameras, back.cameras, tol=1e-8)
+    from vibr.cli import main
+
+    cli_out = tmp_path / "cli_ns.json"
+    assert main(["path", "orbit", str(scene_dir), "-o", str(cli_out), "--frames", "5",
+                 "--dataparser-transforms", str(dp), "-q"]) == 0
+    for a, b in zip(json.loads(cli_out.read_text())["camera_path"], want):
+        np.testing.assert_allclose(a["camera_to_world"], b["camera_to_world"], atol=1e-9)
 
 
 def test_scene_processing_transform_refuses_bad_values(tmp_path, arc_scene):

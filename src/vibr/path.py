@@ -3,7 +3,9 @@
 A fly-through is a list of cameras rendered one after another into a video. vibr reads and
 writes paths in the schema of nerfstudio (``nerfstudio/cameras/camera_paths.py``,
 ``get_path_from_json``; written by the viewer's render panel), so that a path drawn in
-nerfstudio's viewer renders in vibr and a vibr path renders in ``ns-render camera-path``::
+nerfstudio's viewer renders in vibr and a vibr path renders in ``ns-render camera-path``
+(both through the model's ``dataparser_transforms.json``: nerfstudio works in a normalised
+frame, :func:`read_camera_path` and :func:`write_camera_path` map to and from it)::
 
     {"camera_type": "perspective", "render_width": W, "render_height": H,
      "seconds": S, "fps": F,
@@ -161,10 +163,16 @@ def _check_pinhole(cam: Camera, tol: float = 1e-6) -> None:
 
 # ----------------------------------------------------------------------------- files
 def write_camera_path(path, cameras, *, fps: float = 24.0, seconds: float | None = None,
-                      meta: dict | None = None) -> None:
+                      meta: dict | None = None, dataparser_transforms=None, applied_transform=None,
+                      applied_scale: float = 1.0) -> None:
     """Write cameras (a list or a :class:`CameraPath`) as nerfstudio's ``camera_path.json``,
     atomically. Every camera must have the same size; ``seconds`` defaults to
-    ``len(cameras) / fps``. Floats are written by ``repr`` (exact round trip)."""
+    ``len(cameras) / fps``. Floats are written by ``repr`` (exact round trip).
+
+    With ``dataparser_transforms`` (nerfstudio's ``dataparser_transforms.json``, and the
+    scene's ``applied_transform`` / ``applied_scale``: :func:`scene_processing_transform`)
+    the cameras are written in nerfstudio's normalised frame, the one ``ns-render`` renders
+    in; :func:`read_camera_path` with the same arguments reads them back."""
     if isinstance(cameras, CameraPath):
         fps = cameras.fps
         seconds = cameras.seconds if seconds is None else seconds
@@ -177,11 +185,14 @@ def write_camera_path(path, cameras, *, fps: float = 24.0, seconds: float | None
     if any((c.width, c.height) != (w, h) for c in cams):
         raise VibrInputError("every camera of a path must have the same size", path)
     seconds = len(cams) / float(fps) if seconds is None else float(seconds)
+    to_file = _frame_map(dataparser_transforms, applied_transform, applied_scale, path, _normalise)
     frames = []
     for c in cams:
         _check_pinhole(c)
-        frames.append({"camera_to_world": c2w_opengl_from_camera(c).ravel().tolist(),
+        frames.append({"camera_to_world": to_file(c2w_opengl_from_camera(c)).ravel().tolist(),
                        "fov": fov_from_focal(float(c.K[1, 1]), h), "aspect": w / h})
+    if dataparser_transforms is not None:
+        meta = dict(meta or {}, frame=f"nerfstudio's normalised frame ({os.fspath(dataparser_transforms)})")
     data = {"camera_type": "perspective", "render_width": int(w), "render_height": int(h),
             "seconds": seconds, "fps": float(fps), "camera_path": frames}
     if meta:
@@ -215,6 +226,18 @@ def read_dataparser_transforms(path) -> tuple[np.ndarray, float]:
     return T, s
 
 
+def _frame_map(dataparser_transforms, applied_transform, applied_scale, where, fn):
+    """``M -> fn(M, T, s / applied_scale, applied)`` for a dataparser_transforms.json, else
+    the identity (the path is in the data's own frame)."""
+    if not (math.isfinite(applied_scale) and applied_scale > 0):
+        raise VibrInputError(f"applied_scale must be positive, got {applied_scale!r}", where)
+    if dataparser_transforms is None:
+        return lambda M: M
+    T, s = read_dataparser_transforms(dataparser_transforms)
+    applied = None if applied_transform is None else np.asarray(applied_transform, np.float64).reshape(3, 4)
+    return lambda M: fn(M, T, s / applied_scale, applied)
+
+
 def _unnormalise(M: np.ndarray, T: np.ndarray, s: float, applied: np.ndarray | None) -> np.ndarray:
     """Map a camera-to-world from nerfstudio's normalised frame back to the data's frame:
     ``x = T_R⁻¹ (x_n / s − T_t)`` (then ``applied`` when the scene's transforms.json
@@ -229,6 +252,21 @@ def _unnormalise(M: np.ndarray, T: np.ndarray, s: float, applied: np.ndarray | N
         B = np.eye(4)
         B[:3, :] = applied
         out = B @ out
+    return out
+
+
+def _normalise(M: np.ndarray, T: np.ndarray, s: float, applied: np.ndarray | None) -> np.ndarray:
+    """The inverse of :func:`_unnormalise`: a camera-to-world of the data's frame in
+    nerfstudio's normalised frame, ``x_n = s (T_R x + T_t)`` after undoing ``applied``."""
+    out = np.asarray(M, np.float64).copy()
+    if applied is not None:
+        B = np.eye(4)
+        B[:3, :] = applied
+        out = np.linalg.solve(B, out)
+    T4 = np.eye(4)
+    T4[:3, :] = T
+    out = T4 @ out
+    out[:3, 3] = out[:3, 3] * s
     return out
 
 
@@ -282,12 +320,7 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
         raise VibrInputError(f"missing {exc.args[0]!r}", p) from None
     if w <= 0 or h <= 0:
         raise VibrInputError(f"render size must be positive, got {w}x{h}", p)
-    T = s = None
-    if not (math.isfinite(applied_scale) and applied_scale > 0):
-        raise VibrInputError(f"applied_scale must be positive, got {applied_scale!r}", p)
-    if dataparser_transforms is not None:
-        T, s = read_dataparser_transforms(dataparser_transforms)
-    applied = None if applied_transform is None else np.asarray(applied_transform, np.float64).reshape(3, 4)
+    from_file = _frame_map(dataparser_transforms, applied_transform, applied_scale, p, _unnormalise)
     cams = []
     for i, fr in enumerate(frames):
         where = f"{p}: camera_path[{i}]"
@@ -300,8 +333,8 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
         if M.size != 16:
             raise VibrInputError(f"camera_to_world must hold 16 numbers, got {M.size}", where)
         M = M.reshape(4, 4)
-        if T is not None and np.all(np.isfinite(M)):
-            M = _unnormalise(M, T, s / applied_scale, applied)
+        if np.all(np.isfinite(M)):
+            M = from_file(M)
         cams.append(camera_from_c2w_opengl(M, fr["fov"], w, h, source=where))
     seconds = d.get("seconds")
     fps = d.get("fps")

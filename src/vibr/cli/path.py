@@ -10,7 +10,8 @@ from ._options import names
 _DESC = """\
 Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json schema
 (camera_to_world 4x4 row-major in OpenGL camera axes, vertical fov in degrees; docs/FLYTHROUGH.md),
-to render with 'vibr render SCENE --path PATH.json -o video.mp4' (or nerfstudio's ns-render).
+to render with 'vibr render SCENE --path PATH.json -o video.mp4'; with --dataparser-transforms
+the path is written in the normalised frame of a nerfstudio model of the scene, for ns-render.
 Kinds: interpolate (a C2-smooth spline through the scene's cameras: all, nearest next, or
 --views in that order), orbit (an ellipse around the point the cameras look at, at their
 mean height and distance; an arc swept back and forth when the cameras do not surround
@@ -55,6 +56,10 @@ def register(sub) -> None:
                    help="interpolate: keep the given order or reorder the views by proximity (default: "
                         "proximity through all the scene's views, the given order with --views)")
     p.add_argument("--full", action="store_true", help="orbit: a full turn even when the cameras cover an arc")
+    p.add_argument("--dataparser-transforms", metavar="JSON",
+                   help="write the path in the normalised frame of a nerfstudio model trained on SCENE (its "
+                        "dataparser_transforms.json), the frame ns-render renders in; vibr render --path reads "
+                        "such a file with the same option")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -90,7 +95,10 @@ def run(args) -> int:
         path = P.spiral(scene, **kw)
     path.meta["scene"] = str(args.scene)
     path.meta["scale"] = args.scale
-    P.write_camera_path(args.output, path)
+    applied, applied_scale = (P.scene_processing_transform(args.scene) if args.dataparser_transforms
+                              else (None, 1.0))
+    P.write_camera_path(args.output, path, dataparser_transforms=args.dataparser_transforms,
+                        applied_transform=applied, applied_scale=applied_scale)
     print(f"wrote {args.output}: {args.kind} path, {count(len(path), 'frame')} of {path.width}x{path.height} "
           f"at {path.fps:g} fps ({path.seconds:.2f} s)")
     return 0
