@@ -6,6 +6,7 @@ helpers and the error paths."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -360,25 +361,17 @@ def test_a_work_folder_without_room_is_refused_before_colmap(synthetic_photos, t
 def test_a_zoom_gets_one_camera_per_photo(tmp_path):
     """Photos of one size whose EXIF gives two focal lengths (a zoom): one camera per photo,
     each focal length recovered. With one shared camera (before 2026-11-27; the copies COLMAP
-    reads are PNGs without EXIF) both zooms got one focal length, 17 % and 22 % off."""
-    from PIL import Image
+    reads are PNGs without EXIF) both zooms got one focal length, 17 % and 22 % off. The
+    photos are those of benchmarks/calibrate_zoom.py."""
+    import importlib.util
 
-    import vibr.synthetic as synthetic
     from vibr.calibrate import _lens_keys, calibrate_scene
 
-    world = synthetic.default_world(0)
-    truth = {}
-    for i, c in enumerate(synthetic.arc_cameras(10, arc_deg=40, width=480, height=360)):
-        zoom = 1.0 if i % 2 == 0 else 1.5
-        K = c.K.copy()
-        K[:2, :2] *= zoom
-        img, _ = synthetic.render_view(world, Camera(K, c.R, c.t, c.width, c.height))
-        im = Image.fromarray((img * 255 + 0.5).astype(np.uint8))
-        ex = im.getexif()
-        ex[0x010F], ex[0x0110] = "Acme", "Zoomer"
-        ex.get_ifd(0x8769)[0x920A] = 24.0 * zoom
-        im.save(tmp_path / f"v{i:02d}.jpg", exif=ex.tobytes(), quality=95)
-        truth[f"v{i:02d}"] = K[0, 0]
+    spec = importlib.util.spec_from_file_location(
+        "calibrate_zoom", Path(__file__).resolve().parents[1] / "benchmarks" / "calibrate_zoom.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    truth = bench.make_photos(tmp_path)
     assert sorted(set(_lens_keys(sorted(tmp_path.glob("*.jpg"))))) == [("Acme", "Zoomer", 24.0), ("Acme", "Zoomer", 36.0)]
     scene, report = calibrate_scene(tmp_path)
     assert len(scene) == 10 and report.mean_reprojection_error_px < 0.35
