@@ -82,6 +82,8 @@ def run(args) -> int:
                               ("--full", "orbit", args.full)):
         if value not in (None, False) and args.kind != kind:  # refused, not ignored
             raise VibrInputError(f"{flag} applies to 'vibr path {kind}' only, not to {args.kind}")
+    if args.dataparser_transforms:
+        P.read_dataparser_transforms(args.dataparser_transforms)  # a bad file fails before the work
     seconds = 4.0 if args.frames is None and args.seconds is None else args.seconds
     scene = load_scene_cached(args.scene, scale=args.scale)  # the same cache as render --path
     check_not_scene_file(args.output, scene, "-o")
