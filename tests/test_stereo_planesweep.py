@@ -872,3 +872,26 @@ def test_near_plane_closed_form_and_any_unit_of_length():
     np.testing.assert_allclose(np.array(s2["depth_range"]) / 1000.0, s1["depth_range"], rtol=1e-6)
     both = np.isfinite(d1) & np.isfinite(d2)
     assert both.mean() > 0.3 and np.nanmedian(np.abs(d2[both] / d1[both] - 1)) < 1e-4
+
+
+def test_walking_forward_every_view_gets_depth():
+    """Photos taken walking towards the scene: a partner ahead or behind puts its epipole
+    near the image centre, where the parallax vanishes. The near plane is found from nine
+    rays, and a pair that never shows that much parallax falls back to the baseline's depth
+    (with the centre's ray alone and no fallback, three of six views got the range (0, 0)
+    and no depth at all)."""
+    from vibr.scene import Scene, View
+    from vibr.synthetic import SCENE_CENTRE, _focal, _look_at, default_world, render_view
+
+    world = default_world(0)
+    K = Camera.intrinsics(_focal(96, 55.0), 96, 72)
+    start = np.array([0.0, -0.3, -0.6])
+    views = []
+    for i in range(6):
+        eye = start + [0.02 * i, 0.0, 0.25 * i]
+        cam = _look_at(eye, eye + (np.array(SCENE_CENTRE) - start), K, 96, 72)
+        views.append(View(f"f{i}", render_view(world, cam)[0], cam))
+    e = estimate_depth(Scene(views, "forward"), method="mvs")
+    for name, st in e.meta["depth_estimation"]["views"].items():
+        near, far = st["depth_range"]
+        assert 0.05 < near < far and st["kept"] > 0.2, (name, st["depth_range"], st["kept"])

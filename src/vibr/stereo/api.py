@@ -253,32 +253,38 @@ def complete_coverage(cameras: list[Camera], ref: int, chosen: list[int], candid
     return out
 
 
-def _centre_ray_parallax(ref: Camera, src: Camera):
-    """``f(w)``: pixels in ``src`` between the reference image centre's ray at inverse depth
-    ``w`` and at infinity (inf where that point is not in front of ``src``). Exact (the
-    plane homography is projective in ``w``) and the same in any unit of length."""
-    x = np.array([(ref.width - 1) / 2, (ref.height - 1) / 2])
-    ray = ref.pixel_rays(x)
+def _ray_parallax(ref: Camera, src: Camera):
+    """``f(w)``: the largest distance, in ``src``'s pixels, between the points at inverse
+    depth ``w`` and at infinity of nine rays of the reference (a 3×3 grid at 10, 50 and 90 %
+    of its width and height); inf where such a point is not in front of ``src``. Exact (the
+    plane homography is projective in ``w``) and the same in any unit of length; several
+    rays, because a partner ahead or behind puts its epipole, where parallax vanishes, near
+    the image centre. Returns ``(f, baseline)``."""
+    g = np.array([0.1, 0.5, 0.9])
+    xy = np.stack(np.meshgrid(g * (ref.width - 1), g * (ref.height - 1)), -1).reshape(-1, 2)
+    rays = ref.pixel_rays(xy)
     b = max(float(np.linalg.norm(src.centre - ref.centre)), 1e-300)
-    xy_inf = src.project(ref.camera_to_world(ray * (1e12 * b)))[0]
+    xy_inf = src.project(ref.camera_to_world(rays * (1e12 * b)))[0]
 
     def f(w: float) -> float:
         if w <= 0:
             return 0.0
-        xy, z = src.project(ref.camera_to_world(ray / w))
-        return float(np.linalg.norm(xy - xy_inf)) if z > 0 else np.inf
+        xy_w, z = src.project(ref.camera_to_world(rays / w))
+        return float(np.linalg.norm(xy_w - xy_inf, axis=-1).max()) if np.all(z > 0) else np.inf
 
     return f, b
 
 
 def _near_inverse_depth(ref: Camera, src: Camera, parallax_px: float) -> float:
-    """The inverse depth along the reference centre's ray at which ``src`` sees
-    ``parallax_px`` pixels of parallax (bisection on :func:`_centre_ray_parallax`; parallax
-    grows with ``w`` until the point leaves ``src``'s front)."""
-    f, b = _centre_ray_parallax(ref, src)
+    """The inverse depth of the reference's plane at which ``src`` sees ``parallax_px``
+    pixels of parallax (bisection on :func:`_ray_parallax`; parallax grows with ``w`` until
+    a point leaves ``src``'s front)."""
+    f, b = _ray_parallax(ref, src)
     lo, hi = 0.0, 1e-6 / b
     while f(hi) < parallax_px and hi < 1e12 / b:
         lo, hi = hi, 2.0 * hi
+    if f(hi) < parallax_px:  # never that much parallax (a degenerate pair): the baseline's depth
+        return 1.0 / b
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if f(mid) < parallax_px else (lo, mid)
@@ -380,7 +386,7 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
     w_near, w_far = 1.0 / depth_range[0], 1.0 / depth_range[1]
     span_px = 0.0
     for c in srcs:
-        f, _ = _centre_ray_parallax(ref, c)
+        f, _ = _ray_parallax(ref, c)
         span_px = max(span_px, f(w_near) - f(w_far))  # inf (the near plane behind c): hi planes
     return int(np.clip(np.ceil(span_px / step_px) + 1, lo, hi))
 
