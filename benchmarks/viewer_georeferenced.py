@@ -13,7 +13,6 @@ the three side by side.
 from __future__ import annotations
 
 import argparse
-import socket
 import time
 
 import numpy as np
@@ -21,17 +20,12 @@ import numpy as np
 
 def _shot(scene, out, force_zero=False):
     from PIL import Image
-    from playwright.sync_api import sync_playwright
 
     from vibr.camera import Camera
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings
-    from vibr.viewer.browser import launch_chromium
+    from vibr.viewer.browser import free_port, open_page
 
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    viewer = Viewer(scene, ViewerOptions(port=port, points="always",
+    viewer = Viewer(scene, ViewerOptions(port=free_port(), points="always",
                                          settings=ViewSettings(n_views=6, full_long_side=480)))
     if force_zero:
         viewer.origin = np.zeros(3)
@@ -39,18 +33,12 @@ def _shot(scene, out, force_zero=False):
     back = Camera.from_centre(c0.K, c0.R, c0.centre - 1.6 * c0.optical_axis - 0.5 * c0.R[1], c0.width, c0.height)
     url = viewer.start()
     try:
-        with sync_playwright() as pw:
-            browser = launch_chromium(pw)
-            try:
-                page = browser.new_page(viewport={"width": 640, "height": 400})
-                page.goto(url, timeout=60_000)
-                first = viewer.wait_for_image(kind="full", timeout=120)
-                viewer.move_client(next(iter(viewer.clients().values())), back)
-                viewer.wait_for_image(kind="full", after_seq=first.seq, timeout=120)
-                time.sleep(4.0)  # software GL repaints slowly
-                page.screenshot(path=out)
-            finally:
-                browser.close()
+        with open_page(url, 640, 400) as page:
+            first = viewer.wait_for_image(kind="full", timeout=120)
+            viewer.move_client(next(iter(viewer.clients().values())), back)
+            viewer.wait_for_image(kind="full", after_seq=first.seq, timeout=120)
+            time.sleep(4.0)  # software GL repaints slowly
+            page.screenshot(path=out)
     finally:
         viewer.stop()
     return np.asarray(Image.open(out).convert("RGB")).astype(np.float64)

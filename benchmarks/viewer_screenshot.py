@@ -11,12 +11,10 @@ render and saves a screenshot (palette PNG, 256 colours, to keep it small).
 from __future__ import annotations
 
 import argparse
-import socket
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
 
 _REPO = Path(__file__).resolve().parents[1]
 
@@ -26,46 +24,35 @@ def main(argv=None) -> int:
     ap.add_argument("-o", "--output", default=str(_REPO / "docs" / "img" / "viewer.png"))
     a = ap.parse_args(argv)
     from PIL import Image
-    from playwright.sync_api import sync_playwright
 
     from vibr.camera import Camera
     from vibr.synthetic import make_scene
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings
-    from vibr.viewer.browser import launch_chromium
+    from vibr.viewer.browser import free_port, open_page
 
     scene = make_scene("handheld", n_views=9, width=384, height=288)
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
     # the default point-cloud mode ("while moving"): hidden once the camera is still
-    viewer = Viewer(scene, ViewerOptions(port=port, settings=ViewSettings(n_views=6, full_long_side=640)))
+    viewer = Viewer(scene, ViewerOptions(port=free_port(), settings=ViewSettings(n_views=6, full_long_side=640)))
     c0 = scene.views[0].camera
     back = Camera.from_centre(c0.K, c0.R, c0.centre - 1.6 * c0.optical_axis - 0.5 * c0.R[1], c0.width, c0.height)
     url = viewer.start()
     out = Path(a.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
-        with sync_playwright() as pw:
-            browser = launch_chromium(pw)
-            try:
-                page = browser.new_page(viewport={"width": 960, "height": 540})
-                page.goto(url, timeout=60_000)
-                first = viewer.wait_for_image(kind="full", timeout=120)
-                client = next(iter(viewer.clients().values()))
-                viewer.move_client(client, back)
-                rec = viewer.wait_for_image(kind="full", after_seq=first.seq, timeout=120)
-                time.sleep(2.0)
-                rec = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=0.1) or rec
-                try:  # headless Chromium has no GPU: dismiss viser's software-rendering notice
-                    page.locator("button.mantine-Notification-closeButton").first.click(timeout=3000)
-                except Exception:
-                    pass
-                time.sleep(3.0)  # software GL repaints slowly
-                tmp = out.with_suffix(".tmp.png")
-                page.screenshot(path=str(tmp))
-            finally:
-                browser.close()
+        with open_page(url, 960, 540) as page:
+            first = viewer.wait_for_image(kind="full", timeout=120)
+            client = next(iter(viewer.clients().values()))
+            viewer.move_client(client, back)
+            rec = viewer.wait_for_image(kind="full", after_seq=first.seq, timeout=120)
+            time.sleep(2.0)
+            rec = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=0.1) or rec
+            try:  # headless Chromium has no GPU: dismiss viser's software-rendering notice
+                page.locator("button.mantine-Notification-closeButton").first.click(timeout=3000)
+            except Exception:
+                pass
+            time.sleep(3.0)  # software GL repaints slowly
+            tmp = out.with_suffix(".tmp.png")
+            page.screenshot(path=str(tmp))
     finally:
         viewer.stop()
     img = Image.open(tmp).convert("RGB")

@@ -7,11 +7,12 @@ Uses Debian's ``chromium`` package through the ``playwright`` Python package
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
 
-__all__ = ["CHROMIUM_ARGS", "chromium_path", "free_port", "launch_chromium"]
+__all__ = ["CHROMIUM_ARGS", "chromium_path", "free_port", "launch_chromium", "open_page"]
 
 #: Flags for a headless, sandbox-free Chromium that talks to nothing but the page's server.
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -40,3 +41,19 @@ def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def open_page(url: str, width: int = 800, height: int = 800, timeout_s: float = 60.0):
+    """A headless Chromium page of ``width`` × ``height`` opened at ``url`` (the viewer's
+    benchmarks and screenshots); the browser is closed on leaving."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        browser = launch_chromium(pw)
+        try:
+            page = browser.new_page(viewport={"width": width, "height": height})
+            page.goto(url, timeout=timeout_s * 1000)
+            yield page
+        finally:
+            browser.close()
