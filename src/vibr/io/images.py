@@ -261,6 +261,9 @@ def to_uint(img: np.ndarray, bits: int | None = None) -> np.ndarray:
 #: Image formats :func:`write_image` writes (PNG and TIFF in 8 or 16 bits, the others 8).
 WRITE_EXTS = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".webp", ".ppm")
 _EIGHT_BIT_EXTS = (".jpg", ".jpeg", ".bmp", ".webp", ".ppm")
+#: Pillow's defaults (75 for JPEG, 80 for WebP) lose more than a render's own error; 95 as
+#: image tools write them (measured in docs/ERRORS.md, "Image files").
+_LOSSY_QUALITY = {".jpg": {"quality": 95}, ".jpeg": {"quality": 95}, ".webp": {"quality": 95}}
 
 
 def check_image_ext(path) -> str:
@@ -297,7 +300,7 @@ def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | Non
                 f.write(encode_png16(q))
         else:
             # zlib level 2: ~6x faster than Pillow's default for ~10% larger files.
-            kw = {"compress_level": 2} if ext in (".png", "") else {}
+            kw = {"compress_level": 2} if ext in (".png", "") else _LOSSY_QUALITY.get(ext, {})
             if text:
                 from PIL.PngImagePlugin import PngInfo
 
