@@ -216,6 +216,11 @@ def test_write_image_formats(tmp_path):
         with pytest.raises(VibrInputError, match=f"{ext} is not an image format vibr writes"):
             write_image(tmp_path / f"w{ext}", img)
         assert not (tmp_path / f"w{ext}").exists()
+    # 16 bits asked for in an 8-bit format: refused (it was written in 8 without a word)
+    with pytest.raises(VibrInputError, match="holds 8 bits per channel: 16 need .png or .tif"):
+        write_image(tmp_path / "b16.jpg", img, bits=16)
+    assert not (tmp_path / "b16.jpg").exists()
+    write_image(tmp_path / "b16.tif", img, bits=16)
 
 
 def test_lossy_outputs_keep_the_render(tmp_path):

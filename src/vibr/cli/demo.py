@@ -57,7 +57,7 @@ def run(args) -> int:
 
     if args.output is not None:
         check_output(args.output, "file", what="-o")
-        check_image_ext(args.output)
+        check_image_ext(args.output, args.bit_depth)
     elif args.bit_depth is not None:
         raise VibrInputError("--bit-depth applies to the PNG of -o only (the video is 8-bit)")
     if not 16 <= args.size <= 4096:

@@ -101,7 +101,7 @@ def run(args) -> int:
         return _run_path(args)
     _refuse_path_options(args)
     check_output(args.output, "file", what="-o")
-    check_image_ext(args.output)  # before the work: out.npy was a TIFF under that name
+    check_image_ext(args.output, args.bit_depth)  # before the work: out.npy was a TIFF under that name
     check_depth_args(args)
     if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
         raise VibrInputError("--uncertainty output must end in .png or .npy", args.uncertainty)

@@ -266,12 +266,15 @@ _EIGHT_BIT_EXTS = (".jpg", ".jpeg", ".bmp", ".webp", ".ppm")
 _LOSSY_QUALITY = {".jpg": {"quality": 95}, ".jpeg": {"quality": 95}, ".webp": {"quality": 95}}
 
 
-def check_image_ext(path) -> str:
+def check_image_ext(path, bits: int | None = None) -> str:
     """The lower-case extension of an image file to write (``""``: PNG), one of
-    :data:`WRITE_EXTS`; another (``out.npy``, written as a TIFF under that name) is refused."""
+    :data:`WRITE_EXTS`; another (``out.npy``, written as a TIFF under that name) is refused,
+    and so are 16 ``bits`` in a format of 8."""
     ext = os.path.splitext(os.fspath(path))[1].lower()
     if ext and ext not in WRITE_EXTS:
         raise VibrInputError(f"{ext} is not an image format vibr writes ({', '.join(WRITE_EXTS)})", path)
+    if bits == 16 and ext in _EIGHT_BIT_EXTS:  # asked for, not silently dropped
+        raise VibrInputError(f"{ext} holds 8 bits per channel: 16 need .png or .tif", path)
     return ext
 
 
@@ -280,7 +283,7 @@ def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | Non
 
     PNG files are 8-bit when the image is exactly representable in 8 bits, else 16-bit
     (``bits`` = 8 or 16 forces one: a rendered view is 8-bit unless asked); JPEG, BMP, WebP
-    and PPM are always 8-bit. ``text``: key → value strings stored in an 8-bit PNG's text chunks
+    and PPM are always 8-bit (``bits=16`` is refused for them). ``text``: key → value strings stored in an 8-bit PNG's text chunks
     (:func:`read_png_text` reads them back).
     """
     if bits not in (None, 8, 16):
@@ -288,7 +291,7 @@ def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | Non
     import imageio.v3 as iio
 
     path = os.fspath(path)
-    ext = check_image_ext(path)
+    ext = check_image_ext(path, bits)
     if ext in _EIGHT_BIT_EXTS:
         bits = 8
     q = to_uint(img, bits)
