@@ -283,8 +283,9 @@ def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | Non
 
     PNG files are 8-bit when the image is exactly representable in 8 bits, else 16-bit
     (``bits`` = 8 or 16 forces one: a rendered view is 8-bit unless asked); JPEG, BMP, WebP
-    and PPM are always 8-bit (``bits=16`` is refused for them). ``text``: key → value strings stored in an 8-bit PNG's text chunks
-    (:func:`read_png_text` reads them back).
+    and PPM are always 8-bit (``bits=16`` is refused for them), JPEG and WebP at quality 95.
+    ``text``: key → value strings stored in an 8-bit PNG's text chunks (:func:`read_png_text`
+    reads them back).
     """
     if bits not in (None, 8, 16):
         raise VibrInputError(f"bit depth must be 8 or 16, got {bits}", path)

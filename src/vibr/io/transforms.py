@@ -284,14 +284,14 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         raise VibrInputError("transforms.json must be an object with a non-empty 'frames' list", src)
     base = tf.parent
     entries, grid_pos = [], {}
-    stems = _frame_names(meta["frames"])
+    default_names = _frame_names(meta["frames"])
     for i, fr in enumerate(meta["frames"]):
         if not isinstance(fr, dict):
             raise VibrInputError(f"frame {i} is not a JSON object", src)
         if "file_path" not in fr:
             raise VibrInputError(f"frame {i} is missing key 'file_path'", src)
         img = _resolve(base, fr["file_path"], "file_path", src, i, allow_outside)
-        name = fr.get("vibr_name", stems[i])
+        name = fr.get("vibr_name", default_names[i])
         if not isinstance(name, str) or not name.strip():
             raise VibrInputError(f"frame {i}: vibr_name must be a non-empty string", src)
         e = {"name": name, "path": img, "frame": fr, "i": i}

@@ -113,7 +113,7 @@ def frustum_size(scene: Scene, scale: float) -> float:
         d = np.linalg.norm(C[:, None] - C[None], axis=2)
         np.fill_diagonal(d, np.inf)
         nn = float(np.median(d.min(axis=1)))
-        if nn > 1e-6 * scale:  # not cameras at one centre (a rotation-only capture)
+        if nn > 0 and shared_centre([v.camera for v in scene.views]) is None:  # not a rotation-only capture
             size = min(size, 0.5 * nn)
     return size
 
