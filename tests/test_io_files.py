@@ -201,6 +201,23 @@ def test_atomic_output_has_the_usual_file_mode(tmp_path):
     assert (os.stat(tmp_path / "out.txt").st_mode & 0o777) == 0o644
 
 
+def test_saved_scene_folder_has_the_usual_folder_mode(tmp_path):
+    """save_scene's folder was tempfile.mkdtemp's 0700 after the rename: a scene written for
+    a group (a shared project folder, a web server) was unreadable to it."""
+    import os
+
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    umask = os.umask(0o022)
+    try:
+        save_scene(make_scene("grid", n_views=4, width=32, height=24), tmp_path / "scene")
+    finally:
+        os.umask(umask)
+    assert (os.stat(tmp_path / "scene").st_mode & 0o777) == 0o755
+    assert (os.stat(tmp_path / "scene" / "images").st_mode & 0o777) == 0o755
+
+
 def test_write_image_formats(tmp_path):
     """-o out.npy wrote a TIFF under that name; WebP and PPM of a 16-bit image failed in Pillow."""
     from vibr.io.images import WRITE_EXTS

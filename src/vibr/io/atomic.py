@@ -53,9 +53,7 @@ def atomic_path(path, suffix: str | None = None):
     try:
         yield tmp
         # the temporary file is private (0600); give it the mode a plain open() would
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException as exc:
         with contextlib.suppress(OSError):
@@ -65,6 +63,24 @@ def atomic_path(path, suffix: str | None = None):
         raise
     finally:
         _ACTIVE.discard(tmp)
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it, then set back)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
+def temporary_folder(parent, name: str) -> str:
+    """Create a folder ``.NAME.RANDOM.part`` in ``parent`` to be renamed to ``NAME`` once
+    complete, with the mode a plain ``mkdir`` would give it (``tempfile.mkdtemp`` makes it
+    private, 0700, and the renamed output stayed unreadable to the user's group)."""
+    import tempfile
+
+    tmp = tempfile.mkdtemp(prefix=f".{name}.", suffix=".part", dir=parent)
+    os.chmod(tmp, 0o777 & ~_umask())
+    return tmp
 
 
 def write_failed(exc: OSError, path) -> OutputFailed:

@@ -39,7 +39,6 @@ import json
 import math
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +46,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import OutputExists, OutputFailed, VibrInputError
 from ..scene import Scene
-from .atomic import write_failed
+from .atomic import temporary_folder, write_failed
 from .camera_json import as_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
 from .images import build_views, image_size, write_image
@@ -423,7 +422,7 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
             raise VibrInputError(f"view {v.name} has no image to save", v.path)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+        tmp = Path(temporary_folder(out.parent, out.name))
     except OSError as exc:
         raise write_failed(exc, out) from exc
     try:
