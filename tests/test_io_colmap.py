@@ -90,3 +90,35 @@ def test_colmap_dense_depth_at_its_max_image_size_is_resized(tmp_path):
     write_colmap_bin(tmp_path / "stereo" / "depth_maps" / "img1.png.geometric.bin", np.ones((24, 24), np.float32))
     with pytest.raises(VibrInputError, match="img1.png.geometric.bin: depth is 24x24, image img1 is 64x48"):
         load_scene(tmp_path)
+
+
+def test_other_colmap_reconstructions_are_named(tmp_path):
+    """The mapper writes sparse/0, sparse/1, ... for disconnected parts of a capture; vibr
+    loaded sparse/0 without a word, though sparse/1 may hold most of the photographs."""
+    import io
+    import logging
+
+    from vibr.progress import configure_logging
+
+    write_model(tmp_path)
+    rec = pycolmap.Reconstruction(str(tmp_path / "sparse" / "0"))
+    im = pycolmap.Image(name="img3.png", camera_id=1, image_id=3)
+    rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(np.eye(3)), np.zeros(3)))
+    (tmp_path / "sparse" / "1").mkdir()
+    rec.write(str(tmp_path / "sparse" / "1"))
+    write_image(tmp_path / "images" / "img3.png", np.zeros((48, 64, 3), np.float32))
+    lg = logging.getLogger("vibr")
+    saved = (list(lg.handlers), lg.level, lg.propagate)
+    buf = io.StringIO()
+    configure_logging(0, stream=buf)
+    try:
+        assert load_scene(tmp_path).names == ["img1", "img2"]
+        said = buf.getvalue()
+        buf.truncate(0)
+        buf.seek(0)
+        load_scene(tmp_path / "sparse" / "1")  # chosen by the user: nothing to say
+    finally:
+        lg.handlers[:], lg.level, lg.propagate = saved
+    assert "2 reconstructions; loading 0 (2 images), not 1 (3 images)" in said
+    assert "the largest is " + str(tmp_path / "sparse" / "1") in said
+    assert "reconstructions" not in buf.getvalue()

@@ -16,6 +16,8 @@ images are loaded. Points3D go to ``scene.points``.
 
 from __future__ import annotations
 
+import logging
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +30,8 @@ from .camera_json import as_rotation
 from .colmap_check import check_colmap_model
 from .depthfiles import fit_depth, read_depth
 from .images import build_views
+
+logger = logging.getLogger(__name__)
 
 _MODEL_FILES = ("cameras", "images")
 _ZERO_DIST_OK = ("SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV")
@@ -50,6 +54,34 @@ def find_colmap_model(path) -> tuple[Path, Path] | None:
         if _is_model_dir(cand):
             return cand, cand.parent.parent if cand.name == "0" else cand.parent
     return None
+
+
+def _image_count(model: Path) -> int | None:
+    """Images in a model folder, from images.bin's header or images.txt's two lines per
+    image; None when unreadable (the model's own check names the problem if it is loaded)."""
+    try:
+        if (model / "images.bin").is_file():
+            with open(model / "images.bin", "rb") as fh:
+                return struct.unpack("<Q", fh.read(8))[0]
+        lines = (model / "images.txt").read_text(encoding="utf-8", errors="replace").splitlines()
+        return len([ln for ln in lines if not ln.strip().startswith("#")]) // 2
+    except (OSError, struct.error):
+        return None
+
+
+def _note_other_models(model: Path) -> None:
+    """COLMAP's mapper writes one numbered folder per disconnected reconstruction; vibr loads
+    ``sparse/0``, the convention (nerfstudio's too), and says what else is there."""
+    others = sorted((d for d in model.parent.iterdir() if d.name.isdigit() and d != model and _is_model_dir(d)),
+                    key=lambda d: int(d.name))
+    if not others:
+        return
+    n0 = _image_count(model)
+    listed = ", ".join(f"{d.name} ({_image_count(d)} images)" for d in others)
+    larger = [d for d in others if (_image_count(d) or 0) > (n0 or 0)]
+    hint = f"; the largest is {max(larger, key=lambda d: _image_count(d) or 0)}" if larger else ""
+    logger.warning(f"{model.parent}: COLMAP made {len(others) + 1} reconstructions; loading {model.name} "
+                   f"({n0} images), not {listed}{hint}: pass a model folder to load another")
 
 
 def colmap_camera_K(cam, source) -> np.ndarray:
@@ -79,6 +111,8 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     if found is None:
         raise VibrInputError("no COLMAP model (cameras + images .bin/.txt) found", path)
     model, root = found
+    if model.parent.name == "sparse" and model.name.isdigit() and Path(path) != model:
+        _note_other_models(model)
     check_colmap_model(model)  # bounds, counts and references: pycolmap trusts the files
     try:
         rec = pycolmap.Reconstruction(str(model))
