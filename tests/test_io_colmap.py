@@ -72,10 +72,21 @@ def test_colmap_undistorter_layout_and_zero_distortion(tmp_path):
     np.testing.assert_allclose(s["img1"].camera.K[0], [100, 0, 31.5])
 
 
-def test_colmap_distortion_is_an_error(tmp_path):
-    write_model(tmp_path, model="OPENCV", params=(100.0, 110.0, 32.0, 24.0, 0.1, 0, 0, 0))
-    with pytest.raises(VibrInputError, match="image_undistorter"):
-        load_scene(tmp_path)
+def test_colmap_distorted_camera_is_undistorted_at_load(tmp_path):
+    """The mapper's models are distorted (SIMPLE_RADIAL by default): loaded as COLMAP's
+    undistorted pinhole (image_undistorter's camera), where vibr refused them before."""
+    params = (100.0, 110.0, 32.0, 24.0, 0.1, 0, 0, 0)
+    write_model(tmp_path, model="OPENCV", params=params)
+    s = load_scene(tmp_path)
+    cam = pycolmap.Camera.create_from_model_name(1, "OPENCV", 1.0, 64, 48)
+    cam.params = list(params)
+    u = pycolmap.undistort_camera(pycolmap.UndistortCameraOptions(), cam)
+    v = s["img1"]
+    assert v.camera.shape == (u.height, u.width) != (48, 64) and v.image.shape[:2] == v.camera.shape
+    np.testing.assert_allclose(v.camera.K, [[u.params[0], 0, u.params[2] - 0.5], [0, u.params[1], u.params[3] - 0.5],
+                                            [0, 0, 1]])
+    assert v.depth.shape == v.camera.shape and np.nanmax(v.depth) == 2.0 and np.isnan(v.depth[0]).all()
+    assert s["img2"].camera.shape == (48, 64)  # its SIMPLE_PINHOLE as it is
 
 
 def test_colmap_dense_depth_at_its_max_image_size_is_resized(tmp_path):

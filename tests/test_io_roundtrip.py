@@ -152,16 +152,6 @@ def test_transforms_camera_rig_names(tmp_path):
     assert load_scene(tmp_path / "t").names == sc.names
 
 
-def test_transforms_distortion_rejected(tmp_path):
-    import imageio.v3 as iio
-
-    iio.imwrite(tmp_path / "a.png", np.zeros((20, 30, 3), np.uint8))
-    doc = {"fl_x": 40.0, "k1": 0.1, "frames": [{"file_path": "a.png", "transform_matrix": np.eye(4).tolist()}]}
-    (tmp_path / "transforms.json").write_text(json.dumps(doc))
-    with pytest.raises(VibrInputError, match="distortion"):
-        load_scene(tmp_path)
-
-
 # ----------------------------------------------------------------------------- real data
 def test_round_trip_cotton(cotton_dir, tmp_path):
     # Scaled (16-bit-grid images) subset with the depth-carrying centre view.

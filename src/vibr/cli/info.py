@@ -59,6 +59,8 @@ def describe(scene) -> str:
     if "focal_px" in m:
         extra.append(f"camera   f = {m['focal_px']:.6g} px, baseline {m['baseline']:.6g}, "
                      f"focus distance Z0 = {m['focus_distance']:.6g} ({m.get('camera_rule')})")
+    if m.get("undistorted"):
+        extra.append(f"lens     {m['undistorted']}")
     if m.get("depth_source"):
         extra.append(f"depth    from {m['depth_source']}")
     for v in scene.views:

@@ -6,10 +6,11 @@ Layouts recognised (``root`` is what the user passes, or the model folder itself
     root/sparse/{cameras,images,points3D}.{bin,txt}     root/images/   (image_undistorter output)
     root/stereo/depth_maps/NAME.geometric.bin           dense depth, used when present
 
-Cameras: PINHOLE and SIMPLE_PINHOLE; other perspective models (SIMPLE_RADIAL, RADIAL,
-OPENCV, FULL_OPENCV) only when all their distortion parameters are zero; otherwise run
-``colmap image_undistorter`` first. COLMAP puts the centre of the top-left pixel at
-(0.5, 0.5), so vibr's principal point is ``(cx − 0.5, cy − 0.5)``. Poses are COLMAP's
+Cameras: PINHOLE and SIMPLE_PINHOLE as they are; the distorted models (the mapper's
+SIMPLE_RADIAL, OPENCV, the fisheyes, ...) are undistorted at load onto COLMAP's own pinhole
+for them (:mod:`vibr.io.undistort`, as ``colmap image_undistorter`` would). COLMAP puts the
+centre of the top-left pixel at (0.5, 0.5), so vibr's principal point is ``(cx − 0.5,
+cy − 0.5)``. Poses are COLMAP's
 ``cam_from_world`` (world → camera, OpenCV axes, vibr's own convention). Only registered
 images are loaded. Points3D go to ``scene.points``.
 """
@@ -30,6 +31,8 @@ from .camera_json import as_rotation
 from .colmap_check import check_colmap_model
 from .depthfiles import fit_depth, read_depth
 from .images import build_views
+from .undistort import Distortion, pinhole
+from .undistort import summary as undistort_summary
 
 logger = logging.getLogger(__name__)
 
@@ -84,21 +87,23 @@ def _note_other_models(model: Path) -> None:
                    f"({n0} images), not {listed}{hint}: pass a model folder to load another")
 
 
-def colmap_camera_K(cam, source) -> np.ndarray:
-    """vibr K (top-left pixel centre at (0, 0)) of a pycolmap camera; distortion → error."""
+def colmap_camera(cam, source):
+    """vibr's K (top-left pixel centre at (0, 0)), width and height of a pycolmap camera,
+    and its :class:`~vibr.io.undistort.Distortion` (None for a pinhole): a distorted camera
+    is given as the pinhole its image is undistorted onto at load."""
     model = cam.model.name
-    if model not in ("PINHOLE", "SIMPLE_PINHOLE") + _ZERO_DIST_OK:
-        raise VibrInputError(f"camera {cam.camera_id} has model {model}, which is not a pinhole: run "
-                             "'colmap image_undistorter' and load its output", source)
     params = np.asarray(cam.params, dtype=np.float64)
     extra = [int(i) for i in cam.extra_params_idxs()]
-    if extra and np.any(params[extra] != 0):
-        raise VibrInputError(f"camera {cam.camera_id} ({model}) has non-zero distortion "
-                             f"{params[extra].tolist()}: run 'colmap image_undistorter' and load its output",
-                             source)
+    if model not in ("PINHOLE", "SIMPLE_PINHOLE") and (model not in _ZERO_DIST_OK or np.any(params[extra] != 0)):
+        dist = Distortion(model, tuple(params.tolist()), int(cam.width), int(cam.height))
+        try:
+            K, w, h = pinhole(dist)
+        except Exception as exc:  # noqa: BLE001 - COLMAP's words for a model it cannot undistort
+            raise VibrInputError(f"camera {cam.camera_id} ({model}) cannot be undistorted: {exc}", source) from None
+        return K, w, h, dist
     fx, fy = float(cam.focal_length_x), float(cam.focal_length_y)
     cx, cy = float(cam.principal_point_x) - 0.5, float(cam.principal_point_y) - 0.5
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), int(cam.width), int(cam.height), None
 
 
 def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
@@ -131,13 +136,15 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
             continue
         src = f"{model} image {im.name}"
         cam = rec.cameras[im.camera_id]
-        K = colmap_camera_K(cam, src)
+        K, w, h, dist = colmap_camera(cam, src)
         T = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world
         R = as_rotation(T.rotation.matrix(), src)
         t = np.asarray(T.translation, dtype=np.float64)
-        camera = Camera(K, R, t, int(cam.width), int(cam.height), source=src)
+        camera = Camera(K, R, t, w, h, source=src)
         e = {"name": Path(im.name).with_suffix("").as_posix(), "path": img_dir / im.name, "camera": camera,
              "depth_path": depth_dir / f"{im.name}.geometric.bin"}
+        if dist is not None:
+            e["distortion"] = dist
         entries.append(e)
     if not entries:
         raise VibrInputError("the COLMAP model has no registered images", model)
@@ -147,10 +154,14 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
         dp = e.pop("depth_path")
         if dp.is_file():
             # COLMAP's dense maps are at its max_image_size (often smaller than the images)
-            e["depth"] = fit_depth(read_depth(dp), e["camera"].shape, dp, f"image {e['name']}")
+            d = e.get("distortion")
+            shape = e["camera"].shape if d is None else (d.height, d.width)
+            e["depth"] = fit_depth(read_depth(dp), shape, dp, f"image {e['name']}")
             n_depth += 1
+    undistorted = undistort_summary(entries)
     vs = build_views(entries, scale, desc="reading images")
     pts = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
     return Scene(vs, name=root.name, root=root, points=pts if len(pts) else None,
                  meta={"format": "COLMAP", "scale": scale, "model": str(model),
-                       "depth_source": "stereo/depth_maps/*.geometric.bin" if n_depth else None})
+                       "depth_source": "stereo/depth_maps/*.geometric.bin" if n_depth else None,
+                       **({"undistorted": undistorted} if undistorted else {})})

@@ -402,7 +402,9 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     entries : list of dict
         Keys ``name``, ``path`` (image file), ``camera`` (at the file's resolution), optional
         ``depth`` (H×W float32, NaN unknown, at the file's resolution), ``sigma_z`` (scalar or
-        H×W).
+        H×W), ``distortion`` (a :class:`vibr.io.undistort.Distortion` of the file's camera:
+        ``camera`` is then its pinhole, and the image and maps are undistorted onto it
+        before the scale).
     scale : float
         Resize factor applied after reading: images by :func:`resize_image`, cameras by
         :meth:`Camera.scaled`, depth and sigma_z maps by :func:`resize_depth`.
@@ -426,22 +428,22 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
                      entries[0]["path"] if entries else None)
 
     def work(e):
-        cam = e["camera"]
+        cam, dist = e["camera"], e.get("distortion")
+        fw, fh = (dist.width, dist.height) if dist is not None else (cam.width, cam.height)
         w, h = image_size(e["path"])  # the header, before decoding
         if headers:
             img, size = None, (h, w)
         else:
-            if check_size and (w, h) != (cam.width, cam.height):  # no decoding of a lying image
-                raise VibrInputError(f"image is {w}x{h} but its camera says {cam.width}x{cam.height}",
-                                     e["path"])
+            if check_size and (w, h) != (fw, fh):  # no decoding of a lying image
+                raise VibrInputError(f"image is {w}x{h} but its camera says {fw}x{fh}", e["path"])
             img = read_image(e["path"])
             size = img.shape[:2]
-        if size != cam.shape:
+        if size != (fh, fw):
             if check_size:
-                raise VibrInputError(
-                    f"image is {size[1]}x{size[0]} but its camera says {cam.width}x{cam.height}",
-                    e["path"])
+                raise VibrInputError(f"image is {size[1]}x{size[0]} but its camera says {fw}x{fh}", e["path"])
         depth, sz = e.get("depth"), e.get("sigma_z")
+        if dist is not None:
+            img, depth, sz, size = _undistorted(img, depth, sz, dist, cam)
         if scale != 1.0:
             cam = cam.scaled(scale)
         _check_side(size, cam, scale, e["path"])
@@ -458,6 +460,17 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     with ThreadPoolExecutor(max_workers=workers) as ex:
         views = list(progress(ex.map(work, entries), desc=desc, total=n, unit="img"))
     return views
+
+
+def _undistorted(img, depth, sz, dist, cam):
+    """A distorted view's arrays resampled onto its pinhole ``cam`` (:mod:`vibr.io.undistort`)."""
+    from .undistort import undistort_array
+
+    img = None if img is None else undistort_array(img, dist)
+    depth = None if depth is None else undistort_array(depth, dist, nearest=True)
+    if sz is not None and np.ndim(sz) == 2:
+        sz = undistort_array(np.asarray(sz, np.float32), dist, nearest=True)
+    return img, depth, sz, cam.shape
 
 
 def _check_side(size, cam, scale, path) -> None:

@@ -10,8 +10,11 @@ vibr's OpenCV axes (x right, y down, z forward) are obtained by flipping the y a
     R_c2w = M[:3, :3] · diag(1, −1, −1),   R = R_c2wᵀ,   C = M[:3, 3],   t = −R C.
 
 nerfstudio puts the centre of the top-left pixel at (0.5, 0.5): vibr ``cx = cx_ns − 0.5``
-(same for y). Non-zero distortion (k1..k4, p1, p2) or a fisheye / equirectangular
-``camera_model`` raise :class:`VibrInputError`. ``depth_file_path`` (orthogonal depth, 0 =
+(same for y). Distorted frames (``OPENCV`` with non-zero k1, k2, k3, p1, p2, as
+``ns-process-data`` writes them, and ``OPENCV_FISHEYE``) are undistorted at load onto
+COLMAP's pinhole for them, their depth maps too (:mod:`vibr.io.undistort`); a k4 (r⁸) term,
+a fisheye with p1/p2 and the other camera models (equirectangular, FISHEYE624) raise
+:class:`VibrInputError`. ``depth_file_path`` (orthogonal depth, 0 =
 unknown) is read by :func:`vibr.io.read_depth` and multiplied by ``depth_unit_scale_factor``
 (default 1e-3 for 16-bit PNG, 1 otherwise). A path written on Windows (``images\\a.png``)
 that names no file as it stands is read with ``/`` for its backslashes.
@@ -50,11 +53,14 @@ from .atomic import temporary_folder, write_failed
 from .camera_json import as_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
 from .images import build_views, image_size, write_image
+from .undistort import NERFSTUDIO_FISHEYE, Distortion, from_nerfstudio, pinhole
+from .undistort import summary as undistort_summary
 
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 _DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
-_BAD_MODELS = ("OPENCV_FISHEYE", "FISHEYE", "EQUIRECTANGULAR", "OMNIDIRECTIONALSTEREO_L",
-               "OMNIDIRECTIONALSTEREO_R", "VR180_L", "VR180_R")
+#: camera_model values read as a perspective camera (with k1, k2, k3, p1, p2) or a fisheye;
+#: others (EQUIRECTANGULAR, FISHEYE624, the omnidirectional stereo models) are refused.
+_PERSPECTIVE_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE", "PERSPECTIVE")
 
 
 def find_transforms(path) -> Path | None:
@@ -150,16 +156,19 @@ def _get(frame: dict, meta: dict, key: str, default=None):
     return frame[key] if key in frame else meta.get(key, default)
 
 
-def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> Camera:
+def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> tuple[Camera, Distortion | None]:
+    """The frame's camera and, for a distorted one, its :class:`Distortion` (the camera is
+    then the pinhole its image is undistorted onto at load)."""
     model = str(_get(frame, meta, "camera_model", "OPENCV"))[:40].upper()
-    if model in _BAD_MODELS:
-        raise VibrInputError(f"frame {i}: camera_model {model} is not a pinhole; vibr needs undistorted "
-                             "pinhole images", src)
+    if model not in _PERSPECTIVE_MODELS + NERFSTUDIO_FISHEYE:
+        raise VibrInputError(f"frame {i}: camera_model {model} is not one vibr reads (it reads "
+                             f"{', '.join(_PERSPECTIVE_MODELS + NERFSTUDIO_FISHEYE)})", src)
+    dk = {}
     for k in _DISTORTION_KEYS:
         v = _get(frame, meta, k, 0.0)
-        if isinstance(v, (list, dict)) or v not in (0, 0.0, None):
-            raise VibrInputError(f"frame {i}: non-zero distortion {k} = {v}: undistort the images first "
-                                 "(vibr handles pinhole cameras only)", src)
+        if isinstance(v, (list, dict, str, bool)):
+            raise VibrInputError(f"frame {i}: distortion {k} must be a number, got {v!r}", src)
+        dk[k] = 0.0 if v is None else _number(v, f"frame {i}: {k}", src)
     w, h = _get(frame, meta, "w"), _get(frame, meta, "h")
     if w is None or h is None:
         w, h = image_size(img_path)
@@ -186,10 +195,15 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> 
                 raise VibrInputError(f"{fi} camera_angle_y must be in (0, pi) radians, got {ay}", src)
         fy = fx if ay is None else 0.5 * h / math.tan(0.5 * ay)
     fy = _number(fy, f"{fi} fl_y", src, positive=True)
-    cx = _number(_get(frame, meta, "cx", w / 2.0), f"{fi} cx", src) - 0.5
-    cy = _number(_get(frame, meta, "cy", h / 2.0), f"{fi} cy", src) - 0.5
+    cx = _number(_get(frame, meta, "cx", w / 2.0), f"{fi} cx", src)
+    cy = _number(_get(frame, meta, "cy", h / 2.0), f"{fi} cy", src)
     skew = _number(frame.get("vibr_skew", 0.0), f"{fi} vibr_skew", src)
-    K = np.array([[fx, skew, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    dist = from_nerfstudio(model, fx, fy, cx, cy, dk, w, h, f"{src} frame {i}")
+    if dist is not None and skew:
+        raise VibrInputError(f"{fi} vibr_skew with lens distortion is not supported", src)
+    K = np.array([[fx, skew, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+    if dist is not None:
+        K, w, h = pinhole(dist)
     if "transform_matrix" not in frame:
         raise VibrInputError(f"frame {i} is missing key 'transform_matrix'", src)
     try:
@@ -203,7 +217,7 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> 
     if M.shape == (4, 4) and not np.allclose(M[3], [0, 0, 0, 1]):
         raise VibrInputError(f"frame {i}: transform_matrix last row must be 0 0 0 1", src)
     R_c2w = as_rotation(M[:3, :3], src, f"frame {i} transform_matrix rotation") @ _GL_TO_CV
-    return Camera.from_centre(K, R_c2w.T, M[:3, 3], w, h, source=f"{src} frame {i}")
+    return Camera.from_centre(K, R_c2w.T, M[:3, 3], w, h, source=f"{src} frame {i}"), dist
 
 
 def _resolve(base: Path, rel: str, what: str, src: str, i: int, allow_outside: bool = False) -> Path:
@@ -303,25 +317,29 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         if not e["path"].is_file():
             raise VibrInputError(f"image of frame {i} not found" if e["path"].exists() is False else
                                  "image is not a file", e["path"])
-        cam = _frame_camera(fr, meta, e["path"], src, i)
+        cam, dist = _frame_camera(fr, meta, e["path"], src, i)
         e["camera"] = cam
+        if dist is not None:
+            e["distortion"] = dist
+        file_shape = cam.shape if dist is None else (dist.height, dist.width)  # depth and sigma_z files
         dp = _get(fr, {}, "depth_file_path")
         if dp is not None:
             dpath = _resolve(base, dp, "depth_file_path", src, i, allow_outside)
             fac = _get(fr, meta, "depth_unit_scale_factor")
             fac = None if fac is None else _number(fac, f"frame {i}: depth_unit_scale_factor", src, positive=True)
-            e["depth"] = fit_depth(read_depth(dpath, fac), cam.shape, dpath, f"frame {i}'s image")
+            e["depth"] = fit_depth(read_depth(dpath, fac), file_shape, dpath, f"frame {i}'s image")
         sz = _get(fr, meta, "sigma_z")
         szp = fr.get("sigma_z_file_path")
         if szp is not None:
             spath = _resolve(base, szp, "sigma_z_file_path", src, i, allow_outside)
-            s = fit_depth(read_depth(spath, 1.0), cam.shape, spath, f"frame {i}'s image")  # finite, >= 0
+            s = fit_depth(read_depth(spath, 1.0), file_shape, spath, f"frame {i}'s image")  # finite, >= 0
             e["sigma_z"] = np.nan_to_num(s, nan=0.0)
         elif sz is not None:
             sz = _number(sz, f"frame {i}: sigma_z", src)
             if not sz >= 0:
                 raise VibrInputError(f"frame {i}: sigma_z must be finite and >= 0, got {sz}", src)
             e["sigma_z"] = sz
+    undistorted = undistort_summary(entries)
     vs = build_views(entries, scale, desc="reading images")
     points = None
     if meta.get("ply_file_path"):
@@ -334,6 +352,8 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         raise VibrInputError(f"vibr_grid must be positive, got {list(grid)}", src)
     names = {v.name for v in vs}
     smeta = {"format": "transforms.json", "scale": scale, "transforms": src}
+    if undistorted:
+        smeta["undistorted"] = undistorted
     if grid_pos:
         smeta["grid_pos"] = {n: p for n, p in grid_pos.items() if n in names}
     name = meta.get("vibr_name", base.name)

@@ -1,0 +1,154 @@
+"""Distorted cameras made pinhole at load (COLMAP's camera models, through pycolmap).
+
+vibr's renderer and depth estimate assume pinhole cameras. A COLMAP model straight from the
+mapper (``SIMPLE_RADIAL``, ``OPENCV``, fisheye models) and a transforms.json from
+``ns-process-data`` (``OPENCV`` with ``k1, k2, p1, p2``, or ``OPENCV_FISHEYE``) describe
+distorted photographs; they are undistorted as they are read, as ``colmap
+image_undistorter`` would:
+
+1. the pinhole camera is COLMAP's (``pycolmap.undistort_camera`` with its defaults: the
+   same focal lengths, the size and principal point chosen so that every output pixel lies
+   inside the photograph, so no blank border; a fisheye keeps the central part of its
+   field of view);
+2. each output pixel ``p`` is looked up in the photograph at
+   ``camera.img_from_cam(pinhole.cam_from_img(p))`` (COLMAP's own distortion maths), bilinearly
+   for images (``scipy.ndimage.map_coordinates``), at the nearest pixel for depth and
+   sigma_z maps. The camera's pose is unchanged and orthogonal depth is the same in both
+   cameras (the same camera frame), so depth values need no conversion.
+
+nerfstudio's ``OPENCV`` radial polynomial ``1 + k1 r² + k2 r⁴ + k3 r⁶ + k4 r⁸`` is COLMAP's
+``OPENCV`` when ``k3 = k4 = 0`` and its ``FULL_OPENCV`` (numerator only) when ``k4 = 0``; a
+non-zero ``k4`` has no COLMAP model and is refused, as are tangential terms with a fisheye.
+Both tools put the centre of the top-left pixel at (0.5, 0.5); the pinhole's principal point
+becomes vibr's by subtracting 0.5 (:mod:`vibr.io.colmap`).
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._pycolmap import import_pycolmap
+from ..errors import VibrInputError
+
+#: nerfstudio camera_model → the COLMAP model of the same formula (the fisheye's θ-polynomial
+#: ``θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`` is COLMAP's OPENCV_FISHEYE).
+NERFSTUDIO_FISHEYE = ("OPENCV_FISHEYE", "FISHEYE")
+
+
+@dataclass(frozen=True)
+class Distortion:
+    """A distorted camera's intrinsics: a COLMAP model name, its parameters (COLMAP's order
+    and pixel convention) and the photograph's size in pixels."""
+
+    model: str
+    params: tuple
+    width: int
+    height: int
+
+    def colmap_camera(self):
+        pycolmap = import_pycolmap()
+        cam = pycolmap.Camera.create_from_model_name(1, self.model, 1.0, self.width, self.height)
+        cam.params = list(self.params)
+        return cam
+
+
+
+def summary(entries) -> str | None:
+    """One line on the loader entries' distorted cameras (``scene.meta["undistorted"]``,
+    shown by ``vibr info``), or None when there are none."""
+    dists = [e["distortion"] for e in entries if e.get("distortion") is not None]
+    if not dists:
+        return None
+    kinds = {}
+    for d in dists:
+        K, w, h = pinhole(d)
+        key = f"{d.model} {d.width}x{d.height} -> pinhole {w}x{h}"
+        kinds[key] = kinds.get(key, 0) + 1
+    return f"{len(dists)} of {len(entries)} views undistorted at load (" + "; ".join(
+        f"{n}: {k}" if len(kinds) > 1 else k for k, n in kinds.items()) + ")"
+
+
+def from_nerfstudio(model: str, fx: float, fy: float, cx: float, cy: float, k: dict, width: int,
+                    height: int, src: str) -> Distortion | None:
+    """The :class:`Distortion` of a transforms.json frame (``k``: its k1..k4, p1, p2, absent
+    ones 0), or None when it is a plain pinhole. ``cx, cy`` as written (pixel-centre 0.5)."""
+    k = {n: float(k.get(n, 0.0) or 0.0) for n in ("k1", "k2", "k3", "k4", "p1", "p2")}
+    if model in NERFSTUDIO_FISHEYE:
+        if k["p1"] or k["p2"]:
+            raise VibrInputError(f"{model} with tangential distortion (p1 {k['p1']}, p2 {k['p2']}) has no "
+                                 "COLMAP model: undistort the images first", src)
+        return Distortion("OPENCV_FISHEYE", (fx, fy, cx, cy, k["k1"], k["k2"], k["k3"], k["k4"]), width, height)
+    if not any(k.values()):
+        return None
+    if k["k4"]:
+        raise VibrInputError(f"radial term k4 = {k['k4']} (r^8) has no COLMAP camera model: undistort the "
+                             "images first", src)
+    if k["k3"]:
+        return Distortion("FULL_OPENCV", (fx, fy, cx, cy, k["k1"], k["k2"], k["p1"], k["p2"], k["k3"], 0.0, 0.0, 0.0),
+                          width, height)
+    return Distortion("OPENCV", (fx, fy, cx, cy, k["k1"], k["k2"], k["p1"], k["p2"]), width, height)
+
+
+@functools.lru_cache(maxsize=16)
+def _undistorted_camera(dist: Distortion):
+    pycolmap = import_pycolmap()
+    return pycolmap.undistort_camera(pycolmap.UndistortCameraOptions(), dist.colmap_camera())
+
+
+def pinhole(dist: Distortion) -> tuple[np.ndarray, int, int]:
+    """vibr's K (top-left pixel centre at 0) and the size of the undistorted camera."""
+    u = _undistorted_camera(dist)
+    fx, fy = float(u.focal_length_x), float(u.focal_length_y)
+    cx, cy = float(u.principal_point_x) - 0.5, float(u.principal_point_y) - 0.5
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), int(u.width), int(u.height)
+
+
+def source_coords(dist: Distortion, xy: np.ndarray) -> np.ndarray:
+    """(N, 2) pixels of the undistorted (pinhole) camera, vibr's convention → (N, 2) (x, y)
+    of the same rays in the photograph, in array coordinates (top-left pixel centre 0)."""
+    rays = _undistorted_camera(dist).cam_from_img(np.asarray(xy, np.float64).reshape(-1, 2) + 0.5)
+    src = dist.colmap_camera().img_from_cam(np.concatenate([rays, np.ones((len(rays), 1))], axis=1))
+    return src - 0.5
+
+
+_LOOKUP_LOCK = threading.Lock()  # the loader's threads share one map per camera
+
+
+def _lookup(dist: Distortion) -> np.ndarray:
+    with _LOOKUP_LOCK:
+        return _lookup_cached(dist)
+
+
+@functools.lru_cache(maxsize=4)
+def _lookup_cached(dist: Distortion) -> np.ndarray:
+    """(2, H, W) float32: the photograph's (row, column) for each undistorted pixel, made
+    in bands of rows (pycolmap's float64 arrays of a whole 12-Mpixel photo took 1 GB)."""
+    _, w, h = pinhole(dist)
+    out = np.empty((2, h, w), np.float32)
+    xx = np.arange(w, dtype=np.float64)
+    for y0 in range(0, h, 256):
+        y1 = min(h, y0 + 256)
+        yy, xs = np.meshgrid(np.arange(y0, y1, dtype=np.float64), xx, indexing="ij")
+        src = source_coords(dist, np.stack([xs.ravel(), yy.ravel()], axis=1))
+        out[:, y0:y1] = src[:, ::-1].T.reshape(2, y1 - y0, w)
+    return out
+
+
+def undistort_array(a: np.ndarray, dist: Distortion, *, nearest: bool = False) -> np.ndarray:
+    """An H×W or H×W×C float array of the photograph resampled onto the pinhole camera:
+    bilinear, or the nearest pixel (``nearest``, for depth: no depth across an edge)."""
+    from scipy.ndimage import map_coordinates
+
+    coords = _lookup(dist)
+    order = 0 if nearest else 1
+    a = np.asarray(a)
+    if a.ndim == 2:
+        return map_coordinates(a, coords, order=order, mode="nearest").astype(a.dtype, copy=False)
+    out = np.empty(coords.shape[1:] + a.shape[2:], a.dtype)
+    for c in range(a.shape[2]):
+        out[..., c] = map_coordinates(a[..., c], coords, order=order, mode="nearest")
+    return out
