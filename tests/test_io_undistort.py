@@ -120,6 +120,7 @@ def test_depth_map_of_a_distorted_frame_is_resampled(tmp_path):
     ({"camera_model": "FISHEYE624", "k1": 0.1}, "FISHEYE624 is not one vibr reads"),
     ({"camera_model": "EQUIRECTANGULAR"}, "EQUIRECTANGULAR"),
     ({"camera_model": "OPENCV", "k1": "0.1"}, "k1 must be a number"),
+    ({"camera_model": "OPENCV", "k1": -3.0}, "folds the image over itself"),  # r (1 - 3 r²) turns at 0.33
 ])
 def test_distortions_vibr_cannot_undistort_are_refused(tmp_path, extra, match):
     write_image(tmp_path / "a.png", np.zeros((20, 30, 3), np.float32))
@@ -138,3 +139,30 @@ def test_zero_distortion_loads_the_file_as_it_is(tmp_path):
     v = load_scene(tmp_path).views[0]
     assert v.camera.shape == (20, 30)
     np.testing.assert_array_equal(v.image, np.round(img * 65535) / np.float32(65535))
+
+
+def test_a_lens_that_keeps_little_of_the_photograph_is_warned_once(tmp_path):
+    """k1 = 1e10 (a typing error) is a valid, monotone model whose pinhole is a few pixels
+    wide: loaded, with one warning for the camera all frames share."""
+    import io
+    import logging
+
+    from vibr.progress import configure_logging
+
+    frames = []
+    for i in range(3):
+        write_image(tmp_path / f"{i}.png", np.zeros((72, 96, 3), np.float32))
+        frames.append({"file_path": f"{i}.png", "transform_matrix": np.eye(4).tolist()})
+    doc = {"camera_model": "OPENCV", "fl_x": 90.0, "k1": 1e10, "frames": frames}
+    (tmp_path / "transforms.json").write_text(json.dumps(doc))
+    lg = logging.getLogger("vibr")
+    saved = (list(lg.handlers), lg.level, lg.propagate)
+    buf = io.StringIO()
+    configure_logging(0, stream=buf)
+    try:
+        sc = load_scene(tmp_path)
+    finally:
+        lg.handlers[:], lg.level, lg.propagate = saved
+    w, h = sc.views[0].camera.width, sc.views[0].camera.height
+    assert w * h < 0.25 * 96 * 72
+    assert buf.getvalue().count(f"96x72 photograph becomes a {w}x{h} pinhole") == 1

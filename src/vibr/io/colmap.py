@@ -31,7 +31,7 @@ from .camera_json import as_rotation
 from .colmap_check import check_colmap_model
 from .depthfiles import fit_depth, read_depth
 from .images import build_views
-from .undistort import Distortion, pinhole
+from .undistort import Distortion, check_lens, pinhole
 from .undistort import summary as undistort_summary
 
 logger = logging.getLogger(__name__)
@@ -100,7 +100,7 @@ def colmap_camera(cam, source):
             K, w, h = pinhole(dist)
         except Exception as exc:  # noqa: BLE001 - COLMAP's words for a model it cannot undistort
             raise VibrInputError(f"camera {cam.camera_id} ({model}) cannot be undistorted: {exc}", source) from None
-        return K, w, h, dist
+        return K, w, h, check_lens(dist, f"{source} (camera {cam.camera_id})")
     fx, fy = float(cam.focal_length_x), float(cam.focal_length_y)
     cx, cy = float(cam.principal_point_x) - 0.5, float(cam.principal_point_y) - 0.5
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), int(cam.width), int(cam.height), None

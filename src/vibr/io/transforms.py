@@ -53,7 +53,7 @@ from .atomic import temporary_folder, write_failed
 from .camera_json import as_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
 from .images import build_views, image_size, write_image
-from .undistort import NERFSTUDIO_FISHEYE, Distortion, from_nerfstudio, pinhole
+from .undistort import NERFSTUDIO_FISHEYE, Distortion, check_lens, from_nerfstudio, pinhole
 from .undistort import summary as undistort_summary
 
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0])
@@ -199,6 +199,8 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> 
     cy = _number(_get(frame, meta, "cy", h / 2.0), f"{fi} cy", src)
     skew = _number(frame.get("vibr_skew", 0.0), f"{fi} vibr_skew", src)
     dist = from_nerfstudio(model, fx, fy, cx, cy, dk, w, h, f"{src} frame {i}")
+    if dist is not None:
+        check_lens(dist, f"{src} frame {i}")
     if dist is not None and skew:
         raise VibrInputError(f"{fi} vibr_skew with lens distortion is not supported", src)
     K = np.array([[fx, skew, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])

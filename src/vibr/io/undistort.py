@@ -26,6 +26,7 @@ becomes vibr's by subtracting 0.5 (:mod:`vibr.io.colmap`).
 from __future__ import annotations
 
 import functools
+import logging
 import threading
 from dataclasses import dataclass
 
@@ -33,6 +34,8 @@ import numpy as np
 
 from .._pycolmap import import_pycolmap
 from ..errors import VibrInputError
+
+logger = logging.getLogger(__name__)
 
 #: nerfstudio camera_model → the COLMAP model of the same formula (the fisheye's θ-polynomial
 #: ``θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`` is COLMAP's OPENCV_FISHEYE).
@@ -105,6 +108,45 @@ def pinhole(dist: Distortion) -> tuple[np.ndarray, int, int]:
     fx, fy = float(u.focal_length_x), float(u.focal_length_y)
     cx, cy = float(u.principal_point_x) - 0.5, float(u.principal_point_y) - 0.5
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), int(u.width), int(u.height)
+
+
+#: ``vibr`` warns when the undistorted pinhole keeps less than this fraction of the photograph.
+SMALL_COVERAGE = 0.25
+_WARNED: set = set()
+
+
+@functools.lru_cache(maxsize=64)
+def _lens_report(dist: Distortion) -> tuple[bool, float]:
+    """(folds, coverage): whether the model folds the image over itself inside the pinhole's
+    field (its map from pinhole pixels to the photograph not monotone along rows and columns,
+    or not finite: a lens model outside its valid range, a typing error in k1), and what the
+    pinhole keeps: the smaller of the fraction of the photograph's extent it sees and of its
+    pixel count (checked on a 65 × 65 grid)."""
+    _, w, h = pinhole(dist)
+    gx, gy = np.meshgrid(np.linspace(0, w - 1, 65), np.linspace(0, h - 1, 65))
+    src = source_coords(dist, np.stack([gx.ravel(), gy.ravel()], axis=1)).reshape(65, 65, 2)
+    if not np.all(np.isfinite(src)):
+        return True, 0.0
+    folds = bool(np.any(np.diff(src[..., 0], axis=1) <= 0) or np.any(np.diff(src[..., 1], axis=0) <= 0))
+    span = np.ptp(src[..., 0]) * np.ptp(src[..., 1]) / (dist.width * dist.height)
+    return folds, float(min(span, w * h / (dist.width * dist.height)))
+
+
+def check_lens(dist: Distortion, src: str) -> Distortion:
+    """Refuse a model that folds the image inside the photograph; warn (once per camera)
+    when the pinhole keeps little of it."""
+    folds, coverage = _lens_report(dist)
+    if folds:
+        raise VibrInputError(f"lens model {dist.model} {list(dist.params[4:])} folds the image over itself "
+                             "inside the photograph (outside the model's valid range): check the distortion "
+                             "parameters", src)
+    if coverage < SMALL_COVERAGE and dist not in _WARNED:
+        _WARNED.add(dist)
+        _, w, h = pinhole(dist)
+        logger.warning(f"{src}: undistorted, the {dist.width}x{dist.height} photograph becomes a {w}x{h} "
+                       f"pinhole that keeps {100 * coverage:.0f} % of its extent or pixels: check the "
+                       f"distortion parameters {list(dist.params[4:])}")
+    return dist
 
 
 def source_coords(dist: Distortion, xy: np.ndarray) -> np.ndarray:
