@@ -302,7 +302,7 @@ def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
     Decoding and resizing full-size photographs (fountain: 11 JPEGs of 3072×2048) takes
     seconds; a second fly-through of the same scene at the same scale loads the resized
     views instead (``scene-KEY.pkl``, KEY a SHA-256 of the folder, the names, sizes and
-    modification times of its files, and the scale). The file is a pickle written by vibr
+    modification times of its files, the scale and vibr's code). The file is a pickle written by vibr
     in the user's own cache folder (:func:`default_cache_dir`); ``cache_dir=False``
     disables it.
     """
@@ -314,7 +314,9 @@ def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
     if cache_dir is False:
         return load_scene(path, scale=scale)
     h = hashlib.sha256()
-    h.update(f"vibr-scene-cache v{_CACHE_VERSION}|{os.path.abspath(root)}|{float(scale)!r}|".encode())
+    # vibr's code in the key: a loader that changed (undistortion, masks) loads afresh
+    h.update(f"vibr-scene-cache v{_CACHE_VERSION} code {code_fingerprint()}|{os.path.abspath(root)}|"
+             f"{float(scale)!r}|".encode())
     try:
         _folder_fingerprint(root if root.is_dir() else root.parent, h)
     except OSError:

@@ -154,11 +154,11 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
     rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty)
-    cover = np.ones(tview.shape, bool)
+    cover = np.ones(tview.shape, bool) if tview.mask is None else tview.mask.copy()
     if mask == "reconstructed":
         for _, res, _ in rows:
             cover &= np.asarray(res.coverage, bool)
-    m = cover if mask == "reconstructed" else None
+    m = cover if mask == "reconstructed" or tview.mask is not None else None
     lp = _lpips_fn() if use_lpips else None
     counts = view_counts(samples) if view_split is not None else None
     results = []
@@ -172,7 +172,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
             entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
                                                        border=border)
         if view_split is not None:
-            base = cover if mask == "reconstructed" else np.ones(tview.shape, bool)
+            base = cover
             entry["regions"] = _region_metrics(res.image, tview.image, base, counts, view_split, border)
         results.append(entry)
     report = {
@@ -186,7 +186,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         "depth": depth,
         "mask": mask,
         "border": border,
-        "evaluated_fraction": float(cover.mean()) if mask == "reconstructed" else 1.0,
+        "evaluated_fraction": float(cover.mean()),
         "n_samples": int(len(samples)),
         "depth_seconds": round(t_depth, 3),
         "samples_seconds": round(t_samples, 3),

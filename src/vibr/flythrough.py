@@ -133,7 +133,7 @@ def prepare_sources(ctx: FrameContext, cache_depth: bool = True) -> None:
 def job_key(ctx: FrameContext) -> str:
     """SHA-1 of what every frame depends on besides its camera: vibr's code, the method and
     its parameters, the source selection and the sources (names, cameras, images, depth,
-    sigma_z, fallback masks)."""
+    sigma_z, fallback masks, photograph masks)."""
     from .io.checkpoint import code_fingerprint, digest
 
     parts = [code_fingerprint(), ctx.method, ctx.params, ctx.n_views, ctx.blend, ctx.geometry_kw]
@@ -141,7 +141,8 @@ def job_key(ctx: FrameContext) -> str:
         c = v.camera
         parts += [v.name, c.K, c.R, c.t, list(c.shape), v.image, v.depth,
                   v.sigma_z if isinstance(v.sigma_z, np.ndarray) else [v.sigma_z],
-                  v.fallback if v.fallback is not None else []]
+                  v.fallback if v.fallback is not None else [],
+                  v.mask if v.mask is not None else []]
     return digest(*parts)
 
 

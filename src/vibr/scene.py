@@ -130,6 +130,12 @@ class View:
         H×W bool: the pixels whose depth is not a measurement but the fallback proxy
         (:func:`vibr.geometry.fallback_depth`); the geometry stage lets known depth hide
         them. Reset to None by :meth:`replace` when the depth changes without it.
+    mask : ndarray or None
+        H×W bool: the pixels of the photograph that show the scene (nerfstudio's
+        ``mask_path``, 0 = ignore: a passer-by, the photographer's shadow, a fisheye's black
+        surround). The others give the renderer no sample and hide nothing (their depth is
+        unknown to the geometry stage, :func:`vibr.geometry.prepare_depth`), and a held-out
+        view is measured on its mask only. None: the whole photograph.
     """
 
     name: str
@@ -139,6 +145,7 @@ class View:
     sigma_z: float | np.ndarray | None = None
     path: str | None = None
     fallback: np.ndarray | None = None
+    mask: np.ndarray | None = None
 
     def __post_init__(self):
         src = self.path or self.name
@@ -164,6 +171,15 @@ class View:
             if m.shape != self.camera.shape:
                 raise VibrInputError(f"fallback mask has shape {m.shape}, image has {self.camera.shape}", src)
             self.fallback = m if m.any() else None
+        if self.mask is not None:
+            m = np.asarray(self.mask)
+            if m.shape != self.camera.shape:
+                raise VibrInputError(f"mask is {m.shape[1::-1] if m.ndim >= 2 else m.shape} but the image is "
+                                     f"{self.camera.width}x{self.camera.height}", src)
+            m = m.astype(bool)
+            if not m.any():
+                raise VibrInputError("mask excludes every pixel of the photograph", src)
+            self.mask = None if m.all() else m
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -59,6 +59,11 @@ def describe(scene) -> str:
     if "focal_px" in m:
         extra.append(f"camera   f = {m['focal_px']:.6g} px, baseline {m['baseline']:.6g}, "
                      f"focus distance Z0 = {m['focus_distance']:.6g} ({m.get('camera_rule')})")
+    masked = [v for v in scene.views if v.mask is not None]
+    if masked:
+        out = np.mean([1.0 - v.mask.mean() for v in masked])
+        extra.append(f"masks    {len(masked)} of {len(scene.views)} views masked ({100 * out:.1f} % of their "
+                     "pixels on average not used)")
     if m.get("undistorted"):
         extra.append(f"lens     {m['undistorted']}")
     if m.get("depth_source"):

@@ -206,6 +206,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     for v in sources.views:
         z = np.full(v.camera.shape, np.nan, np.float32) if v.depth is None else np.asarray(v.depth, np.float32)
         unknown = ~np.isfinite(z)
+        if v.mask is not None:  # masked pixels stay out of the render (prepare_depth)
+            unknown &= v.mask
         if not unknown.any() or unknown.mean() < min_fraction:
             views.append(v)
             continue

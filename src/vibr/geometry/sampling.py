@@ -44,15 +44,27 @@ OPTIONAL_FIELDS = ("jac", "src_xy")
 DEFAULT_SIGMA_Z_REL = 0.01
 
 
+def usable_pixels(mask: np.ndarray) -> np.ndarray:
+    """The pixels of a view's mask whose 3×3 neighbourhood is in the mask too: a sample's
+    colour gradient ∇v (the renderer's stencil reaches one pixel each way) must not read a
+    masked pixel's colour."""
+    from scipy.ndimage import binary_erosion
+
+    return binary_erosion(mask, np.ones((3, 3), bool), border_value=1)
+
+
 def prepare_depth(view: View, *, fill_holes: bool = False, edge_rel: float = DEFAULT_EDGE_REL):
     """Depth of a view as float64 plus slopes: returns ``(z, z_x, z_y)``, (H, W) float64,
-    NaN where unknown (holes filled first when ``fill_holes``)."""
+    NaN where unknown (holes filled first when ``fill_holes``) and outside the view's
+    :attr:`~vibr.scene.View.mask` (less a pixel: :func:`usable_pixels`)."""
     if view.depth is None:
         raise VibrInputError(f"source view {view.name} has no depth map", view.path or view.name)
     z = view.depth
     if fill_holes and np.isnan(z).any():
         z, _ = fill_depth_holes(z, view.image)
     z = np.ascontiguousarray(z, dtype=np.float64)
+    if view.mask is not None:  # masked pixels: no sample, no occluder
+        z = np.where(usable_pixels(view.mask), z, np.nan)
     zx, zy = depth_derivatives(z, edge_rel)
     return z, zx, zy
 

@@ -393,6 +393,32 @@ def resize_depth(depth: np.ndarray, shape) -> np.ndarray:
     return np.ascontiguousarray(depth[ri[:, None], ci[None, :]])
 
 
+def read_mask(path, shape, what: str = "its image") -> np.ndarray:
+    """A validity mask file (nerfstudio's ``mask_path``: non-zero = use the pixel, 0 =
+    ignore it) as an H×W bool array of ``shape``; a mask of the image's aspect at another
+    resolution is resized (nearest pixel), another aspect is an error naming the file."""
+    m = read_image(path).max(axis=2) > 0
+    (h, w), (H, W) = m.shape, tuple(int(s) for s in shape)
+    if (h, w) != (H, W):
+        if abs(w * H - h * W) > max(w, W):
+            raise VibrInputError(f"mask is {w}x{h}, {what} is {W}x{H} (another aspect)", path)
+        m = resize_depth(m, (H, W))
+    if not m.any():
+        raise VibrInputError("mask excludes every pixel (0 everywhere; non-zero marks the pixels to use)", path)
+    return m
+
+
+def resize_mask(mask: np.ndarray, shape) -> np.ndarray:
+    """A validity mask resized to ``shape``: a new pixel is valid only where every old
+    pixel under it is (the area average of :func:`resize_image` at 1), so no masked-out
+    colour leaks into a kept pixel."""
+    m = np.asarray(mask, bool)
+    if m.shape == tuple(int(s) for s in shape):
+        return m
+    a = resize_image(np.repeat(m[..., None].astype(np.float32), 3, axis=2), shape)[..., 0]
+    return a >= np.float32(1.0 - 1e-6)
+
+
 # ----------------------------------------------------------------------------- view building
 def build_views(entries, scale: float = 1.0, desc: str = "reading images", check_size: bool = True):
     """Read the images of ``entries`` in a thread pool and build scaled :class:`View` s.
@@ -402,7 +428,8 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     entries : list of dict
         Keys ``name``, ``path`` (image file), ``camera`` (at the file's resolution), optional
         ``depth`` (H×W float32, NaN unknown, at the file's resolution), ``sigma_z`` (scalar or
-        H×W), ``distortion`` (a :class:`vibr.io.undistort.Distortion` of the file's camera:
+        H×W), ``mask`` (H×W bool, True where the photograph is to be used, at the file's
+        resolution), ``distortion`` (a :class:`vibr.io.undistort.Distortion` of the file's camera:
         ``camera`` is then its pinhole, and the image and maps are undistorted onto it
         before the scale).
     scale : float
@@ -441,9 +468,9 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
         if size != (fh, fw):
             if check_size:
                 raise VibrInputError(f"image is {size[1]}x{size[0]} but its camera says {fw}x{fh}", e["path"])
-        depth, sz = e.get("depth"), e.get("sigma_z")
+        depth, sz, mask = e.get("depth"), e.get("sigma_z"), e.get("mask")
         if dist is not None:
-            img, depth, sz, size = _undistorted(img, depth, sz, dist, cam)
+            img, depth, sz, mask, size = _undistorted(img, depth, sz, mask, dist, cam)
         if scale != 1.0:
             cam = cam.scaled(scale)
         _check_side(size, cam, scale, e["path"])
@@ -453,7 +480,8 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
                 depth = resize_depth(depth, cam.shape)
             if sz is not None and np.ndim(sz) == 2:
                 sz = resize_depth(np.asarray(sz, dtype=np.float32), cam.shape)
-        return View(e["name"], img, cam, depth=depth, sigma_z=sz, path=os.fspath(e["path"]))
+            mask = None if mask is None else resize_mask(mask, cam.shape)
+        return View(e["name"], img, cam, depth=depth, sigma_z=sz, path=os.fspath(e["path"]), mask=mask)
 
     n = len(entries)
     workers = min(8, max(1, n), (os.cpu_count() or 2) * 2)
@@ -462,7 +490,7 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     return views
 
 
-def _undistorted(img, depth, sz, dist, cam):
+def _undistorted(img, depth, sz, mask, dist, cam):
     """A distorted view's arrays resampled onto its pinhole ``cam`` (:mod:`vibr.io.undistort`)."""
     from .undistort import undistort_array
 
@@ -470,7 +498,9 @@ def _undistorted(img, depth, sz, dist, cam):
     depth = None if depth is None else undistort_array(depth, dist, nearest=True)
     if sz is not None and np.ndim(sz) == 2:
         sz = undistort_array(np.asarray(sz, np.float32), dist, nearest=True)
-    return img, depth, sz, cam.shape
+    if mask is not None:
+        mask = undistort_array(np.asarray(mask, np.float32), dist, nearest=True) > 0.5
+    return img, depth, sz, mask, cam.shape
 
 
 def _check_side(size, cam, scale, path) -> None:
@@ -499,8 +529,8 @@ def headers_only():
 def scaled_scene(scene, s: float):
     """Every view of ``scene`` resized by ``s`` as :func:`vibr.io.load_scene` does with
     ``scale``: images by :func:`resize_image`, cameras by :meth:`vibr.camera.Camera.scaled`,
-    depth, sigma_z and fallback maps by nearest neighbour (:func:`resize_depth`). ``s = 1``:
-    the scene."""
+    depth, sigma_z and fallback maps by nearest neighbour (:func:`resize_depth`), masks by
+    :func:`resize_mask`. ``s = 1``: the scene."""
     if s == 1.0:
         return scene
     views = []
@@ -512,7 +542,7 @@ def scaled_scene(scene, s: float):
         fb = None if v.fallback is None else resize_depth(v.fallback, cam.shape)
         views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
                                depth=None if v.depth is None else resize_depth(v.depth, cam.shape), sigma_z=sz,
-                               fallback=fb))
+                               fallback=fb, mask=None if v.mask is None else resize_mask(v.mask, cam.shape)))
     meta = dict(scene.meta)
     if meta.get("missing_views"):  # a light field's absent positions (vibr.io.hci)
         from ..camera import Camera

@@ -23,6 +23,9 @@ Views are named by their image's file stem; when two frames share one (a camera 
 ``images/cam0/0001.png``, ``images/cam1/0001.png``) by the path without its extension below
 the folders every frame shares (``cam0/0001``).
 
+``mask_path`` (nerfstudio's: an image, non-zero where the photograph is to be used, 0 where
+not) gives :attr:`vibr.scene.View.mask`, resized and undistorted with the image.
+
 vibr extras (ignored by other tools): top level ``vibr_grid: [rows, cols]``, ``vibr_name``
 (scene name), ``ply_file_path`` (sparse points, nerfstudio's key), ``sigma_z`` (scalar, may be
 per frame); per frame ``vibr_name`` (view name), ``vibr_skew`` (K[0, 1]), ``vibr_grid_pos:
@@ -52,7 +55,7 @@ from ..scene import Scene
 from .atomic import temporary_folder, write_failed
 from .camera_json import as_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
-from .images import build_views, image_size, write_image
+from .images import build_views, image_size, read_mask, write_image
 from .undistort import NERFSTUDIO_FISHEYE, Distortion, check_lens, from_nerfstudio, pinhole
 from .undistort import summary as undistort_summary
 
@@ -330,6 +333,10 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
             fac = _get(fr, meta, "depth_unit_scale_factor")
             fac = None if fac is None else _number(fac, f"frame {i}: depth_unit_scale_factor", src, positive=True)
             e["depth"] = fit_depth(read_depth(dpath, fac), file_shape, dpath, f"frame {i}'s image")
+        mp = fr.get("mask_path")
+        if mp is not None:
+            mpath = _resolve(base, mp, "mask_path", src, i, allow_outside)
+            e["mask"] = read_mask(mpath, file_shape, f"frame {i}'s image")
         sz = _get(fr, meta, "sigma_z")
         szp = fr.get("sigma_z_file_path")
         if szp is not None:
@@ -389,6 +396,8 @@ def _frame_entries(scene: Scene, files: list) -> list:
         if v.depth is not None:
             fr["depth_file_path"] = f"depth/{fn}.npy"
             fr["depth_unit_scale_factor"] = 1.0
+        if v.mask is not None:
+            fr["mask_path"] = f"masks/{fn}.png"
         if v.sigma_z is not None:
             if np.ndim(v.sigma_z) == 2:
                 fr["sigma_z_file_path"] = f"sigma_z/{fn}.npy"
@@ -460,6 +469,8 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
             (tmp / "depth").mkdir()
         if any(v.sigma_z is not None and np.ndim(v.sigma_z) == 2 for v in scene.views):
             (tmp / "sigma_z").mkdir()
+        if any(v.mask is not None for v in scene.views):
+            (tmp / "masks").mkdir()
 
         frames = _frame_entries(scene, files)
 
@@ -470,6 +481,8 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
                 write_depth(tmp / "depth" / f"{fn}.npy", v.depth)
             if v.sigma_z is not None and np.ndim(v.sigma_z) == 2:
                 write_depth(tmp / "sigma_z" / f"{fn}.npy", np.asarray(v.sigma_z, dtype=np.float32))
+            if v.mask is not None:
+                write_image(tmp / "masks" / f"{fn}.png", v.mask.astype(np.float32), bits=8)
 
         with ThreadPoolExecutor(max_workers=min(8, (os.cpu_count() or 2) * 2)) as ex:
             list(progress(ex.map(write_one, zip(scene.views, files)), desc="writing views",

@@ -165,5 +165,6 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     if isinstance(target, View) and target.image is not None:
         from ..metrics import view_metrics
 
-        res.metrics = view_metrics(res.image, target.image, res.coverage)
+        cover = res.coverage if target.mask is None else res.coverage & target.mask
+        res.metrics = view_metrics(res.image, target.image, cover)
     return res

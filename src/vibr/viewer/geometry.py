@@ -49,6 +49,8 @@ def point_cloud(scene: Scene, max_points: int = 300_000, seed: int = 0,
         ok = np.isfinite(z) & (z > 0)
         if v.fallback is not None:  # the fallback proxy's plane is not a surface of the scene
             ok &= ~v.fallback[::step, ::step]
+        if v.mask is not None:
+            ok &= v.mask[::step, ::step]
         if not np.any(ok):
             continue
         xy = np.stack([xx[ok], yy[ok]], -1).astype(np.float64)
