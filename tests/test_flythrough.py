@@ -362,7 +362,7 @@ def test_bad_path_timing_is_one_line(grid_dir, tmp_path, capsys, extra, msg):
     ('{"render_width": 8, "render_height": 8, "fps": 24}', "camera_path"),
     ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": []}', "no frames"),
     ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '
-     '[2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": 50}]}', "not rigid"),
+     '[2,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": 50}]}', "not a rotation matrix"),
     ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '
      '[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1], "fov": 0}]}', "fov"),
     ('{"render_width": 8, "render_height": 8, "fps": 24, "camera_path": [{"camera_to_world": '

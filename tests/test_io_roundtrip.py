@@ -128,6 +128,39 @@ def test_transforms_windows_separators(tmp_path):
         load_scene(tmp_path)
 
 
+def test_transforms_rotation_with_a_uniform_scale(tmp_path):
+    """A camera object scaled in Blender writes s·R into transform_matrix: vibr refused it
+    (not a rotation); the rays' lines do not depend on s, so the camera is R's. Shear is
+    still refused."""
+    save_scene(synthetic_scene(), tmp_path / "s")
+    ref = load_scene(tmp_path / "s")
+    doc = json.loads((tmp_path / "s" / "transforms.json").read_text())
+    for f, s in zip(doc["frames"], (2.0, 0.01, 1.001)):
+        M = np.array(f["transform_matrix"])
+        M[:3, :3] *= s
+        f["transform_matrix"] = M.tolist()
+    (tmp_path / "s" / "transforms.json").write_text(json.dumps(doc))
+    sc = load_scene(tmp_path / "s")
+    for a, b in zip(sc.views, ref.views):
+        np.testing.assert_allclose(a.camera.R, b.camera.R, atol=1e-12)
+        np.testing.assert_allclose(a.camera.t, b.camera.t, atol=1e-12)
+    M = np.array(doc["frames"][0]["transform_matrix"])
+    M[:3, :3] = M[:3, :3] @ np.diag([1.0, 1.0, 1.5])
+    doc["frames"][0]["transform_matrix"] = M.tolist()
+    (tmp_path / "s" / "transforms.json").write_text(json.dumps(doc))
+    with pytest.raises(VibrInputError, match="nor one with a uniform scale"):
+        load_scene(tmp_path / "s")
+    # a camera path's camera_to_world (vibr render --path) reads the same way
+    from vibr.path import camera_from_c2w_opengl
+
+    c2w = np.array(json.loads((tmp_path / "s" / "transforms.json").read_text())["frames"][1]["transform_matrix"])
+    a = camera_from_c2w_opengl(c2w, 50.0, 32, 24)
+    c2w[:3, :3] /= 0.01
+    b = camera_from_c2w_opengl(c2w, 50.0, 32, 24)
+    np.testing.assert_allclose(a.R, b.R, atol=1e-12)
+    np.testing.assert_allclose(a.R, ref.views[1].camera.R, atol=1e-12)
+
+
 def test_transforms_camera_rig_names(tmp_path):
     """A rig's frames share file stems (``images/cam0/0000.png``, ``images/cam1/0000.png``):
     the views are named by their paths below the shared folders (until 2026-11-27 such a

@@ -48,9 +48,6 @@ PATH_KINDS = ("interpolate", "orbit", "spiral")
 
 #: OpenGL camera axes (x right, y up, z backward) <-> OpenCV (x right, y down, z forward).
 _GL_CV = np.diag([1.0, -1.0, -1.0])
-#: Largest |R Rᵀ − I| accepted for a camera_to_world rotation read from a file (floats
-#: written as text keep ~7 digits in nerfstudio's viewer: float32 poses).
-_RIGID_TOL = 1e-4
 
 
 @dataclass
@@ -109,8 +106,10 @@ def camera_from_c2w_opengl(c2w_4x4, fov_deg_vertical: float, width: int, height:
 
     ``R_c2w(OpenCV) = R_c2w(OpenGL) · diag(1, −1, −1)``, ``R = R_c2wᵀ``, ``C = c2w[:3, 3]``;
     ``K`` has ``fx = fy = (H/2) / tan(fov/2)`` and the principal point at the image centre.
-    The rotation block must be a rotation (within 1e-4; it is snapped to the nearest one)
-    and the last row ``[0, 0, 0, 1]``: anything else raises :class:`VibrInputError`.
+    The rotation block must be a rotation, or one times a uniform scale (a scaled camera
+    object; the scale is dropped), within 1e-4 (snapped to the nearest rotation:
+    :func:`vibr.io.camera_json.as_scaled_rotation`), and the last row ``[0, 0, 0, 1]``:
+    anything else raises :class:`VibrInputError`.
     """
     try:
         M = np.asarray(c2w_4x4, dtype=np.float64).reshape(4, 4)
@@ -120,14 +119,9 @@ def camera_from_c2w_opengl(c2w_4x4, fov_deg_vertical: float, width: int, height:
         raise VibrInputError("camera_to_world has non-finite entries", source)
     if np.abs(M[3] - [0, 0, 0, 1]).max() > 1e-6:
         raise VibrInputError(f"camera_to_world's last row is {M[3].tolist()}, not [0, 0, 0, 1]", source)
-    Rgl = M[:3, :3]
-    err = float(np.abs(Rgl @ Rgl.T - np.eye(3)).max())
-    det = float(np.linalg.det(Rgl))
-    if err > _RIGID_TOL or det < 0:
-        raise VibrInputError(f"camera_to_world is not rigid (|R Rᵀ - I| = {err:.2g}, det = {det:.3g})", source)
-    if err > 0:
-        U, _, Vt = np.linalg.svd(Rgl)
-        Rgl = U @ Vt
+    from .io.camera_json import as_scaled_rotation
+
+    Rgl, _ = as_scaled_rotation(M[:3, :3], source, "camera_to_world's rotation")
     try:
         fov = float(fov_deg_vertical)
     except (TypeError, ValueError):
@@ -207,7 +201,7 @@ def read_dataparser_transforms(path) -> tuple[np.ndarray, float]:
     """nerfstudio's ``dataparser_transforms.json``: ``(T, scale)`` with ``T`` the 3×4
     ``transform`` and ``scale`` such that a world point of the data maps to the
     normalised frame as ``x_n = scale · (T[:, :3] x + T[:, 3])``."""
-    from .io.camera_json import parse_json
+    from .io.camera_json import as_rotation, parse_json
 
     p = os.fspath(path)
     d = parse_json(p)
@@ -220,9 +214,7 @@ def read_dataparser_transforms(path) -> tuple[np.ndarray, float]:
         raise VibrInputError("'transform' must be 3x4 numbers and 'scale' a number", p) from None
     if not (np.all(np.isfinite(T)) and math.isfinite(s) and s > 0):
         raise VibrInputError("'transform' must be finite and 'scale' positive", p)
-    err = float(np.abs(T[:, :3] @ T[:, :3].T - np.eye(3)).max())
-    if err > _RIGID_TOL or np.linalg.det(T[:, :3]) < 0:
-        raise VibrInputError(f"'transform' is not rigid (|R Rᵀ - I| = {err:.2g})", p)
+    T[:, :3] = as_rotation(T[:, :3], p, "'transform' (its 3x3 part)")
     return T, s
 
 

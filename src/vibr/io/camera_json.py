@@ -40,6 +40,28 @@ def as_rotation(R, source=None, what: str = "R") -> np.ndarray:
     return U @ Vt
 
 
+def as_scaled_rotation(M, source=None, what: str = "R") -> tuple[np.ndarray, float]:
+    """A 3×3 matrix that is a rotation times a uniform scale ``s > 0`` → ``(R, s)``.
+
+    A camera-to-world matrix from 3-D software carries the camera object's scale
+    (Blender's ``matrix_world`` of a scaled camera); it scales the rays' directions, not
+    their lines, so the rotation is the camera. Shear, non-uniform scale and reflections
+    raise :class:`VibrInputError` (:func:`as_rotation`'s tolerance, relative to ``s``)."""
+    M = np.asarray(M, dtype=np.float64)
+    if M.shape != (3, 3) or not np.all(np.isfinite(M)):
+        raise VibrInputError(f"{what} must be a finite 3x3 matrix", source)
+    det = float(np.linalg.det(M))
+    if not det > 0:
+        return as_rotation(M, source, what), 1.0  # its error names the reflection or singularity
+    s = det ** (1.0 / 3.0)
+    sv = np.linalg.svd(M, compute_uv=False)
+    if np.abs(sv / s - 1.0).max() > ROTATION_TOL:
+        raise VibrInputError(f"{what} is not a rotation matrix, nor one with a uniform scale (singular values "
+                             f"{sv[0]:.4g}, {sv[1]:.4g}, {sv[2]:.4g}: shear or a scale that differs by axis)",
+                             source)
+    return as_rotation(M / s, source, what), s
+
+
 def parse_json(path) -> object:
     """Load a JSON file; syntax errors become one-line :class:`VibrInputError` s. A UTF-8
     byte-order mark (what Windows editors write) is accepted."""

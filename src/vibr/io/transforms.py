@@ -9,6 +9,10 @@ vibr's OpenCV axes (x right, y down, z forward) are obtained by flipping the y a
 
     R_c2w = M[:3, :3] · diag(1, −1, −1),   R = R_c2wᵀ,   C = M[:3, 3],   t = −R C.
 
+A rotation part that is a rotation times a uniform scale (Blender's ``matrix_world`` of a
+scaled camera object) is read as its rotation, with one warning: the scale changes the
+length of a ray's direction, not its line. Shear and per-axis scales are refused.
+
 nerfstudio puts the centre of the top-left pixel at (0.5, 0.5): vibr ``cx = cx_ns − 0.5``
 (same for y). Distorted frames (``OPENCV`` with non-zero k1, k2, k3, p1, p2, as
 ``ns-process-data`` writes them, and ``OPENCV_FISHEYE``) are undistorted at load onto
@@ -42,6 +46,7 @@ Writing (:func:`save_scene`)
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import shutil
@@ -53,11 +58,13 @@ from ..camera import Camera
 from ..errors import OutputExists, OutputFailed, VibrInputError
 from ..scene import Scene
 from .atomic import temporary_folder, write_failed
-from .camera_json import as_rotation, parse_json
+from .camera_json import ROTATION_TOL, as_scaled_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
 from .images import build_views, image_size, read_mask, write_image
-from .undistort import NERFSTUDIO_FISHEYE, Distortion, check_lens, from_nerfstudio, pinhole
+from .undistort import NERFSTUDIO_FISHEYE, check_lens, from_nerfstudio, pinhole
 from .undistort import summary as undistort_summary
+
+logger = logging.getLogger(__name__)
 
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0])
 _DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
@@ -159,9 +166,10 @@ def _get(frame: dict, meta: dict, key: str, default=None):
     return frame[key] if key in frame else meta.get(key, default)
 
 
-def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> tuple[Camera, Distortion | None]:
-    """The frame's camera and, for a distorted one, its :class:`Distortion` (the camera is
-    then the pinhole its image is undistorted onto at load)."""
+def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int):
+    """``(camera, distortion, s)``: the frame's camera; for a distorted one its
+    :class:`Distortion` (the camera is then the pinhole its image is undistorted onto at
+    load), else None; the uniform scale its transform_matrix's rotation carried (1: none)."""
     model = str(_get(frame, meta, "camera_model", "OPENCV"))[:40].upper()
     if model not in _PERSPECTIVE_MODELS + NERFSTUDIO_FISHEYE:
         raise VibrInputError(f"frame {i}: camera_model {model} is not one vibr reads (it reads "
@@ -221,8 +229,9 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int) -> 
         raise VibrInputError(f"frame {i}: transform_matrix must be 4x4, got shape {M.shape}", src)
     if M.shape == (4, 4) and not np.allclose(M[3], [0, 0, 0, 1]):
         raise VibrInputError(f"frame {i}: transform_matrix last row must be 0 0 0 1", src)
-    R_c2w = as_rotation(M[:3, :3], src, f"frame {i} transform_matrix rotation") @ _GL_TO_CV
-    return Camera.from_centre(K, R_c2w.T, M[:3, 3], w, h, source=f"{src} frame {i}"), dist
+    R_gl, s = as_scaled_rotation(M[:3, :3], src, f"frame {i} transform_matrix rotation")
+    R_c2w = R_gl @ _GL_TO_CV
+    return Camera.from_centre(K, R_c2w.T, M[:3, 3], w, h, source=f"{src} frame {i}"), dist, s
 
 
 def _resolve(base: Path, rel: str, what: str, src: str, i: int, allow_outside: bool = False) -> Path:
@@ -317,12 +326,15 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
             grid_pos[name] = _ints(fr["vibr_grid_pos"], 2, f"frame {i}: vibr_grid_pos", src)
         entries.append(e)
     entries = select_entries(entries, views, base)
+    scaled = []
     for e in entries:
         fr, i = e.pop("frame"), e.pop("i")
         if not e["path"].is_file():
             raise VibrInputError(f"image of frame {i} not found" if e["path"].exists() is False else
                                  "image is not a file", e["path"])
-        cam, dist = _frame_camera(fr, meta, e["path"], src, i)
+        cam, dist, s = _frame_camera(fr, meta, e["path"], src, i)
+        if abs(s - 1.0) > ROTATION_TOL:
+            scaled.append(s)
         e["camera"] = cam
         if dist is not None:
             e["distortion"] = dist
@@ -348,6 +360,10 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
             if not sz >= 0:
                 raise VibrInputError(f"frame {i}: sigma_z must be finite and >= 0, got {sz}", src)
             e["sigma_z"] = sz
+    if scaled:  # a scaled camera object in 3-D software: the rays' lines are the same
+        logger.warning(f"{src}: the rotations of {len(scaled)} of {len(entries)} frames carry a uniform scale "
+                       f"({min(scaled):.4g}..{max(scaled):.4g}); vibr uses their rotation, as the scale "
+                       "changes the length of a ray's direction, not its line")
     undistorted = undistort_summary(entries)
     vs = build_views(entries, scale, desc="reading images")
     points = None
