@@ -533,7 +533,7 @@ def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     import imageio_ffmpeg
 
     from vibr.io import read_image, write_image
-    from vibr.io.video import write_video
+    from vibr.io.video import read_video_info, write_video
 
     ref = tmp_path / "ref.mp4"
     write_video(ref, (read_image(f) for f in frames), fps=24)
@@ -616,22 +616,24 @@ def test_depth_cache_estimates_once(tmp_path, monkeypatch):
     assert scene_with_depth(s, cache_dir=tmp_path).meta["depth_source"] == "scene"
 
 
-def test_video_colours_are_bt709_tagged(tmp_path):
+@pytest.mark.parametrize("ext", [".mp4", ".mov", ".mkv", ".webm"])
+def test_video_colours_are_bt709_tagged(tmp_path, ext):
     """The video's colours as a player shows them: players read HD video as BT.709 (untagged
     or tagged), so the frames are converted and tagged BT.709. Decoding with the BT.709
     matrix forced (what an untagged file got in a browser: pure green came back as 215)
-    gives the colours back."""
+    gives the colours back; every YUV format (H.264 in MP4, QuickTime, Matroska; VP9 in
+    WebM) alike."""
     import subprocess
 
     import imageio_ffmpeg
 
-    from vibr.io.video import write_video
+    from vibr.io.video import read_video_info, write_video
 
     cols = [(255, 0, 0), (0, 255, 0), (0, 0, 255), (255, 255, 0), (200, 120, 60), (128, 128, 128)]
     img = np.zeros((96, 96 * len(cols), 3), np.uint8)
     for i, c in enumerate(cols):
         img[:, 96 * i:96 * (i + 1)] = c
-    out = tmp_path / "c.mp4"
+    out = tmp_path / f"c{ext}"
     write_video(out, [img] * 3, fps=24)
     ff = imageio_ffmpeg.get_ffmpeg_exe()
     info = subprocess.run([ff, "-i", str(out)], capture_output=True, text=True).stderr
@@ -641,3 +643,29 @@ def test_video_colours_are_bt709_tagged(tmp_path):
     dec = np.frombuffer(raw, np.uint8)[:img.size].reshape(img.shape).astype(int)
     for i, c in enumerate(cols):
         assert np.abs(dec[48, 96 * i + 48] - np.array(c)).max() <= 4, (c, dec[48, 96 * i + 48])
+    assert read_video_info(out) == (3, img.shape[1], img.shape[0], 24.0)
+
+
+def test_gif_keeps_colours_and_odd_sizes(tmp_path):
+    """A GIF (one 256-colour palette, no YUV: no even padding) decodes to the frames'
+    colours; its frame duration is whole hundredths of a second (24 fps plays at 25)."""
+    from vibr.io.video import read_video_info, write_video
+
+    rng = np.random.default_rng(0)
+    frames = [np.repeat(np.repeat(rng.integers(0, 256, (5, 7, 3), dtype=np.uint8), 9, 0), 9, 1)[:-1, :-2]
+              for _ in range(4)]  # 44x61: odd sizes
+    out = tmp_path / "a.gif"
+    assert write_video(out, frames, fps=24) == (4, 61, 44)
+    assert read_video_info(out) == (4, 61, 44, 25.0)
+    import imageio.v3 as iio
+
+    dec = iio.imread(out, index=None)[..., :3]
+    assert np.abs(dec.astype(int) - np.array(frames, int)).max() <= 8
+
+
+def test_video_extension_must_be_known(tmp_path):
+    from vibr.errors import VibrInputError
+    from vibr.io.video import read_video_info, write_video
+
+    with pytest.raises(VibrInputError, match=r"not a video extension \(one of .mp4, .mov, .mkv, .webm, .gif\)"):
+        write_video(tmp_path / "a.avi", [np.zeros((8, 8, 3), np.uint8)], fps=24)

@@ -295,10 +295,12 @@ def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
 
 
 def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
-    if out.suffix.lower() == ".mp4":
+    from .io.video import VIDEO_FORMATS, is_video
+
+    if is_video(out):
         return (Path(frames_dir) if frames_dir else out.with_name(out.stem + "_frames")), out
     if out.suffix:
-        raise VibrInputError("output must be a .mp4 file or a folder for the frames", out)
+        raise VibrInputError(f"output must be a video ({', '.join(VIDEO_FORMATS)}) or a folder for the frames", out)
     if frames_dir and Path(frames_dir) != out:
         raise VibrInputError("--frames-dir is for a video output; the frames go to OUT", out)
     return out, None
@@ -330,7 +332,8 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     scene : Scene
     camera_path : vibr.path.CameraPath
     out : path
-        ``*.mp4`` (frames in ``frames_dir``, default ``OUT_frames/`` beside it) or a folder
+        a video (``*.mp4``, or another of :data:`vibr.io.video.VIDEO_FORMATS`; frames in
+        ``frames_dir``, default ``OUT_frames/`` beside it) or a folder
         (the frames only).
     method, params : the render method and its parameters (:func:`vibr.render.render`).
     n_views : int or None

@@ -38,7 +38,8 @@ def register(sub) -> None:
     p.add_argument("-o", "--output", help="also write the rendered view to this PNG")
     v = p.add_mutually_exclusive_group()
     v.add_argument("--video", default="vibr-demo.mp4",
-                   help="fly-through (a ~2 s orbit of the scene) written to this MP4 (default: vibr-demo.mp4)")
+                   help="fly-through (a ~2 s orbit of the scene) written to this video, .mp4 or another format by "
+                        "its extension as 'vibr render --path' (default: vibr-demo.mp4)")
     v.add_argument("--no-video", action="store_true", help="skip the fly-through video")
     add_bit_depth_option(p)
     add_quiet(p)
@@ -97,8 +98,10 @@ def _demo_video(scene, args) -> None:
     from ..flythrough import render_path
     from ..path import orbit
 
-    if not args.video.lower().endswith(".mp4"):
-        raise VibrInputError("the demo video must be a .mp4 file", args.video)
+    from ..io.video import VIDEO_FORMATS, is_video
+
+    if not is_video(args.video):
+        raise VibrInputError(f"the demo video must be a video file ({', '.join(VIDEO_FORMATS)})", args.video)
     t0 = time.perf_counter()
     path = orbit(scene, n_frames=48, fps=24.0)
     tmp = tempfile.mkdtemp(prefix="vibr-demo-frames-")

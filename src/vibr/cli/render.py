@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 
+from ..io.video import VIDEO_FORMATS, is_video
 from ._executor import add_executor_args, executor_from_args
 from . import add_quiet, count
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
@@ -40,7 +41,9 @@ def register(sub) -> None:
                    help="view name / index to hold out and render, or a camera JSON file (K, R, t, "
                         "width, height at the scene's original resolution: --scale applies to it too)")
     p.add_argument("-o", "--output", required=True,
-                   help="output image (.png; .tif, .jpg, .webp, .bmp or .ppm by its extension); with --path a video (.mp4) or a folder for the frames")
+                   help="output image (.png; .tif, .jpg, .webp, .bmp or .ppm by its extension); with --path a video "
+                        f"({', '.join(VIDEO_FORMATS)}: " + "; ".join(f"{e} {f.what}" for e, f in VIDEO_FORMATS.items())
+                        + ") or a folder for the frames")
     add_bit_depth_option(p)
     add_method_option(p)
     add_render_params(p)
@@ -63,7 +66,7 @@ def _add_path_options(p) -> None:
     g.add_argument("--path", metavar="PATH.json",
                    help="render every camera of a camera path (nerfstudio camera_path.json, as written by "
                         "'vibr path' or nerfstudio's viewer) to -o OUT.mp4 or -o FRAMES_DIR/ instead of --target")
-    g.add_argument("--frames-dir", metavar="DIR", help="where the numbered PNG frames go (default: OUT_frames/ beside OUT.mp4)")
+    g.add_argument("--frames-dir", metavar="DIR", help="where the numbered PNG frames go (default: OUT_frames/ beside the video)")
     g.add_argument("--crf", type=int, default=None, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
     g.add_argument("--fps", type=float, help="video frame rate (default: the path file's)")
     g.add_argument("--dataparser-transforms", metavar="JSON",
@@ -96,8 +99,7 @@ def run(args) -> int:
     if (args.path is None) == (args.target is None):
         raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
     if args.path is not None:
-        check_output(args.output, "file" if args.output.lower().endswith(".mp4") else "dir",
-                     overwrite=True, what="-o")
+        check_output(args.output, "file" if is_video(args.output) else "dir", overwrite=True, what="-o")
         return _run_path(args)
     _refuse_path_options(args)
     check_output(args.output, "file", what="-o")
@@ -167,8 +169,9 @@ def _run_path(args) -> int:
     from ..path import read_camera_path, scene_processing_transform
 
     out = args.output
-    if not (out.lower().endswith(".mp4") or not os.path.splitext(out)[1]):
-        raise VibrInputError("with --path, -o is a .mp4 video or a folder for the frames", out)
+    if not (is_video(out) or not os.path.splitext(out)[1]):
+        raise VibrInputError(f"with --path, -o is a video ({', '.join(VIDEO_FORMATS)}) or a folder for the frames",
+                             out)
     for flag in ("sources", "depth_files", "uncertainty", "bit_depth"):  # frames are 8-bit colour only
         if getattr(args, flag, None):
             raise VibrInputError(f"--{flag.replace('_', '-')} does not apply to --path")

@@ -1,4 +1,5 @@
-"""H.264 MP4 video through imageio-ffmpeg (which ships its own ffmpeg binary).
+"""Videos through imageio-ffmpeg (which ships its own ffmpeg binary): H.264 in MP4 (the
+default; also .mov and .mkv), VP9 in WebM, and GIF (:data:`VIDEO_FORMATS`, by extension).
 
 ``yuv420p`` (what every player decodes) stores chroma at half resolution and so needs even
 frame sizes: an odd width or height is **padded** by one row / column repeating the last
@@ -18,6 +19,8 @@ import re
 import signal
 import subprocess
 import tempfile
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -26,7 +29,8 @@ from .atomic import atomic_path
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["write_video", "read_video_info", "even_pad", "BT709_FILTER", "BT709_TAGS"]
+__all__ = ["write_video", "read_video_info", "even_pad", "BT709_FILTER", "BT709_TAGS", "VIDEO_FORMATS",
+           "is_video", "VideoFormat"]
 
 #: RGB → YUV with the BT.709 matrix, and the stream tagged BT.709 (matrix, primaries,
 #: transfer, limited range): players read untagged HD video as BT.709 whatever matrix made
@@ -34,6 +38,47 @@ __all__ = ["write_video", "read_video_info", "even_pad", "BT709_FILTER", "BT709_
 BT709_FILTER = ("scale=out_color_matrix=bt709:out_range=tv,"
                 "setparams=color_primaries=bt709:color_trc=bt709:colorspace=bt709:range=tv")
 BT709_TAGS = ("-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "bt709", "-color_range", "tv")
+
+
+@dataclass(frozen=True)
+class VideoFormat:
+    """How one video file extension is encoded: ``codec`` (ffmpeg's output arguments for a
+    ``crf`` and x264 ``preset``), ``even`` (yuv420p: sizes padded to even), ``what`` (help)."""
+
+    what: str
+    codec: Callable[[int, str], list]
+    even: bool = True
+
+
+def _h264(container: str, *extra: str):
+    return lambda crf, preset: ["-vf", BT709_FILTER, "-vcodec", "libx264", "-pix_fmt", "yuv420p", *BT709_TAGS,
+                                "-crf", str(int(crf)), "-preset", preset, *extra, "-f", container]
+
+
+def _vp9(crf, preset):  # constant quality (-b:v 0); cpu-used 4: x264 medium's speed, about
+    return ["-vf", BT709_FILTER, "-vcodec", "libvpx-vp9", "-pix_fmt", "yuv420p", *BT709_TAGS, "-crf", str(int(crf)),
+            "-b:v", "0", "-deadline", "good", "-cpu-used", "4", "-row-mt", "1", "-f", "webm"]
+
+
+def _gif(crf, preset):  # one palette of 256 colours for the whole video, dithered
+    return ["-vf", "split[a][b];[a]palettegen=stats_mode=full[p];[b][p]paletteuse=dither=sierra2_4a",
+            "-loop", "0", "-f", "gif"]
+
+
+#: Output formats by extension. GIF stores each frame's duration in hundredths of a second,
+#: so its frame rate is 100 / round(100 / fps) (24 fps plays at 25).
+VIDEO_FORMATS = {
+    ".mp4": VideoFormat("H.264 in MP4, what every player plays", _h264("mp4", "-movflags", "+faststart")),
+    ".mov": VideoFormat("H.264 in QuickTime", _h264("mov", "-movflags", "+faststart")),
+    ".mkv": VideoFormat("H.264 in Matroska", _h264("matroska")),
+    ".webm": VideoFormat("VP9 in WebM, for web pages", _vp9),
+    ".gif": VideoFormat("GIF, one 256-colour palette, for READMEs and chat", _gif, even=False),
+}
+
+
+def is_video(path) -> bool:
+    """Whether ``path``'s extension is one of :data:`VIDEO_FORMATS`."""
+    return os.path.splitext(os.fspath(path))[1].lower() in VIDEO_FORMATS
 
 
 def even_pad(frame: np.ndarray) -> np.ndarray:
@@ -68,7 +113,8 @@ def check_video_options(path, *, fps: float, crf: int = 18) -> None:
 
 
 def write_video(path, frames, *, fps: float, crf: int = 18, preset: str = "medium") -> tuple[int, int, int]:
-    """Encode frames (an iterable of (H, W, 3) uint8, or float in [0, 1]) as H.264 MP4.
+    """Encode frames (an iterable of (H, W, 3) uint8, or float in [0, 1]) as a video of the
+    format of ``path``'s extension (:data:`VIDEO_FORMATS`).
 
     Returns ``(n_frames, width, height)`` of the encoded video (sizes after padding).
     Raises :class:`VibrInputError` for no frames, frames of different sizes, a bad
@@ -78,16 +124,19 @@ def write_video(path, frames, *, fps: float, crf: int = 18, preset: str = "mediu
     """
     p = os.fspath(path)
     check_video_options(p, fps=fps, crf=crf)
+    fmt = VIDEO_FORMATS.get(os.path.splitext(p)[1].lower())
+    if fmt is None:
+        raise VibrInputError(f"not a video extension (one of {', '.join(VIDEO_FORMATS)})", p)
     n = 0
     size = None
     with atomic_path(p) as tmp, tempfile.TemporaryFile() as log:
         proc = None
         try:
             for img in frames:
-                f = even_pad(_as_uint8(img))
+                f = even_pad(_as_uint8(img)) if fmt.even else _as_uint8(img)
                 if size is None:
                     size = (f.shape[1], f.shape[0])
-                    proc = _start_ffmpeg(tmp, size, fps, crf, preset, log)
+                    proc = _start_ffmpeg(tmp, size, fps, fmt.codec(crf, preset), log)
                 elif (f.shape[1], f.shape[0]) != size:
                     raise VibrInputError(f"frame {n} is {f.shape[1]}x{f.shape[0]}, the video {size[0]}x{size[1]}", p)
                 try:
@@ -105,15 +154,15 @@ def write_video(path, frames, *, fps: float, crf: int = 18, preset: str = "mediu
     return n, size[0], size[1]
 
 
-def _start_ffmpeg(out, size, fps, crf, preset, log):
-    """ffmpeg reading raw RGB frames of ``size`` on its stdin, writing H.264 to ``out``
-    (its own session: a Ctrl-C reaches vibr, which stops it and removes the file)."""
+def _start_ffmpeg(out, size, fps, codec: list, log):
+    """ffmpeg reading raw RGB frames of ``size`` on its stdin, writing ``codec`` (output
+    arguments, :data:`VIDEO_FORMATS`) to ``out`` (its own session: a Ctrl-C reaches vibr,
+    which stops it and removes the file)."""
     import imageio_ffmpeg
 
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-f", "rawvideo", "-vcodec", "rawvideo",
            "-s", f"{size[0]}x{size[1]}", "-pix_fmt", "rgb24", "-r", f"{float(fps):.10g}", "-i", "-",
-           "-an", "-vf", BT709_FILTER, "-vcodec", "libx264", "-pix_fmt", "yuv420p", *BT709_TAGS,
-           "-crf", str(int(crf)), "-preset", preset, "-movflags", "+faststart", "-v", "error", "-f", "mp4", out]
+           "-an", *codec[:-2], "-v", "error", *codec[-2:], out]
     return subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log,
                             start_new_session=True)
 
