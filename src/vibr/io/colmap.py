@@ -12,7 +12,7 @@ for them (:mod:`vibr.io.undistort`, as ``colmap image_undistorter`` would). COLM
 centre of the top-left pixel at (0.5, 0.5), so vibr's principal point is ``(cx − 0.5,
 cy − 0.5)``. Poses are COLMAP's
 ``cam_from_world`` (world → camera, OpenCV axes, vibr's own convention). Only registered
-images are loaded. Points3D go to ``scene.points``.
+images are loaded, listed by name (COLMAP's image ids follow the order of registration). Points3D go to ``scene.points``.
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     img_dir = img_dirs[0]
     depth_dir = root / "stereo" / "depth_maps"
     entries = []
-    for iid in sorted(rec.images):
+    for iid in sorted(rec.images, key=lambda i: (rec.images[i].name, i)):  # by name, as a folder lists them
         im = rec.images[iid]
         if not im.has_pose:
             continue
