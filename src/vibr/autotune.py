@@ -73,7 +73,8 @@ def probe_scale(sources: Scene, target: Camera, probes, n_renders: int, budget: 
 
 
 def _probe_cases(sources: Scene, probes, s: float, keep=()):
-    """Per probe: (samples from the other sources, their centres, probe camera, probe image)."""
+    """Per probe: (samples from the other sources, their centres, probe camera, probe image,
+    the probe's mask or None: a masked pixel of its photograph is no error of a render)."""
     from .geometry import compute_samples
     from .io.images import scaled_scene
 
@@ -84,19 +85,20 @@ def _probe_cases(sources: Scene, probes, s: float, keep=()):
         rest = small.replace(views=[v for j, v in enumerate(small.views) if j != i])
         samples = compute_samples(rest, pv.camera, keep=keep)
         if len(samples):
-            out.append((samples, np.array([v.camera.centre for v in rest.views]), pv.camera, pv.image))
+            out.append((samples, np.array([v.camera.centre for v in rest.views]), pv.camera, pv.image, pv.mask))
     return out
 
 
 def _score(cases, method: str, params: dict) -> float:
-    """Mean over the probes of the MSE of their renders (all pixels, border excluded)."""
+    """Mean over the probes of the MSE of their renders (all pixels of their masks, border
+    excluded)."""
     from .metrics import mse
     from .render.api import render_samples
 
     errs = []
-    for samples, centres, cam, img in cases:
+    for samples, centres, cam, img, mask in cases:
         r = render_samples(samples, method, source_centres=centres, target_centre=cam.centre, **params)
-        errs.append(mse(r.image, img, None, BORDER))
+        errs.append(mse(r.image, img, mask, BORDER))
     return float(np.mean(errs))
 
 
