@@ -13,8 +13,11 @@ image_undistorter`` would:
 2. each output pixel ``p`` is looked up in the photograph at
    ``camera.img_from_cam(pinhole.cam_from_img(p))`` (COLMAP's own distortion maths), bilinearly
    for images (``scipy.ndimage.map_coordinates``), at the nearest pixel for depth and
-   sigma_z maps. The camera's pose is unchanged and orthogonal depth is the same in both
-   cameras (the same camera frame), so depth values need no conversion.
+   sigma_z maps and masks. The camera's pose is unchanged and orthogonal depth is the same
+   in both cameras (the same camera frame), so depth values need no conversion.
+
+A model that folds the image over itself inside the photograph (outside its valid range) is
+refused, one that keeps under a quarter of it warned about (:func:`check_lens`).
 
 nerfstudio's ``OPENCV`` radial polynomial ``1 + k1 r² + k2 r⁴ + k3 r⁶ + k4 r⁸`` is COLMAP's
 ``OPENCV`` when ``k3 = k4 = 0`` and its ``FULL_OPENCV`` (numerator only) when ``k4 = 0``; a
