@@ -176,7 +176,7 @@ def _save(path: Path, scene: Scene) -> None:
 
 
 def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | None = None,
-                     cache_dir=None, exclude=(), fallback="auto") -> Scene:
+                     cache_dir=None, exclude=(), fallback="auto", executor=None) -> Scene:
     """The scene (minus ``exclude``) with a depth map on every view.
 
     Parameters
@@ -195,6 +195,8 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
     fallback : {"auto", "always", "never"}
         The fallback proxy for pixels of unknown depth (:func:`vibr.geometry.apply_fallback`,
         as :func:`vibr.pipeline.prepare`); applied after the cache (not part of its key).
+    executor : where the views' depth is estimated (:func:`vibr.stereo.estimate_depth`; not
+        part of the key: the depths are the same).
 
     Returns
     -------
@@ -205,11 +207,11 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
     """
     from .geometry import apply_fallback
 
-    out = _scene_with_depth(scene, depth, estimate_kw, cache_dir, exclude)
+    out = _scene_with_depth(scene, depth, estimate_kw, cache_dir, exclude, executor)
     return apply_fallback(out, fallback)
 
 
-def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude) -> Scene:
+def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude, executor=None) -> Scene:
     t0 = time.perf_counter()
     if depth not in ("auto", "gt", "estimated"):
         raise VibrInputError(f"depth must be auto, gt or estimated for a camera path, got {depth!r}")
@@ -229,10 +231,10 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude) -> S
             src = ensure_source_depth(src)
         # a new meta: the caller's scene is not changed
         return src.replace(meta=dict(src.meta, depth_source="scene", depth_time_s=time.perf_counter() - t0))
-    return estimated_depth(src, estimate_kw, cache_dir)  # from the kept views only
+    return estimated_depth(src, estimate_kw, cache_dir, executor)  # from the kept views only
 
 
-def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=None) -> Scene:
+def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=None, executor=None) -> Scene:
     """Depth estimated for every view of ``scene`` (:func:`vibr.stereo.estimate_depth`; depth
     the views have is ignored), through the on-disk cache (module docstring).
 
@@ -241,7 +243,8 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
     file as it finishes, so that a run killed midway resumes. ``meta["depth_source"]`` is
     ``"cache"`` or ``"estimated"``, ``meta["depth_cache"]`` the cache file when used,
     ``meta["depth_time_s"]`` the time spent, ``meta["depth_estimation"]`` the estimator's
-    statistics (kept from the run that filled the cache).
+    statistics (kept from the run that filled the cache). ``executor``: where the views'
+    sweeps run (:func:`vibr.stereo.estimate_depth`).
     """
     from .camera import shared_centre
     from .geometry import sphere_proxy
@@ -270,7 +273,7 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
             return out
     logger.info("estimating depth for %d views%s", len(bare), "" if cpath is None else " (once; cached)")
     resume = None if cpath is None else resume_folder(cpath)
-    out = estimate_depth(bare, checkpoint=resume, **kw)
+    out = estimate_depth(bare, checkpoint=resume, executor=executor, **kw)
     if cpath is not None:
         _save(cpath, out)
         shutil.rmtree(resume, ignore_errors=True)

@@ -343,7 +343,8 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     executor : "auto", None, "processes:N", int or a Dask address
         Passed to :func:`vibr.executor.run_tasks`; None: serial, here. "auto" (default):
         frames on :func:`vibr.executor.auto_workers` local processes (serial for a short
-        path or small frames, :func:`auto_executor`).
+        path or small frames, :func:`auto_executor`). A depth estimate runs there too when
+        the engine is named (not on "auto").
     depth, estimate_kw, cache_dir, exclude : see :func:`vibr.depthcache.scene_with_depth`.
     crf, fps : video quality and frame rate (default the path's).
     blend : width of the weight transition (relative to the penalty threshold).
@@ -374,8 +375,10 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
     _check_frame_memory(scene, cams, n_views, camera_path.meta.get("file"))
     t0 = time.perf_counter()
+    # depth on the engine the caller named (on "auto" here: on one machine the sweeps'
+    # kernels already use every core)
     sources = scene_with_depth(scene, depth=depth, estimate_kw=estimate_kw, cache_dir=cache_dir,
-                               exclude=exclude)
+                               exclude=exclude, executor=None if executor == "auto" else executor)
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
     ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,

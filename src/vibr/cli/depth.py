@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from . import add_quiet
+from ._executor import add_executor_args, executor_from_args
 from ._options import add_overwrite_option, names
 
 _DESC = """\
@@ -73,6 +74,8 @@ def register(sub) -> None:
                    help="refinement iterations at the coarse level before the full-size ones "
                    "(default that of estimate_depth, 1; light fields: the first of --refine-iter)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
+    # the views' sweeps (MVS) on local processes or a Dask cluster (docs/SCALE.md)
+    add_executor_args(p, default="here: the sweeps' kernels already use every core of this machine")
     p.add_argument("--fill-segments", action="store_true",
                    help="dense output (MVS): fill unknown pixels from the planes of their colour "
                    "segments, then re-run the weighted median (docs/DEPTH.md). Better depth "
@@ -117,6 +120,7 @@ def run(args) -> int:
                                             ("median_radius", args.median_radius),
                                             ("sweep_scale", args.sweep_scale), ("coarse_iter", args.coarse_iter))
                           if v is not None})  # before loading the scene
+    executor = executor_from_args(args)  # a bad scheduler fails before the work
     src = Path(args.scene)
     in_place = args.out is None
     if in_place:
@@ -148,7 +152,7 @@ def run(args) -> int:
                          depth_range=args.depth_range, method=args.method,
                          exclude=args.exclude or (),
                          consistency=not args.no_consistency, fill_segments=args.fill_segments,
-                         checkpoint=resume_folder(out), **opt)  # a rerun after a kill resumes
+                         checkpoint=resume_folder(out), executor=executor, **opt)  # a rerun after a kill resumes
     info = est.meta["depth_estimation"]
     save_scene(est, out, overwrite=in_place or args.overwrite, in_place=in_place)
     resumed = sum(bool(v.get("resumed")) for v in info["views"].values())

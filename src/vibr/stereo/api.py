@@ -546,7 +546,7 @@ def depth_options(options: DepthOptions | None = None, /, **kw) -> DepthOptions:
 
 # --------------------------------------------------------------------------- main API
 def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOptions | None = None,
-                   checkpoint=None, **kw) -> Scene:
+                   checkpoint=None, executor=None, **kw) -> Scene:
     """Estimate orthogonal depth and its uncertainty for views of a scene.
 
     Parameters
@@ -563,6 +563,12 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
         MVS: keep each view's sweep result there as it finishes (atomic writes, keyed by the
         view, its partners and the options: :class:`vibr.io.checkpoint.ViewCheckpoint`) and
         read back the matching ones, so that a job killed midway and run again resumes.
+    executor : None, int, str or distributed.Client
+        MVS: where the views' sweeps run (:func:`vibr.executor.run_tasks`: None this
+        process, ``N`` local processes, ``"local"`` or an address a Dask cluster); each
+        worker receives the scene once. The depths are the serial run's, bit for bit (the
+        consistency check and the rest run here). With ``checkpoint`` the workers keep their
+        results there as they finish: on a cluster, a folder they share resumes.
     **kw : fields of :class:`DepthOptions` (``scale=0.5``, ``fill_segments=True``, ...) or
         keywords of :func:`~vibr.stereo.lightfield.lightfield_depth` (``step=0.05``), applied
         over ``options`` (:func:`depth_options`); any other name raises ``TypeError``.
@@ -590,9 +596,11 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
     cams = [v.camera.scaled(opt.scale) if opt.scale != 1.0 else v.camera for v in scene.views]
     imgs = _Images(scene, cams)
     if method == "lightfield":
+        if not _is_serial(executor):
+            logger.info("depth: a light field's views are estimated in this process (the executor is for MVS)")
         depths, sigmas, stats = _estimate_lightfield(scene, targets, inputs, cams, imgs, opt)
     else:
-        depths, sigmas, stats = _estimate_mvs(scene, targets, inputs, cams, imgs, opt, checkpoint)
+        depths, sigmas, stats = _estimate_mvs(scene, targets, inputs, cams, imgs, opt, checkpoint, executor)
     new_views = _at_scene_resolution(scene, targets, cams, depths, sigmas)
     meta = dict(scene.meta)
     meta["depth_estimation"] = {"method": method, "scale": opt.scale, "views": stats,
@@ -720,30 +728,30 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
     return depths, sigmas, stats
 
 
-def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpoint=None):
+def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpoint=None, executor=None):
     """Plane-sweep MVS of each requested view (and of its consistency partners), then the
     consistency check and the optional segment completion of the requested views."""
     est, nbrs = _mvs_views(scene, cams, targets, inputs, opt)
     med_r = 9 if opt.median_radius is None else int(opt.median_radius)  # MVS default: 19×19 window
-    raw, stats = {}, {}
     ck = None
     if checkpoint is not None:
         from ..io.checkpoint import ViewCheckpoint
 
         ck = ViewCheckpoint(checkpoint, {**{f.name: getattr(opt, f.name) for f in fields(opt)}, "med_r": med_r})
-    with progress(total=sum(1 for i in est if nbrs[i]), desc="depth views", unit="view") as bar:
-        for i in est:
-            if not nbrs[i]:
-                continue
-            t0 = time.perf_counter()
-            if ck is None:
-                raw[i], st, nbrs[i] = _sweep_view(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
-            else:
-                raw[i], st, nbrs[i] = _sweep_view_resumable(ck, scene, i, nbrs[i], cams, imgs, inputs, opt, med_r)
-            st["time_s"] = st.get("time_s", time.perf_counter() - t0)
-            st["role"] = "target" if i in targets else "consistency partner"
-            stats[scene.views[i].name] = st
-            bar.update(1)
+    todo = [i for i in est if nbrs[i]]
+    if _is_serial(executor):
+        swept = _sweep_here(scene, todo, nbrs, cams, imgs, inputs, opt, med_r, ck)
+    else:
+        from ..executor import run_tasks
+
+        swept = dict(zip(todo, run_tasks(sweep_task, [(i, nbrs[i]) for i in todo], setup=sweep_setup,
+                                         setup_args=(scene, cams, inputs, opt, med_r, ck), executor=executor,
+                                         desc="depth views")))
+    raw, stats = {}, {}
+    for i in todo:
+        raw[i], st, nbrs[i] = swept[i]
+        st["role"] = "target" if i in targets else "consistency partner"
+        stats[scene.views[i].name] = st
     depths, sigmas = {}, {}
     for i in targets:
         if i not in raw:  # no stereo partner (_mvs_views): nothing known
@@ -766,6 +774,47 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
             st["segments_s"] = time.perf_counter() - t0
         depths[i], sigmas[i] = d, s
     return depths, sigmas, stats
+
+
+def _is_serial(executor) -> bool:
+    from ..executor import parse_executor
+
+    return parse_executor(executor)[0] == "serial"
+
+
+def _sweep_here(scene, todo, nbrs, cams, imgs, inputs, opt: DepthOptions, med_r: int, ck) -> dict:
+    """The sweeps of the views ``todo`` in this process: ``{i: (raw, stats, partners)}``."""
+    out = {}
+    with progress(total=len(todo), desc="depth views", unit="view") as bar:
+        for i in todo:
+            out[i] = _sweep_one(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r, ck)
+            bar.update(1)
+    return out
+
+
+def _sweep_one(scene, i, nb, cams, imgs, inputs, opt: DepthOptions, med_r: int, ck):
+    t0 = time.perf_counter()
+    if ck is None:
+        raw, st, nb = _sweep_view(scene, i, nb, cams, imgs, inputs, opt, med_r)
+    else:
+        raw, st, nb = _sweep_view_resumable(ck, scene, i, nb, cams, imgs, inputs, opt, med_r)
+    st["time_s"] = st.get("time_s", time.perf_counter() - t0)
+    return raw, st, nb
+
+
+def sweep_setup(scene, cams, inputs, opt: DepthOptions, med_r: int, ck) -> dict:
+    """Per worker of a parallel depth estimate (:func:`vibr.executor.run_tasks`): what every
+    view's sweep shares, the images resized once."""
+    return {"scene": scene, "cams": cams, "inputs": inputs, "opt": opt, "med_r": med_r, "ck": ck,
+            "imgs": _Images(scene, cams)}
+
+
+def sweep_task(ctx: dict, task) -> tuple:
+    """One view's sweep on a worker: ``task`` = (view index, partners); returns what
+    :func:`_sweep_view` returns (its maps: the consistency check runs in the caller)."""
+    i, nb = task
+    return _sweep_one(ctx["scene"], i, list(nb), ctx["cams"], ctx["imgs"], ctx["inputs"], ctx["opt"],
+                      ctx["med_r"], ctx["ck"])
 
 
 def _why_no_partner(cams, i, inputs) -> str:
