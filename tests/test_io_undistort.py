@@ -121,6 +121,7 @@ def test_depth_map_of_a_distorted_frame_is_resampled(tmp_path):
     ({"camera_model": "EQUIRECTANGULAR"}, "EQUIRECTANGULAR"),
     ({"camera_model": "OPENCV", "k1": "0.1"}, "k1 must be a number"),
     ({"camera_model": "OPENCV", "k1": -3.0}, "folds the image over itself"),  # r (1 - 3 r²) turns at 0.33
+    ({"camera_model": "OPENCV", "k1": 1e10}, "outside the photograph"),  # COLMAP's size clamped
 ])
 def test_distortions_vibr_cannot_undistort_are_refused(tmp_path, extra, match):
     write_image(tmp_path / "a.png", np.zeros((20, 30, 3), np.float32))
@@ -142,8 +143,8 @@ def test_zero_distortion_loads_the_file_as_it_is(tmp_path):
 
 
 def test_a_lens_that_keeps_little_of_the_photograph_is_warned_once(tmp_path):
-    """k1 = 1e10 (a typing error) is a valid, monotone model whose pinhole is a few pixels
-    wide: loaded, with one warning for the camera all frames share."""
+    """k1 = 50 is a valid, monotone model whose pinhole keeps a tenth of the photograph's
+    pixels: loaded, with one warning for the camera all frames share."""
     import io
     import logging
 
@@ -153,7 +154,7 @@ def test_a_lens_that_keeps_little_of_the_photograph_is_warned_once(tmp_path):
     for i in range(3):
         write_image(tmp_path / f"{i}.png", np.zeros((72, 96, 3), np.float32))
         frames.append({"file_path": f"{i}.png", "transform_matrix": np.eye(4).tolist()})
-    doc = {"camera_model": "OPENCV", "fl_x": 90.0, "k1": 1e10, "frames": frames}
+    doc = {"camera_model": "OPENCV", "fl_x": 90.0, "k1": 50.0, "frames": frames}
     (tmp_path / "transforms.json").write_text(json.dumps(doc))
     lg = logging.getLogger("vibr")
     saved = (list(lg.handlers), lg.level, lg.propagate)

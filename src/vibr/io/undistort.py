@@ -16,8 +16,9 @@ image_undistorter`` would:
    sigma_z maps and masks. The camera's pose is unchanged and orthogonal depth is the same
    in both cameras (the same camera frame), so depth values need no conversion.
 
-A model that folds the image over itself inside the photograph (outside its valid range) is
-refused, one that keeps under a quarter of it warned about (:func:`check_lens`).
+A model that folds the image over itself inside the photograph (outside its valid range), or
+for which no pinhole fits inside the photograph, is refused; one that keeps under a quarter
+of it is warned about (:func:`check_lens`).
 
 nerfstudio's ``OPENCV`` radial polynomial ``1 + k1 r² + k2 r⁴ + k3 r⁶ + k4 r⁸`` is COLMAP's
 ``OPENCV`` when ``k3 = k4 = 0`` and its ``FULL_OPENCV`` (numerator only) when ``k4 = 0``; a
@@ -119,30 +120,35 @@ _WARNED: set = set()
 
 
 @functools.lru_cache(maxsize=64)
-def _lens_report(dist: Distortion) -> tuple[bool, float]:
-    """(folds, coverage): whether the model folds the image over itself inside the pinhole's
-    field (its map from pinhole pixels to the photograph not monotone along rows and columns,
-    or not finite: a lens model outside its valid range, a typing error in k1), and what the
-    pinhole keeps: the smaller of the fraction of the photograph's extent it sees and of its
-    pixel count (checked on a 65 × 65 grid)."""
+def _lens_report(dist: Distortion) -> tuple[str | None, float]:
+    """(problem, coverage), checked on a 65 × 65 grid of the pinhole: the problem, or None,
+    of a model whose map from pinhole pixels to the photograph leaves the photograph (COLMAP
+    found no pinhole inside it: its size clamped) or is not monotone along rows and columns
+    (the model folds the image over itself: outside its valid range, a typing error in k1);
+    and what the pinhole keeps: the smaller of the fraction of the photograph's extent it
+    sees and of its pixel count."""
     _, w, h = pinhole(dist)
     gx, gy = np.meshgrid(np.linspace(0, w - 1, 65), np.linspace(0, h - 1, 65))
     src = source_coords(dist, np.stack([gx.ravel(), gy.ravel()], axis=1)).reshape(65, 65, 2)
+    x, y = src[..., 0], src[..., 1]
+    outside = "maps the pinhole's pixels outside the photograph (no pinhole fits inside it)"
     if not np.all(np.isfinite(src)):
-        return True, 0.0
-    folds = bool(np.any(np.diff(src[..., 0], axis=1) <= 0) or np.any(np.diff(src[..., 1], axis=0) <= 0))
-    span = np.ptp(src[..., 0]) * np.ptp(src[..., 1]) / (dist.width * dist.height)
-    return folds, float(min(span, w * h / (dist.width * dist.height)))
+        return outside, 0.0
+    if np.any(np.diff(x, axis=1) <= 0) or np.any(np.diff(y, axis=0) <= 0):
+        return "folds the image over itself inside the photograph (outside the model's valid range)", 0.0
+    if not (x.min() > -1 and y.min() > -1 and x.max() < dist.width and y.max() < dist.height):
+        return outside, 0.0
+    span = np.ptp(x) * np.ptp(y) / (dist.width * dist.height)
+    return None, float(min(span, w * h / (dist.width * dist.height)))
 
 
 def check_lens(dist: Distortion, src: str) -> Distortion:
-    """Refuse a model that folds the image inside the photograph; warn (once per camera)
-    when the pinhole keeps little of it."""
-    folds, coverage = _lens_report(dist)
-    if folds:
-        raise VibrInputError(f"lens model {dist.model} {list(dist.params[4:])} folds the image over itself "
-                             "inside the photograph (outside the model's valid range): check the distortion "
-                             "parameters", src)
+    """Refuse a model that folds the image, or that no pinhole fits inside; warn (once per
+    camera) when the pinhole keeps little of the photograph."""
+    problem, coverage = _lens_report(dist)
+    if problem:
+        raise VibrInputError(f"lens model {dist.model} {list(dist.params[4:])} {problem}: check the "
+                             "distortion parameters", src)
     if coverage < SMALL_COVERAGE and dist not in _WARNED:
         _WARNED.add(dist)
         _, w, h = pinhole(dist)
