@@ -167,3 +167,22 @@ def test_a_lens_that_keeps_little_of_the_photograph_is_warned_once(tmp_path):
     w, h = sc.views[0].camera.width, sc.views[0].camera.height
     assert w * h < 0.25 * 96 * 72
     assert buf.getvalue().count(f"96x72 photograph becomes a {w}x{h} pinhole") == 1
+
+
+def test_a_distorted_scene_saves_as_its_pinhole_views(tmp_path):
+    """vibr convert of a distorted scene writes the undistorted photographs and their
+    pinhole cameras (no distortion keys): loaded again, the same views."""
+    from vibr.io import save_scene
+
+    pts = np.array([[0.0, 0.0, 2.0]])
+    _blob_scene(tmp_path / "s", "OPENCV", {"k1": -0.1, "k2": 0.01, "p1": 0.0, "p2": 0.0}, pts, depth_z=2.5)
+    a = load_scene(tmp_path / "s")
+    save_scene(a, tmp_path / "t")
+    doc = json.loads((tmp_path / "t" / "transforms.json").read_text())
+    assert not any(k in doc or k in doc["frames"][0] for k in ("k1", "k2", "p1", "p2"))
+    b = load_scene(tmp_path / "t")
+    assert "undistorted" not in b.meta
+    va, vb = a.views[0], b.views[0]
+    np.testing.assert_allclose(vb.camera.K, va.camera.K, atol=1e-9)
+    np.testing.assert_allclose(vb.image, va.image, atol=1 / 65535)
+    np.testing.assert_array_equal(vb.depth, va.depth)
