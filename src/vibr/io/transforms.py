@@ -332,9 +332,9 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         if not e["path"].is_file():
             raise VibrInputError(f"image of frame {i} not found" if e["path"].exists() is False else
                                  "image is not a file", e["path"])
-        cam, dist, s = _frame_camera(fr, meta, e["path"], src, i)
-        if abs(s - 1.0) > ROTATION_TOL:
-            scaled.append(s)
+        cam, dist, rot_scale = _frame_camera(fr, meta, e["path"], src, i)
+        if abs(rot_scale - 1.0) > ROTATION_TOL:
+            scaled.append(rot_scale)
         e["camera"] = cam
         if dist is not None:
             e["distortion"] = dist
