@@ -10,9 +10,9 @@ Cameras: PINHOLE and SIMPLE_PINHOLE as they are; the distorted models (the mappe
 SIMPLE_RADIAL, OPENCV, the fisheyes, ...) are undistorted at load onto COLMAP's own pinhole
 for them (:mod:`vibr.io.undistort`, as ``colmap image_undistorter`` would). COLMAP puts the
 centre of the top-left pixel at (0.5, 0.5), so vibr's principal point is ``(cx − 0.5,
-cy − 0.5)``. Poses are COLMAP's
-``cam_from_world`` (world → camera, OpenCV axes, vibr's own convention). Only registered
-images are loaded, listed by name (COLMAP's image ids follow the order of registration). Points3D go to ``scene.points``.
+cy − 0.5)``. Poses are COLMAP's ``cam_from_world`` (world → camera, OpenCV axes, vibr's own
+convention). Only registered images are loaded, listed by name (COLMAP's image ids follow
+the order of registration). Points3D go to ``scene.points``.
 """
 
 from __future__ import annotations
