@@ -162,7 +162,7 @@ def _start_ffmpeg(out, size, fps, codec: list, log):
 
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-f", "rawvideo", "-vcodec", "rawvideo",
            "-s", f"{size[0]}x{size[1]}", "-pix_fmt", "rgb24", "-r", f"{float(fps):.10g}", "-i", "-",
-           "-an", *codec[:-2], "-v", "error", *codec[-2:], out]
+           "-an", "-v", "error", *codec, out]
     return subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log,
                             start_new_session=True)
 
