@@ -186,3 +186,21 @@ def test_a_distorted_scene_saves_as_its_pinhole_views(tmp_path):
     np.testing.assert_allclose(vb.camera.K, va.camera.K, atol=1e-9)
     np.testing.assert_allclose(vb.image, va.image, atol=1 / 65535)
     np.testing.assert_array_equal(vb.depth, va.depth)
+
+
+def test_compiled_remap_is_scipys_map_coordinates():
+    """The compiled resampling equals scipy.ndimage.map_coordinates (mode "nearest"):
+    bilinear to float32 rounding, nearest exactly (NaN depth kept)."""
+    from scipy.ndimage import map_coordinates
+
+    from vibr.io.undistort import _lookup, from_nerfstudio, undistort_array
+
+    d = from_nerfstudio("OPENCV", 70.0, 72.0, 40.3, 29.8, {"k1": 0.12, "k2": -0.03, "p1": 0.002}, 80, 60, "t")
+    rng = np.random.default_rng(3)
+    img = rng.random((60, 80, 3), dtype=np.float32)
+    dep = rng.random((60, 80)).astype(np.float32)
+    dep[10:20, 30:50] = np.nan
+    c = _lookup(d)
+    ref = np.stack([map_coordinates(img[..., k], c, order=1, mode="nearest") for k in range(3)], -1)
+    np.testing.assert_allclose(undistort_array(img, d), ref, atol=1e-6)
+    np.testing.assert_array_equal(undistort_array(dep, d, nearest=True), map_coordinates(dep, c, order=0, mode="nearest"))
