@@ -49,6 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_depth import _seen_count, _surface_textured, _textured  # noqa: E402
 
 import vibr.stereo.api as api  # noqa: E402
+
+NOMASK = np.zeros((0, 1, 1), np.uint8)  # the kernels' ``valid`` for sources without masks
 from vibr.stereo import _kernels as kern  # noqa: E402
 from vibr.stereo import planesweep as ps  # noqa: E402
 from vibr.synthetic import default_world, make_scene  # noqa: E402
@@ -103,7 +105,7 @@ def _redecide_shiftable(res, ref_image, ref_camera, src_images, src_cameras, n_b
         C = np.full(best.shape, np.inf)
         for sy, sx in _DIRS[:5]:
             wc = wp + xq * sx + yq * sy
-            cc = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, d["eps"] ** 2,
+            cc = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, NOMASK, A, b, n_best, d["eps"] ** 2,
                                   _shifted(wc, sy, sx), _shifted(xq, sy, sx), _shifted(yq, sy, sx),
                                   d["single_view_penalty"])
             C = np.minimum(C, _shifted(cc, -sy, -sx))

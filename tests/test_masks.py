@@ -130,3 +130,19 @@ def test_a_fly_through_frame_is_not_reused_across_masks(grid):
         return job_key(FrameContext(sources=scene, cameras=[grid["view_004"].camera], frames_dir=None))
 
     assert key(grid) != key(_with_intruder(grid, paint=False)) and key(grid) == key(grid)
+
+
+@pytest.mark.parametrize("layout", ["grid", "handheld"])
+def test_estimated_depth_leaves_masked_pixels_unknown(layout):
+    """Light field (grid) and multi-view stereo (hand-held): a masked pixel of a view gets
+    no depth from the estimate."""
+    from vibr.stereo import estimate_depth
+
+    sc = make_scene(layout, n_views=9 if layout == "grid" else 5, width=64, height=48)
+    v = sc.views[1]
+    m = np.ones(v.camera.shape, bool)
+    m[10:30, 20:40] = False
+    sc = sc.replace(views=[u.replace(depth=None, sigma_z=None, mask=m if u.name == v.name else None)
+                           for u in sc.views])
+    d = estimate_depth(sc, views=[v.name])[v.name].depth
+    assert np.isnan(d[~m]).all() and np.isfinite(d[m]).mean() > 0.3

@@ -10,6 +10,9 @@ from vibr.errors import VibrInputError
 from vibr.stereo import (check_consistency, estimate_depth, plane_homographies, plane_sweep,
                          select_neighbours, upsample_depth)
 
+#: the kernels' ``valid`` argument for sources without masks
+NOMASK = np.zeros((0, 1, 1), np.uint8)
+
 
 def _cams():
     K = Camera.intrinsics(120.0, 96, 80)
@@ -316,7 +319,7 @@ def test_sweep_kernel_matches_reference_implementation(n_best):
     cm, cp, prev = (np.full((H, W), np.inf) for _ in range(3))
     sizes = np.array([[80, 96]] * 3, np.int64)
     for l0 in range(0, 12, 5):  # three slabs, the running state carried across them
-        kern.sweep_slab(I, mu, sd, srcs, sizes, A, b, winv[l0:l0 + 5], l0, radius, n_best,
+        kern.sweep_slab(I, mu, sd, srcs, sizes, NOMASK, A, b, winv[l0:l0 + 5], l0, radius, n_best,
                         eps ** 2, 7, best_c, best_l, cm, cp, prev)
     want = _reference_sweep_costs(I, list(srcs.astype(np.float64)), A, b, winv, radius, n_best, eps)
     np.testing.assert_allclose(best_c, want.min(0), atol=2e-5)
@@ -535,7 +538,7 @@ def test_plane_cost_kernel_matches_reference_implementation():
     w = rng.uniform(1 / 8, 1 / 2.5, ref.shape)
     gx, gy = (rng.normal(0, 2e-3, ref.shape) for _ in range(2))
     for n_best, lam1 in ((1, -1.0), (2, 0.1), (3, -1.0)):
-        got = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, 0.002 ** 2, w, gx, gy, lam1)
+        got = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, NOMASK, A, b, n_best, 0.002 ** 2, w, gx, gy, lam1)
         want = _reference_plane_costs(wts.astype(np.float64), wI.astype(np.float64), sdI, offs,
                                       [to_grey(v[0]).astype(np.float64) for v in views[1:]], A, b,
                                       n_best, 0.002 ** 2, w, gx, gy, lam1)
@@ -553,11 +556,11 @@ def test_patchmatch_memo_skips_evaluations_without_changing_the_result():
     offs, wts, wI, sdI, srcs, sizes, A, b = _kernel_inputs(views, cams)
     w0 = np.asarray(res.inv_depth, np.float64)
     zero = np.zeros(w0.shape)
-    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w0, zero, zero, 0.1)
+    c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, NOMASK, A, b, 1, 0.002 ** 2, w0, zero, zero, 0.1)
     out = {}
     for memo in (False, True):
         w, gx, gy, cost = w0.copy(), zero.copy(), zero.copy(), c0.copy()
-        n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w, gx,
+        n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, NOMASK, A, b, 1, 0.002 ** 2, w, gx,
                                         gy, cost, 3, 2 * abs(res.winv[1] - res.winv[0]), 1.0,
                                         np.linalg.inv(ref.K), res.winv.min(), res.winv.max(), 0,
                                         0.1, 0, memo)
@@ -592,7 +595,7 @@ def test_plane_cost_is_minimal_at_the_true_slanted_plane():
     inner = (slice(5, -5), slice(5, -5))
 
     def cost(w_, gx_, gy_):
-        return kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, 1, 0.002 ** 2, w_, gx_, gy_, -1.0)[inner]
+        return kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, NOMASK, A, b, 1, 0.002 ** 2, w_, gx_, gy_, -1.0)[inner]
 
     c_true = cost(w, gx, gy)
     assert np.median(c_true) < 0.02
@@ -895,3 +898,40 @@ def test_walking_forward_every_view_gets_depth():
     for name, st in e.meta["depth_estimation"]["views"].items():
         near, far = st["depth_range"]
         assert 0.05 < near < far and st["kept"] > 0.2, (name, st["depth_range"], st["kept"])
+
+
+def test_a_masked_source_is_a_view_that_does_not_see():
+    """A source masked everywhere takes no part: the sweep and the refinement with it give
+    the result without it, bit for bit (n_best 1); masked in part, a view's garbage there
+    (an intruder of noise) stops costing depth accuracy where the mask covers it."""
+    from vibr.stereo.planesweep import refine_planes
+
+    ref, src = _cams()
+    K = ref.K
+    src2 = Camera.look_at([-0.4, -0.1, 0.1], [-0.1, 0, 5], [0, -1, 0], K, 96, 80)
+    cams = [ref, src, src2]
+    views = _textured_plane_views(((0.15, 0.0, 1.0), 4.0), cams)
+    img0, imgs = views[0][0], [v[0] for v in views[1:]]
+    kw = dict(n_planes=96, radius=3, n_best=1)
+    alone = plane_sweep(img0, ref, imgs[:1], cams[1:2], (2.5, 8.0), **kw)
+    off = np.zeros(cams[2].shape, bool)
+    both = plane_sweep(img0, ref, imgs, cams[1:], (2.5, 8.0), src_masks=[None, off], **kw)
+    np.testing.assert_array_equal(both.depth, alone.depth)
+    np.testing.assert_array_equal(both.cost, alone.cost)
+    rk = dict(n_iter=1, n_best=1, single_view_penalty=None)
+    np.testing.assert_array_equal(
+        refine_planes(img0, ref, imgs, cams[1:], both, src_masks=[None, off], **rk).depth,
+        refine_planes(img0, ref, imgs[:1], cams[1:2], alone, **rk).depth)
+    # noise over the left half of source 1, masked or not (n_best 1: the better view wins)
+    noisy = imgs[0].copy()
+    half = np.zeros(cams[1].shape, bool)
+    half[:, :48] = True
+    noisy[half] = np.random.default_rng(5).random((int(half.sum()), 1))
+    gt = views[0][1]
+    inner = (slice(4, -4), slice(4, -4))
+    err = {}
+    for name, masks in (("masked", [~half, None]), ("not masked", None)):
+        r = plane_sweep(img0, ref, [noisy, imgs[1]], cams[1:], (2.5, 8.0), src_masks=masks,
+                        n_planes=96, radius=3, n_best=2)
+        err[name] = np.mean((np.abs(r.depth - gt) / gt)[inner] < 0.01)
+    assert err["masked"] > err["not masked"] + 0.05, err

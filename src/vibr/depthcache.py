@@ -76,6 +76,8 @@ def _view_fingerprint(v, h) -> None:
         h.update(f"{os.path.abspath(v.path)}|{st.st_size}|{st.st_mtime_ns}".encode())
     elif v.image is not None:
         h.update(np.ascontiguousarray(v.image).tobytes())
+    if v.mask is not None:  # the estimate leaves masked pixels out of its matching
+        h.update(b"mask" + np.packbits(v.mask).tobytes())
 
 
 def depth_cache_key(scene: Scene, estimate_kw: dict | None = None, exclude=()) -> str:

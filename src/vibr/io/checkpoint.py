@@ -60,9 +60,13 @@ class ViewCheckpoint:
         self.unwritable = False
 
     def key(self, view, camera, partners) -> str:
+        masks = [m for m in [getattr(view, "mask", None)] + [getattr(p, "mask", None) for p in partners]
+                 if m is not None]  # the sweep leaves masked pixels out
+        bits = np.concatenate([np.packbits(m) for m in masks]) if masks else np.zeros(0, np.uint8)
         return digest(code_fingerprint(), self.params, view.name, camera.K, camera.R, camera.t,
-                      list(camera.shape), view.image,
-                      [(p.name, p.camera.K, p.camera.R, p.camera.t) for p in partners])
+                      list(camera.shape), view.image, bits,
+                      [(p.name, p.camera.K, p.camera.R, p.camera.t, getattr(p, "mask", None) is not None)
+                       for p in partners], getattr(view, "mask", None) is not None)
 
     def _path(self, name: str) -> Path:
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)

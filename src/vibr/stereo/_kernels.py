@@ -131,12 +131,13 @@ def _mean_two_lowest(C, OK, r, j, nv, n_best):
 
 
 @njit(cache=True, inline="always")
-def _warp_band_hsums(I, srcs, A, b, v, w, hv, wv, h0, h1, ib0, ib1, radius, OK, Jrow, HJ, HJJ, HIJ):
+def _warp_band_hsums(I, srcs, valid, A, b, v, w, hv, wv, h0, h1, ib0, ib1, radius, OK, Jrow, HJ, HJJ, HIJ):
     """Step 1 of :func:`sweep_slab` for view ``v`` and plane ``w``: warp the rows
     ``h0..h1`` (the band and its halo) by the plane homography, bilinearly (clamped), mark
     the band's samples that land inside the source in ``OK``, and store the running
     horizontal window sums of J, J² and I·J (window clipped at the border) in HJ, HJJ, HIJ."""
     W = I.shape[1]
+    masked = valid.shape[0] > 0
     for ii in range(h0, h1):
         inband = ii >= ib0 and ii < ib1
         px = A[v, 0, 1] * ii + A[v, 0, 2] + w * b[v, 0]
@@ -163,6 +164,8 @@ def _warp_band_hsums(I, srcs, A, b, v, w, hv, wv, h0, h1, ib0, ib1, radius, OK, 
             y = qy * iz
             if inband:
                 inside = (x > -0.5) and (y > -0.5) and (x < wv - 0.5) and (y < hv - 0.5)
+                if masked and inside and valid[v, int(y + 0.5), int(x + 0.5)] == 0:
+                    inside = False  # lands on a masked pixel of the source: as if outside
                 OK[v, ii - ib0, j] = 1 if inside else 0
             Jrow[j] = _bilinear_clamped(srcs, v, x, y, wv, hv)
         # running horizontal window sums (window clipped at the border)
@@ -262,7 +265,7 @@ def _aggregate_band(C, OK, costs, nv, n_best, ib0, ib1, lab, best_c, best_l, c_m
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, block,
+def sweep_slab(I, mu, sd, srcs, sizes, valid, A, b, winv, l0, radius, n_best, eps2, block,
                best_c, best_l, c_minus, c_plus, prev):
     """Process a slab of fronto-parallel planes of the reference camera (streaming WTA).
 
@@ -284,7 +287,9 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
     intermediate arrays: the work stays in the task's cache-sized buffers).
 
     Arrays: I, mu, sd (H,W) reference grey / window mean / regularised std; srcs
-    (nv,Hm,Wm) float32 source grey images (padded), sizes (nv,2) their (H,W); A (nv,3,3),
+    (nv,Hm,Wm) float32 source grey images (padded), sizes (nv,2) their (H,W); valid
+    (nv,Hm,Wm) uint8, 0 at the sources' masked pixels (a view whose sample lands on one
+    counts as not seeing the pixel), or (0,1,1) for no masks; A (nv,3,3),
     b (nv,3); winv (d,) inverse depths of this slab, first label index ``l0``; state
     best_c, best_l, c_minus, c_plus, prev (H,W) updated in place.
     """
@@ -313,7 +318,7 @@ def sweep_slab(I, mu, sd, srcs, sizes, A, b, winv, l0, radius, n_best, eps2, blo
         for di in range(winv.shape[0]):
             w = winv[di]
             for v in range(nv):
-                _warp_band_hsums(I, srcs, A, b, v, w, sizes[v, 0], sizes[v, 1], h0, h1, ib0, ib1,
+                _warp_band_hsums(I, srcs, valid, A, b, v, w, sizes[v, 0], sizes[v, 1], h0, h1, ib0, ib1,
                                  radius, OK, Jrow, HJ, HJJ, HIJ)
                 _band_zncc(mu, sd, v, h0, ib0, ib1, radius, eps2, inv_cols, HJ, HJJ, HIJ,
                            VJ, VJJ, VIJ, C)
@@ -622,7 +627,7 @@ def _cost_setup(offs, srcs):
 
 
 @njit(cache=True, fastmath=True)
-def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes, A, b, n_best, eps2,
+def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes, valid, A, b, n_best, eps2,
                 costs, lam1):
     """Aggregated cost ``1 − ZNCC`` (weighted window, mean of the ``n_best`` best views) of
     the plane ``w(x', y') = w + gx (x' − j) + gy (y' − i)`` (inverse depth, affine in the
@@ -631,13 +636,14 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, offf, rwin, srcs, flat, siz
 
     ``wts``, ``wI``, ``sdI``: the window weights, weighted centred reference samples and
     weighted reference std of :func:`support_weights` for the window offsets ``offs``;
-    ``srcs``, ``sizes``, ``A``, ``b`` as in :func:`sweep_slab`; ``costs`` (≥ nv,) scratch.
+    ``srcs``, ``sizes``, ``valid``, ``A``, ``b`` as in :func:`sweep_slab`; ``costs`` (≥ nv,) scratch.
     The ZNCC is ``Σ wI J / (√(sdI² + eps2) √(var_w(J) + eps2))``, J sampled bilinearly
     (clamped) at the plane's image of each window pixel. ``offf``, ``rwin``, ``flat``:
     :func:`_cost_setup` of ``offs``, ``srcs``."""
     nv = srcs.shape[0]
     nwin = offs.shape[0]
     wst = srcs.shape[2]
+    masked = valid.shape[0] > 0
     nval = 0
     sI = np.sqrt(sdI[i, j] * sdI[i, j] + eps2)
     wts_ij = wts[i, j]
@@ -655,6 +661,8 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, offf, rwin, srcs, flat, siz
         yc = cy / cz
         if not ((xc > -0.5) and (yc > -0.5) and (xc < wv - 0.5) and (yc < hv - 0.5)):
             continue
+        if masked and valid[v, int(yc + 0.5), int(xc + 0.5)] == 0:
+            continue  # the centre lands on a masked pixel of the source
         ex0 = A[v, 0, 0] + gx * b[v, 0]
         ex1 = A[v, 1, 0] + gx * b[v, 1]
         ex2 = A[v, 2, 0] + gx * b[v, 2]
@@ -732,7 +740,7 @@ def _plane_cost(i, j, w, gx, gy, wts, wI, sdI, offs, offf, rwin, srcs, flat, siz
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1):
+def plane_costs(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, gx, gy, lam1):
     """:func:`_plane_cost` of every pixel's plane (w, gx, gy) (H,W) → (H,W) float64."""
     H, W = w.shape
     out = np.empty((H, W))
@@ -742,12 +750,12 @@ def plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, 
         costs = np.empty(max(nv, 1))
         for j in range(W):
             out[i, j] = _plane_cost(i, j, w[i, j], gx[i, j], gy[i, j], wts, wI, sdI, offs, offf, rwin,
-                                    srcs, flat, sizes, A, b, n_best, eps2, costs, lam1)
+                                    srcs, flat, sizes, valid, A, b, n_best, eps2, costs, lam1)
     return out
 
 
 @njit(cache=True, inline="always")
-def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes, A, b,
+def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes, valid, A, b,
                n_best, eps2, costs, wmin, wmax, lam1, ver, seen, memo):
     """Propagation: pixel (i, j) tries the plane of pixel (qi, qj), extended to it; returns
     1 when it evaluated the cost, else 0.
@@ -769,7 +777,7 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, sr
     if cw == w[i, j] and gx[qi, qj] == gx[i, j] and gy[qi, qj] == gy[i, j]:
         return 0
     c = _plane_cost(i, j, cw, gx[qi, qj], gy[qi, qj], wts, wI, sdI, offs, offf, rwin, srcs, flat, sizes,
-                    A, b, n_best, eps2, costs, lam1)
+                    valid, A, b, n_best, eps2, costs, lam1)
     if c < cost[i, j]:
         cost[i, j] = c
         w[i, j] = cw
@@ -780,7 +788,7 @@ def _try_plane(i, j, qi, qj, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, sr
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
+def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2,
                       w, gx, gy, cost, n_iter, dw, dn, Kinv, wmin, wmax, seed, lam1,
                       r_first=0, memo=True, r_last=4):
     """Slanted-plane PatchMatch refinement (Bleyer et al. 2011) of per-pixel planes
@@ -819,20 +827,20 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
             ne = 0
             for j in range(1, W):
                 ne += _try_plane(i, j, i, j - 1, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
-                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[0], memo)
+                                 flat, sizes, valid, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[0], memo)
             for j in range(W - 2, -1, -1):
                 ne += _try_plane(i, j, i, j + 1, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
-                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[1], memo)
+                                 flat, sizes, valid, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[1], memo)
             n_eval[i] += ne
         for j in prange(W):
             costs = np.empty(max(nv, 1))
             ne = 0
             for i in range(1, H):
                 ne += _try_plane(i, j, i - 1, j, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
-                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[2], memo)
+                                 flat, sizes, valid, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[2], memo)
             for i in range(H - 2, -1, -1):
                 ne += _try_plane(i, j, i + 1, j, w, gx, gy, cost, wts, wI, sdI, offs, offf, rwin, srcs,
-                                 flat, sizes, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[3], memo)
+                                 flat, sizes, valid, A, b, n_best, eps2, costs, wmin, wmax, lam1, ver, seen[3], memo)
             n_eval[j] += ne
         for i in prange(H):
             costs = np.empty(max(nv, 1))
@@ -872,7 +880,7 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2,
                     if cw < wmin or cw > wmax:
                         continue
                     c = _plane_cost(i, j, cw, cx, cy, wts, wI, sdI, offs, offf, rwin,
-                                    srcs, flat, sizes, A, b, n_best, eps2, costs, lam1)
+                                    srcs, flat, sizes, valid, A, b, n_best, eps2, costs, lam1)
                     n_eval[i] += 1
                     if c < bc:
                         bc = c

@@ -599,6 +599,9 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
         if not _is_serial(executor):
             logger.info("depth: a light field's views are estimated in this process (the executor is for MVS)")
         depths, sigmas, stats = _estimate_lightfield(scene, targets, inputs, cams, imgs, opt)
+        for i in targets:  # the light-field estimate reads every pixel; a masked one gets no depth
+            if imgs.mask(i) is not None:
+                depths[i] = np.where(imgs.mask(i), depths[i], np.nan).astype(np.float32)
     else:
         depths, sigmas, stats = _estimate_mvs(scene, targets, inputs, cams, imgs, opt, checkpoint, executor)
     new_views = _at_scene_resolution(scene, targets, cams, depths, sigmas)
@@ -677,7 +680,8 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
 
 class _Images:
     """The views' images at the working scale (``imgs(i)``) and reduced copies of them
-    (``imgs.small(i, camera)``: coarse level, depth-range sweep), each resized once."""
+    (``imgs.small(i, camera)``: coarse level, depth-range sweep), each resized once; their
+    masks likewise (``imgs.mask(i[, camera])``)."""
 
     def __init__(self, scene: Scene, cams: list[Camera]):
         self.scene, self.cams = scene, cams
@@ -693,6 +697,20 @@ class _Images:
         key = (i, camera.shape)
         if key not in self.resized:
             self.resized[key] = _resized(self(i), camera)
+        return self.resized[key]
+
+    def mask(self, i: int, camera: Camera | None = None) -> np.ndarray | None:
+        """View ``i``'s mask (:attr:`vibr.scene.View.mask`) at ``camera``'s size (default
+        the working scale), or None."""
+        from ..io.images import resize_mask
+
+        m = self.scene.views[i].mask
+        if m is None:
+            return None
+        shape = (camera or self.cams[i]).shape
+        key = ("mask", i, shape)
+        if key not in self.resized:
+            self.resized[key] = resize_mask(m, shape)
         return self.resized[key]
 
 
@@ -874,25 +892,30 @@ def _sweep_view(scene, i, nb, cams, imgs, inputs, opt: DepthOptions, med_r: int)
         ims = [imgs.small(j, c) for j, c in zip([i] + nb, cs)]
         if not opt.n_planes:  # step_px is in pixels of the images swept
             D = _planes_for(cs[0], cs[1:], dr, opt.step_px, lo_planes, opt.max_planes)
+        mks = [imgs.mask(j, c) for j, c in zip(nb, cs[1:])]
         res = plane_sweep(ims[0], cs[0], ims[1:], cs[1:], dr, n_planes=D, mem_bytes=opt.mem_bytes,
-                          desc=desc, **common)
+                          desc=desc, src_masks=mks, **common)
         if opt.coarse_iter > 0:
-            res = refine_planes(ims[0], cs[0], ims[1:], cs[1:], res, n_iter=int(opt.coarse_iter), **common)
+            res = refine_planes(ims[0], cs[0], ims[1:], cs[1:], res, n_iter=int(opt.coarse_iter),
+                                src_masks=mks, **common)
             coarse_done = True
         res = upsample_sweep(res, cs[0], cams[i])
     else:
         res = plane_sweep(imgs(i), cams[i], [imgs(j) for j in nb], [cams[j] for j in nb], dr,
-                          n_planes=D, mem_bytes=opt.mem_bytes, desc=desc, **common)
+                          n_planes=D, mem_bytes=opt.mem_bytes, desc=desc,
+                          src_masks=[imgs.mask(j) for j in nb], **common)
     if opt.refine_iter > 0:
         # after a refined coarse level the upsampled inverse depth carries its
         # slopes and the joint random moves have been made at the coarse size: the
         # fronto-parallel start and the joint perturbation are not worth their costs
         res = refine_planes(imgs(i), cams[i], [imgs(j) for j in nb], [cams[j] for j in nb], res,
                             n_iter=opt.refine_iter, fronto_init=not coarse_done,
-                            joint_perturbation=not coarse_done, **common)
+                            joint_perturbation=not coarse_done, src_masks=[imgs.mask(j) for j in nb],
+                            **common)
     if med_r > 0:
         res = median_planes(imgs(i), res, radius=med_r)
-    d = np.where(res.confident, res.depth, np.nan).astype(np.float32)
+    keep = res.confident if imgs.mask(i) is None else res.confident & imgs.mask(i)
+    d = np.where(keep, res.depth, np.nan).astype(np.float32)  # masked pixels: no depth
     stats = {"depth_range": dr, "n_planes": D, "neighbours": [scene.views[j].name for j in nb],
              "confident": float(res.confident.mean()), "sweep_s": res.meta["time_s"]}
     return (d, res.sigma_z, res.meta.get("plane_gradient"), dr), stats, nb

@@ -93,11 +93,24 @@ def _stack_greys(images):
     return srcs, sizes
 
 
+def _stack_masks(masks, srcs) -> np.ndarray:
+    """The sources' masks (None: every pixel usable) as the kernels' ``valid`` stack, uint8
+    of ``srcs``' shape with 0 at masked pixels, or an empty (0, 1, 1) array when none has
+    one (the kernels then test nothing)."""
+    if masks is None or all(m is None for m in masks):
+        return np.zeros((0, 1, 1), np.uint8)
+    valid = np.ones(srcs.shape, np.uint8)
+    for v, m in enumerate(masks):
+        if m is not None:
+            valid[v, : m.shape[0], : m.shape[1]] = np.asarray(m, bool)
+    return valid
+
+
 def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
                 src_cameras: list[Camera], depth_range: tuple[float, float], *,
                 n_planes: int = 128, radius: int = 3, n_best: int | None = None,
                 eps: float = 0.002, max_cost: float = 0.6, slab: int | None = None,
-                mem_bytes: float = 2e9, desc: str | None = None) -> SweepResult:
+                mem_bytes: float = 2e9, desc: str | None = None, src_masks=None) -> SweepResult:
     """Plane-sweep stereo for one reference view.
 
     Parameters
@@ -116,6 +129,10 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     slab : planes per compiled call (for the progress bar); default chosen from mem_bytes.
     mem_bytes : bound on the working memory (the sweep needs ~ (40 + 4 · views) bytes · H · W,
         independent of D; a ValueError is raised if that alone exceeds the bound).
+    src_masks : list of (H_v, W_v) bool or None, optional
+        The sources' masks (:attr:`vibr.scene.View.mask`): a view whose sample of a
+        reference pixel lands on a masked pixel counts as not seeing it (as outside its
+        image), so the ``n_best`` mean is taken over the other views.
 
     Returns
     -------
@@ -143,6 +160,7 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     # planes from far to near, uniform in inverse depth
     winv = np.linspace(1.0 / far, 1.0 / near, int(n_planes))
     srcs, sizes = _stack_greys(src_images)
+    valid = _stack_masks(src_masks, srcs)
     A, b = plane_homographies(ref_camera, list(src_cameras))
     eps2 = float(eps) ** 2
     mu, sd = kern.box_mean_std(I, radius, eps2)
@@ -157,7 +175,7 @@ def plane_sweep(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.n
     block = int(max(2 * radius + 2, min(32, -(-H // 8))))
     starts = range(0, D, slab)
     for l0 in progress(starts, desc=desc or "plane sweep", total=len(starts), unit="slab"):
-        kern.sweep_slab(I, mu, sd, srcs, sizes, A, b, winv[l0 : l0 + slab], l0, int(radius),
+        kern.sweep_slab(I, mu, sd, srcs, sizes, valid, A, b, winv[l0 : l0 + slab], l0, int(radius),
                         n_best, eps2, block, best_c, best_l, c_minus, c_plus, prev)
     lab, curv = kern.subpixel(best_c, best_l, c_minus, c_plus)
     dw = winv[1] - winv[0] if D > 1 else 1.0 / near
@@ -193,7 +211,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
                   n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
                   dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1,
                   fronto_init: bool = True, joint_perturbation: bool = True,
-                  normal_perturbation: bool = True) -> SweepResult:
+                  normal_perturbation: bool = True, src_masks=None) -> SweepResult:
     """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
 
     The sweep is winner-take-all over fronto-parallel planes: its depth is quantised (the
@@ -225,6 +243,9 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     eight fewer per iteration, for a refinement that starts from a refined plane (the
     full-size iterations after the coarse level).
 
+    ``src_masks``: the sources' masks, as in :func:`plane_sweep` (a view whose window
+    centre lands on a masked pixel is left out of that cost).
+
     ``normal_perturbation``: whether the random search tries the normal alone and a random
     normal. Without it (and without the joint perturbation) the random search only moves
     the depth, and propagation alone spreads orientations: for full-size iterations whose
@@ -244,6 +265,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
     lam1 = -1.0 if single_view_penalty is None else float(single_view_penalty)
     srcs, sizes = _stack_greys(src_images)
+    valid = _stack_masks(src_masks, srcs)
     A, b = plane_homographies(ref_camera, list(src_cameras))
     offs = window_offsets(int(radius), int(stride))
     guide = np.asarray(ref_image, np.float32)
@@ -257,14 +279,14 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     w = np.clip(np.asarray(init.inv_depth, np.float64), wmin, wmax)
     zero = np.zeros((H, W))
     gy, gx = np.gradient(w)
-    cost = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy, lam1)
+    cost = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, gx, gy, lam1)
     if fronto_init:
-        c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, zero, zero, lam1)
+        c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, zero, zero, lam1)
         fronto = c0 <= cost
         gx = np.where(fronto, 0.0, gx)
         gy = np.where(fronto, 0.0, gy)
         cost = np.where(fronto, c0, cost)
-    n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, A, b, n_best, eps2, w, gx, gy,
+    n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, gx, gy,
                            cost, int(n_iter), 2.0 * step, float(dn), np.linalg.inv(ref_camera.K),
                            wmin, wmax, int(seed), lam1, r_first=0 if joint_perturbation else 1,
                            r_last=4 if normal_perturbation else 2)
