@@ -669,3 +669,26 @@ def test_video_extension_must_be_known(tmp_path):
 
     with pytest.raises(VibrInputError, match=r"not a video extension \(one of .mp4, .mov, .mkv, .webm, .gif\)"):
         write_video(tmp_path / "a.avi", [np.zeros((8, 8, 3), np.uint8)], fps=24)
+
+
+def test_depth_only_for_the_views_the_path_uses(tmp_path):
+    """A scene of many views without depth: the fly-through estimates depth for the views
+    its frames may use (each frame's 2·n_views best, ranked before depth), not for all."""
+    from vibr.flythrough import render_path, views_for_path
+    from vibr.path import interpolate
+    from vibr.synthetic import make_scene
+
+    s = make_scene("handheld", n_views=16, width=64, height=48, seed=2)
+    s = s.replace(views=[v.replace(depth=None, sigma_z=None) for v in s.views])
+    p = interpolate(s, views=["view_003", "view_004"], n_frames=3)
+    assert views_for_path(s, p.cameras, None) is None and views_for_path(s, p.cameras, 8) is None
+    need = views_for_path(s, p.cameras, 2)
+    assert need is not None and {"view_003", "view_004"} <= set(need) and len(need) < 16
+    r = render_path(s, p, tmp_path / "f", n_views=2, cache_dir=tmp_path / "cache", executor=None, progress=False)
+    assert r.rendered == 3
+    from vibr.depthcache import scene_with_depth  # the cache render_path filled: the path's views only
+
+    got = scene_with_depth(s, cache_dir=tmp_path / "cache", views=need)
+    assert got.meta["depth_source"] == "cache" and got.names == need
+    targets = [n for n, st in got.meta["depth_estimation"]["views"].items() if st["role"] == "target"]
+    assert targets == need

@@ -178,7 +178,7 @@ def _save(path: Path, scene: Scene) -> None:
 
 
 def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | None = None,
-                     cache_dir=None, exclude=(), fallback="auto", executor=None) -> Scene:
+                     cache_dir=None, exclude=(), fallback="auto", executor=None, views=None) -> Scene:
     """The scene (minus ``exclude``) with a depth map on every view.
 
     Parameters
@@ -199,6 +199,10 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
         as :func:`vibr.pipeline.prepare`); applied after the cache (not part of its key).
     executor : where the views' depth is estimated (:func:`vibr.stereo.estimate_depth`; not
         part of the key: the depths are the same).
+    views : names, optional
+        When depth is estimated: only these views get it, and only they are returned (all
+        kept views still serve as stereo partners; part of the key). A fly-through passes
+        the views its frames may use (:func:`vibr.flythrough.views_for_path`).
 
     Returns
     -------
@@ -209,11 +213,11 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
     """
     from .geometry import apply_fallback
 
-    out = _scene_with_depth(scene, depth, estimate_kw, cache_dir, exclude, executor)
+    out = _scene_with_depth(scene, depth, estimate_kw, cache_dir, exclude, executor, views)
     return apply_fallback(out, fallback)
 
 
-def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude, executor=None) -> Scene:
+def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude, executor=None, views=None) -> Scene:
     t0 = time.perf_counter()
     if depth not in ("auto", "gt", "estimated"):
         raise VibrInputError(f"depth must be auto, gt or estimated for a camera path, got {depth!r}")
@@ -233,10 +237,11 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude, exec
             src = ensure_source_depth(src)
         # a new meta: the caller's scene is not changed
         return src.replace(meta=dict(src.meta, depth_source="scene", depth_time_s=time.perf_counter() - t0))
-    return estimated_depth(src, estimate_kw, cache_dir, executor)  # from the kept views only
+    return estimated_depth(src, estimate_kw, cache_dir, executor, views)  # from the kept views only
 
 
-def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=None, executor=None) -> Scene:
+def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=None, executor=None,
+                    views=None) -> Scene:
     """Depth estimated for every view of ``scene`` (:func:`vibr.stereo.estimate_depth`; depth
     the views have is ignored), through the on-disk cache (module docstring).
 
@@ -246,7 +251,8 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
     ``"cache"`` or ``"estimated"``, ``meta["depth_cache"]`` the cache file when used,
     ``meta["depth_time_s"]`` the time spent, ``meta["depth_estimation"]`` the estimator's
     statistics (kept from the run that filled the cache). ``executor``: where the views'
-    sweeps run (:func:`vibr.stereo.estimate_depth`).
+    sweeps run (:func:`vibr.stereo.estimate_depth`). ``views``: only these views get depth
+    and are returned (the others still serve as stereo partners).
     """
     from .camera import shared_centre
     from .geometry import sphere_proxy
@@ -263,19 +269,24 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
         out.meta.update(depth_source="shared centre", depth_time_s=time.perf_counter() - t0)
         return out
     kw = dict(estimate_kw or {})
+    wanted = bare if views is None else bare.subset(list(views))
     cpath = None
     if cache_dir is not False:
         folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-        cpath = folder / f"depth-{depth_cache_key(bare, kw)}.npz"
-        out = _load(cpath, bare) if cpath.is_file() else None
+        key_kw = kw if views is None else dict(kw, views=sorted(wanted.names))
+        cpath = folder / f"depth-{depth_cache_key(bare, key_kw)}.npz"
+        out = _load(cpath, wanted) if cpath.is_file() else None
         if out is not None:
             _used(cpath)
             logger.info("depth of %d views loaded from the cache %s", len(out), cpath)
             out.meta.update(depth_source="cache", depth_cache=str(cpath), depth_time_s=time.perf_counter() - t0)
             return out
-    logger.info("estimating depth for %d views%s", len(bare), "" if cpath is None else " (once; cached)")
+    logger.info("estimating depth for %d views%s", len(wanted), "" if cpath is None else " (once; cached)")
     resume = None if cpath is None else resume_folder(cpath)
-    out = estimate_depth(bare, checkpoint=resume, executor=executor, **kw)
+    out = estimate_depth(bare, views=None if views is None else wanted.names, checkpoint=resume,
+                         executor=executor, **kw)
+    if views is not None:
+        out = out.subset(wanted.names)
     if cpath is not None:
         _save(cpath, out)
         shutil.rmtree(resume, ignore_errors=True)

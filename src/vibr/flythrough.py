@@ -268,6 +268,35 @@ class FlyResult:
         return self.times.get("frames", 0.0) / max(1, self.rendered)
 
 
+#: A fly-through whose scene has no depth estimates it only for the views its frames may use
+#: when the scene has more than this many times ``n_views`` views: the union over the frames of
+#: their PATH_MARGIN · n_views best views, ranked before any depth is known.
+PATH_MARGIN = 2
+
+
+def views_for_path(scene: Scene, cameras, n_views: int | None, exclude=()) -> list[str] | None:
+    """Names of the views a path's frames may take as sources, or None for all of them.
+
+    Each frame's ``PATH_MARGIN · n_views`` best views by :func:`vibr.selection.rank_views`
+    on the geometry known before depth (the scene's sparse points, else a plane where the
+    cameras' axes meet), united over the frames. None when ``n_views`` is None or the scene
+    has at most ``PATH_MARGIN · n_views`` views (every view may serve)."""
+    from .selection import select_views
+
+    if n_views is None:
+        return None
+    ex = {scene.views[scene.index(e)].name for e in exclude}
+    kept = [v.replace(depth=None, sigma_z=None) for v in scene.views if v.name not in ex]
+    k = PATH_MARGIN * int(n_views)
+    if len(kept) <= k:
+        return None
+    bare = scene.replace(views=kept)
+    chosen = set()
+    for cam in cameras:
+        chosen.update(select_views(bare, cam, k))
+    return None if len(chosen) == len(kept) else [kept[i].name for i in sorted(chosen)]
+
+
 def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
     """Raise :class:`VibrInputError` when most of the path's cameras see nothing of the
     scene: the centre of the scene (:func:`vibr.path.scene_centre`) lies behind or outside
@@ -375,10 +404,15 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
     _check_frame_memory(scene, cams, n_views, camera_path.meta.get("file"))
     t0 = time.perf_counter()
+    estimating = depth == "estimated" or (depth == "auto" and all(v.depth is None for v in scene.views))
+    need = views_for_path(scene, cams, n_views, exclude) if estimating else None
+    if need is not None:
+        logger.info("fly-through: depth for the %d of %d views its frames may use", len(need), len(scene))
     # depth on the engine the caller named (on "auto" here: on one machine the sweeps'
     # kernels already use every core)
     sources = scene_with_depth(scene, depth=depth, estimate_kw=estimate_kw, cache_dir=cache_dir,
-                               exclude=exclude, executor=None if executor == "auto" else executor)
+                               exclude=exclude, executor=None if executor == "auto" else executor,
+                               views=need)
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
     ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,
