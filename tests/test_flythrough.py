@@ -324,6 +324,8 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
     ("v.mp4", ["--fps", "0"], "fps must be in (0, 1000]"),  # fell back to the path's rate silently
     ("v.mp4", ["--fps", "24000"], "fps must be in (0, 1000]"),
     ("v.mp4", ["--crf", "99"], "crf must be in 0..51"),
+    ("v.gif", ["--crf", "30"], "--crf does not apply to a GIF"),  # was ignored without a word
+    ("v.avi", [], "-o is a video (.mp4, .mov, .mkv, .webm, .gif) or a folder"),
     ("frames", ["--uncertainty", "u.png"], "--uncertainty does not apply to --path"),
     ("frames", ["--bit-depth", "16"], "--bit-depth does not apply to --path"),
 ])

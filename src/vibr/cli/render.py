@@ -67,7 +67,9 @@ def _add_path_options(p) -> None:
                    help="render every camera of a camera path (nerfstudio camera_path.json, as written by "
                         "'vibr path' or nerfstudio's viewer) to -o OUT.mp4 or -o FRAMES_DIR/ instead of --target")
     g.add_argument("--frames-dir", metavar="DIR", help="where the numbered PNG frames go (default: OUT_frames/ beside the video)")
-    g.add_argument("--crf", type=int, default=None, help="H.264 quality, 0 (lossless) .. 51 (default 18)")
+    g.add_argument("--crf", type=int, default=None,
+                   help="video quality (H.264's and VP9's constant rate factor), 0 (lossless) .. 51 (default 18; "
+                        "a GIF has none)")
     g.add_argument("--fps", type=float, help="video frame rate (default: the path file's)")
     g.add_argument("--dataparser-transforms", metavar="JSON",
                    help="nerfstudio's dataparser_transforms.json: the path is in nerfstudio's normalised frame")
@@ -169,6 +171,8 @@ def _run_path(args) -> int:
     from ..path import read_camera_path, scene_processing_transform
 
     out = args.output
+    if args.crf is not None and out.lower().endswith(".gif"):
+        raise VibrInputError("--crf does not apply to a GIF (one 256-colour palette, no rate factor)", out)
     if not (is_video(out) or not os.path.splitext(out)[1]):
         raise VibrInputError(f"with --path, -o is a video ({', '.join(VIDEO_FORMATS)}) or a folder for the frames",
                              out)
