@@ -596,12 +596,13 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
     cams = [v.camera.scaled(opt.scale) if opt.scale != 1.0 else v.camera for v in scene.views]
     imgs = _Images(scene, cams)
     if method == "lightfield":
-        if not _is_serial(executor):
+        if executor is not None:
             logger.info("depth: a light field's views are estimated in this process (the executor is for MVS)")
         depths, sigmas, stats = _estimate_lightfield(scene, targets, inputs, cams, imgs, opt)
         for i in targets:  # the light-field estimate reads every pixel; a masked one gets no depth
-            if imgs.mask(i) is not None:
-                depths[i] = np.where(imgs.mask(i), depths[i], np.nan).astype(np.float32)
+            m = imgs.mask(i)
+            if m is not None:
+                depths[i] = np.where(m, depths[i], np.nan).astype(np.float32)
     else:
         depths, sigmas, stats = _estimate_mvs(scene, targets, inputs, cams, imgs, opt, checkpoint, executor)
     new_views = _at_scene_resolution(scene, targets, cams, depths, sigmas)
@@ -756,15 +757,13 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
         from ..io.checkpoint import ViewCheckpoint
 
         ck = ViewCheckpoint(checkpoint, {**{f.name: getattr(opt, f.name) for f in fields(opt)}, "med_r": med_r})
-    todo = [i for i in est if nbrs[i]]
-    if _is_serial(executor):
-        swept = _sweep_here(scene, todo, nbrs, cams, imgs, inputs, opt, med_r, ck)
-    else:
-        from ..executor import run_tasks
+    from ..executor import run_tasks
 
-        swept = dict(zip(todo, run_tasks(sweep_task, [(i, nbrs[i]) for i in todo], setup=sweep_setup,
-                                         setup_args=(scene, cams, inputs, opt, med_r, ck), executor=executor,
-                                         desc="depth views")))
+    todo = [i for i in est if nbrs[i]]
+    # serial: here, on this call's images; else each worker receives them once
+    swept = dict(zip(todo, run_tasks(sweep_task, [(i, nbrs[i]) for i in todo], setup=sweep_setup,
+                                     setup_args=(imgs, inputs, opt, med_r, ck), executor=executor,
+                                     desc="depth views")))
     raw, stats = {}, {}
     for i in todo:
         raw[i], st, nbrs[i] = swept[i]
@@ -794,45 +793,25 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
     return depths, sigmas, stats
 
 
-def _is_serial(executor) -> bool:
-    from ..executor import parse_executor
-
-    return parse_executor(executor)[0] == "serial"
-
-
-def _sweep_here(scene, todo, nbrs, cams, imgs, inputs, opt: DepthOptions, med_r: int, ck) -> dict:
-    """The sweeps of the views ``todo`` in this process: ``{i: (raw, stats, partners)}``."""
-    out = {}
-    with progress(total=len(todo), desc="depth views", unit="view") as bar:
-        for i in todo:
-            out[i] = _sweep_one(scene, i, nbrs[i], cams, imgs, inputs, opt, med_r, ck)
-            bar.update(1)
-    return out
-
-
-def _sweep_one(scene, i, nb, cams, imgs, inputs, opt: DepthOptions, med_r: int, ck):
-    t0 = time.perf_counter()
-    if ck is None:
-        raw, st, nb = _sweep_view(scene, i, nb, cams, imgs, inputs, opt, med_r)
-    else:
-        raw, st, nb = _sweep_view_resumable(ck, scene, i, nb, cams, imgs, inputs, opt, med_r)
-    st["time_s"] = st.get("time_s", time.perf_counter() - t0)
-    return raw, st, nb
-
-
-def sweep_setup(scene, cams, inputs, opt: DepthOptions, med_r: int, ck) -> dict:
-    """Per worker of a parallel depth estimate (:func:`vibr.executor.run_tasks`): what every
-    view's sweep shares, the images resized once."""
-    return {"scene": scene, "cams": cams, "inputs": inputs, "opt": opt, "med_r": med_r, "ck": ck,
-            "imgs": _Images(scene, cams)}
+def sweep_setup(imgs: "_Images", inputs, opt: DepthOptions, med_r: int, ck) -> dict:
+    """Per worker of a depth estimate (:func:`vibr.executor.run_tasks`): what every view's
+    sweep shares (the scene and cameras in ``imgs``, whose resized images it reuses)."""
+    return {"imgs": imgs, "inputs": inputs, "opt": opt, "med_r": med_r, "ck": ck}
 
 
 def sweep_task(ctx: dict, task) -> tuple:
-    """One view's sweep on a worker: ``task`` = (view index, partners); returns what
-    :func:`_sweep_view` returns (its maps: the consistency check runs in the caller)."""
+    """One view's sweep: ``task`` = (view index, partners); returns what :func:`_sweep_view`
+    returns, with its time (the consistency check runs in the caller)."""
     i, nb = task
-    return _sweep_one(ctx["scene"], i, list(nb), ctx["cams"], ctx["imgs"], ctx["inputs"], ctx["opt"],
-                      ctx["med_r"], ctx["ck"])
+    imgs, ck = ctx["imgs"], ctx["ck"]
+    t0 = time.perf_counter()
+    if ck is None:
+        raw, st, nb = _sweep_view(imgs.scene, i, list(nb), imgs.cams, imgs, ctx["inputs"], ctx["opt"], ctx["med_r"])
+    else:
+        raw, st, nb = _sweep_view_resumable(ck, imgs.scene, i, list(nb), imgs.cams, imgs, ctx["inputs"],
+                                            ctx["opt"], ctx["med_r"])
+    st["time_s"] = st.get("time_s", time.perf_counter() - t0)
+    return raw, st, nb
 
 
 def _why_no_partner(cams, i, inputs) -> str:
