@@ -281,7 +281,8 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
             logger.info("depth of %d views loaded from the cache %s", len(out), cpath)
             out.meta.update(depth_source="cache", depth_cache=str(cpath), depth_time_s=time.perf_counter() - t0)
             return out
-    logger.info("estimating depth for %d views%s", len(wanted), "" if cpath is None else " (once; cached)")
+    logger.info("estimating depth for %d%s views%s", len(wanted), "" if views is None else f" of {len(bare)}",
+                "" if cpath is None else " (once; cached)")
     resume = None if cpath is None else resume_folder(cpath)
     out = estimate_depth(bare, views=None if views is None else wanted.names, checkpoint=resume,
                          executor=executor, **kw)

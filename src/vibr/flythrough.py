@@ -404,15 +404,11 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
     _check_frame_memory(scene, cams, n_views, camera_path.meta.get("file"))
     t0 = time.perf_counter()
-    estimating = depth == "estimated" or (depth == "auto" and all(v.depth is None for v in scene.views))
-    need = views_for_path(scene, cams, n_views, exclude) if estimating else None
-    if need is not None:
-        logger.info("fly-through: depth for the %d of %d views its frames may use", len(need), len(scene))
-    # depth on the engine the caller named (on "auto" here: on one machine the sweeps'
-    # kernels already use every core)
+    # depth, when estimated, for the views the frames may use, on the engine the caller
+    # named (on "auto" here: on one machine the sweeps' kernels already use every core)
     sources = scene_with_depth(scene, depth=depth, estimate_kw=estimate_kw, cache_dir=cache_dir,
                                exclude=exclude, executor=None if executor == "auto" else executor,
-                               views=need)
+                               views=views_for_path(scene, cams, n_views, exclude))
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
     ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,
