@@ -40,6 +40,29 @@ def test_scaled_keeps_pixel_centre_convention():
     np.testing.assert_allclose(xy, [0.0, 0.0], atol=1e-12)
 
 
+def test_turned_camera_sees_the_image_turned_clockwise():
+    """A point seen at pixel (u, v) by a camera is seen, by the camera turned by one quarter
+    turn, where np.rot90(image, -1) puts that pixel: (H - 1 - v, u); four turns are the
+    camera itself; the centre and the depth of points do not change."""
+    cam = Camera(np.array([[120.0, 0, 30.2], [0, 118.0, 20.7], [0, 0, 1]]), _cam().R, _cam().t, 64, 48)
+    rng = np.random.default_rng(2)
+    X = cam.backproject(rng.uniform(0, 47, size=(50, 2)), rng.uniform(1, 10, size=50))
+    (u, v), z = cam.project(X)[0].T, cam.project(X)[1]
+    one = cam.turned(1)
+    assert (one.width, one.height) == (48, 64)
+    xy, z1 = one.project(X)
+    np.testing.assert_allclose(xy, np.stack([47 - v, u], axis=1), atol=1e-9)
+    np.testing.assert_allclose(z1, z, atol=1e-9)
+    np.testing.assert_allclose(one.centre, cam.centre, atol=1e-12)
+    img = rng.uniform(size=(48, 64))
+    turned = np.rot90(img, -1)
+    assert turned.shape == one.shape and turned[33, 47 - 20] == img[20, 33]  # pixel (u, v) = (33, 20) -> (27, 33)
+    assert cam.turned(4).allclose(cam) and cam.turned(2).turned(2).allclose(cam, atol=1e-9)
+    assert cam.turned(3).turned(1).allclose(cam, atol=1e-9) and cam.turned(-1).allclose(cam.turned(3))
+    with pytest.raises(VibrInputError, match="skewed"):
+        Camera(np.array([[120.0, 0.5, 30], [0, 118.0, 20], [0, 0, 1]]), cam.R, cam.t, 64, 48).turned(1)
+
+
 def test_bad_rotation_is_rejected():
     R = np.eye(3)
     R[0, 1] = 0.1

@@ -291,6 +291,69 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     assert closest(interpolate(scene, order="given", n_frames=200)) < 0.5
 
 
+def _up_angles(cameras, up):
+    """Degrees between each camera's image up (−y axis) and ``up``."""
+    return np.degrees(np.arccos(np.clip([-c.R[1] @ up for c in cameras], -1, 1)))
+
+
+def test_interpolate_through_rolled_photographs_does_not_spin(data_dir):
+    """templeSparseRing's photographs are rolled by +90° or −90° (the temple lies on its
+    side, upside down from one half of the ring to the other): a path keeping their
+    orientations spins by up to 180° between neighbours. The default turns each key by
+    quarter turns to the ring's up: every frame upright within the cameras' 8° look down,
+    the frame portrait (the photographs turned); "level" makes every key's horizon level."""
+    from vibr.path import interpolate, scene_up
+
+    scene = _temple_cameras(data_dir / "middlebury_templeSparseRing")
+    up = scene_up([v.camera for v in scene.views])
+    kept = interpolate(scene, n_frames=120, roll="keep")
+    assert _up_angles(kept.cameras, up).max() > 150 and (kept.width, kept.height) == (640, 480)
+    snap = interpolate(scene, n_frames=120)
+    assert snap.meta["roll"] == "snap" and (snap.width, snap.height) == (480, 640)
+    assert _up_angles(snap.cameras, up).max() < 12
+    # the step between frames: no spin left (the kept path turns 10 times faster somewhere)
+    from scipy.spatial.transform import Rotation
+
+    def steps(p):
+        r = Rotation.from_matrix(np.array([c.R for c in p.cameras]))
+        return np.degrees((r[:-1].inv() * r[1:]).magnitude())
+    assert steps(snap).max() < 3.0 < steps(kept).max()
+    level = interpolate(scene, n_frames=120, roll="level")
+    keys = np.round(np.array(level.meta["knots"]) / level.meta["knots"][-1] * 119).astype(int)
+    assert max(abs(level.cameras[k].R[0] @ up) for k in keys) < 0.02  # x axis level at the keys
+
+
+def test_interpolate_snap_turns_a_rolled_key_back(arc_scene):
+    """A view whose camera was turned by a quarter turn (a portrait photograph among
+    landscape ones) makes, by default, the path of the scene without the turn; the
+    cameras of an upright capture are not touched (the same path as roll="keep")."""
+    from vibr.path import interpolate
+    from vibr.scene import Scene, View
+
+    plain = interpolate(arc_scene, n_frames=30)
+    _same_cameras(plain.cameras, interpolate(arc_scene, n_frames=30, roll="keep").cameras, tol=0)
+    views = [View(v.name, None, v.camera.turned(1) if i == 2 else v.camera) for i, v in enumerate(arc_scene.views)]
+    rolled = Scene(views)
+    _same_cameras(interpolate(rolled, n_frames=30).cameras, plain.cameras, tol=1e-9)
+    spun = interpolate(rolled, n_frames=30, roll="keep").cameras
+    assert max(np.abs(a.R - b.R).max() for a, b in zip(spun, plain.cameras)) > 0.5
+    with pytest.raises(VibrInputError, match="roll must be one of"):
+        interpolate(arc_scene, n_frames=3, roll="upright")
+
+
+def test_interpolate_level_needs_an_up():
+    """Cameras whose up directions cancel out (half of them upside down, side by side): the
+    default keeps them; "level" says why it cannot."""
+    from vibr.path import interpolate
+
+    K = Camera.intrinsics(50.0, 64, 48)
+    cams = [Camera.look_at([x, 0, 0], [x, 0, 5], [0, -1 if i % 2 else 1, 0], K, 64, 48) for i, x in enumerate(range(4))]
+    scene = _cameras_only([(f"c{i}", c) for i, c in enumerate(cams)])
+    assert interpolate(scene, n_frames=5).meta["roll"] == "snap"
+    with pytest.raises(VibrInputError, match="roll 'level' needs the scene's up"):
+        interpolate(scene, n_frames=5, roll="level")
+
+
 @pytest.mark.parametrize("which", ["fountain", "temple"])
 @pytest.mark.parametrize("kind", ["orbit", "spiral"])
 def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
@@ -406,6 +469,7 @@ def test_path_options_with_a_target_are_refused(grid_dir, tmp_path, capsys, extr
     ("orbit", ["--views", "view_001,view_002"], "--views applies to 'vibr path interpolate' only"),
     ("spiral", ["--order", "given"], "--order applies to 'vibr path interpolate' only"),
     ("interpolate", ["--full"], "--full applies to 'vibr path orbit' only"),
+    ("orbit", ["--roll", "level"], "--roll applies to 'vibr path interpolate' only"),
 ])
 def test_path_options_of_another_kind_are_refused(grid_dir, tmp_path, capsys, kind, extra, msg):
     from vibr.cli import main
@@ -416,6 +480,24 @@ def test_path_options_of_another_kind_are_refused(grid_dir, tmp_path, capsys, ki
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err
     assert not pj.exists()
+
+
+def test_path_cli_turns_rolled_photographs_and_says_so(data_dir, tmp_path, capsys):
+    """``vibr path interpolate`` on templeSparseRing: the keys turned (a line says how many),
+    a portrait frame; ``--roll keep`` the photographs' landscape orientation."""
+    from vibr.cli import main
+
+    ring = str(data_dir / "middlebury_templeSparseRing")
+    capsys.readouterr()
+    assert main(["path", "interpolate", ring, "-o", str(tmp_path / "a.json"), "--frames", "8"]) == 0
+    err = capsys.readouterr().err
+    assert "16 of 16 key cameras turned to the scene's up" in err
+    a = json.loads((tmp_path / "a.json").read_text())
+    assert (a["render_width"], a["render_height"]) == (480, 640) and a["vibr"]["roll"] == "snap"
+    assert main(["path", "interpolate", ring, "-o", str(tmp_path / "b.json"), "--frames", "8", "--roll", "keep"]) == 0
+    assert "turned" not in capsys.readouterr().err
+    b = json.loads((tmp_path / "b.json").read_text())
+    assert (b["render_width"], b["render_height"]) == (640, 480) and b["vibr"]["roll"] == "keep"
 
 
 # ----------------------------------------------------------------------------- rendering

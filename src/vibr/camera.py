@@ -211,6 +211,25 @@ class Camera:
     def with_size(self, width: int, height: int) -> "Camera":
         return Camera(self.K, self.R, self.t, width, height, self.source)
 
+    def turned(self, k: int) -> "Camera":
+        """The same camera rolled by ``k`` quarter turns about its optical axis: the camera
+        of the image turned clockwise ``k`` times (``np.rot90(image, -k)``, size W×H for
+        odd ``k``).
+
+        One quarter turn maps pixels ``(u, v) -> (H - 1 - v, u)`` (``Q``) and camera axes
+        ``(x, y, z) -> (-y, x, z)`` (``R_z``): ``K' = Q K R_zᵀ``, ``R' = R_z R``, so that
+        ``K' [R' | t'] = Q K [R | t]``. A skewed ``K`` has no such turn (``K'`` would not be
+        upper triangular): refused."""
+        k = int(k) % 4
+        if k and self.K[0, 1] != 0:
+            raise VibrInputError("a camera with a skewed K cannot be turned by quarter turns", self.source)
+        cam = self
+        Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+        for _ in range(k):
+            Q = np.array([[0.0, -1.0, cam.height - 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+            cam = Camera.from_centre(Q @ cam.K @ Rz.T, Rz @ cam.R, cam.centre, cam.height, cam.width, self.source)
+        return cam
+
     def allclose(self, other: "Camera", atol: float = 1e-9) -> bool:
         return (
             self.width == other.width

@@ -42,9 +42,23 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
-           "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED", "PATH_KINDS"]
+           "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED", "PATH_KINDS",
+           "ROLL_MODES", "orient_keys"]
 
 PATH_KINDS = ("interpolate", "orbit", "spiral")
+
+#: How :func:`interpolate` orients its key cameras about their optical axes (``roll=``;
+#: ``vibr path interpolate --roll``). orbit and spiral look at the scene with its up, as "level".
+ROLL_MODES = {
+    "snap": "turn each key camera by the quarter turns that bring its image's up nearest the scene's up "
+            "(photographs taken rolled by 90 degrees or upside down pass upright; a hand-held tilt is kept)",
+    "level": "as snap, then roll each key camera to the scene's up exactly (a level horizon)",
+    "keep": "the cameras' own orientations",
+}
+
+#: A camera looking within this angle (degrees) of the scene's up or down has no roll to
+#: correct: its image's up says nothing about the world's (a nadir photograph).
+ROLL_UNDEFINED_DEG = 15.0
 
 #: OpenGL camera axes (x right, y up, z backward) <-> OpenCV (x right, y down, z forward).
 _GL_CV = np.diag([1.0, -1.0, -1.0])
@@ -499,6 +513,79 @@ def _key_steps(cams, X):
     return np.linalg.norm(np.diff(C, axis=0), axis=1) + r * (rots[:-1].inv() * rots[1:]).magnitude(), r
 
 
+def _quarter_turns(cam: Camera, up: np.ndarray) -> int | None:
+    """The quarter turns k (0–3, :meth:`Camera.turned`) after which the camera's image up
+    (its −y axis) is nearest to ``up``; None when it looks within
+    :data:`ROLL_UNDEFINED_DEG` of ±up."""
+    R = cam.R
+    if max(abs(R[0] @ up), abs(R[1] @ up)) < math.sin(math.radians(ROLL_UNDEFINED_DEG)):
+        return None
+    # image up after k turns: -y, then -x, +y, +x of the original camera
+    return int(np.argmax(np.array([-R[1], -R[0], R[1], R[0]]) @ up))
+
+
+def _levelled(cam: Camera, up: np.ndarray) -> Camera:
+    """The camera rolled about its optical axis until its image up lies in the plane of
+    that axis and ``up`` (same K, size and centre)."""
+    z = cam.R[2]
+    x = np.cross(-up, z)
+    x /= np.linalg.norm(x)
+    return Camera.from_centre(cam.K, np.stack([x, np.cross(z, x), z]), cam.centre, cam.width, cam.height,
+                              cam.source)
+
+
+def orient_keys(cameras, roll: str, up) -> tuple[list, list]:
+    """Key cameras oriented for a path by ``roll`` (:data:`ROLL_MODES`) about their optical
+    axes, the world's ``up`` given (:func:`scene_up`). Returns the cameras and the quarter
+    turns given to each (0 for those kept, with "keep", or looking along ±up).
+
+    A path through cameras whose photographs were taken rolled (templeSparseRing's by ±90°,
+    half of them upside down relative to the others; a phone held in portrait) spins the
+    video by up to 180° between two neighbours; "snap" turns such a key by whole quarter
+    turns (the frame at the key is its photograph, turned), "level" also removes the rest
+    of the roll (the frame at the key is the photograph turned by a few degrees too)."""
+    if roll not in ROLL_MODES:
+        raise VibrInputError(f"roll must be one of {', '.join(ROLL_MODES)}, got {roll!r}")
+    cams = list(cameras)
+    if roll == "keep":
+        return cams, [0] * len(cams)
+    up = np.asarray(up, np.float64)
+    out, turns = [], []
+    for c in cams:
+        k = _quarter_turns(c, up)
+        if k is None or (k and c.K[0, 1] != 0):  # nadir; a skewed K has no quarter turn
+            out.append(c)
+            turns.append(0)
+            continue
+        c = c.turned(k)
+        out.append(_levelled(c, up) if roll == "level" else c)
+        turns.append(k)
+    return out, turns
+
+
+def _oriented(cams, roll, X):
+    """:func:`orient_keys` with the scene's up; with no common up, "snap" keeps the cameras."""
+    if roll not in ROLL_MODES:
+        raise VibrInputError(f"roll must be one of {', '.join(ROLL_MODES)}, got {roll!r}")
+    if roll == "keep":
+        return cams
+    try:
+        up = scene_up(cams, X)
+    except VibrInputError:
+        if roll == "level":
+            raise VibrInputError("roll 'level' needs the scene's up, and the cameras' up directions cancel out; "
+                                 "use roll 'keep'") from None
+        logger.debug("interpolate: no common up, the cameras' own orientations kept")
+        return cams
+    out, turns = orient_keys(cams, roll, up)
+    by = {90 * k: sum(1 for j in turns if j == k) for k in (1, 2, 3)}
+    if any(by.values()):
+        logger.info("interpolate: %d of %d key cameras turned to the scene's up (clockwise: %s; roll 'keep' "
+                    "leaves them as photographed)", sum(by.values()), len(cams),
+                    ", ".join(f"{n} by {a}°" for a, n in by.items() if n))
+    return out
+
+
 def _distinct_keys(cams, names, X):
     """The key cameras without those whose pose is the one before's (the spline needs
     increasing knots), with a warning naming them; returns ``(cams, names, steps)``."""
@@ -517,7 +604,7 @@ def _distinct_keys(cams, names, X):
 
 def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | None = None,
                 seconds: float | None = None, fps: float = 24.0, width: int | None = None,
-                height: int | None = None, scale: float = 1.0) -> CameraPath:
+                height: int | None = None, scale: float = 1.0, roll: str = "snap") -> CameraPath:
     """A C²-smooth path through the scene's cameras (all, or ``views`` in that order).
 
     Knots ``t_i`` are the cumulative length ``Σ ‖C_i − C_{i−1}‖ + r · angle(R_{i−1}, R_i)``
@@ -540,7 +627,12 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
         path in that order goes through the temple).
     n_frames : int, or ``seconds`` × ``fps``
     width, height : int, optional
-        Frame size (default: the first view's, times ``scale``).
+        Frame size (default: the first key camera's, times ``scale``: W×H swapped when
+        ``roll`` turned it by a quarter turn).
+    roll : {"snap", "level", "keep"}
+        How the key cameras are oriented about their optical axes (:data:`ROLL_MODES`,
+        :func:`orient_keys`), the world's up from :func:`scene_up`; with "snap", photographs
+        taken rolled by 90° or upside down make no spin in the video.
     """
     from scipy.interpolate import CubicSpline
     from scipy.spatial.transform import Rotation, RotationSpline
@@ -555,8 +647,9 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     if len(cams) < 2:
         raise VibrInputError("interpolate needs at least two cameras")
     n = _frame_count(n_frames, seconds, fps)
-    w, h = _output_size(cams, width, height, scale)
     X = scene_centre(cams, scene_points(scene))
+    cams = _oriented(cams, roll, X)
+    w, h = _output_size(cams, width, height, scale)
     cams, names, step = _distinct_keys(cams, names, X)
     t = np.concatenate([[0.0], np.cumsum(step)])
     C = np.array([c.centre for c in cams])
@@ -572,7 +665,7 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
         K = Camera.intrinsics(float(fi) * h, w, h)
         out.append(Camera.from_centre(K, Ri.T, Ci, w, h))
     return CameraPath(out, float(fps), None, w, h,
-                      {"kind": "interpolate", "views": names, "knots": t.tolist()})
+                      {"kind": "interpolate", "views": names, "knots": t.tolist(), "roll": roll})
 
 
 def _angles_in_plane(V, e1, e2):

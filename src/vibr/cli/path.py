@@ -24,6 +24,7 @@ examples:
   vibr path orbit ../shared/data/middlebury_templeSparseRing -o orbit.json --seconds 4 --fps 24
   vibr path spiral SCENE -o spiral.json --frames 90 --size 640x480
   vibr path interpolate SCENE -o p.json --views 0003,0005,0004 --order proximity
+  vibr path interpolate ../shared/data/middlebury_templeSparseRing -o ring.json --frames 96 --roll level
 """
 
 
@@ -39,7 +40,7 @@ def _size(s):
 
 
 def register(sub) -> None:
-    from ..path import PATH_KINDS
+    from ..path import PATH_KINDS, ROLL_MODES
 
     p = sub.add_parser("path", help="make a camera path (nerfstudio camera_path.json) for a fly-through",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -55,6 +56,9 @@ def register(sub) -> None:
     p.add_argument("--order", choices=["given", "proximity"], default=None,
                    help="interpolate: keep the given order or reorder the views by proximity (default: "
                         "proximity through all the scene's views, the given order with --views)")
+    p.add_argument("--roll", choices=list(ROLL_MODES), default=None,
+                   help="interpolate: how the key cameras are turned about their axes: "
+                        + "; ".join(f"{k}: {v}" for k, v in ROLL_MODES.items()) + " (default: snap)")
     p.add_argument("--full", action="store_true", help="orbit: a full turn even when the cameras cover an arc")
     p.add_argument("--dataparser-transforms", metavar="JSON",
                    help="write the path in the normalised frame of a nerfstudio model trained on SCENE (its "
@@ -79,7 +83,7 @@ def run(args) -> int:
     if args.scale <= 0:
         raise VibrInputError(f"--scale must be positive, got {args.scale}")
     for flag, kind, value in (("--views", "interpolate", args.views), ("--order", "interpolate", args.order),
-                              ("--full", "orbit", args.full)):
+                              ("--roll", "interpolate", args.roll), ("--full", "orbit", args.full)):
         if value not in (None, False) and args.kind != kind:  # refused, not ignored
             raise VibrInputError(f"{flag} applies to 'vibr path {kind}' only, not to {args.kind}")
     if args.dataparser_transforms:
@@ -90,7 +94,7 @@ def run(args) -> int:
     w, h = args.size if args.size else (None, None)
     kw = dict(n_frames=args.frames, seconds=seconds, fps=args.fps, width=w, height=h)
     if args.kind == "interpolate":
-        path = P.interpolate(scene, args.views, order=args.order, **kw)
+        path = P.interpolate(scene, args.views, order=args.order, roll=args.roll or "snap", **kw)
     elif args.kind == "orbit":
         path = P.orbit(scene, full=True if args.full else None, **kw)
     else:

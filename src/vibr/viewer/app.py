@@ -433,7 +433,8 @@ class Viewer:
             write_camera_path(out, self.keyframes, fps=fps, seconds=1.0 / fps)
         else:
             keys = Scene([View(f"key_{i:03d}", None, c) for i, c in enumerate(self.keyframes)], "keyframes")
-            cpath = interpolate(keys, n_frames=max(2, int(round(seconds * fps))), fps=fps)
+            # the user posed the keyframes: their roll is theirs
+            cpath = interpolate(keys, n_frames=max(2, int(round(seconds * fps))), fps=fps, roll="keep")
             write_camera_path(out, cpath.cameras, fps=fps, seconds=seconds)
         logger.info("wrote %s (%d keyframes)", out, len(self.keyframes))
         return out
