@@ -749,7 +749,7 @@ def test_gif_keeps_colours_and_odd_sizes(tmp_path):
 
 def test_video_extension_must_be_known(tmp_path):
     from vibr.errors import VibrInputError
-    from vibr.io.video import read_video_info, write_video
+    from vibr.io.video import write_video
 
     with pytest.raises(VibrInputError, match=r"not a video extension \(one of .mp4, .mov, .mkv, .webm, .gif\)"):
         write_video(tmp_path / "a.avi", [np.zeros((8, 8, 3), np.uint8)], fps=24)
