@@ -121,7 +121,6 @@ def run_once(sources, target, measure_bw=False, **params):
     r = render_samples(S, "gradient", **params)
     total = time.perf_counter() - t0
     g = S.meta["times"]
-    n_iter = len(r.energy) - len(r.outer)
     out = {
         "depth preparation": g["depth"], "z-buffer (quad warps)": g["zbuffer"],
         "visibility": g["visibility"], "sample fields (warps, Jacobians)": g["assembly"],

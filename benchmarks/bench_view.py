@@ -613,9 +613,9 @@ def main(argv=None) -> int:
                   f"{f['warm']['first_full_s']:6.1f} s  (depth {f['warm']['depth_s']:.2f} s)", "< 10 s")]
         for label in ("cold", "warm"):
             print(f"\nfountain start, {label}: " + ", ".join(f"{k} {v:.2f} s" for k, v in f[label]["stages"].items()))
-            print(f"  process CPU seconds (all threads): " + ", ".join(f"{k} {v:.2f}" for k, v in f[label]["cpu"].items()))
+            print("  process CPU seconds (all threads): " + ", ".join(f"{k} {v:.2f}" for k, v in f[label]["cpu"].items()))
             print(f"  kernels compiled in that process (not loaded from numba's cache): {f[label]['compiled_at_start']}")
-    print(f"\n| measurement | median (spread) | target |\n|---|---|---|")
+    print("\n| measurement | median (spread) | target |\n|---|---|---|")
     for r in rows:
         print(f"| {r[0]} | {r[1].strip()} | {r[2]} |")
     print(f"\nload average after: {os.getloadavg()[0]:.1f}")

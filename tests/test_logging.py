@@ -35,7 +35,8 @@ def test_progress_off_a_terminal_logs_one_line(restore_vibr_logger):
 
 def test_a_long_stage_off_a_terminal_says_how_far_it_is(restore_vibr_logger, monkeypatch):
     """A stage past LONG_S logs its count and the time left, at most once per EVERY_S; a
-    short one stays one line (the test above)."""
+    short one stays one line (the test above). The time left is at the pace after the
+    first item: a first item slowed by compilation says nothing of the others."""
     import vibr.progress as P
 
     clock = [100.0]
@@ -48,10 +49,19 @@ def test_a_long_stage_off_a_terminal_says_how_far_it_is(restore_vibr_logger, mon
         bar.update(1)
     bar.close()
     lines = buf.getvalue().splitlines()
-    assert lines[0] == "leave-one-out: 1/81 in 7 min, about 8.9 h left"
-    assert lines[1] == "leave-one-out: 3/81 in 14 min, about 6.0 h left"
+    # no time left from the first item alone (it pays the start-up); then at the pace since
+    assert lines[0] == "leave-one-out: 1/81 in 7 min"
+    assert lines[1] == "leave-one-out: 3/81 in 14 min, about 4.7 h left"  # 215 s an item after the first
     assert lines[2].startswith("leave-one-out: 3/81 in 830.0 s") and len(lines) == 3
     assert P.duration_text(42) == "42 s" and P.duration_text(420) == "7 min"
+    # two items finishing together (side by side) are the first batch: the pace after them
+    buf.truncate(0), buf.seek(0)
+    bar = progress(total=6, desc="depth views")
+    for dt in (40.0, 0.1, 30.0, 30.0):  # 2 done at 40 s (start-up paid), then one every 30 s
+        clock[0] += dt
+        bar.update(1)
+    bar.close()
+    assert buf.getvalue().splitlines()[:2] == ["depth views: 1/6 in 40 s", "depth views: 4/6 in 2 min, about 60 s left"]
 
 
 def test_a_stage_inside_another_logs_at_debug(restore_vibr_logger):
@@ -82,9 +92,9 @@ def test_a_long_stage_inside_another_still_says_how_far_it_is(restore_vibr_logge
                 inner.update(1)
         outer.update(1)
     # the inner stage's count and time left (at most once a minute), not its end; the outer's both
-    assert buf.getvalue().splitlines() == ["plane sweep: 1/4 in 30 s, about 2 min left",
+    assert buf.getvalue().splitlines() == ["plane sweep: 1/4 in 30 s",
                                            "plane sweep: 3/4 in 2 min, about 30 s left",
-                                           "depth views: 1/2 in 2 min, about 2 min left",
+                                           "depth views: 1/2 in 2 min",
                                            "depth views: 1/2 in 120.0 s"]
 
 

@@ -231,7 +231,7 @@ def format_all_table(report: dict) -> str:
     for stat in ("mean", "median"):
         lines.append(f"{stat:<10}" + "".join(
             f" {s[lb]['psnr'][stat]:>{w - 8}.2f} / {s[lb]['dssim'][stat]:>5.0f}" for lb in labels))
-    lines.append(f"SSIM mean: " + ", ".join(f"{lb} {s[lb]['ssim']['mean']:.4f}" for lb in labels))
+    lines.append("SSIM mean: " + ", ".join(f"{lb} {s[lb]['ssim']['mean']:.4f}" for lb in labels))
     if any("ause" in s[lb] for lb in labels):  # --uncertainty
         lines.append("uncertainty AUSE mean (lower is better): "
                      + ", ".join(f"{lb} {s[lb]['ause']['mean']:.4f}" for lb in labels if "ause" in s[lb]))

@@ -13,7 +13,6 @@ or a bare :class:`Camera` (intrinsics, pose and size).
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterable, Union

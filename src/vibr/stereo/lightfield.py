@@ -176,7 +176,6 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     if ref not in pos:
         raise VibrInputError(f"view {scene.views[ref].name} is not on the light-field grid", scene.root)
     r0, c0 = pos[ref]
-    cam = cams[ref]
     others = [j for j in inputs if j != ref and j in pos]
     if not others:
         raise VibrInputError("light-field depth needs at least one other grid view", scene.root)
