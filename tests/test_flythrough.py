@@ -358,7 +358,9 @@ def test_interpolate_level_needs_an_up():
 @pytest.mark.parametrize("kind", ["orbit", "spiral"])
 def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
     """The scene's centre (where the cameras' axes meet) projects within the middle third
-    of every frame, in front of the camera; an orbit stays at the cameras' mean distance."""
+    of every frame, in front of the camera; an orbit stays at the cameras' mean distance.
+    The frame is the photographs' turned upright: templeSparseRing's, rolled by 90°, portrait
+    with the photographs' horizontal field of view as its vertical one."""
     from vibr import path as P
     from vibr.camera import axes_meeting_point
 
@@ -368,6 +370,12 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
     X = axes_meeting_point(cams)
     assert X is not None
     p = getattr(P, kind)(scene, n_frames=60)
+    c0 = cams[0]
+    if which == "temple":
+        assert (p.width, p.height) == (c0.height, c0.width)
+        assert p.cameras[0].K[1, 1] / p.height == pytest.approx(c0.K[0, 0] / c0.width)
+    else:
+        assert (p.width, p.height) == (c0.width, c0.height)
     for c in p.cameras:
         xy, z = c.project(X)
         assert z > 0

@@ -668,6 +668,15 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
                       {"kind": "interpolate", "views": names, "knots": t.tolist(), "roll": roll})
 
 
+def _upright_framing(cams, up, width, height, scale):
+    """Frame size and focal (``fy / H``, the cameras' mean) of the photographs turned upright
+    (:func:`orient_keys`, "snap"): the framing of an orbit or a spiral, which look with the
+    scene's up — portrait for photographs taken rolled by 90° (templeSparseRing's)."""
+    upright, _ = orient_keys(cams, "snap", up)
+    w, h = _output_size(upright, width, height, scale)
+    return w, h, float(np.mean([_vertical_focal(c) for c in upright]))
+
+
 def _angles_in_plane(V, e1, e2):
     return np.arctan2(V @ e2, V @ e1)
 
@@ -684,14 +693,16 @@ def orbit(scene, *, n_frames: int | None = None, seconds: float | None = None, f
     which this is the ring's radius) — ``full`` orbit —, and a circle at their mean
     horizontal distance swept back and forth over the arc they cover otherwise
     (``θ(s) = θ_mid + ½ span · sin 2πs``: nothing is rendered from where no camera looked;
-    ``full=True`` forces a full turn). Focal length: the cameras' mean ``fy / H``.
+    ``full=True`` forces a full turn). Focal length: the cameras' mean ``fy / H``, and the
+    frame size the first camera's, both of the photographs turned upright
+    (:func:`_upright_framing`).
     """
     cams = [v.camera for v in scene.views]
     _check_not_one_centre(scene, "an orbit")
     n = _frame_count(n_frames, seconds, fps)
-    w, h = _output_size(cams, width, height, scale)
     X = scene_centre(cams, scene_points(scene))
     up = scene_up(cams, X)
+    w, h, f_rel = _upright_framing(cams, up, width, height, scale)
     C = np.array([c.centre for c in cams]) - X
     height_ = float(np.mean(C @ up))
     V = C - np.outer(C @ up, up)
@@ -723,7 +734,6 @@ def orbit(scene, *, n_frames: int | None = None, seconds: float | None = None, f
         mid = lo + span / 2
         ang = mid + 0.5 * span * np.sin(2 * np.pi * s)
         rad_a = rad_b = float(np.mean(np.linalg.norm(V, axis=1))) * radius_scale
-    f_rel = float(np.mean([_vertical_focal(c) for c in cams]))
     out = []
     for t in ang:
         eye = X + height_ * up + rad_a * math.cos(t) * e1 + rad_b * math.sin(t) * e2
@@ -750,9 +760,9 @@ def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, 
     cams = [v.camera for v in scene.views]
     _check_not_one_centre(scene, "a spiral")
     n = _frame_count(n_frames, seconds, fps)
-    w, h = _output_size(cams, width, height, scale)
     X = scene_centre(cams, scene_points(scene))
     up = scene_up(cams, X)
+    w, h, f_rel = _upright_framing(cams, up, width, height, scale)
     C = np.array([c.centre for c in cams])
     Cm = C.mean(0)
     dist = float(np.mean(np.linalg.norm(C - X, axis=1)))
@@ -768,7 +778,6 @@ def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, 
         rad = np.percentile(np.abs(off), 90, axis=0) * radius_scale
     if not np.any(rad > 0):
         raise VibrInputError("the cameras share one centre: no spiral radius")
-    f_rel = float(np.mean([_vertical_focal(c) for c in cams]))
     out = []
     for th in np.linspace(0.0, 2 * np.pi * rots, n, endpoint=False):
         local = np.array([math.cos(th), -math.sin(th), -math.sin(th * zrate)]) * rad

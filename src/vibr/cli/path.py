@@ -50,7 +50,8 @@ def register(sub) -> None:
     p.add_argument("--frames", type=int, help="number of frames (default: --seconds x --fps)")
     p.add_argument("--seconds", type=float, default=None, help="duration in seconds (default 4 without --frames)")
     p.add_argument("--fps", type=float, default=24.0, help="frames per second (default 24)")
-    p.add_argument("--size", type=_size, metavar="WxH", help="frame size (default: the first view's, after --scale)")
+    p.add_argument("--size", type=_size, metavar="WxH", help="frame size (default: the first view's, after --scale; W and H swapped when its "
+                        "photograph is turned upright by a quarter turn, see --roll)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.25 (default 1)")
     p.add_argument("--views", type=names, help="interpolate: comma-separated views to pass through, in order (default: all)")
     p.add_argument("--order", choices=["given", "proximity"], default=None,
