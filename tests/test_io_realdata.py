@@ -107,6 +107,10 @@ def test_vibr_info_real_scenes(request, capsys, which, args):
     assert "views" in out and "format" in out
     if which == "cotton_dir":
         assert "9x9 grid" in out and "input_Cam040: 100.0% known" in out
+    # templeSparseRing's photographs are rolled (a path turns them upright) and two share a pose
+    rolled = "rolled   16 of 16 photographs not upright (to turn clockwise: 5 by 90°, 11 by 270°)"
+    assert (rolled in out) == (which == "temple_dir")
+    assert ("poses    the same pose: templeSR0001 = templeSR0011" in out) == (which == "temple_dir")
 
 
 def test_strecha_cameras_beside_images_named_after_pngs(fountain_dir, tmp_path, fountain):

@@ -12,8 +12,9 @@ Load a scene (format detected: HCI light field, Strecha, Middlebury *_par.txt,
 nerfstudio/instant-NGP transforms.json, COLMAP sparse model) and print a summary: format,
 number and size of views, light-field grid, depth coverage and range, sparse points, and one
 line per camera (focal lengths and principal point in pixels with the centre of the top-left
-pixel at (0,0); camera centre in scene units). Use it to check that a dataset loads before
-rendering. Only the images' headers are read (their sizes), not their pixels.
+pixel at (0,0); camera centre in scene units), and photographs taken rolled or sharing a
+pose (which a fly-through path turns upright or leaves out). Use it to check that a dataset
+loads before rendering. Only the images' headers are read (their sizes), not their pixels.
 """
 
 _EPILOG = """\
@@ -68,6 +69,7 @@ def describe(scene) -> str:
         extra.append(f"lens     {m['undistorted']}")
     if m.get("depth_source"):
         extra.append(f"depth    from {m['depth_source']}")
+    extra += _pose_lines(scene)
     for v in scene.views:
         if v.depth is not None:
             known = np.isfinite(v.depth)
@@ -79,6 +81,39 @@ def describe(scene) -> str:
     if extra:
         lines += [""] + extra
     return "\n".join(lines)
+
+
+def _pose_lines(scene) -> list:
+    """Photographs taken rolled (the quarter turns a path gives them, vibr.path.orient_keys)
+    and views with the same pose as another (a path leaves them out)."""
+    import numpy as np
+
+    from ..errors import VibrInputError
+    from ..path import orient_keys, scene_up
+
+    cams = [v.camera for v in scene.views]
+    out = []
+    if len(cams) >= 2:
+        try:
+            _, turns = orient_keys(cams, "snap", scene_up(cams))
+        except VibrInputError:  # no common up
+            turns = []
+        by = {90 * k: sum(1 for t in turns if t == k) for k in (1, 2, 3)}
+        if any(by.values()):
+            out.append(f"rolled   {sum(by.values())} of {len(cams)} photographs not upright (to turn clockwise: "
+                       + ", ".join(f"{n} by {a}°" for a, n in by.items() if n)
+                       + "); 'vibr path' turns them upright (--roll)")
+    C = np.array([c.centre for c in cams])
+    size = max(float(np.ptp(C, axis=0).max()) if len(C) else 0.0, 1e-12)
+    key = np.round(np.hstack([C / size, np.array([c.R.ravel() for c in cams])]) * 1e9) if len(C) else C
+    seen: dict = {}
+    for v, k in zip(scene.views, map(bytes, key.astype(np.int64)) if len(C) else []):
+        seen.setdefault(k, []).append(v.name)
+    same = [names_ for names_ in seen.values() if len(names_) > 1]
+    if same:
+        out.append("poses    the same pose: " + "; ".join(" = ".join(g) for g in same[:6])
+                   + ("; ..." if len(same) > 6 else ""))
+    return out
 
 
 def run(args) -> int:
