@@ -43,7 +43,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
            "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED", "PATH_KINDS",
-           "ROLL_MODES", "orient_keys"]
+           "ROLL_MODES", "orient_keys", "turns_text"]
 
 PATH_KINDS = ("interpolate", "orbit", "spiral")
 
@@ -578,12 +578,16 @@ def _oriented(cams, roll, X):
         logger.debug("interpolate: no common up, the cameras' own orientations kept")
         return cams
     out, turns = orient_keys(cams, roll, up)
-    by = {90 * k: sum(1 for j in turns if j == k) for k in (1, 2, 3)}
-    if any(by.values()):
+    if any(turns):
         logger.info("interpolate: %d of %d key cameras turned to the scene's up (clockwise: %s; roll 'keep' "
-                    "leaves them as photographed)", sum(by.values()), len(cams),
-                    ", ".join(f"{n} by {a}°" for a, n in by.items() if n))
+                    "leaves them as photographed)", sum(1 for k in turns if k), len(cams), turns_text(turns))
     return out
+
+
+def turns_text(turns) -> str:
+    """``"5 by 90°, 11 by 270°"``: how many cameras :func:`orient_keys` turned by each angle."""
+    by = {90 * k: sum(1 for j in turns if j == k) for k in (1, 2, 3)}
+    return ", ".join(f"{n} by {a}°" for a, n in by.items() if n)
 
 
 def _distinct_keys(cams, names, X):

@@ -89,7 +89,7 @@ def _pose_lines(scene) -> list:
     import numpy as np
 
     from ..errors import VibrInputError
-    from ..path import orient_keys, scene_up
+    from ..path import orient_keys, scene_up, turns_text
 
     cams = [v.camera for v in scene.views]
     out = []
@@ -98,11 +98,9 @@ def _pose_lines(scene) -> list:
             _, turns = orient_keys(cams, "snap", scene_up(cams))
         except VibrInputError:  # no common up
             turns = []
-        by = {90 * k: sum(1 for t in turns if t == k) for k in (1, 2, 3)}
-        if any(by.values()):
-            out.append(f"rolled   {sum(by.values())} of {len(cams)} photographs not upright (to turn clockwise: "
-                       + ", ".join(f"{n} by {a}°" for a, n in by.items() if n)
-                       + "); 'vibr path' turns them upright (--roll)")
+        if any(turns):
+            out.append(f"rolled   {sum(1 for k in turns if k)} of {len(cams)} photographs not upright (to turn "
+                       f"clockwise: {turns_text(turns)}); 'vibr path' turns them upright (--roll)")
     C = np.array([c.centre for c in cams])
     size = max(float(np.ptp(C, axis=0).max()) if len(C) else 0.0, 1e-12)
     key = np.round(np.hstack([C / size, np.array([c.R.ravel() for c in cams])]) * 1e9) if len(C) else C
