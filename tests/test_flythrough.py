@@ -341,6 +341,24 @@ def test_interpolate_snap_turns_a_rolled_key_back(arc_scene):
         interpolate(arc_scene, n_frames=3, roll="upright")
 
 
+def test_interpolate_through_a_portrait_photograph_keeps_the_focal(arc_scene):
+    """A portrait photograph among landscape ones, taken with the same lens (the same focal
+    in pixels, the phone turned): the path keeps that focal; relative to each photograph's
+    height it zoomed out by 4:3 at that key and back in (fy / H: 0.75 f there)."""
+    from vibr.path import interpolate
+    from vibr.scene import Scene, View
+
+    def portrait(c):
+        K = Camera.intrinsics(c.K[0, 0], c.height, c.width)
+        return Camera(K, c.R, c.t, c.height, c.width)
+
+    views = [View(v.name, None, portrait(v.camera) if i == 2 else v.camera) for i, v in enumerate(arc_scene.views)]
+    p = interpolate(Scene(views), n_frames=60)
+    f = [c.K[1, 1] for c in p.cameras]
+    assert (p.width, p.height) == (64, 48)
+    assert np.allclose(f, arc_scene.views[0].camera.K[1, 1], rtol=1e-9)
+
+
 def test_interpolate_level_needs_an_up():
     """Cameras whose up directions cancel out (half of them upside down, side by side): the
     default keeps them; "level" says why it cannot."""

@@ -467,9 +467,13 @@ def _look_at(eye, target, up, f_rel, w, h) -> Camera:
     return Camera.look_at(eye, target, up, K, w, h)
 
 
-def _vertical_focal(cam: Camera) -> float:
-    """Focal length relative to the image height (fy / H): what a resize keeps."""
-    return float(cam.K[1, 1]) / cam.height
+def _vertical_focal(cam: Camera, w: int, h: int) -> float:
+    """Focal length relative to the image height (fy / H: what a resize keeps) for a frame of
+    w×h; relative to the photograph's width when its orientation is not the frame's (a
+    portrait photograph in a landscape path): then the focal in pixels is kept, where fy / H
+    would zoom out by the aspect ratio at that key (4:3: 1.33×) and back in after it."""
+    other = (cam.width > cam.height and h > w) or (cam.height > cam.width and w > h)
+    return float(cam.K[1, 1]) / (cam.width if other else cam.height)
 
 
 # ----------------------------------------------------------------------------- generators
@@ -617,7 +621,8 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     (``scipy.interpolate.CubicSpline``, C² with zero end curvature); orientations:
     ``scipy.spatial.transform.RotationSpline`` (rotation vectors between consecutive keys
     cubic in t, angular rate and acceleration continuous: C²); the vertical focal length
-    (relative to the image height): a natural cubic spline. Frames are ``n_frames`` equal
+    (relative to the image height, or to the width for a photograph of the other
+    orientation than the frame: :func:`_vertical_focal`): a natural cubic spline. Frames are ``n_frames`` equal
     steps of t from the first key to the last, so a key camera is never repeated.
 
     Parameters
@@ -660,7 +665,7 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     rots = Rotation.from_matrix(np.array([c.R.T for c in cams]))  # camera-to-world
     pos = CubicSpline(t, C, bc_type="natural")
     rot = RotationSpline(t, rots)
-    foc = CubicSpline(t, [_vertical_focal(c) for c in cams], bc_type="natural")
+    foc = CubicSpline(t, [_vertical_focal(c, w, h) for c in cams], bc_type="natural")
     ts = np.linspace(t[0], t[-1], n) if n > 1 else t[:1]
     Rc2w = rot(ts).as_matrix()
     P, F = pos(ts), foc(ts)
@@ -678,7 +683,7 @@ def _upright_framing(cams, up, width, height, scale):
     scene's up — portrait for photographs taken rolled by 90° (templeSparseRing's)."""
     upright, _ = orient_keys(cams, "snap", up)
     w, h = _output_size(upright, width, height, scale)
-    return w, h, float(np.mean([_vertical_focal(c) for c in upright]))
+    return w, h, float(np.mean([_vertical_focal(c, w, h) for c in upright]))
 
 
 def _angles_in_plane(V, e1, e2):
