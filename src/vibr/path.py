@@ -517,6 +517,11 @@ def _key_steps(cams, X):
     return np.linalg.norm(np.diff(C, axis=0), axis=1) + r * (rots[:-1].inv() * rots[1:]).magnitude(), r
 
 
+def _check_roll(roll: str) -> None:
+    if roll not in ROLL_MODES:
+        raise VibrInputError(f"roll must be one of {', '.join(ROLL_MODES)}, got {roll!r}")
+
+
 def _quarter_turns(cam: Camera, up: np.ndarray) -> int | None:
     """The quarter turns k (0–3, :meth:`Camera.turned`) after which the camera's image up
     (its −y axis) is nearest to ``up``; None when it looks within
@@ -548,8 +553,7 @@ def orient_keys(cameras, roll: str, up) -> tuple[list, list]:
     video by up to 180° between two neighbours; "snap" turns such a key by whole quarter
     turns (the frame at the key is its photograph, turned), "level" also removes the rest
     of the roll (the frame at the key is the photograph turned by a few degrees too)."""
-    if roll not in ROLL_MODES:
-        raise VibrInputError(f"roll must be one of {', '.join(ROLL_MODES)}, got {roll!r}")
+    _check_roll(roll)
     cams = list(cameras)
     if roll == "keep":
         return cams, [0] * len(cams)
@@ -569,8 +573,7 @@ def orient_keys(cameras, roll: str, up) -> tuple[list, list]:
 
 def _oriented(cams, roll, X):
     """:func:`orient_keys` with the scene's up; with no common up, "snap" keeps the cameras."""
-    if roll not in ROLL_MODES:
-        raise VibrInputError(f"roll must be one of {', '.join(ROLL_MODES)}, got {roll!r}")
+    _check_roll(roll)
     if roll == "keep":
         return cams
     try:
