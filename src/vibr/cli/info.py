@@ -92,22 +92,23 @@ def _pose_lines(scene) -> list:
     from ..path import orient_keys, scene_up, turns_text
 
     cams = [v.camera for v in scene.views]
+    if len(cams) < 2:
+        return []
     out = []
-    if len(cams) >= 2:
-        try:
-            _, turns = orient_keys(cams, "snap", scene_up(cams))
-        except VibrInputError:  # no common up
-            turns = []
-        if any(turns):
-            out.append(f"rolled   {sum(1 for k in turns if k)} of {len(cams)} photographs not upright (to turn "
-                       f"clockwise: {turns_text(turns)}); 'vibr path' turns them upright (--roll)")
+    try:
+        _, turns = orient_keys(cams, "snap", scene_up(cams))
+    except VibrInputError:  # no common up
+        turns = []
+    if any(turns):
+        out.append(f"rolled   {sum(1 for k in turns if k)} of {len(cams)} photographs not upright (to turn "
+                   f"clockwise: {turns_text(turns)}); 'vibr path' turns them upright (--roll)")
     C = np.array([c.centre for c in cams])
-    size = max(float(np.ptp(C, axis=0).max()) if len(C) else 0.0, 1e-12)
-    key = np.round(np.hstack([C / size, np.array([c.R.ravel() for c in cams])]) * 1e9) if len(C) else C
-    seen: dict = {}
-    for v, k in zip(scene.views, map(bytes, key.astype(np.int64)) if len(C) else []):
-        seen.setdefault(k, []).append(v.name)
-    same = [names_ for names_ in seen.values() if len(names_) > 1]
+    size = max(float(np.ptp(C, axis=0).max()), 1e-12)
+    keys = np.round(np.hstack([C / size, [c.R.ravel() for c in cams]]) * 1e9).astype(np.int64)
+    groups: dict = {}
+    for v, k in zip(scene.views, keys):
+        groups.setdefault(k.tobytes(), []).append(v.name)
+    same = [g for g in groups.values() if len(g) > 1]
     if same:
         out.append("poses    the same pose: " + "; ".join(" = ".join(g) for g in same[:6])
                    + ("; ..." if len(same) > 6 else ""))
