@@ -415,7 +415,9 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
     ("v.mp4", ["--crf", "99"], "crf must be in 0..51"),
     ("v.gif", ["--crf", "30"], "--crf does not apply to a GIF"),  # was ignored without a word
     ("v.avi", [], "-o is a video (.mp4, .mov, .mkv, .webm, .gif) or a folder"),
-    ("frames", ["--uncertainty", "u.png"], "--uncertainty does not apply to --path"),
+    ("frames", ["--uncertainty", "u.png"], "with --path, --uncertainty is a video (.mp4, .mov, .mkv, .webm, .gif)"),
+    ("v.mp4", ["--uncertainty", "v.mp4"], "the σ video must not be the frames' video"),
+    ("v.mp4", ["--uncertainty", "u.mp4", "--crf", "60"], "crf must be in 0..51"),
     ("frames", ["--bit-depth", "16"], "--bit-depth does not apply to --path"),
 ])
 def test_bad_render_path_options_are_refused_before_any_frame(grid_dir, tmp_path, capsys, out, extra, msg):
@@ -424,6 +426,7 @@ def test_bad_render_path_options_are_refused_before_any_frame(grid_dir, tmp_path
     pj = tmp_path / "p.json"
     assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "2", "-q"]) == 0
     capsys.readouterr()
+    extra = [str(tmp_path / a) if a.endswith((".mp4", ".png")) else a for a in extra]
     assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(tmp_path / out), "-q", *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err
@@ -612,6 +615,76 @@ def test_hand_written_nerfstudio_camera_renders_like_camera_json(grid_dir, tmp_p
     a = read_image(tmp_path / "c.png")
     b = read_image(tmp_path / "fr" / "frame_00000.png")
     assert np.abs(a - b).max() <= 1 / 255 + 1e-6
+
+
+def test_path_uncertainty_video_on_one_scale(grid_dir, tmp_path, capsys):
+    """``--uncertainty fly_sigma.mp4`` with a path: a video of every frame's σ map, each
+    frame colour-mapped on the one scale of the whole path (decoded back: the σ frame of
+    a frame is its map through that scale, within H.264's rounding); the colour frames are
+    the ones rendered without it (bit for bit); a rerun renders nothing, but frames written
+    without σ are rendered again for it."""
+    import imageio.v3 as iio
+
+    from vibr.cli import main
+    from vibr.flythrough import sigma_name
+    from vibr.io.video import read_video_info
+    from vibr.uncertainty_figures import sigma_figure
+
+    pj = tmp_path / "o.json"
+    assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "6", "--size", "48x32", "-q"]) == 0
+    plain = tmp_path / "plain.mp4"
+    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(plain), "--views", "4", "-q"]) == 0
+    out, sig = tmp_path / "o.mp4", tmp_path / "o_sigma.mp4"
+    args = ["render", str(grid_dir), "--path", str(pj), "-o", str(out), "--views", "4", "--uncertainty", str(sig)]
+    capsys.readouterr()
+    assert main(args) == 0
+    txt = capsys.readouterr().out
+    vmax = float(txt.split("(sigma of every frame, 0 to ")[1].split(" grey levels")[0])
+    n, w, h = read_video_info(sig)[:3]
+    assert (n, w) == (6, 48) and h > 32  # the map above its scale bar
+    fdir = tmp_path / "o_frames"
+    for i in range(6):
+        a, b = iio.imread(fdir / f"frame_{i:05d}.png"), iio.imread(tmp_path / "plain_frames" / f"frame_{i:05d}.png")
+        assert np.array_equal(a, b)
+    decoded = iio.imread(sig, index=None)
+    maps = [np.load(fdir / sigma_name(i))["sigma"].astype(np.float32) for i in range(6)]
+    for i in (0, 3, 5):
+        want = sigma_figure(maps[i], vmax)[:32].astype(float)
+        assert np.abs(decoded[i][:32].astype(float) - want).mean() < 10.0  # 4:2:0 chroma on 48×32
+    assert main(args) == 0
+    assert "rendered 0 frames (6 already there)" in capsys.readouterr().out
+    # the plain run's frames have no σ: asked for it, they are rendered again
+    assert main(["render", str(grid_dir), "--path", str(pj), "-o", str(plain), "--views", "4", "-q",
+                 "--uncertainty", str(tmp_path / "p_sigma.webm")]) == 0
+    assert "rendered 6 frames (0 already there)" in capsys.readouterr().out
+
+
+def test_sigma_video_has_one_scale_for_all_frames(tmp_path):
+    """Three σ maps of different ranges: every frame of the video is drawn on the scale of
+    all of them (0 to the 99th percentile of every frame's values, rounded up), not on its
+    own, so that a colour means the same σ in every frame; NaN (no value) as the top."""
+    import imageio.v3 as iio
+
+    from vibr.flythrough import _write_sigma_frame, write_sigma_video
+    from vibr.uncertainty_figures import sigma_figure
+
+    ramp = np.linspace(0, 1, 64 * 48).reshape(48, 64)
+    maps = [ramp * 1.0, ramp * 5.0, ramp * 20.0]
+    maps[0][:4, :4] = np.nan
+    paths = []
+    for i, m in enumerate(maps):
+        paths.append(tmp_path / f"s{i}.npz")
+        _write_sigma_frame(paths[-1], m, "k")
+    n, w, h, vmax = write_sigma_video(paths, tmp_path / "s.mp4", fps=24)
+    assert (n, w) == (3, 64) and vmax == 20.0  # 99th percentile of all: 19.6 → 20
+    decoded = iio.imread(tmp_path / "s.mp4", index=None)
+    for i, m in enumerate(maps):
+        want = sigma_figure(m.astype(np.float16).astype(np.float32), 20.0)[:48].astype(float)
+        own = sigma_figure(m.astype(np.float16).astype(np.float32))[:48].astype(float)
+        err = np.abs(decoded[i][:48].astype(float) - want).mean()
+        assert err < 4.0, err
+        if i < 2:  # its own scale would have drawn it otherwise
+            assert np.abs(own - want).mean() > 4 * err
 
 
 def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):

@@ -166,6 +166,20 @@ def test_sigma_ranks_the_errors_of_a_planar_proxy(grid):
 
 
 # ----------------------------------------------------------------------------- CLI
+def test_sigma_scale_leaves_the_holes_out():
+    """The colour scale of a σ figure spans the pixels the sources reach: holes (σ_hole, a
+    third of this map, also stored as float16) would otherwise make it 0–100 and put the
+    rest, 0–10, in the bottom tenth of the colours."""
+    from vibr.render.uncertainty import hole_sigma
+    from vibr.uncertainty_figures import sigma_scale
+
+    m = np.linspace(0.0, 9.9, 3000)
+    m[:1000] = np.float16(hole_sigma())
+    assert sigma_scale(m) == 10.0
+    assert sigma_scale(np.full(10, hole_sigma())) == 100.0  # only holes: σ_hole, rounded up
+    assert sigma_scale([np.nan]) == 100.0
+
+
 def test_cli_render_writes_uncertainty_png_and_npy(tmp_path, capsys):
     import imageio.v3 as iio
 

@@ -23,6 +23,10 @@ Per frame (:func:`render_frame`, a top-level function of ``(context, frame index
    with a key (:func:`frame_key`: the camera, the sources, the method and its parameters,
    vibr's code) in a text chunk. A frame already there with the same key is skipped unless
    ``overwrite``; one rendered for another path or other settings is rendered again.
+4. with ``uncertainty``, the frame's σ map (:mod:`vibr.render.uncertainty`, grey levels)
+   as ``sigma_NNNNN.npz`` beside it (float16, with the frame's key); the σ video is drawn
+   once every frame is there, on one colour scale for the whole path
+   (:func:`write_sigma_video`), so that its colours mean the same in every frame.
 
 Work that does not depend on the frame is done once (:func:`prepare_sources`): the scene,
 the sources' depth, the world points of every source used to rank views (a strided
@@ -49,9 +53,14 @@ from .scene import Scene
 logger = logging.getLogger(__name__)
 
 __all__ = ["FrameContext", "FlyResult", "render_path", "render_frame", "view_weights", "auto_executor",
-           "frame_name", "check_path_sees_scene"]
+           "frame_name", "sigma_name", "check_path_sees_scene", "write_sigma_video"]
 
 FRAME_PATTERN = "frame_{:05d}.png"
+SIGMA_PATTERN = "sigma_{:05d}.npz"
+
+
+def sigma_name(i: int) -> str:
+    return SIGMA_PATTERN.format(i)
 
 
 def frame_name(i: int) -> str:
@@ -81,6 +90,7 @@ class FrameContext:
     view_points: list = field(default_factory=list)  # per source: (N_k, 3) world points
     prepared: dict = field(default_factory=dict)  # per source: prepare_depth's (z, z_x, z_y)
     job_key: str = ""  # what every frame depends on besides its camera (:func:`job_key`)
+    uncertainty: bool = False  # also each frame's σ map (sigma_NNNNN.npz)
 
     def __post_init__(self):
         # the optional sample fields the method reads (the footprint PSF's Jacobians), once
@@ -160,7 +170,43 @@ def frame_done(ctx: FrameContext, i: int, key: str | None = None) -> bool:
     from .io.images import read_png_text
 
     key = frame_key(ctx, i) if key is None else key
-    return read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) == key
+    if read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) != key:
+        return False
+    return not ctx.uncertainty or _sigma_key(os.path.join(ctx.frames_dir, sigma_name(i))) == key
+
+
+def _sigma_key(path) -> str | None:
+    """The frame key stored with a σ map, None when there is none (or no readable file)."""
+    try:
+        with np.load(path) as z:
+            return str(z["key"])
+    except (OSError, KeyError, ValueError, EOFError):
+        return None
+
+
+def _write_sigma_frame(path, sigma, key: str) -> None:
+    from .io.atomic import atomic_path
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, sigma=np.asarray(sigma, np.float16), key=np.array(key))
+
+
+def write_sigma_video(paths, out, *, fps: float, crf: int = 18) -> tuple[int, int, int, float]:
+    """The σ maps of a path's frames (``sigma_NNNNN.npz``) as a video, each frame colour-mapped
+    with a scale bar (:func:`vibr.uncertainty_figures.sigma_figure`) on one scale for all:
+    :func:`vibr.uncertainty_figures.sigma_scale` of every frame's σ (0 to their 99th
+    percentile below σ_hole, rounded up). Returns ``(n_frames, width, height, vmax)``."""
+    from .io.video import write_video
+    from .uncertainty_figures import sigma_figure, sigma_scale
+
+    def load(p):
+        with np.load(p) as z:
+            return z["sigma"].astype(np.float32)
+
+    # the scale from every frame (a strided sample of each: the maps are not all held at once)
+    vmax = sigma_scale(np.concatenate([load(p)[::4, ::4].ravel() for p in paths]) if paths else [])
+    n, w, h = write_video(out, (sigma_figure(load(p), vmax) for p in paths), fps=fps, crf=crf)
+    return n, w, h, vmax
 
 
 def _smoothstep(x):
@@ -232,8 +278,10 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     if np.any(ws < 1.0):
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
-                         target_centre=cam.centre, **ctx.params)
+                         target_centre=cam.centre, uncertainty=ctx.uncertainty, **ctx.params)
     tm["render"] = -t + (t := time.perf_counter())
+    if ctx.uncertainty:  # first: a colour frame on disk with its key says the frame is done
+        _write_sigma_frame(os.path.join(ctx.frames_dir, sigma_name(i)), res.uncertainty, key)
     write_image(out, res.image, bits=8, text={FRAME_KEY: key})
     tm["write"] = time.perf_counter() - t
     tm.update({f"geometry: {k}": v for k, v in samples.meta.get("times", {}).items()})
@@ -258,6 +306,8 @@ class FlyResult:
     video: str | None
     video_frames: int | None = None
     video_size: tuple | None = None
+    sigma_video: str | None = None  # the σ video (uncertainty) and the top of its colour scale
+    sigma_vmax: float | None = None
     depth_source: str = ""
     times: dict = field(default_factory=dict)
     frames: list = field(default_factory=list)
@@ -353,7 +403,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
                 depth: str = "auto", estimate_kw: dict | None = None, cache_dir=None,
                 exclude=(), frames_dir=None, crf: int = 18, fps: float | None = None,
                 blend: float = 0.25, geometry_kw: dict | None = None, progress: bool = True,
-                check_scene: bool = True) -> FlyResult:
+                check_scene: bool = True, uncertainty=None) -> FlyResult:
     """Render every camera of ``camera_path`` from ``scene`` to numbered PNGs and a video.
 
     Parameters
@@ -378,9 +428,13 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     crf, fps : video quality and frame rate (default the path's).
     blend : width of the weight transition (relative to the penalty threshold).
     progress : a bar per frame (on a terminal, :func:`vibr.progress.progress`).
+    uncertainty : path, optional
+        A video (same formats as ``out``) of each frame's σ map (:mod:`vibr.render.uncertainty`,
+        grey levels of 255, colour-mapped on one scale for the whole path with its scale
+        bar: :func:`write_sigma_video`); the maps stay in the frames folder as
+        ``sigma_NNNNN.npz``.
     """
     from .depthcache import scene_with_depth
-    from .io.video import write_video
     from .render.methods import METHODS
 
     t_start = time.perf_counter()
@@ -395,10 +449,15 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     # frames among the photographs would become views of an image-folder scene (Strecha)
     check_not_input(fdir, [v.path for v in scene.views if v.path] + ([scene.root] if scene.root else []))
     fps = camera_path.fps if fps is None else fps
-    if video is not None:
-        from .io.video import check_video_options
+    from .io.video import VIDEO_FORMATS, check_video_options, is_video
 
-        check_video_options(video, fps=fps, crf=crf)  # before any frame is rendered
+    if uncertainty is not None and not is_video(uncertainty):
+        raise VibrInputError(f"the σ output of a path is a video ({', '.join(VIDEO_FORMATS)})", os.fspath(uncertainty))
+    for v in (video, uncertainty):
+        if v is not None:
+            check_video_options(v, fps=fps, crf=crf)  # before any frame is rendered
+    if uncertainty is not None and video is not None and Path(uncertainty).resolve() == video.resolve():
+        raise VibrInputError("the σ video must not be the frames' video", uncertainty)
     cams = list(camera_path.cameras)
     if check_scene:
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
@@ -412,7 +471,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
     ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,
-                       overwrite, dict(geometry_kw or {}))
+                       overwrite, dict(geometry_kw or {}), uncertainty=uncertainty is not None)
     prepare_sources(ctx)
     t_first = time.perf_counter() - t_start
     t0 = time.perf_counter()
@@ -422,19 +481,27 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     rendered = sum(not f["skipped"] for f in frames)
     res = FlyResult(len(cams), rendered, len(cams) - rendered, str(fdir), None,
                     depth_source=sources.meta.get("depth_source", ""), frames=frames, engine=engine)
-    t_video = 0.0
-    if video is not None:
-        from .io import read_image
-
-        t0 = time.perf_counter()
-        paths = [fdir / frame_name(i) for i in range(len(cams))]
-        n, w, h = write_video(video, (read_image(p) for p in paths), fps=fps, crf=crf)
-        t_video = time.perf_counter() - t0
-        res.video, res.video_frames, res.video_size = str(video), n, (w, h)
+    t0 = time.perf_counter()
+    _write_videos(res, fdir, len(cams), video, uncertainty, fps, crf)
+    t_video = time.perf_counter() - t0
     res.times = {"depth": t_depth, "to_first_frame": t_first, "frames": t_frames, "video": t_video,
                  "total": time.perf_counter() - t_start,
                  "depth_source_time": sources.meta.get("depth_time_s", t_depth)}
     return res
+
+
+def _write_videos(res: FlyResult, fdir: Path, n: int, video, uncertainty, fps: float, crf: int) -> None:
+    """The frames' video and the σ video, when asked, into ``res``."""
+    from .io import read_image
+    from .io.video import write_video
+
+    if video is not None:
+        paths = [fdir / frame_name(i) for i in range(n)]
+        k, w, h = write_video(video, (read_image(p) for p in paths), fps=fps, crf=crf)
+        res.video, res.video_frames, res.video_size = str(video), k, (w, h)
+    if uncertainty is not None:
+        *_, vmax = write_sigma_video([fdir / sigma_name(i) for i in range(n)], uncertainty, fps=fps, crf=crf)
+        res.sigma_video, res.sigma_vmax = str(uncertainty), vmax
 
 
 def _check_frames_rendered(frames: list, fdir, source) -> None:

@@ -11,7 +11,7 @@ import numpy as np
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["colourise", "sigma_figure", "write_sigma", "sparsification_plot", "write_sparsification_figure"]
+__all__ = ["colourise", "sigma_scale", "sigma_figure", "write_sigma", "sparsification_plot", "write_sparsification_figure"]
 
 #: viridis (matplotlib's perceptually uniform map, CC0), 9 anchors from 0 to 1
 _VIRIDIS = np.array([
@@ -42,16 +42,30 @@ def _nice_ceiling(x: float) -> float:
     return float(10 * e)
 
 
+def sigma_scale(values, scale: float = 255.0) -> float:
+    """Top of the colour scale of σ maps (grey levels of ``scale``): the 99th percentile of
+    the finite σ below σ_hole (:func:`vibr.render.uncertainty.hole_sigma`, the σ of pixels no
+    source reaches, drawn at the top whatever the scale), rounded up to 1, 2, 2.5 or 5 × 10^k.
+
+    Holes are left out because they would set the scale by themselves: on fountain's
+    fly-through 7 % of a frame's pixels are holes, the 99th percentile of all pixels is σ_hole
+    (73.6) and the σ of the pixels the sources reach (median 7, 90th percentile 18) took the
+    bottom tenth of the colours."""
+    from .render.uncertainty import hole_sigma
+
+    v = np.asarray(values, np.float64).ravel()
+    v = v[np.isfinite(v) & (v < 0.999 * hole_sigma(scale))]  # σ_hole, also as float16
+    return _nice_ceiling(float(np.percentile(v, 99)) if v.size else hole_sigma(scale))
+
+
 def sigma_figure(sigma, vmax: float | None = None, label: str = "sigma, grey levels") -> np.ndarray:
     """σ map (H, W) → RGB uint8 image: the colour-mapped map above a horizontal scale bar
-    (0 to ``vmax``; default the 99th percentile of the finite values rounded up to 1, 2, 2.5
-    or 5 × 10^k) with the caption ``label``."""
+    (0 to ``vmax``, default :func:`sigma_scale`) with the caption ``label``."""
     from PIL import Image, ImageDraw
 
     s = np.asarray(sigma, np.float64)
-    fin = s[np.isfinite(s)]
     if vmax is None:
-        vmax = _nice_ceiling(float(np.percentile(fin, 99)) if fin.size else 1.0)
+        vmax = sigma_scale(s)
     H, W = s.shape
     bar_h = max(40, H // 12)
     img = Image.new("RGB", (W, H + bar_h), (255, 255, 255))

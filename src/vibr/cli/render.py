@@ -53,9 +53,10 @@ def register(sub) -> None:
                    help="image scale the scene is loaded at, e.g. 0.5; a camera-file target is scaled "
                         "with it (default 1)")
     _add_path_options(p)
-    p.add_argument("--uncertainty", metavar="OUT_STD.png|.npy",
+    p.add_argument("--uncertainty", metavar="OUT_STD.png|.npy|VIDEO",
                    help="also write the per-pixel standard deviation (grey levels of 255): a colour-mapped "
-                        "PNG with a scale bar, or the raw float32 array (.npy)")
+                        "PNG with a scale bar, or the raw float32 array (.npy); with --path a video of every "
+                        "frame's, on one colour scale")
     add_quiet(p)
     p.set_defaults(func=run)
 
@@ -166,6 +167,7 @@ def _refuse_path_options(args) -> None:
 def _run_path(args) -> int:
     """``--path``: a thin layer over :func:`vibr.flythrough.render_path`."""
     from ..errors import VibrInputError
+    from ..io.outputs import check_output
     from ..depthcache import load_scene_cached
     from ..flythrough import render_path
     from ..path import read_camera_path, scene_processing_transform
@@ -176,11 +178,16 @@ def _run_path(args) -> int:
     if not (is_video(out) or not os.path.splitext(out)[1]):
         raise VibrInputError(f"with --path, -o is a video ({', '.join(VIDEO_FORMATS)}) or a folder for the frames",
                              out)
-    for flag in ("sources", "depth_files", "uncertainty", "bit_depth"):  # frames are 8-bit colour only
+    for flag in ("sources", "depth_files", "bit_depth"):  # frames are 8-bit colour only
         if getattr(args, flag, None):
             raise VibrInputError(f"--{flag.replace('_', '-')} does not apply to --path")
     if args.depth not in ("auto", "gt", "given", "estimated"):
         raise VibrInputError(f"--depth {args.depth} does not apply to --path (auto, gt or estimated)")
+    if args.uncertainty:
+        if not is_video(args.uncertainty):
+            raise VibrInputError(f"with --path, --uncertainty is a video ({', '.join(VIDEO_FORMATS)})",
+                                 args.uncertainty)
+        check_output(args.uncertainty, "file", overwrite=True, what="--uncertainty")
     applied, applied_scale = (scene_processing_transform(args.scene) if args.dataparser_transforms
                               else (None, 1.0))
     cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
@@ -193,7 +200,8 @@ def _run_path(args) -> int:
                       n_views=8 if args.views is None else args.views, params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
-                      crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor)
+                      crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor,
+                      uncertainty=args.uncertainty or None)
     t = res.times
     what = f"{res.video} ({count(res.video_frames, 'frame')}, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
@@ -201,4 +209,6 @@ def _run_path(args) -> int:
     print(f"rendered {count(res.rendered, 'frame')} ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}"
           f"{per}; total {t['total']:.1f} s (depth: {res.depth_source} "
           f"({t['depth']:.1f} s); video {t['video']:.1f} s); wrote {what}")
+    if res.sigma_video:
+        print(f"wrote {res.sigma_video} (sigma of every frame, 0 to {res.sigma_vmax:g} grey levels)")
     return 0
