@@ -516,3 +516,39 @@ def test_a_camera_that_sees_nothing_is_said_in_the_panel(tiny_scene, monkeypatch
     v._render_for(client, Request(1, 0.0, (app.CameraState.of(cam), v.settings)), "full")
     assert v.gui["status"].content.startswith("nothing to render from here: ")
     assert not v.sent.get(3)
+
+
+def test_the_viewer_shows_where_the_render_can_be_trusted(tiny_scene, monkeypatch):
+    """show "sigma": the image sent is the render's σ map (vibr.render with uncertainty=True,
+    the same camera and sources) through viridis on sigma_scale, the status line gives the
+    scale; the render itself is the same with or without it."""
+    from types import SimpleNamespace
+
+    from vibr.render import render
+    from vibr.uncertainty_figures import colourise, sigma_scale
+    from vibr.viewer import app
+    from vibr.viewer.renderer import ViewRenderer
+    from vibr.viewer.worker import Request
+
+    sent = []
+    monkeypatch.setattr(app, "send_background", lambda client, img, kind: sent.append(img))
+    settings = ViewSettings(n_views=3, full_long_side=64, show="sigma")
+    v = Viewer(tiny_scene, ViewerOptions(warm_up=False, settings=settings))
+    v.gui = {"points": SimpleNamespace(value="never"), "status": SimpleNamespace(content=""),
+             "show_sources": SimpleNamespace(value=False)}
+    v._points = SimpleNamespace(visible=False)
+    client = SimpleNamespace(client_id=4, flush=lambda: None)
+    cam0 = tiny_scene.views[0].camera
+    wxyz, pos, fov, aspect = app.viser_pose_from_camera(cam0)
+    st = app.CameraState.of(SimpleNamespace(wxyz=tuple(wxyz), position=tuple(pos), fov=fov, aspect=aspect))
+    v._render_for(client, Request(1, 0.0, (st, settings)), "full")
+    cam = st.camera(64, v.origin)
+    r = ViewRenderer(tiny_scene)
+    src = tiny_scene.subset(r.sources_for(cam, 3))
+    res = render(src, cam, uncertainty=True)
+    vmax = sigma_scale(res.uncertainty)
+    assert np.array_equal(sent[-1], colourise(np.where(np.isfinite(res.uncertainty), res.uncertainty, vmax), vmax))
+    assert f"sigma 0 (dark) to {vmax:g} grey levels" in v.gui["status"].content
+    assert np.array_equal(r.render(cam, settings).image, r.render(cam, settings.replace(show="image")).image)
+    with pytest.raises(Exception, match="show must be one of image, sigma"):
+        ViewSettings(show="depth")

@@ -25,7 +25,7 @@ from ..render.methods import METHODS
 from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
 from .geometry import display_origin, frustum_size, point_cloud, scene_scale, thumbnail, world_up
-from .renderer import RenderAbandoned, ViewRenderer, ViewSettings
+from .renderer import SHOW, RenderAbandoned, ViewRenderer, ViewSettings
 from .worker import LatestRequestWorker, Request
 
 logger = logging.getLogger(__name__)
@@ -117,6 +117,19 @@ def encode_png(img: np.ndarray, compress_level: int = 1) -> bytes:
     buf = io.BytesIO()
     Image.fromarray(np.ascontiguousarray(img)).save(buf, format="PNG", compress_level=compress_level)
     return buf.getvalue()
+
+
+def shown_image(out) -> tuple[np.ndarray, str]:
+    """The uint8 image the viewer shows for a render (:class:`ViewImage`) and what the
+    status line adds: the render itself, or its σ map through viridis on
+    :func:`vibr.uncertainty_figures.sigma_scale` (the scale said in the status line)."""
+    if out.uncertainty is None:
+        return np.clip(out.image * 255.0 + 0.5, 0, 255).astype(np.uint8), ""
+    from ..uncertainty_figures import colourise, sigma_scale
+
+    vmax = sigma_scale(out.uncertainty)
+    return colourise(np.where(np.isfinite(out.uncertainty), out.uncertainty, vmax), vmax), \
+        f"; sigma 0 (dark) to {vmax:g} grey levels (yellow)"
 
 
 def send_background(client, img: np.ndarray, kind: str) -> None:
@@ -315,7 +328,9 @@ class Viewer:
         g["n_views"] = gui.add_slider("source views", 1, n, 1, min(s.n_views, n))
         g["preview"] = gui.add_slider("preview size", 64, 768, 32, s.preview_long_side, hint="long side (px) while moving")
         g["full"] = gui.add_number("full size", s.full_long_side, min=16, max=4096, step=16, hint="long side (px) when still")
-        for key in ("method", "gamma", "lam", "n_views", "preview", "full"):
+        g["show"] = gui.add_dropdown("show", tuple(SHOW), initial_value=s.show,
+                                     hint="; ".join(f"{k}: {v}" for k, v in SHOW.items()))
+        for key in ("method", "gamma", "lam", "n_views", "preview", "full", "show"):
             g[key].on_update(lambda _e: self._settings_changed())
         g["show_sources"] = gui.add_checkbox("show sources used", True)
         g["show_sources"].on_update(lambda _e: self._colour_sources(None))
@@ -339,7 +354,7 @@ class Viewer:
             self.settings = ViewSettings(method=str(g["method"].value), gamma=float(g["gamma"].value),
                                          lam=float(g["lam"].value), n_views=int(g["n_views"].value),
                                          preview_long_side=int(g["preview"].value),
-                                         full_long_side=int(g["full"].value))
+                                         full_long_side=int(g["full"].value), show=str(g["show"].value))
         except VibrInputError as exc:
             g["status"].content = f"invalid setting: {exc}"
             return
@@ -515,7 +530,7 @@ class Viewer:
             return
         if kind == "full" and stale is not None and stale():
             return
-        img = np.clip(out.image * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        img, what = shown_image(out)
         send_background(client, img, kind)
         client.flush()
         dt = time.perf_counter() - req.t_update
@@ -527,7 +542,7 @@ class Viewer:
             self._sent_event.notify_all()
         self._colour_sources(out.sources)
         self.gui["status"].content = (f"{kind} {cam.width}×{cam.height}, {settings.method}, "
-                                      f"{len(out.sources)} sources, {dt:.2f} s")
+                                      f"{len(out.sources)} sources, {dt:.2f} s{what}")
 
     def wait_for_image(self, client_id=None, kind: str = "full", after_seq: int = 0,
                        timeout: float = 30.0) -> SentImage | None:

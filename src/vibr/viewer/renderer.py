@@ -23,12 +23,18 @@ from .geometry import points_in_view
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scaled_scene", "scene_with_depth"]
+__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scaled_scene", "scene_with_depth",
+           "SHOW"]
 
 
 #: Memory the per-source depth preparation kept for a session may take (bytes): three
 #: float64 maps per view (fountain at scale 0.25, 11 views of 768×512: 104 MB).
 PREPARED_BUDGET_BYTES = 1 << 30
+
+
+#: What the viewer shows of a render (:attr:`ViewSettings.show`).
+SHOW = {"image": "the rendered view",
+        "sigma": "where it can be trusted: each pixel's standard deviation, viridis from 0 (dark) up"}
 
 
 class RenderAbandoned(Exception):
@@ -48,6 +54,8 @@ class ViewSettings:
     preview_long_side : long side of the preview image while the camera moves (px)
     full_long_side : long side of the image once the camera is still (px); None: the
         scene's largest image side (the viewer fills it in)
+    show : one of :data:`SHOW` — the render, or where it can be trusted: its per-pixel σ
+        (:mod:`vibr.render.uncertainty`) colour-mapped
     """
 
     method: str = "gradient"
@@ -56,6 +64,7 @@ class ViewSettings:
     n_views: int = 8
     preview_long_side: int = 256
     full_long_side: int | None = None
+    show: str = "image"
 
     def __post_init__(self):
         from ..errors import VibrInputError
@@ -66,6 +75,8 @@ class ViewSettings:
             raise VibrInputError("n_views must be >= 1 and image sizes >= 8 px")
         if not (self.gamma >= 0 and self.lam >= 0):
             raise VibrInputError("gamma and lam must be >= 0")
+        if self.show not in SHOW:
+            raise VibrInputError(f"show must be one of {', '.join(SHOW)}, got {self.show!r}")
 
     def replace(self, **changes) -> "ViewSettings":
         return replace(self, **changes)
@@ -75,7 +86,7 @@ class ViewSettings:
 class ViewImage:
     """A render for the viewer: ``image`` H×W×3 float32 in [0, 1], the ``camera`` it is
     for, the ``sources`` (view names) it used, ``seconds`` spent, the renderer's stage
-    ``times`` and its solver ``iterations``."""
+    ``times``, its solver ``iterations`` and, when shown, its σ map ``uncertainty``."""
 
     image: np.ndarray
     camera: Camera
@@ -83,6 +94,7 @@ class ViewImage:
     seconds: float
     times: dict = field(default_factory=dict)
     iterations: int = 0
+    uncertainty: np.ndarray | None = None  # σ, grey levels (ViewSettings.show "sigma")
 
 
 class ViewRenderer:
@@ -193,9 +205,10 @@ class ViewRenderer:
                 if should_stop():
                     raise RenderAbandoned()
         res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb,
-                     geometry_kw={"prepared": prepared})
+                     geometry_kw={"prepared": prepared}, uncertainty=settings.show == "sigma")
         dt = time.perf_counter() - t0
-        return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times), res.iterations)
+        return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times), res.iterations,
+                         res.uncertainty)
 
 
 def scaled_scene(scene: Scene, s: float) -> Scene:
