@@ -177,10 +177,12 @@ def frame_done(ctx: FrameContext, i: int, key: str | None = None) -> bool:
 
 def _sigma_key(path) -> str | None:
     """The frame key stored with a σ map, None when there is none (or no readable file)."""
+    import zipfile
+
     try:
         with np.load(path) as z:
             return str(z["key"])
-    except (OSError, KeyError, ValueError, EOFError):
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         return None
 
 
