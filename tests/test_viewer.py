@@ -552,3 +552,31 @@ def test_the_viewer_shows_where_the_render_can_be_trusted(tiny_scene, monkeypatc
     assert np.array_equal(r.render(cam, settings).image, r.render(cam, settings.replace(show="image")).image)
     with pytest.raises(Exception, match="show must be one of image, sigma"):
         ViewSettings(show="depth")
+
+
+def test_a_click_on_a_rolled_photograph_moves_there_upright(data_dir):
+    """templeSparseRing's photographs are rolled by ±90°: a click on one moves the browser's
+    camera to its pose turned upright by quarter turns (as a path's keys), with the ring's
+    normal as the orbit controls' up — before, the camera's own sideways up, so keyframes
+    and exported paths came out sideways."""
+    from types import SimpleNamespace
+
+    from vibr.io import load_scene
+    from vibr.path import scene_up
+    from vibr.viewer.convert import camera_from_viser
+
+    scene = load_scene(data_dir / "middlebury_templeSparseRing", views=[0, 3, 6, 9, 12, 14])
+    scene = scene.replace(views=[v.replace(depth=np.full(v.shape, 0.6)) for v in scene.views])
+    v = Viewer(scene, ViewerOptions(warm_up=False))
+    up = scene_up([w.camera for w in scene.views])
+    assert np.allclose(v.up, up)
+    for w in scene.views:
+        cam = SimpleNamespace()
+        client = SimpleNamespace(camera=cam, atomic=lambda: __import__("contextlib").nullcontext(), flush=lambda: None)
+        v.move_client(client, w.camera)
+        assert np.allclose(cam.up_direction, up)
+        got = camera_from_viser(cam.wxyz, np.add(cam.position, v.origin), cam.fov, 0.75, 640)
+        assert np.allclose(got.centre, w.camera.centre, atol=1e-9)
+        assert np.allclose(got.optical_axis, w.camera.optical_axis, atol=1e-9)
+        assert -got.R[1] @ up > 0.98  # upright (the cameras look 8° down); the photograph's up is at 90°
+        assert abs(w.camera.R[1] @ up) < 0.2

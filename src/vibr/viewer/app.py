@@ -195,6 +195,7 @@ class Viewer:
         self._points = None
         self._moving: set[int] = set()  # clients whose camera moved since their last full render
         self._points_shown: bool | None = None
+        self._up: np.ndarray | None = None
         self._hidden: set[str] = set()  # frustums hidden because the viewport is inside them
         self._scale = 1.0
         self._frustum_size = 0.1
@@ -275,8 +276,7 @@ class Viewer:
     # ------------------------------------------------------------------ scene
     def _draw_scene(self) -> None:
         sc = self.server.scene
-        up = world_up(self.scene)
-        sc.set_up_direction(tuple(up))
+        sc.set_up_direction(tuple(self.up))
         P, C = point_cloud(self.scene, self.options.max_points, origin=self.origin)
         size = scene_scale(self.scene, P.astype(np.float64) + self.origin)
         self._scale = size
@@ -305,13 +305,27 @@ class Viewer:
 
         return cb
 
+    @property
+    def up(self) -> np.ndarray:
+        """The scene's up (:func:`vibr.viewer.geometry.world_up`), that of the browser's
+        orbit controls."""
+        if self._up is None:
+            self._up = world_up(self.scene)
+        return self._up
+
     def move_client(self, client, camera: Camera) -> None:
-        """Move ``client``'s viewport to ``camera`` (its pose and vertical field of view)."""
+        """Move ``client``'s viewport to ``camera``: its pose and vertical field of view,
+        turned upright as a path's keys are (:func:`vibr.path.orient_keys`, "snap": a
+        photograph taken rolled by 90° is seen turned; the orbit controls keep the scene's
+        up, and would turn it on the first drag)."""
+        from ..path import orient_keys
+
+        (camera,), _ = orient_keys([camera], "snap", self.up)
         wxyz, pos, fov, _ = viser_pose_from_camera(camera)
         pos = pos - self.origin
         with client.atomic():
             client.camera.fov = fov
-            client.camera.up_direction = tuple(-camera.R[1])
+            client.camera.up_direction = tuple(self.up)
             client.camera.position = pos
             client.camera.wxyz = wxyz
         client.flush()

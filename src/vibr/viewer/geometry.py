@@ -121,11 +121,16 @@ def frustum_size(scene: Scene, scale: float) -> float:
 
 
 def world_up(scene: Scene) -> np.ndarray:
-    """World "up": the mean of the cameras' image-up directions (−y axis, ``-R[1]``),
-    normalised; ``(0, -1, 0)`` when they cancel out."""
-    u = -np.mean([v.camera.R[1] for v in scene.views], axis=0)
-    n = float(np.linalg.norm(u))
-    return u / n if n > 1e-9 else np.array([0.0, -1.0, 0.0])
+    """World "up" as camera paths take it (:func:`vibr.path.scene_up`: the mean of the
+    cameras' image-up directions, or the normal of a ring of cameras, which stays right when
+    the photographs are rolled); ``(0, -1, 0)`` when the cameras have none."""
+    from ..errors import VibrInputError
+    from ..path import scene_up
+
+    try:
+        return scene_up([v.camera for v in scene.views])
+    except VibrInputError:
+        return np.array([0.0, -1.0, 0.0])
 
 
 def thumbnail(image: np.ndarray, long_side: int = 160) -> np.ndarray:
