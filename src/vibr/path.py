@@ -361,7 +361,8 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
 def scene_up(cameras, centre=None) -> np.ndarray:
     """World "up" of a set of cameras.
 
-    The mean of the cameras' −y axes (image up), normalised — unless the camera centres
+    The mean of the cameras' −y axes (image up), normalised, with cameras rolled by quarter
+    turns counted by their axis nearest that mean (:func:`_quarter_turn_mean`) — unless the camera centres
     spread in a plane in two directions (a ring or a wide arc: singular values of the
     centres ``s₂ < 0.1 s₁`` and ``s₁ > 0.3 s₀``) and the cameras look across that plane (mean
     ``|n · axis| < 0.5``; a light-field grid looks along it): then the plane's normal, which stays right
@@ -388,7 +389,26 @@ def scene_up(cameras, centre=None) -> np.ndarray:
     n = np.linalg.norm(u)
     if n < 1e-9:
         raise VibrInputError("the cameras' up directions cancel out: no common up")
-    return u / n
+    return _quarter_turn_mean(cams, u / n)
+
+
+def _quarter_turn_mean(cams, u: np.ndarray, rounds: int = 3) -> np.ndarray:
+    """The mean image up of cameras some of which are rolled by quarter turns (portrait
+    photographs stored sideways among landscape ones): each camera's up taken as whichever
+    of its ±x, ±y axes is nearest the current estimate, averaged again. The plain mean of
+    −y leans towards the rolled ones (3 of 6 turned by 90°: 45°, where a quarter turn is
+    ambiguous); for cameras taken upright it is the plain mean, unchanged."""
+    for _ in range(rounds):
+        ups = []
+        for c in cams:
+            cand = np.array([-c.R[1], -c.R[0], c.R[1], c.R[0]])
+            ups.append(cand[int(np.argmax(cand @ u))])
+        v = np.mean(ups, axis=0)
+        nv = np.linalg.norm(v)
+        if nv < 1e-9 or np.allclose(v / nv, u, rtol=0, atol=1e-15):
+            break
+        u = v / nv
+    return u
 
 
 def scene_centre(cameras, points: np.ndarray | None = None) -> np.ndarray:
