@@ -895,3 +895,41 @@ def test_depth_only_for_the_views_the_path_uses(tmp_path):
     assert got.meta["depth_source"] == "cache" and got.names == need
     targets = [n for n, st in got.meta["depth_estimation"]["views"].items() if st["role"] == "target"]
     assert targets == need
+
+
+def test_orient_keys_property():
+    """For any camera and up (hypothesis): "snap" keeps the centre, the optical axis and the
+    focal in pixels, and leaves the image up the nearest of the four quarter turns to ``up``
+    (its cosine to up's projection on the image plane at least cos 45°); "level" puts it at
+    0° (x axis perpendicular to up); a camera within 15° of ±up is kept."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from scipy.spatial.transform import Rotation
+
+    from vibr.path import orient_keys
+
+    unit = st.lists(st.floats(-1, 1, allow_nan=False), min_size=3, max_size=3).filter(
+        lambda v: np.linalg.norm(v) > 0.1)
+
+    @settings(max_examples=150, deadline=None)
+    @given(q=st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4).filter(
+        lambda v: np.linalg.norm(v) > 0.1), up=unit, w=st.integers(8, 64), h=st.integers(8, 64))
+    def check(q, up, w, h):
+        up = np.asarray(up) / np.linalg.norm(up)
+        R = Rotation.from_quat(q).as_matrix()
+        cam = Camera.from_centre(Camera.intrinsics(40.0, w, h, fy=44.0), R, [1.0, 2.0, 3.0], w, h)
+        (snap,), (k,) = orient_keys([cam], "snap", up)
+        (lev,), _ = orient_keys([cam], "level", up)
+        assert np.allclose(snap.centre, cam.centre) and np.allclose(snap.optical_axis, cam.optical_axis)
+        assert np.allclose(lev.centre, cam.centre) and np.allclose(lev.optical_axis, cam.optical_axis)
+        proj = up - (up @ cam.optical_axis) * cam.optical_axis
+        if np.linalg.norm(proj) < np.sin(np.radians(15.0)) - 1e-9:
+            assert k == 0 and snap is cam and lev is cam
+            return
+        c = -snap.R[1] @ proj / np.linalg.norm(proj)
+        assert c >= np.cos(np.radians(45.0)) - 1e-9
+        assert abs(lev.R[0] @ up) < 1e-9 and -lev.R[1] @ up > 0
+        assert sorted([snap.K[0, 0], snap.K[1, 1]]) == [40.0, 44.0]
+        assert (snap.width, snap.height) == ((w, h) if k % 2 == 0 else (h, w))
+
+    check()

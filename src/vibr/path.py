@@ -547,7 +547,7 @@ def _quarter_turns(cam: Camera, up: np.ndarray) -> int | None:
     (its −y axis) is nearest to ``up``; None when it looks within
     :data:`ROLL_UNDEFINED_DEG` of ±up."""
     R = cam.R
-    if max(abs(R[0] @ up), abs(R[1] @ up)) < math.sin(math.radians(ROLL_UNDEFINED_DEG)):
+    if math.hypot(R[0] @ up, R[1] @ up) < math.sin(math.radians(ROLL_UNDEFINED_DEG)):  # up's projection
         return None
     # image up after k turns: -y, then -x, +y, +x of the original camera
     return int(np.argmax(np.array([-R[1], -R[0], R[1], R[0]]) @ up))
