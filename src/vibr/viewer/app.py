@@ -195,7 +195,7 @@ class Viewer:
         self._points = None
         self._moving: set[int] = set()  # clients whose camera moved since their last full render
         self._points_shown: bool | None = None
-        self._up: np.ndarray | None = None
+        self.up = world_up(scene)  # the scene's up, that of the browser's orbit controls
         self._hidden: set[str] = set()  # frustums hidden because the viewport is inside them
         self._scale = 1.0
         self._frustum_size = 0.1
@@ -304,14 +304,6 @@ class Viewer:
             self.move_client(event.client, camera)
 
         return cb
-
-    @property
-    def up(self) -> np.ndarray:
-        """The scene's up (:func:`vibr.viewer.geometry.world_up`), that of the browser's
-        orbit controls."""
-        if self._up is None:
-            self._up = world_up(self.scene)
-        return self._up
 
     def move_client(self, client, camera: Camera) -> None:
         """Move ``client``'s viewport to ``camera``: its pose and vertical field of view,
