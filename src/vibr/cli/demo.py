@@ -71,7 +71,7 @@ def run(args) -> int:
     t1 = time.perf_counter()
     logger.info(f"scene: {len(scene)} views ({args.layout}), {args.size}x{args.size}, made in {t1 - t0:.2f} s; "
         f"rendering {tview.name} from the other {len(sources)} (the first run on a machine also "
-        f"compiles the kernels: about a minute on 2 cores)")
+        f"compiles the kernels: a minute or two on 2 cores)")
     res = render(sources, tview.camera, method=args.method, progress_bar=True)
     t2 = time.perf_counter()
     mask = res.coverage
