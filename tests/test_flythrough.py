@@ -379,6 +379,53 @@ def test_scene_up_with_portrait_photographs_stored_sideways(layout):
     _same_cameras(interpolate(rolled, n_frames=20).cameras, interpolate(s, n_frames=20).cameras, tol=1e-9)
 
 
+def _turns_and_speeds(p):
+    C = np.array([c.centre for c in p.cameras])
+    if p.meta.get("closed"):
+        C = np.vstack([C, C[:1]])
+    V = np.diff(C, axis=0)
+    cos = np.sum(V[1:] * V[:-1], 1) / np.linalg.norm(V[1:], axis=1) / np.linalg.norm(V[:-1], axis=1)
+    return np.degrees(np.arccos(np.clip(cos, -1, 1))).max(), np.linalg.norm(V, axis=1)
+
+
+def test_interpolate_round_a_light_field_grid(data_dir):
+    """Through all of cotton's 81 views in proximity order the path scans the grid row by
+    row, the camera turning back by up to 116° between frames; by default it loops round the
+    grid through its corners and the middles of its sides, closed (the video loops: its last
+    frame leads to its first at the pace of the others), turning by at most 19° a frame."""
+    from vibr.io import load_scene
+    from vibr.path import interpolate
+
+    scene = load_scene(data_dir / "hci2016_cotton", scale=0.125)
+    loop = interpolate(scene, n_frames=96)
+    assert loop.meta["closed"] and loop.meta["views"] == [
+        "input_Cam000", "input_Cam004", "input_Cam008", "input_Cam044", "input_Cam080", "input_Cam076",
+        "input_Cam072", "input_Cam036", "input_Cam000"]
+    turn, speed = _turns_and_speeds(loop)
+    assert turn < 19 and speed.max() < 2.2 * speed.min()
+    scan = interpolate(scene, n_frames=96, order="proximity")
+    assert not scan.meta["closed"] and len(scan.meta["views"]) == 81 and _turns_and_speeds(scan)[0] > 100
+
+
+def test_grid_loop_passes_over_missing_positions():
+    """A light field with missing views: the loop takes the border views nearest to the
+    corners and the middles of the sides; a grid of 2 rows has no loop (proximity order)."""
+    from vibr.path import grid_loop, interpolate
+    from vibr.synthetic import make_scene
+
+    s = make_scene("grid", width=32, height=32, grid=(5, 5), seed=0)
+    assert [s.names[i] for i in grid_loop(s)] == [s.names[i] for i in (0, 2, 4, 14, 24, 22, 20, 10)]
+    gone = {0, 2, 14}  # a corner and two side middles
+    sub = s.replace(views=[v for i, v in enumerate(s.views) if i not in gone],
+                    meta=dict(s.meta, grid_pos={v.name: (i // 5, i % 5) for i, v in enumerate(s.views)
+                                                if i not in gone}))
+    got = [sub.names[i] for i in grid_loop(sub)]
+    assert got[0] in (s.names[1], s.names[5]) and s.names[4] in got and s.names[0] not in got
+    assert interpolate(sub, n_frames=10).meta["closed"]
+    two = make_scene("grid", width=32, height=32, grid=(2, 5), seed=0)
+    assert grid_loop(two) is None and not interpolate(two, n_frames=10).meta["closed"]
+
+
 def test_interpolate_level_needs_an_up():
     """Cameras whose up directions cancel out (half of them upside down, side by side): the
     default keeps them; "level" says why it cannot."""

@@ -43,7 +43,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
            "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED", "PATH_KINDS",
-           "ROLL_MODES", "orient_keys", "turns_text"]
+           "ROLL_MODES", "orient_keys", "turns_text", "grid_loop"]
 
 PATH_KINDS = ("interpolate", "orbit", "spiral")
 
@@ -669,15 +669,7 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     from scipy.interpolate import CubicSpline
     from scipy.spatial.transform import Rotation, RotationSpline
 
-    cams, names = _cameras_of(scene, views)
-    order = ("given" if views is not None else "proximity") if order is None else order
-    if order not in ("given", "proximity"):
-        raise VibrInputError(f"order must be 'given' or 'proximity', got {order!r}")
-    if order == "proximity":
-        idx = order_by_proximity(cams)
-        cams, names = [cams[i] for i in idx], [names[i] for i in idx]
-    if len(cams) < 2:
-        raise VibrInputError("interpolate needs at least two cameras")
+    cams, names, closed = _path_keys(scene, views, order)
     n = _frame_count(n_frames, seconds, fps)
     X = scene_centre(cams, scene_points(scene))
     cams = _oriented(cams, roll, X)
@@ -686,10 +678,12 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     t = np.concatenate([[0.0], np.cumsum(step)])
     C = np.array([c.centre for c in cams])
     rots = Rotation.from_matrix(np.array([c.R.T for c in cams]))  # camera-to-world
-    pos = CubicSpline(t, C, bc_type="natural")
+    bc = "periodic" if closed else "natural"
+    pos = CubicSpline(t, C, bc_type=bc)
     rot = RotationSpline(t, rots)
-    foc = CubicSpline(t, [_vertical_focal(c, w, h) for c in cams], bc_type="natural")
-    ts = np.linspace(t[0], t[-1], n) if n > 1 else t[:1]
+    foc = CubicSpline(t, [_vertical_focal(c, w, h) for c in cams], bc_type=bc)
+    # a closed loop does not end on its first frame again: the video loops without a repeat
+    ts = np.linspace(t[0], t[-1], n, endpoint=not closed) if n > 1 else t[:1]
     Rc2w = rot(ts).as_matrix()
     P, F = pos(ts), foc(ts)
     out = []
@@ -697,7 +691,61 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
         K = Camera.intrinsics(float(fi) * h, w, h)
         out.append(Camera.from_centre(K, Ri.T, Ci, w, h))
     return CameraPath(out, float(fps), None, w, h,
-                      {"kind": "interpolate", "views": names, "knots": t.tolist(), "roll": roll})
+                      {"kind": "interpolate", "views": names, "knots": t.tolist(), "roll": roll, "closed": closed})
+
+
+def _path_keys(scene, views, order) -> tuple[list, list, bool]:
+    """The key cameras of :func:`interpolate`, their names, and whether they close a loop."""
+    cams, names = _cameras_of(scene, views)
+    if views is None and order is None:
+        loop = grid_loop(scene)
+        if loop is not None:
+            logger.info("interpolate: a light field's grid: a loop through %d views round its border "
+                        "(order 'proximity': through all %d, row by row)", len(loop), len(cams))
+            return [cams[i] for i in loop] + [cams[loop[0]]], [names[i] for i in loop] + [names[loop[0]]], True
+    order = ("given" if views is not None else "proximity") if order is None else order
+    if order not in ("given", "proximity"):
+        raise VibrInputError(f"order must be 'given' or 'proximity', got {order!r}")
+    if order == "proximity":
+        idx = order_by_proximity(cams)
+        cams, names = [cams[i] for i in idx], [names[i] for i in idx]
+    if len(cams) < 2:
+        raise VibrInputError("interpolate needs at least two cameras")
+    return cams, names, False
+
+
+def grid_loop(scene) -> list[int] | None:
+    """Views round the border of a light field's grid: at its corners and the middles of its
+    sides (or the border views nearest to them where positions are missing), clockwise
+    from the top-left; None when the scene is no grid of at least 3×3 positions with 4 such
+    views.
+
+    A path through all the views of a grid in proximity order scans them row by row, the
+    camera going back and forth at every view (cotton: 81 keys, the direction reversed at
+    each); round the border it circles the grid once, showing the parallax all round."""
+    if scene.grid is None and not scene.meta.get("grid_pos"):
+        return None
+    from .stereo.lightfield import grid_positions
+
+    pos = grid_positions(scene)
+    at = {rc: i for i, rc in pos.items()}
+    rows = sorted({r for r, _ in pos.values()})
+    cols = sorted({c for _, c in pos.values()})
+    r0, r1, c0, c1 = rows[0], rows[-1], cols[0], cols[-1]
+    if r1 - r0 < 2 or c1 - c0 < 2:
+        return None
+    rm, cm = (r0 + r1) / 2, (c0 + c1) / 2
+    # the corners and the middles of the sides, clockwise: a periodic spline through them is
+    # a rounded loop (through all the border views it turned by 90° within a frame or two at
+    # each corner)
+    marks = [(r0, c0), (r0, cm), (r0, c1), (rm, c1), (r1, c1), (r1, cm), (r1, c0), (rm, c0)]
+    border = [rc for rc in at if rc[0] in (r0, r1) or rc[1] in (c0, c1)]
+    loop = []
+    for m in marks:
+        rc = min(border, key=lambda p: (p[0] - m[0]) ** 2 + (p[1] - m[1]) ** 2)
+        if at[rc] not in loop:
+            loop.append(at[rc])
+    return loop if len(loop) >= 4 else None
 
 
 def _upright_framing(cams, up, width, height, scale):

@@ -13,7 +13,8 @@ Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json 
 to render with 'vibr render SCENE --path PATH.json -o video.mp4'; with --dataparser-transforms
 the path is written in the normalised frame of a nerfstudio model of the scene, for ns-render.
 Kinds: interpolate (a C2-smooth spline through the scene's cameras: all, nearest next, or
---views in that order), orbit (an ellipse around the point the cameras look at, at their
+--views in that order; on a light field's grid a loop round it through its corners and the
+middles of its sides), orbit (an ellipse around the point the cameras look at, at their
 mean height and distance; an arc swept back and forth when the cameras do not surround
 it), spiral (an LLFF-style forward-facing spiral around the mean camera).
 """
