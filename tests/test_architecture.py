@@ -20,14 +20,14 @@ PKG = SRC / "vibr"
 FOUNDATION = ("camera", "scene", "errors", "metrics")
 #: area → the areas it must never import (docs/ARCHITECTURE.md, "Import rules").
 FORBIDDEN = {
-    **{a: {"io", "geometry", "render", "stereo", "pipeline", "evaluate", "calibrate", "synthetic",
-           "figures", "cli"} for a in FOUNDATION},
-    "io": {"geometry", "render", "stereo", "pipeline", "evaluate", "calibrate", "cli"},
-    "geometry": {"render", "io", "stereo", "pipeline", "evaluate", "calibrate", "cli"},
-    "render": {"io", "stereo", "pipeline", "evaluate", "calibrate", "cli"},
+    **{a: {"io", "geometry", "render", "stereo", "pipeline", "evaluate", "calibrate", "video_frames",
+           "synthetic", "figures", "cli"} for a in FOUNDATION},
+    "io": {"geometry", "render", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
+    "geometry": {"render", "io", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
+    "render": {"io", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
     # stereo resamples images with vibr.io.images.resize_image (the one resize of vibr)
-    "stereo": {"render", "geometry", "pipeline", "evaluate", "calibrate", "cli"},
-    "synthetic": {"render", "geometry", "io", "stereo", "pipeline", "evaluate", "calibrate", "cli"},
+    "stereo": {"render", "geometry", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
+    "synthetic": {"render", "geometry", "io", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
 }
 #: Nothing outside the CLI imports it.
 CLI_IMPORTERS = {"cli", "__main__"}

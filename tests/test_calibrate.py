@@ -201,9 +201,11 @@ def test_missing_or_empty_folder(tmp_path):
     _write_png(tmp_path / "b.png", np.zeros((8, 8, 3)))
     iio.imwrite(tmp_path / "c.webp", np.zeros((8, 8, 3), np.uint8))
     assert [p.name for p in list_photos(tmp_path)] == ["b.png", "c.webp"]
-    (tmp_path / "walk.MOV").write_bytes(b"\0")  # a phone video: the error says how to get frames
-    with pytest.raises(VibrInputError, match="for a video, extract frames first.*--matcher sequential"):
-        list_photos(tmp_path / "walk.MOV")
+    (tmp_path / "notes.txt").write_text("x")  # neither a folder nor a video: the error says what is read
+    with pytest.raises(VibrInputError, match=r"not a folder of photos nor a video .*\.mp4, \.mov"):
+        list_photos(tmp_path / "notes.txt")
+    with pytest.raises(VibrInputError, match="video not found"):
+        calibrate(tmp_path / "walk.MOV", tmp_path / "out")
 
 
 def test_duplicate_stems_refused(tmp_path):

@@ -2,6 +2,9 @@
 
 Pipeline (``vibr calibrate PHOTOS_DIR OUT_SCENE``)
 --------------------------------------------------
+0. From a **video** (``vibr calibrate VIDEO OUT_SCENE``): the sharpest frame of each of
+   ``frames`` equal stretches becomes a photo (:mod:`vibr.video_frames`), and matching is
+   sequential by default.
 1. **Downscale** every photo by ``scale`` (Lanczos) into a work folder, as PNG (lossless).
 2. **Features**: SIFT extraction (``pycolmap.extract_features``), one shared camera by
    default (photos from one camera), camera model ``SIMPLE_RADIAL`` by default.
@@ -42,8 +45,10 @@ from ._pycolmap import import_pycolmap
 from .camera import Camera
 from .errors import OutputExists, VibrInputError
 from .io.images import IMAGE_EXTS
+from .io.video import VIDEO_INPUTS, is_video_input
 from .progress import progress
 from .scene import Scene, View
+from .video_frames import DEFAULT_FRAMES, extract_frames
 
 logger = logging.getLogger(__name__)
 
@@ -88,12 +93,10 @@ def list_photos(photos_dir) -> list[Path]:
     """
     d = Path(photos_dir)
     if not d.exists():
-        raise VibrInputError("photo folder not found", d)
+        raise VibrInputError(("video" if d.suffix.lower() in VIDEO_INPUTS else "photo folder") + " not found", d)
     if not d.is_dir():
-        video = d.suffix.lower() in (".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm")
-        raise VibrInputError("not a folder (calibrate takes a folder of photos)"
-                             + ("; for a video, extract frames first, e.g. 'ffmpeg -i VIDEO -vf fps=2 "
-                                "FRAMES/%04d.png', then calibrate FRAMES with --matcher sequential" if video else ""), d)
+        raise VibrInputError("not a folder of photos nor a video (calibrate reads a folder of photos, "
+                             f"or a video: {', '.join(VIDEO_INPUTS)})", d)
     files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS)
     if not files:
         heic = any(p.suffix.lower() in (".heic", ".heif") for p in d.iterdir())
@@ -295,8 +298,13 @@ class CalibrateOptions:
     scale : float
         Resize factor applied to the photos before everything else (0 < scale ≤ 4; 0.5 of
         3072×2048 gives 1536×1024). The scene's cameras are those of the resized images.
-    matcher : {"exhaustive", "sequential"}
-        Pair selection for feature matching.
+    matcher : {"exhaustive", "sequential"}, optional
+        Pair selection for feature matching; None (the default): sequential for a video
+        (frames in time order; COLMAP's quadratic overlap also pairs frames 2, 4, ..., 512
+        apart, which closes a loop round an object), exhaustive for photos.
+    frames : int
+        From a video: how many frames become photos (the sharpest of each of as many equal
+        stretches; every frame when it has fewer). Ignored for a folder of photos.
     camera_model : str
         COLMAP model estimated by bundle adjustment (SIMPLE_RADIAL, RADIAL, OPENCV,
         SIMPLE_PINHOLE, PINHOLE). Distorted models are undistorted to PINHOLE in step 5.
@@ -324,7 +332,8 @@ class CalibrateOptions:
     """
 
     scale: float = 1.0
-    matcher: str = "exhaustive"
+    matcher: str | None = None
+    frames: int = DEFAULT_FRAMES
     camera_model: str = "SIMPLE_RADIAL"
     single_camera: bool = True
     refine_principal_point: bool | None = None
@@ -343,7 +352,9 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
     Parameters
     ----------
     photos_dir : path
-        Folder of photos of one static scene (jpg/png/tif...), not recursive.
+        Folder of photos of one static scene (jpg/png/tif...), not recursive, or a video of
+        it (:data:`vibr.io.video.VIDEO_INPUTS`): the sharpest frame of each of
+        ``options.frames`` stretches is calibrated (:func:`vibr.video_frames.extract_frames`).
     options : CalibrateOptions, optional
         How to calibrate; ``kw`` (fields of :class:`CalibrateOptions`, e.g. ``scale=0.5``)
         applies over it. Any other keyword raises ``TypeError``.
@@ -362,13 +373,21 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
 
     opt = replace(options or CalibrateOptions(), **kw)
     photos_dir = Path(photos_dir)
-    files = list_photos(photos_dir)
-    opt = _check_options(opt, len(files), photos_dir)
+    video = is_video_input(photos_dir)
+    files = None if video else list_photos(photos_dir)
+    opt = _check_options(opt, opt.frames if video else len(files), photos_dir)
+    opt = replace(opt, matcher=opt.matcher or ("sequential" if video else "exhaustive"))
     own_work = work_dir is None
     work = Path(tempfile.mkdtemp(prefix="vibr-calibrate-")) if own_work else Path(work_dir)
     work.mkdir(parents=True, exist_ok=True)
     times: dict[str, float] = {}
+    frames = None
     try:
+        if video:
+            t0 = time.perf_counter()
+            frames = extract_frames(photos_dir, work / "frames", opt.frames)
+            files = _check_frames(frames, opt, photos_dir)
+            times["frames"] = time.perf_counter() - t0
         sizes = _header_sizes(files)  # None when a header is unreadable: named later
         if sizes is not None:
             _check_photo_sides(files, sizes, opt.scale, photos_dir)
@@ -421,9 +440,10 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             image_size=tuple(max(sizes, key=lambda wh: wh[0] * wh[1])),
             times_s=times,
         )
-        meta = _calibration_meta(photos_dir, opt, pp_note, report, pycolmap.__version__)
+        meta = _calibration_meta(photos_dir, opt, pp_note, report, pycolmap.__version__, frames)
         scene = scene_from_reconstruction(
-            urec, undist / "images", name=photos_dir.resolve().name, root=None, meta=meta
+            urec, undist / "images", name=photos_dir.resolve().stem if video else photos_dir.resolve().name,
+            root=None, meta=meta
         )
         return scene, report
     finally:
@@ -435,7 +455,9 @@ def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> Ca
     """``opt`` checked (:class:`VibrInputError` naming ``photos_dir``)."""
     if not (0 < opt.scale <= 4):
         raise VibrInputError(f"scale must be in (0, 4], got {opt.scale}", photos_dir)
-    if opt.matcher not in MATCHERS:
+    if int(opt.frames) != opt.frames or opt.frames < 2:
+        raise VibrInputError(f"frames must be an integer >= 2, got {opt.frames}", photos_dir)
+    if opt.matcher is not None and opt.matcher not in MATCHERS:
         raise VibrInputError(f"matcher must be one of {', '.join(MATCHERS)}, got {opt.matcher!r}", photos_dir)
     if opt.camera_model not in CAMERA_MODELS:
         raise VibrInputError(
@@ -455,6 +477,14 @@ def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> Ca
             f"{n_photos} photos found, calibrate needs at least {opt.min_registered}", photos_dir
         )
     return opt
+
+
+def _check_frames(frames, opt: CalibrateOptions, video: Path) -> list[Path]:
+    """The frames kept from a video, refused when fewer than ``min_registered``."""
+    if len(frames.files) < opt.min_registered:
+        raise VibrInputError(f"the video has {len(frames.files)} frames, calibrate needs at least "
+                             f"{opt.min_registered}", video)
+    return frames.files
 
 
 def _clean_work(work: Path) -> tuple[Path, Path, Path, Path]:
@@ -573,9 +603,10 @@ def _kept_model(recs, names: list[str], stem: dict, photos_dir: Path, opt: Calib
 
 
 def _calibration_meta(photos_dir: Path, opt: CalibrateOptions, pp_note: str,
-                      report: CalibrationReport, tool_version: str) -> dict:
-    """The scene's ``meta``: format "calibrate" and the calibration summary."""
-    return {
+                      report: CalibrationReport, tool_version: str, frames=None) -> dict:
+    """The scene's ``meta``: format "calibrate" and the calibration summary (with, from a
+    video, the frames kept: their numbers, times and sharpness)."""
+    meta = {
         "format": "calibrate",
         "calibration": {
             "tool": f"pycolmap {tool_version}",
@@ -592,6 +623,16 @@ def _calibration_meta(photos_dir: Path, opt: CalibrateOptions, pp_note: str,
             "times_s": {k: round(v, 3) for k, v in report.times_s.items()},
         },
     }
+    if frames is not None:
+        info = frames.info
+        meta["calibration"]["video"] = {
+            "size": [info.width, info.height], "fps": info.fps, "duration_s": info.duration_s,
+            "frames_read": frames.n_read, "frames_kept": frames.indices,
+            "times_s": [round(i / info.fps, 3) if info.fps > 0 else None for i in frames.indices],
+            "sharpness_kept": [round(v, 2) for v in frames.sharpness],
+            "sharpness_median_all": round(frames.median_sharpness, 2),
+        }
+    return meta
 
 
 #: The "auto" principal-point refinement is kept only if the standard deviation of each

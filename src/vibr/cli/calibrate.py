@@ -1,18 +1,24 @@
-"""``vibr calibrate PHOTOS_DIR OUT_SCENE``: cameras from raw photos with COLMAP (CPU)."""
+"""``vibr calibrate PHOTOS_DIR|VIDEO OUT_SCENE``: cameras from raw photos or a video with
+COLMAP (CPU)."""
 
 from __future__ import annotations
 
 import argparse
 
+from ..calibrate import CAMERA_MODELS, MATCHERS
+from ..errors import VibrInputError
+from ..io.video import VIDEO_INPUTS, is_video_input
+from ..video_frames import DEFAULT_FRAMES
 from . import add_quiet, count
 
 _EPILOG = """\
-stages: resize -> SIFT features -> matching -> incremental mapping -> undistortion to pinhole;
+stages: [video: sharpest frame of each stretch ->] resize -> SIFT features -> matching -> incremental mapping -> undistortion to pinhole;
 the scene is written as transforms.json + images + sparse_pc.ply (the sparse points bound the
 depth range of 'vibr depth'). The reconstruction's scale and orientation are arbitrary.
 
 examples:
   vibr calibrate photos/ scene/ --scale 0.5
+  vibr calibrate walk.mp4 scene/ --frames 40 --scale 0.5
   vibr depth scene/ && vibr render scene/ --target 5 -o view5.png
 """
 
@@ -20,22 +26,27 @@ examples:
 def register(sub) -> None:
     p = sub.add_parser(
         "calibrate",
-        help="calibrate cameras from a folder of photos (COLMAP SfM, CPU)",
-        description="Calibrate a folder of photos of one static scene with COLMAP (pycolmap, CPU): "
-        "features, matching, incremental mapping, undistortion; write a vibr scene.",
+        help="calibrate cameras from a folder of photos or a video (COLMAP SfM, CPU)",
+        description="Calibrate a folder of photos (or a video) of one static scene with COLMAP "
+        "(pycolmap, CPU): features, matching, incremental mapping, undistortion; write a vibr scene.",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("photos", metavar="PHOTOS_DIR", help="folder of photos (jpg/png/tif), not recursive")
+    p.add_argument("photos", metavar="PHOTOS_DIR|VIDEO",
+                   help="folder of photos (jpg/png/tif), not recursive, or a video ("
+                   + ", ".join(VIDEO_INPUTS) + "): its sharpest frames become the photos")
     p.add_argument("out", metavar="OUT_SCENE", help="output scene folder (must not exist unless --overwrite)")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the photos are calibrated at, e.g. 0.5: 3072x2048 -> 1536x1024 "
                         "(default 1)")
-    p.add_argument("--matcher", choices=["exhaustive", "sequential"], default="exhaustive",
-                   help="exhaustive: all pairs (default, best up to ~100 photos); "
-                   "sequential: neighbours in file-name order (video-like captures)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="from a video: how many frames become photos, the sharpest of each of as "
+                   f"many equal stretches of it (default {DEFAULT_FRAMES})")
+    p.add_argument("--matcher", choices=list(MATCHERS), default=None,
+                   help="exhaustive: all pairs (the default for photos, best up to ~100); "
+                   "sequential: neighbours in file-name order (the default for a video)")
     p.add_argument("--camera-model", default="SIMPLE_RADIAL",
-                   choices=["SIMPLE_RADIAL", "RADIAL", "OPENCV", "SIMPLE_PINHOLE", "PINHOLE"],
+                   choices=list(CAMERA_MODELS),
                    help="COLMAP camera model to estimate (default SIMPLE_RADIAL)")
     p.add_argument("--per-image-cameras", action="store_true",
                    help="one intrinsic camera per photo (default: one shared camera)")
@@ -60,6 +71,9 @@ def run(args) -> int:
     from ..io.outputs import check_output
     from . import verbosity
 
+    if args.frames is not None and not is_video_input(args.photos):
+        raise VibrInputError("--frames is for a video; this is a folder of photos (all of them are calibrated)",
+                             args.photos)
     check_output(args.out, "dir", overwrite=args.overwrite, what="OUT_SCENE")
     if args.work is not None:
         check_output(args.work, "dir", what="--work")
@@ -69,6 +83,7 @@ def run(args) -> int:
         overwrite=args.overwrite,
         scale=args.scale,
         matcher=args.matcher,
+        frames=DEFAULT_FRAMES if args.frames is None else args.frames,
         camera_model=args.camera_model,
         single_camera=not args.per_image_cameras,
         refine_principal_point={"auto": None, "fixed": False, "refine": True}[args.principal_point],

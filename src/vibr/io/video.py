@@ -30,7 +30,7 @@ from .atomic import atomic_path
 logger = logging.getLogger(__name__)
 
 __all__ = ["write_video", "read_video_info", "even_pad", "BT709_FILTER", "BT709_TAGS", "VIDEO_FORMATS",
-           "is_video", "VideoFormat"]
+           "is_video", "VideoFormat", "VIDEO_INPUTS", "is_video_input", "VideoInfo", "open_video"]
 
 #: RGB → YUV with the BT.709 matrix, and the stream tagged BT.709 (matrix, primaries,
 #: transfer, limited range): players read untagged HD video as BT.709 whatever matrix made
@@ -184,6 +184,77 @@ def _finish_ffmpeg(proc, log, path) -> None:
     else:
         why = f"stopped by {signal.Signals(-rc).name}" if -rc in signal.valid_signals() else f"exit status {rc}"
     raise OutputFailed(f"cannot write the video: ffmpeg: {why}", path)
+
+
+#: Video files read as input (``vibr calibrate``), by extension: what phones and cameras
+#: write, decoded by imageio-ffmpeg's ffmpeg.
+VIDEO_INPUTS = (".mp4", ".mov", ".m4v", ".mkv", ".webm", ".avi", ".mts", ".m2ts")
+
+
+def is_video_input(path) -> bool:
+    """Whether ``path`` is a file with one of the :data:`VIDEO_INPUTS` extensions."""
+    return os.path.splitext(os.fspath(path))[1].lower() in VIDEO_INPUTS and os.path.isfile(path)
+
+
+@dataclass(frozen=True)
+class VideoInfo:
+    """A video's frame size as decoded (after the display rotation a phone stores, which
+    ffmpeg applies), frame rate, duration (0 when the container does not say) and
+    ``n_frames``, the frame count those two give (an estimate: the decoder has the last
+    word)."""
+
+    width: int
+    height: int
+    fps: float
+    duration_s: float
+    rotated: bool
+
+    @property
+    def n_frames(self) -> int:
+        return max(int(round(self.fps * self.duration_s)), 0)
+
+
+@contextlib.contextmanager
+def open_video(path):
+    """``with open_video(path) as (info, frames)``: the :class:`VideoInfo` and an iterator
+    of (H, W, 3) uint8 RGB frames, upright (ffmpeg applies the display rotation); ffmpeg is
+    stopped on leaving. An unreadable file raises :class:`VibrInputError` naming it, with
+    ffmpeg's last message."""
+    import imageio_ffmpeg
+
+    p = os.fspath(path)
+    reader = imageio_ffmpeg.read_frames(p)
+    quiet = logging.getLogger("imageio_ffmpeg")
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)  # its warning on a rotated video's size: expected, and said in our log
+    try:
+        meta = reader.__next__()
+    except (OSError, RuntimeError, StopIteration) as exc:
+        reader.close()
+        raise VibrInputError(f"cannot read the video: {_ffmpeg_reason(str(exc))}", p) from None
+    finally:
+        quiet.setLevel(level)
+    w, h = (int(v) for v in meta["size"])
+    info = VideoInfo(w, h, float(meta.get("fps") or 0.0), float(meta.get("duration") or 0.0),
+                     tuple(meta.get("source_size", (w, h))) != (w, h))
+
+    def frames():
+        for b in reader:
+            yield np.frombuffer(b, np.uint8).reshape(h, w, 3)
+
+    try:
+        yield info, frames()
+    finally:
+        reader.close()
+
+
+def _ffmpeg_reason(text: str) -> str:
+    """The last line of ffmpeg's messages that says something (its banner and
+    configuration are not the reason)."""
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip() and not ln.startswith(" ")]
+    skip = ("ffmpeg version", "built with", "configuration:", "lib", "===", "Could not load meta")
+    useful = [ln for ln in lines if not ln.startswith(skip)]
+    return re.sub(r"^\[[^\]]*\]\s*", "", useful[-1]) if useful else "ffmpeg could not decode it"
 
 
 def read_video_info(path) -> tuple[int, int, int, float]:
