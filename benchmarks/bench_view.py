@@ -334,6 +334,41 @@ def ab_overhead(size: int = 768, cameras: int = 2, repeat: int = 2) -> None:
     print(f"\nload average {os.getloadavg()[0]:.1f}")
 
 
+def ab_preview(size: int = 768, preview: int = 256, cameras: int = 12) -> None:
+    """Previews (long side ``preview``) in one outer pass against two, alternating, on the
+    benchmark's scene and cameras: render time, FISTA iterations and PSNR against the
+    ray-cast truth at the preview's size (2-pixel border)."""
+    import vibr.viewer.renderer as R
+    from vibr.metrics import psnr
+    from vibr.synthetic import default_world, make_scene, render_view
+
+    scene = make_scene("handheld", n_views=9, width=size, height=size)
+    world = default_world(0)  # make_scene's world
+    r = R.ViewRenderer(scene)
+    st = R.ViewSettings(n_views=8)
+    cams = [_midway(scene.views[0].camera, scene.views[1 + k % 8].camera).scaled(preview / size)
+            for k in range(cameras + 1)]
+    r.render(cams[0], st, preview=True)
+    r.render(cams[0], st)
+    rows = {1: ([], [], []), 2: ([], [], [])}
+    for k, cam in enumerate(cams[1:]):
+        truth = render_view(world, cam)[0]
+        for passes in ((1, 2) if k % 2 == 0 else (2, 1)):
+            out = r.render(cam, st, preview=passes == 1)  # 2: the full view's passes at the preview's size
+            rows[passes][0].append(out.seconds)
+            rows[passes][1].append(out.iterations)
+            rows[passes][2].append(psnr(out.image, truth, border=2))
+    print(f"| preview {cams[1].width}x{cams[1].height}, {cameras} cameras | render s, median (min-max) | "
+          "FISTA iterations, median | PSNR dB, median | PSNR, mean difference to two passes |")
+    print("|---|---|---|---|---|")
+    for passes in (2, 1):
+        t, it, p = rows[passes]
+        d = float(np.mean(np.subtract(p, rows[2][2])))
+        print(f"| {passes} outer pass{'es' if passes > 1 else ''} | {np.median(t):.3f} ({min(t):.3f}-{max(t):.3f}) | "
+              f"{np.median(it):g} | {np.median(p):.3f} | {d:+.4f} |")
+    print(f"\nload average {os.getloadavg()[0]:.1f}")
+
+
 def ab_prepared(size: int = 768, cameras: int = 4) -> None:
     """Full renders with each source's depth preparation kept for the session against
     prepared per request (``PREPARED_BUDGET_BYTES`` = 0), two renderers, alternating."""
@@ -548,6 +583,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ab-settings", action="store_true", help="only the render-settings comparison")
     ap.add_argument("--ab-overhead", action="store_true", help="only the viewer against the bare render")
     ap.add_argument("--ab-prepared", action="store_true", help="only kept against per-request depth preparation")
+    ap.add_argument("--ab-preview", action="store_true", help="only previews in one outer pass against two")
     ap.add_argument("--browser-cpu", action="store_true", help="only the CPU an idle viewer page takes")
     ap.add_argument("--browser-timeline", action="store_true",
                     help="only the browser's CPU from a camera move to the full image, per point-cloud mode")
@@ -573,6 +609,9 @@ def main(argv=None) -> int:
         return 0
     if a.ab_prepared:
         ab_prepared()
+        return 0
+    if a.ab_preview:
+        ab_preview()
         return 0
     if a.ab_overhead:
         ab_overhead()

@@ -580,3 +580,25 @@ def test_a_click_on_a_rolled_photograph_moves_there_upright(data_dir):
         assert np.allclose(got.optical_axis, w.camera.optical_axis, atol=1e-9)
         assert -got.R[1] @ up > 0.98  # upright (the cameras look 8° down); the photograph's up is at 90°
         assert abs(w.camera.R[1] @ up) < 0.2
+
+
+def test_a_preview_is_rendered_in_one_outer_pass(tiny_scene):
+    """A preview of the methods that re-estimate their weights takes one outer pass (the
+    image ``render(..., n_outer=1)`` gives, bit for bit); the full view keeps the method's
+    passes; savsr and ulr make no more than one anyway."""
+    import vibr.viewer.renderer as R
+    from vibr.render import render
+
+    r = R.ViewRenderer(tiny_scene)
+    cam = tiny_scene.views[1].camera.scaled(0.5)
+    src = r.scene_for(cam).subset(r.sources_for(cam, 3))
+    for method in ("gradient", "bvs"):
+        st = ViewSettings(method=method, n_views=3)
+        preview, full = r.render(cam, st, preview=True), r.render(cam, st)
+        kw = dict(gamma=st.gamma, lam=st.lam)  # the viewer's controls
+        assert np.array_equal(preview.image, render(src, cam, method, n_outer=R.PREVIEW_OUTER, **kw).image)
+        assert np.array_equal(full.image, render(src, cam, method, **kw).image)
+        assert not np.array_equal(preview.image, full.image)
+    for method in ("savsr", "ulr"):
+        st = ViewSettings(method=method, n_views=3)
+        assert np.array_equal(r.render(cam, st, preview=True).image, r.render(cam, st).image)

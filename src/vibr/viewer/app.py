@@ -525,7 +525,7 @@ class Viewer:
         worker = self._workers.get(client.client_id)
         stale = (lambda: worker.is_stale(req)) if worker is not None else None
         try:
-            out = self.renderer.render(cam, settings, should_stop=stale)
+            out = self.renderer.render(cam, settings, should_stop=stale, preview=kind == "preview")
         except RenderAbandoned:
             self.abandoned += 1
             return  # the camera moved on: the newer request is rendered next

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..render import render
-from ..render.methods import DEFAULTS, METHODS
+from ..render.methods import DEFAULTS, METHODS, method_params
 from ..scene import Scene
 from ..selection import select_views
 from .geometry import points_in_view
@@ -30,6 +30,12 @@ __all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scal
 #: Memory the per-source depth preparation kept for a session may take (bytes): three
 #: float64 maps per view (fountain at scale 0.25, 11 views of 768×512: 104 MB).
 PREPARED_BUDGET_BYTES = 1 << 30
+
+#: Outer passes (weights re-estimated from u) of a preview, for the methods that make more:
+#: a preview lasts until the camera has been still for a moment, and one pass is faster at
+#: about the same PSNR (docs/VIEWER.md, "Previews in one outer pass"). The full view keeps
+#: the method's passes: it is what ``vibr render`` gives for the camera.
+PREVIEW_OUTER = 1
 
 
 #: What the viewer shows of a render (:attr:`ViewSettings.show`).
@@ -174,8 +180,9 @@ class ViewRenderer:
         pts = points_in_view(self.rank_points, camera)
         return select_views(self.scene, camera, n_views, points=pts if len(pts) else None)
 
-    def render(self, camera: Camera, settings: ViewSettings, should_stop=None) -> ViewImage:
-        """Render ``camera`` with ``settings`` (its size is the camera's).
+    def render(self, camera: Camera, settings: ViewSettings, should_stop=None, preview: bool = False) -> ViewImage:
+        """Render ``camera`` with ``settings`` (its size is the camera's); a ``preview`` in at
+        most :data:`PREVIEW_OUTER` outer passes.
 
         ``should_stop()``, when given, is polled after every solver iteration; when it
         returns True the render is abandoned by raising :class:`RenderAbandoned` (a newer
@@ -187,11 +194,11 @@ class ViewRenderer:
             numba.set_num_threads(min(int(self.threads or numba.config.NUMBA_NUM_THREADS),
                                       numba.config.NUMBA_NUM_THREADS))
             try:
-                return self._render(camera, settings, should_stop)
+                return self._render(camera, settings, should_stop, preview)
             finally:
                 numba.set_num_threads(before)
 
-    def _render(self, camera: Camera, settings: ViewSettings, should_stop) -> ViewImage:
+    def _render(self, camera: Camera, settings: ViewSettings, should_stop, preview: bool = False) -> ViewImage:
         t0 = time.perf_counter()
         if should_stop is not None and should_stop():
             raise RenderAbandoned()
@@ -204,8 +211,11 @@ class ViewRenderer:
             def cb(*_):
                 if should_stop():
                     raise RenderAbandoned()
+        passes = {}
+        if preview and method_params(settings.method)["n_outer"] > PREVIEW_OUTER:
+            passes["n_outer"] = PREVIEW_OUTER
         res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb,
-                     geometry_kw={"prepared": prepared}, uncertainty=settings.show == "sigma")
+                     geometry_kw={"prepared": prepared}, uncertainty=settings.show == "sigma", **passes)
         dt = time.perf_counter() - t0
         return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times), res.iterations,
                          res.uncertainty)
