@@ -87,6 +87,14 @@ def test_bad_videos_are_refused_in_one_line(tmp_path, capsys):
     rc = main(["calibrate", str(bad), str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and "broken.mp4" in err and "cannot read the video" in err
+    import imageio_ffmpeg
+
+    sound = tmp_path / "voice.mp4"  # a phone's voice memo: an MP4 with sound only
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i", "sine=duration=1",
+                    "-c:a", "aac", str(sound)], check=True)
+    rc = main(["calibrate", str(sound), str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and "voice.mp4" in err and "no video stream" in err
     short = tmp_path / "short.mp4"
     write_video(short, [_texture(0)] * 2, fps=10)
     with pytest.raises(VibrInputError, match="the video has 2 frames, calibrate needs at least 3"):
@@ -124,3 +132,26 @@ def test_calibrate_a_video_of_a_walk(tmp_path):
     e = pose_errors([v.camera for v in scene.views], [truth.views[k].camera for k in kept])
     assert e["rot_deg"].max() < 1.0, e["rot_deg"]
     assert e["centre_rel"].max() < 0.02, e["centre_rel"]
+
+
+def test_a_video_cut_short_is_said(tmp_path):
+    """A copy interrupted half-way decodes up to where it stops: what was kept is kept, and a
+    warning says the video ended before the frames its header announces."""
+    import logging
+
+    video = tmp_path / "walk.mp4"
+    write_video(video, [_texture(k) for k in range(40)], fps=10, crf=18)
+    data = video.read_bytes()
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(data[: len(data) // 2])  # faststart: the header, then the first half of the frames
+    seen = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = lambda record: seen.append(record.getMessage())
+    lg = logging.getLogger("vibr.video_frames")  # its own handler: the CLI's tests stop propagation
+    lg.addHandler(handler)
+    try:
+        kept = extract_frames(cut, tmp_path / "frames", 8)
+    finally:
+        lg.removeHandler(handler)
+    assert 0 < kept.n_read < 40 and len(kept.files) < 8
+    assert any("ended after" in m and "of the 40 frames" in m for m in seen), seen

@@ -154,6 +154,9 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
         raise VibrInputError("the video holds no frame", video)
     kept.n_read = len(scores)
     kept.median_sharpness = float(np.median(scores))
+    if len(kept.files) < min(n, kept.n_read):  # the stretches were cut for frames that never came
+        logger.warning(f"calibrate: {video.name} ended after {kept.n_read} of the {total} frames its header "
+                       f"announces (cut short?): {len(kept.files)} frames kept, not {min(n, total)}")
     logger.info(f"calibrate: {kept.summary()}")
     return kept
 

@@ -248,9 +248,20 @@ def open_video(path):
         reader.close()
 
 
+#: What ffmpeg's messages mean for a user, first match wins: (what ffmpeg says, what to say).
+_FFMPEG_REASONS = (
+    ("does not contain any stream", "it holds no video stream (a sound file?)"),
+    ("partial file", "the file is cut short (an interrupted copy or download?)"),
+    ("Invalid data found", "ffmpeg cannot decode it (a damaged file, or not a video)"),
+)
+
+
 def _ffmpeg_reason(text: str) -> str:
-    """The last line of ffmpeg's messages that says something (its banner and
-    configuration are not the reason)."""
+    """What ffmpeg's messages say went wrong: a known cause (:data:`_FFMPEG_REASONS`), else
+    the last line that says something (its banner and configuration are not the reason)."""
+    for said, meaning in _FFMPEG_REASONS:
+        if said in text:
+            return meaning
     lines = [ln.strip() for ln in text.splitlines() if ln.strip() and not ln.startswith(" ")]
     skip = ("ffmpeg version", "built with", "configuration:", "lib", "===", "Could not load meta")
     useful = [ln for ln in lines if not ln.startswith(skip)]
