@@ -129,6 +129,9 @@ def test_calibrate_a_video_of_a_walk(tmp_path):
     assert len(info["registered"]) == 8 and not info["unregistered"]
     scene = load_scene(out)
     assert scene.names == [f"frame_{k:06d}" for k in kept]
+    from vibr.cli.info import describe  # vibr info says where the cameras come from
+
+    assert "calib    pycolmap" in describe(scene) and "from walk.mp4, 8 of its 24 frames" in describe(scene)
     e = pose_errors([v.camera for v in scene.views], [truth.views[k].camera for k in kept])
     assert e["rot_deg"].max() < 1.0, e["rot_deg"]
     assert e["centre_rel"].max() < 0.02, e["centre_rel"]

@@ -69,6 +69,7 @@ def describe(scene) -> str:
         extra.append(f"lens     {m['undistorted']}")
     if m.get("depth_source"):
         extra.append(f"depth    from {m['depth_source']}")
+    extra += _calibration_lines(scene)
     extra += _pose_lines(scene)
     for v in scene.views:
         if v.depth is not None:
@@ -81,6 +82,28 @@ def describe(scene) -> str:
     if extra:
         lines += [""] + extra
     return "\n".join(lines)
+
+
+def _calibration_lines(scene) -> list:
+    """What ``vibr calibrate`` wrote beside the scene (calibration.json): from what, how many
+    photographs or frames registered, and the reprojection error."""
+    import json
+    from pathlib import Path
+
+    f = Path(scene.root) / "calibration.json" if getattr(scene, "root", None) else None
+    if f is None or not f.is_file():
+        return []
+    try:
+        c = json.loads(f.read_text())
+        reg, unreg = len(c["registered"]), len(c["unregistered"])
+        video = c.get("video")
+        src = Path(c["photos"]).name
+        what = (f"{src}, {len(video['frames_kept'])} of its {video['frames_read']} frames (the sharpest of each "
+                f"stretch)" if video else f"the photos of {src}")
+        return [f"calib    {c.get('tool', 'COLMAP')} from {what}: {reg} of {reg + unreg} registered, "
+                f"mean reprojection error {c['mean_reprojection_error_px']:.3f} px"]
+    except (OSError, ValueError, KeyError, TypeError):  # another tool's file, or an older one: not ours to read
+        return []
 
 
 def _pose_lines(scene) -> list:
