@@ -103,6 +103,8 @@ def test_bad_videos_are_refused_in_one_line(tmp_path, capsys):
     rc = main(["calibrate", str(short), str(tmp_path / "out"), "--frames", "1"])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "frames must be an integer >= 2" in err
+    with pytest.raises(VibrInputError, match=r"frames \(2\) must be at least min_registered \(3\)"):
+        calibrate_scene(short, frames=2)
     rc = main(["calibrate", str(tmp_path), str(tmp_path / "out"), "--frames", "10"])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "--frames is for a video" in err and str(tmp_path) in err

@@ -375,7 +375,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
     photos_dir = Path(photos_dir)
     video = is_video_input(photos_dir)
     files = None if video else list_photos(photos_dir)
-    opt = _check_options(opt, opt.frames if video else len(files), photos_dir)
+    opt = _check_options(opt, None if video else len(files), photos_dir)
     opt = replace(opt, matcher=opt.matcher or ("sequential" if video else "exhaustive"))
     own_work = work_dir is None
     work = Path(tempfile.mkdtemp(prefix="vibr-calibrate-")) if own_work else Path(work_dir)
@@ -451,8 +451,9 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             shutil.rmtree(work, ignore_errors=True)
 
 
-def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> CalibrateOptions:
-    """``opt`` checked (:class:`VibrInputError` naming ``photos_dir``)."""
+def _check_options(opt: CalibrateOptions, n_photos: int | None, photos_dir: Path) -> CalibrateOptions:
+    """``opt`` checked (:class:`VibrInputError` naming ``photos_dir``); ``n_photos`` None for
+    a video (its frames are counted as they are read)."""
     if not (0 < opt.scale <= 4):
         raise VibrInputError(f"scale must be in (0, 4], got {opt.scale}", photos_dir)
     if int(opt.frames) != opt.frames or opt.frames < 2:
@@ -472,7 +473,10 @@ def _check_options(opt: CalibrateOptions, n_photos: int, photos_dir: Path) -> Ca
         raise VibrInputError(f"min_registered must be an integer >= 2 (a model needs two photos), "
                              f"got {opt.min_registered}", photos_dir)
     opt = replace(opt, min_registered=int(opt.min_registered))
-    if n_photos < opt.min_registered:
+    if n_photos is None and opt.frames < opt.min_registered:
+        raise VibrInputError(f"frames ({opt.frames}) must be at least min_registered ({opt.min_registered})",
+                             photos_dir)
+    if n_photos is not None and n_photos < opt.min_registered:
         raise VibrInputError(
             f"{n_photos} photos found, calibrate needs at least {opt.min_registered}", photos_dir
         )

@@ -270,10 +270,6 @@ def _ffmpeg_reason(text: str) -> str:
 
 def read_video_info(path) -> tuple[int, int, int, float]:
     """Decode a video and return ``(n_frames, width, height, fps)`` (counts decoded frames)."""
-    import imageio_ffmpeg
-
-    reader = imageio_ffmpeg.read_frames(os.fspath(path))
-    meta = reader.__next__()
-    n = sum(1 for _ in reader)
-    w, h = meta["size"]
-    return n, int(w), int(h), float(meta.get("fps", 0.0))
+    with open_video(path) as (info, frames):
+        n = sum(1 for _ in frames)
+    return n, info.width, info.height, info.fps
