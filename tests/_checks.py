@@ -1,9 +1,28 @@
 """Checks shared by several test modules (imported as a plain module: pytest puts this
 folder on sys.path)."""
 
+import contextlib
+import logging
+
 import numpy as np
 
 from vibr.render.operators import stencil_apply
+
+
+@contextlib.contextmanager
+def warnings_logged(name: str):
+    """The messages of the warnings logger ``name`` logs inside the block (a list, filled
+    as they come): a handler of its own, since the CLI's tests stop the "vibr" logger's
+    propagation to pytest's capture."""
+    seen = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = lambda record: seen.append(record.getMessage())
+    lg = logging.getLogger(name)
+    lg.addHandler(handler)
+    try:
+        yield seen
+    finally:
+        lg.removeHandler(handler)
 
 
 def assert_quadratic_form(s, w, rng):

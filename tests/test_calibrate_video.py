@@ -9,6 +9,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from _checks import warnings_logged
 from scipy import ndimage
 
 from vibr.calibrate import pose_errors
@@ -142,21 +143,12 @@ def test_calibrate_a_video_of_a_walk(tmp_path):
 def test_a_video_cut_short_is_said(tmp_path):
     """A copy interrupted half-way decodes up to where it stops: what was kept is kept, and a
     warning says the video ended before the frames its header announces."""
-    import logging
-
     video = tmp_path / "walk.mp4"
     write_video(video, [_texture(k) for k in range(40)], fps=10, crf=18)
     data = video.read_bytes()
     cut = tmp_path / "cut.mp4"
     cut.write_bytes(data[: len(data) // 2])  # faststart: the header, then the first half of the frames
-    seen = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = lambda record: seen.append(record.getMessage())
-    lg = logging.getLogger("vibr.video_frames")  # its own handler: the CLI's tests stop propagation
-    lg.addHandler(handler)
-    try:
+    with warnings_logged("vibr.video_frames") as seen:
         kept = extract_frames(cut, tmp_path / "frames", 8)
-    finally:
-        lg.removeHandler(handler)
     assert 0 < kept.n_read < 40 and len(kept.files) < 8
     assert any("ended after" in m and "of the 40 frames" in m for m in seen), seen

@@ -266,7 +266,7 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     ring's inside (where the temple stands). Through all the views the default order is by
     proximity, and the path stays near the ring; the view with the same pose as its
     neighbour by proximity (templeSR0011, templeSR0001's) is left out with a warning."""
-    import logging
+    from _checks import warnings_logged
 
     from vibr.path import interpolate, scene_centre
 
@@ -277,15 +277,8 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     def closest(p):
         return min(np.linalg.norm(c.centre - X) for c in p.cameras) / ring
 
-    seen = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = lambda record: seen.append(record.getMessage())
-    lg = logging.getLogger("vibr.path")  # its own handler: the CLI's tests stop propagation
-    lg.addHandler(handler)
-    try:
+    with warnings_logged("vibr.path") as seen:
         p = interpolate(scene, n_frames=200)
-    finally:
-        lg.removeHandler(handler)
     assert any("templeSR0011.png (after templeSR0001.png) left out" in m for m in seen)
     assert len(p.meta["views"]) == 15 and closest(p) > 0.8
     assert closest(interpolate(scene, order="given", n_frames=200)) < 0.5
