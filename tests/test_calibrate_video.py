@@ -152,3 +152,16 @@ def test_a_video_cut_short_is_said(tmp_path):
         kept = extract_frames(cut, tmp_path / "frames", 8)
     assert 0 < kept.n_read < 40 and len(kept.files) < 8
     assert any("ended after" in m and "of the 40 frames" in m for m in seen), seen
+
+
+def test_no_room_for_the_frames_is_said_before_reading(tmp_path, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    video = tmp_path / "walk.mp4"
+    write_video(video, [_texture(k) for k in range(6)], fps=10)
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10 ** 9, 10 ** 9 - 100_000, 100_000))
+    with pytest.raises(VibrInputError, match=r"0.1 MiB free, 6 frames of 160x120 need about 0.3 MiB"):
+        extract_frames(video, tmp_path / "frames", 10)
+    assert not any((tmp_path / "frames").iterdir())

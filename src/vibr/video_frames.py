@@ -102,6 +102,22 @@ def _centre_weight(i: int, n_total: int, n: int) -> float:
     return 1.0 - CENTRE_PREFERENCE * min(abs(i - centre) / half, 1.0)
 
 
+def _check_space(out: Path, n: int, info: VideoInfo) -> None:
+    """Refuse to start when ``out``'s disk cannot hold ``n`` frames (BMP: 3 bytes a pixel)."""
+    try:
+        free = shutil.disk_usage(out).free
+    except OSError:
+        return
+    need = 3.0 * info.width * info.height * n + 1024 * n
+    if free < need:
+        raise VibrInputError(f"{_mib(free)} free, {n} frames of {info.width}x{info.height} need about "
+                             f"{_mib(need)}: free some space, or use --work DIR on another disk", out)
+
+
+def _mib(b: float) -> str:
+    return f"{b / 2**20:.1f} MiB" if b < 10 * 2**20 else f"{b / 2**20:.0f} MiB"
+
+
 def _count_frames(path: Path) -> int:
     """Frames in the video, decoded (for containers that state no duration)."""
     import imageio_ffmpeg
@@ -133,6 +149,7 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
     with open_video(video) as (info, frames):
         kept.info = info
         total = info.n_frames or _count_frames(video)
+        _check_space(out, min(n, max(total, 1)), info)
         logger.info(f"calibrate: video {video.name}: {info.width}x{info.height}"
                     f"{' (turned upright)' if info.rotated else ''}, {info.fps:.3g} fps, "
                     f"{info.duration_s:.1f} s, about {total} frames; keeping {min(n, max(total, 1))}")
