@@ -165,3 +165,17 @@ def test_no_room_for_the_frames_is_said_before_reading(tmp_path, monkeypatch):
     with pytest.raises(VibrInputError, match=r"0.1 MiB free, 6 frames of 160x120 need about 0.3 MiB"):
         extract_frames(video, tmp_path / "frames", 10)
     assert not any((tmp_path / "frames").iterdir())
+
+
+def test_the_choice_stays_near_the_middle_of_a_long_stretch(tmp_path):
+    """Two stretches of 3 s at 10 fps: a sharp frame 1.25 s from its stretch's middle is not
+    taken (the views would bunch up at one end), one 0.05 s from it is."""
+    from vibr.video_frames import REACH_S
+
+    frames = [_motion_blur(_texture(0), 5)] * 60
+    frames = list(frames)
+    frames[2] = frames[45] = _texture(0)
+    video = tmp_path / "long.mp4"
+    write_video(video, frames, fps=10, crf=10)
+    assert REACH_S * 10 < 14.5 - 2
+    assert extract_frames(video, tmp_path / "frames", 2).indices == [14, 45]

@@ -3,10 +3,13 @@
 A video walked round a scene holds thousands of frames, many blurred by the hand's motion,
 and neighbours that differ by a few pixels. Structure from motion wants a few dozen sharp
 photographs spread along the walk. The video is cut into ``n`` stretches of equal length,
-and of each stretch the frame with the highest :func:`sharpness` is kept, weighted by up to
-:data:`CENTRE_PREFERENCE` towards the stretch's middle: the spread comes from the stretches,
-the choice within a stretch avoids the blur, and of frames about as sharp the middle one
-keeps the kept frames evenly spaced (docs/CALIBRATE.md, "From a video"). The frames are read once, as a stream: memory holds one stretch's best frame.
+and of each stretch the frame with the highest :func:`sharpness` within :data:`REACH_S` of
+its middle is kept, weighted by up to :data:`CENTRE_PREFERENCE` towards the middle: the
+spread comes from the stretches, the choice near the middle avoids the blur (which comes and
+goes within a fraction of a second as the hand shakes and the walker steps) without
+trading a blurred frame for a gap in the walk, and of frames about as sharp the middle one
+keeps the kept frames evenly spaced (docs/CALIBRATE.md, "From a video"). The frames are read
+once, as a stream: memory holds one stretch's best frame.
 """
 
 from __future__ import annotations
@@ -37,6 +40,12 @@ SHARPNESS_SIDE = 960
 #: sharpness: blur from the hand's motion divides the sharpness by much more than that, so a
 #: blurred middle frame still loses to a sharp one off the middle.
 CENTRE_PREFERENCE = 0.2
+
+#: How far (seconds) from its stretch's middle a frame may be chosen: a long stretch's most
+#: detailed frame is often just the one that looks at the most texture, and choosing it could
+#: leave the views of a walk seconds apart on one side and a few frames apart on the other.
+#: Half a second covers a step of the walker and many periods of the hand's tremor.
+REACH_S = 0.5
 
 
 def sharpness(img) -> float:
@@ -71,7 +80,8 @@ def sharpness(img) -> float:
 class VideoFrames:
     """What :func:`extract_frames` kept: the image ``files`` (named by frame number, in time
     order), the frame ``indices`` and their ``sharpness``, the video's ``info``, the number
-    of frames read, and the median sharpness of all of them."""
+    of frames read, and the median sharpness of those scored (the frames near the middles
+    of the stretches, where the choice is made)."""
 
     files: list[Path]
     indices: list[int]
@@ -82,8 +92,8 @@ class VideoFrames:
 
     def summary(self) -> str:
         gain = np.median(self.sharpness) / self.median_sharpness if self.median_sharpness > 0 else float("nan")
-        return (f"kept {len(self.files)} of {self.n_read} frames, the sharpest of each stretch "
-                f"({gain:.2f}x the median frame's sharpness)")
+        return (f"kept {len(self.files)} of {self.n_read} frames, the sharpest near the middle of each stretch "
+                f"({gain:.2f}x the median sharpness of the frames it chose from)")
 
 
 def _stretch(i: int, n_total: int, n: int) -> int:
@@ -92,14 +102,17 @@ def _stretch(i: int, n_total: int, n: int) -> int:
     return min(i * n // n_total, n - 1) if n_total > 0 else i
 
 
-def _centre_weight(i: int, n_total: int, n: int) -> float:
-    """``1 − CENTRE_PREFERENCE · d``, ``d`` the distance of frame ``i`` from its stretch's
-    middle in half-stretches (at most 1)."""
+def _centre_weight(i: int, n_total: int, n: int, reach: float) -> float:
+    """``1 − CENTRE_PREFERENCE · d`` for frame ``i``, ``d`` its distance from its stretch's
+    middle over the half-width of the window it may be chosen in (half the stretch, or
+    ``reach`` frames when that is shorter and at least 2); 0 outside that window."""
     if n_total <= n:
         return 1.0
     half = n_total / (2 * n)
     centre = (2 * _stretch(i, n_total, n) + 1) * half - 0.5
-    return 1.0 - CENTRE_PREFERENCE * min(abs(i - centre) / half, 1.0)
+    window = reach if 2 <= reach < half else half
+    d = abs(i - centre) / window
+    return 0.0 if d > 1.0 else 1.0 - CENTRE_PREFERENCE * d
 
 
 def _check_space(out: Path, n: int, info: VideoInfo) -> None:
@@ -146,6 +159,7 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
     out.mkdir(parents=True)
     kept = VideoFrames([], [], None, 0)
     scores: list[float] = []
+    n_read = 0
     with open_video(video) as (info, frames):
         kept.info = info
         total = info.n_frames or _count_frames(video)
@@ -155,21 +169,26 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
                     f"{info.duration_s:.1f} s, about {total} frames; keeping {min(n, max(total, 1))}")
         best = (-1.0, -1, None)  # sharpness, index, frame of the current stretch
         current = 0
+        reach = REACH_S * info.fps if info.fps > 0 else float("inf")
         for i, frame in enumerate(progress(frames, desc="calibrate: video frames", total=total or None)):
             k = _stretch(i, total, n)
             if k != current and best[2] is not None:
                 _keep(best, out, kept, iio)
                 best = (-1.0, -1, None)
             current = k
+            n_read = i + 1
+            weight = _centre_weight(i, total, n, reach)
+            if weight == 0.0:
+                continue  # too far from the stretch's middle: not even scored
             s = sharpness(frame)
             scores.append(s)
-            if s * _centre_weight(i, total, n) > best[0]:
-                best = (s * _centre_weight(i, total, n), i, frame.copy())
+            if s * weight > best[0]:
+                best = (s * weight, i, frame.copy())
         if best[2] is not None:
             _keep(best, out, kept, iio)
     if not kept.files:
         raise VibrInputError("the video holds no frame", video)
-    kept.n_read = len(scores)
+    kept.n_read = n_read
     kept.median_sharpness = float(np.median(scores))
     if len(kept.files) < min(n, kept.n_read):  # the stretches were cut for frames that never came
         logger.warning(f"calibrate: {video.name} ended after {kept.n_read} of the {total} frames its header "
