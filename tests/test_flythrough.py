@@ -973,3 +973,92 @@ def test_orient_keys_property():
         assert (snap.width, snap.height) == ((w, h) if k % 2 == 0 else (h, w))
 
     check()
+
+
+def _walk(n=40, jitter=0.02, deg=2.0, seed=0):
+    """A steady walk along x (0.1 a key, turning 1° a key) and the same shaken by a hand:
+    centres ± ``jitter``, orientations ± ``deg`` about each axis."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    K = Camera.intrinsics(100, 160, 120)
+
+    def cam(C, rv):
+        return Camera.from_centre(K, Rotation.from_rotvec(rv).as_matrix().T, C, 160, 120)
+
+    steady = [cam(np.array([0.1 * i, 0, 0]), np.radians([0, i, 0])) for i in range(n)]
+    shaken = [cam(c.centre + rng.normal(0, jitter, 3), np.radians([0, i, 0]) + rng.normal(0, np.radians(deg), 3))
+              for i, c in enumerate(steady)]
+    return steady, shaken
+
+
+def _rms_off(cams, ref):
+    """RMS distance and angle (degrees) of ``cams`` from ``ref``, key by key."""
+    d = [np.linalg.norm(a.centre - b.centre) for a, b in zip(cams, ref)]
+    ang = [np.degrees(np.arccos(np.clip((np.trace(a.R @ b.R.T) - 1) / 2, -1, 1))) for a, b in zip(cams, ref)]
+    return float(np.sqrt(np.mean(np.square(d)))), float(np.sqrt(np.mean(np.square(ang))))
+
+
+def test_smooth_keys_keeps_a_steady_walk_and_calms_a_shaken_one():
+    from vibr.path import smooth_keys
+
+    steady, shaken = _walk()
+    same = smooth_keys(steady, 2.0)
+    d, a = _rms_off(same, steady)
+    assert d < 1e-12 and a < 1e-4  # a steady motion (and its ends) is left as it is
+    for sigma in (1.0, 2.0):
+        calm = smooth_keys(shaken, sigma)
+        d0, a0 = _rms_off(shaken, steady)
+        d1, a1 = _rms_off(calm, steady)
+        assert d1 < 0.7 * d0 and a1 < 0.7 * a0, (sigma, d0, d1, a0, a1)
+        assert np.allclose(calm[0].centre, shaken[0].centre) and np.allclose(calm[-1].centre, shaken[-1].centre)
+    # a loop wraps round: a ring of 12 keys smoothed stays a ring, every key shrunk alike
+    K = Camera.intrinsics(100, 160, 120)
+    ring = [Camera.look_at([3 * math.cos(a), 0, 3 * math.sin(a)], [0, 0, 0], [0, -1, 0], K, 160, 120)
+            for a in np.linspace(0, 2 * math.pi, 12, endpoint=False)]
+    r1 = [np.linalg.norm(c.centre) for c in smooth_keys(ring, 1.0, closed=True)]
+    assert np.ptp(r1) < 1e-9 and abs(r1[0] / 3 - 0.872) < 0.001  # Σ g_j cos(30° j) / Σ g_j
+    with pytest.raises(VibrInputError, match="smooth must be a positive number of keys"):
+        smooth_keys(steady, -1)
+
+
+def test_interpolate_smooth_through_a_shaken_walk():
+    """``interpolate(smooth=...)``: the path of a shaken walk is nearer the steady one and
+    turns less from frame to frame; 0 leaves the path through the cameras unchanged."""
+    from vibr.path import interpolate
+    from vibr.scene import Scene, View
+
+    steady, shaken = _walk()
+    scene = Scene([View(f"f{k:03d}", np.zeros((120, 160, 3), np.float32), c) for k, c in enumerate(shaken)])
+    ref = Scene([View(f"f{k:03d}", np.zeros((120, 160, 3), np.float32), c) for k, c in enumerate(steady)])
+    truth = interpolate(ref, order="given", n_frames=200).cameras
+    raw = interpolate(scene, order="given", n_frames=200)
+    calm = interpolate(scene, order="given", n_frames=200, smooth=2.0)
+    assert calm.meta["smooth"] == 2.0 and raw.meta["smooth"] == 0.0
+
+    def turn(cams):  # mean rotation between consecutive frames, degrees
+        return np.mean([np.degrees(np.arccos(np.clip((np.trace(a.R @ b.R.T) - 1) / 2, -1, 1)))
+                        for a, b in zip(cams, cams[1:])])
+
+    assert turn(calm.cameras) < 0.6 * turn(raw.cameras)
+    assert _rms_off(calm.cameras, truth)[1] < 0.7 * _rms_off(raw.cameras, truth)[1]
+    assert all(a.allclose(b) for a, b in zip(interpolate(scene, order="given", n_frames=50, smooth=0).cameras,
+                                              interpolate(scene, order="given", n_frames=50).cameras))
+
+
+def test_cli_smooth(tmp_path, arc_scene, capsys):
+    from vibr.cli import main
+    from vibr.io.transforms import save_scene as save_scene_transforms
+
+    save_scene_transforms(arc_scene, tmp_path / "s")
+    out = tmp_path / "p.json"
+    assert main(["path", "interpolate", str(tmp_path / "s"), "-o", str(out), "--frames", "8", "--smooth", "1",
+                 "-q"]) == 0
+    assert json.loads(out.read_text())["vibr"]["smooth"] == 1.0
+    capsys.readouterr()
+    for args, said in ((["orbit", "--smooth", "1"], "--smooth applies to 'vibr path interpolate' only"),
+                       (["interpolate", "--smooth", "-1"], "--smooth must be a number of keys >= 0")):
+        rc = main(["path", args[0], str(tmp_path / "s"), "-o", str(tmp_path / "q.json"), *args[1:]])
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and said in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "q.json").exists()

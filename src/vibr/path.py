@@ -43,7 +43,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
            "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED", "PATH_KINDS",
-           "ROLL_MODES", "orient_keys", "turns_text", "grid_loop"]
+           "ROLL_MODES", "orient_keys", "turns_text", "grid_loop", "smooth_keys"]
 
 PATH_KINDS = ("interpolate", "orbit", "spiral")
 
@@ -635,7 +635,8 @@ def _distinct_keys(cams, names, X):
 
 def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | None = None,
                 seconds: float | None = None, fps: float = 24.0, width: int | None = None,
-                height: int | None = None, scale: float = 1.0, roll: str = "snap") -> CameraPath:
+                height: int | None = None, scale: float = 1.0, roll: str = "snap",
+                smooth: float = 0.0) -> CameraPath:
     """A C²-smooth path through the scene's cameras (all, or ``views`` in that order).
 
     Knots ``t_i`` are the cumulative length ``Σ ‖C_i − C_{i−1}‖ + r · angle(R_{i−1}, R_i)``
@@ -665,6 +666,11 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
         How the key cameras are oriented about their optical axes (:data:`ROLL_MODES`,
         :func:`orient_keys`), the world's up from :func:`scene_up`; with "snap", photographs
         taken rolled by 90° or upside down make no spin in the video.
+    smooth : float
+        σ (in keys) of a Gaussian smoothing of the key cameras along the path before the
+        splines (:func:`smooth_keys`): the hand's sway between the frames of a hand-held
+        video, which the splines would otherwise follow. 0 (the default): the path passes
+        through the cameras.
     """
     from scipy.interpolate import CubicSpline
     from scipy.spatial.transform import Rotation, RotationSpline
@@ -674,6 +680,11 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     X = scene_centre(cams, scene_points(scene))
     cams = _oriented(cams, roll, X)
     w, h = _output_size(cams, width, height, scale)
+    if smooth and closed:  # the loop's last key is its first again
+        cams = smooth_keys(cams[:-1], smooth, closed=True)
+        cams = cams + cams[:1]
+    elif smooth:
+        cams = smooth_keys(cams, smooth)
     cams, names, step = _distinct_keys(cams, names, X)
     t = np.concatenate([[0.0], np.cumsum(step)])
     C = np.array([c.centre for c in cams])
@@ -691,7 +702,74 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
         K = Camera.intrinsics(float(fi) * h, w, h)
         out.append(Camera.from_centre(K, Ri.T, Ci, w, h))
     return CameraPath(out, float(fps), None, w, h,
-                      {"kind": "interpolate", "views": names, "knots": t.tolist(), "roll": roll, "closed": closed})
+                      {"kind": "interpolate", "views": names, "knots": t.tolist(), "roll": roll, "closed": closed,
+                       "smooth": float(smooth)})
+
+
+def smooth_keys(cameras, sigma: float, closed: bool = False) -> list:
+    """Key cameras smoothed along their sequence: a Gaussian low-pass of the trajectory, the
+    first step of video stabilisation (Grundmann, Kwatra & Essa, "Auto-directed video
+    stabilization with robust L1 optimal camera paths", CVPR 2011, fit a smooth path to the
+    shaky one; a Gaussian is the simplest such fit).
+
+    Key ``i`` gets ``C̃_i = Σ_j g_j C_{i+j} / Σ_j g_j``, ``g_j = exp(−j²/2σ²)``, ``|j| ≤ ⌈3σ⌉``;
+    its orientation the weighted chordal mean of the rotations (``Rotation.mean``) and its
+    focal length the weighted mean, the intrinsics otherwise kept. An open sequence is
+    extended past its ends by point reflection (``C_{−j} = 2C_0 − C_j``, ``R_{−j} =
+    R_0 R_jᵀ R_0``), so the end keys stay where they are and a steady motion is left as it
+    is; a ``closed`` one wraps round.
+
+    Parameters
+    ----------
+    cameras : list of Camera (at least 2)
+    sigma : float
+        Width of the Gaussian in keys (> 0; for a hand-held video's frames, 1–3).
+    closed : bool
+        The sequence is a loop (its last key is followed by its first).
+    """
+    from scipy.spatial.transform import Rotation
+
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise VibrInputError(f"smooth must be a positive number of keys, got {sigma}")
+    n = len(cameras)
+    m = min(int(np.ceil(3 * sigma)), n - 1)
+    g = np.exp(-np.arange(-m, m + 1) ** 2 / (2.0 * sigma ** 2))
+    C = np.array([c.centre for c in cameras])
+    R = Rotation.from_matrix(np.array([c.R.T for c in cameras]))  # camera-to-world
+    f = np.array([c.K[1, 1] for c in cameras])
+    out = []
+    for i in range(n):
+        Cs, Rs, fs = _window(C, R, f, i, m, closed)
+        c = cameras[i]
+        K = c.K.copy()
+        K[0, 0] *= float(g @ fs) / g.sum() / K[1, 1]
+        K[1, 1] = float(g @ fs) / g.sum()
+        Rc2w = Rs.mean(weights=g).as_matrix()
+        out.append(Camera.from_centre(K, Rc2w.T, g @ Cs / g.sum(), c.width, c.height))
+    return out
+
+
+def _window(C, R, f, i: int, m: int, closed: bool):
+    """The keys ``i − m … i + m`` (centres, rotations, focal lengths): wrapped round when
+    ``closed``, else reflected through the end keys."""
+    from scipy.spatial.transform import Rotation
+
+    n = len(C)
+    idx = np.arange(i - m, i + m + 1)
+    if closed:
+        k = idx % n
+        return C[k], R[k], f[k]
+    Cs, Rm, fs = np.empty((len(idx), 3)), [], np.empty(len(idx))
+    for a, j in enumerate(idx):
+        e = 0 if j < 0 else n - 1 if j >= n else None  # the end key reflected through
+        if e is None:
+            Cs[a], fs[a] = C[j], f[j]
+            Rm.append(R[j].as_matrix())
+        else:
+            r = 2 * e - j  # mirror index, inside since m ≤ n − 1
+            Cs[a], fs[a] = 2 * C[e] - C[r], 2 * f[e] - f[r]
+            Rm.append((R[e] * R[r].inv() * R[e]).as_matrix())
+    return Cs, Rotation.from_matrix(np.array(Rm)), fs
 
 
 def _path_keys(scene, views, order) -> tuple[list, list, bool]:

@@ -61,6 +61,10 @@ def register(sub) -> None:
     p.add_argument("--roll", choices=list(ROLL_MODES), default=None,
                    help="interpolate: how the key cameras are turned about their axes: "
                         + "; ".join(f"{k}: {v}" for k, v in ROLL_MODES.items()) + " (default: snap)")
+    p.add_argument("--smooth", type=float, default=None, metavar="SIGMA",
+                   help="interpolate: smooth the key cameras along the path first, a Gaussian of SIGMA keys "
+                        "(e.g. 2 for the frames of a hand-held video: the path no longer follows the hand's "
+                        "sway, and passes near the photographs rather than through them; default: through them)")
     p.add_argument("--full", action="store_true", help="orbit: a full turn even when the cameras cover an arc")
     p.add_argument("--dataparser-transforms", metavar="JSON",
                    help="write the path in the normalised frame of a nerfstudio model trained on SCENE (its "
@@ -84,8 +88,11 @@ def run(args) -> int:
         raise VibrInputError("give --frames or --seconds, not both")
     if args.scale <= 0:
         raise VibrInputError(f"--scale must be positive, got {args.scale}")
+    if args.smooth is not None and not args.smooth >= 0:  # before the scene is read
+        raise VibrInputError(f"--smooth must be a number of keys >= 0, got {args.smooth}")
     for flag, kind, value in (("--views", "interpolate", args.views), ("--order", "interpolate", args.order),
-                              ("--roll", "interpolate", args.roll), ("--full", "orbit", args.full)):
+                              ("--roll", "interpolate", args.roll), ("--smooth", "interpolate", args.smooth),
+                              ("--full", "orbit", args.full)):
         if value not in (None, False) and args.kind != kind:  # refused, not ignored
             raise VibrInputError(f"{flag} applies to 'vibr path {kind}' only, not to {args.kind}")
     if args.dataparser_transforms:
@@ -96,7 +103,8 @@ def run(args) -> int:
     w, h = args.size if args.size else (None, None)
     kw = dict(n_frames=args.frames, seconds=seconds, fps=args.fps, width=w, height=h)
     if args.kind == "interpolate":
-        path = P.interpolate(scene, args.views, order=args.order, roll=args.roll or "snap", **kw)
+        path = P.interpolate(scene, args.views, order=args.order, roll=args.roll or "snap",
+                             smooth=args.smooth or 0.0, **kw)
     elif args.kind == "orbit":
         path = P.orbit(scene, full=True if args.full else None, **kw)
     else:
