@@ -1,6 +1,6 @@
 """How much ``vibr path interpolate --smooth SIGMA`` calms a hand-held capture.
 
-A steady walk (``--keys`` keys 0.1 scene units apart along x, turning 1° a key, as one frame a
+A steady walk (:func:`vibr.synthetic.walk_cameras`: ``--keys`` keys 0.1 scene units apart along x, turning 1° a key, as one frame a
 second of a walking video would be) is shaken by a hand: every key's centre moved by
 N(0, ``--jitter``) per axis and its orientation turned by N(0, ``--deg``°) about each axis,
 ``--seeds`` draws. For each SIGMA the path through the shaken keys
@@ -16,23 +16,6 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-
-
-def walk(n, jitter, deg, seed):
-    from scipy.spatial.transform import Rotation
-
-    from vibr.camera import Camera
-
-    rng = np.random.default_rng(seed)
-    K = Camera.intrinsics(100, 160, 120)
-
-    def cam(C, rv):
-        return Camera.from_centre(K, Rotation.from_rotvec(rv).as_matrix().T, C, 160, 120)
-
-    steady = [cam(np.array([0.1 * i, 0, 0]), np.radians([0, i, 0])) for i in range(n)]
-    shaken = [cam(c.centre + rng.normal(0, jitter, 3), np.radians([0, i, 0]) + rng.normal(0, np.radians(deg), 3))
-              for i, c in enumerate(steady)]
-    return steady, shaken
 
 
 def scene_of(cams):
@@ -55,12 +38,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from vibr.path import interpolate
+    from vibr.synthetic import walk_cameras
 
     sigmas = [float(s) for s in args.sigmas.split(",")]
     rows = {s: [] for s in sigmas}
     n_frames = 10 * args.keys
     for seed in range(args.seeds):
-        steady, shaken = walk(args.keys, args.jitter, args.deg, seed)
+        steady = walk_cameras(args.keys, seed)
+        shaken = walk_cameras(args.keys, seed, jitter=args.jitter, jitter_deg=args.deg)
         truth = interpolate(scene_of(steady), order="given", n_frames=n_frames).cameras
         for s in sigmas:
             cams = interpolate(scene_of(shaken), order="given", n_frames=n_frames, smooth=s).cameras

@@ -976,20 +976,10 @@ def test_orient_keys_property():
 
 
 def _walk(n=40, jitter=0.02, deg=2.0, seed=0):
-    """A steady walk along x (0.1 a key, turning 1° a key) and the same shaken by a hand:
-    centres ± ``jitter``, orientations ± ``deg`` about each axis."""
-    from scipy.spatial.transform import Rotation
+    """A steady walk and the same shaken by a hand (:func:`vibr.synthetic.walk_cameras`)."""
+    from vibr.synthetic import walk_cameras
 
-    rng = np.random.default_rng(seed)
-    K = Camera.intrinsics(100, 160, 120)
-
-    def cam(C, rv):
-        return Camera.from_centre(K, Rotation.from_rotvec(rv).as_matrix().T, C, 160, 120)
-
-    steady = [cam(np.array([0.1 * i, 0, 0]), np.radians([0, i, 0])) for i in range(n)]
-    shaken = [cam(c.centre + rng.normal(0, jitter, 3), np.radians([0, i, 0]) + rng.normal(0, np.radians(deg), 3))
-              for i, c in enumerate(steady)]
-    return steady, shaken
+    return walk_cameras(n, seed), walk_cameras(n, seed, jitter=jitter, jitter_deg=deg)
 
 
 def _rms_off(cams, ref):

@@ -49,6 +49,7 @@ __all__ = [
     "free_cameras",
     "make_scene",
     "handheld_cameras",
+    "walk_cameras",
     "degrade_depth",
     "planar_depth",
     "TEXTURES",
@@ -764,6 +765,26 @@ def handheld_cameras(n: int = 7, seed: int = 0, *, width: int = 128, height: int
             r = rng.uniform(*baseline)
             off = np.array([r * math.cos(a), r * math.sin(a), rng.uniform(-z_jitter, z_jitter)])
         cams.append(_aimed_rolled(e0 + off, t0, rng, aim_jitter, roll_deg, K, width, height))
+    return cams
+
+
+def walk_cameras(n: int = 40, seed: int = 0, *, step: float = 0.1, turn_deg: float = 1.0,
+                 jitter: float = 0.0, jitter_deg: float = 0.0, width: int = 160, height: int = 120,
+                 fov_deg: float = 55.0) -> list[Camera]:
+    """A steady walk, as one frame a second of a walking video: key ``i`` at ``(i · step, 0,
+    0)``, turned by ``i · turn_deg`` about the y axis; shaken by a hand when ``jitter`` /
+    ``jitter_deg`` are given: each centre moved by N(0, ``jitter``) per axis and each
+    orientation turned by N(0, ``jitter_deg``°) about each axis (rotation vector).
+    Deterministic for a seed; the same ``n`` and ``seed`` without jitter give the walk the
+    shaken one was shaken from."""
+    from scipy.spatial.transform import Rotation
+
+    rng, K, _, _ = _random_layout("walk_cameras", n, seed, width, height, fov_deg, (0, 0, 0), (0, 0, 1))
+    cams = []
+    for i in range(n):
+        C = np.array([step * i, 0.0, 0.0]) + rng.normal(0.0, 1.0, 3) * jitter
+        rv = np.radians([0.0, turn_deg * i, 0.0]) + rng.normal(0.0, 1.0, 3) * np.radians(jitter_deg)
+        cams.append(Camera.from_centre(K, Rotation.from_rotvec(rv).as_matrix().T, C, width, height))
     return cams
 
 
