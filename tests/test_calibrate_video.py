@@ -135,9 +135,31 @@ def test_calibrate_a_video_of_a_walk(tmp_path):
     from vibr.cli.info import describe  # vibr info says where the cameras come from
 
     assert "calib    pycolmap" in describe(scene) and "from walk.mp4, 8 of its 24 frames" in describe(scene)
+    # the views are the video's frames in time order, said in transforms.json
+    assert scene.meta["capture"] == "video"
+    assert json.loads((out / "transforms.json").read_text())["vibr_capture"] == "video"
     e = pose_errors([v.camera for v in scene.views], [truth.views[k].camera for k in kept])
     assert e["rot_deg"].max() < 1.0, e["rot_deg"]
     assert e["centre_rel"].max() < 0.02, e["centre_rel"]
+
+
+def test_a_path_through_a_videos_frames_keeps_their_time_order():
+    """A walk out and back along two close lines: by proximity the path zigzags between
+    them; the frames of a video (``meta["capture"]``) are taken in time order."""
+    from vibr.path import interpolate
+    from vibr.scene import Scene, View
+    from vibr.synthetic import walk_cameras
+
+    out = walk_cameras(8, turn_deg=0)
+    # back 0.05 beside the way out, half a step along: nearer the way out's keys than they are to each other
+    back = [c.__class__.from_centre(c.K, c.R, c.centre + [0.05, 0, 0.05], c.width, c.height) for c in out[::-1]]
+    views = [View(f"frame_{k:06d}", np.zeros((120, 160, 3), np.float32), c) for k, c in enumerate(out + back)]
+    names = [v.name for v in views]
+    plain = Scene(views)
+    video = Scene(views, meta={"capture": "video"})
+    assert interpolate(plain, n_frames=40).meta["views"] != names  # proximity reorders them
+    assert interpolate(video, n_frames=40).meta["views"] == names
+    assert interpolate(video, n_frames=40, order="proximity").meta["views"] != names
 
 
 def test_a_video_cut_short_is_said(tmp_path):

@@ -629,6 +629,7 @@ def _calibration_meta(photos_dir: Path, opt: CalibrateOptions, pp_note: str,
     }
     if frames is not None:
         info = frames.info
+        meta["capture"] = "video"  # the views in time order (saved as vibr_capture)
         meta["calibration"]["video"] = {
             "size": [info.width, info.height], "fps": info.fps, "duration_s": info.duration_s,
             "frames_read": frames.n_read, "frames_kept": frames.indices,

@@ -655,9 +655,10 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     views : sequence of view names / indices, optional
     order : {"given", "proximity"}, optional
         Keep the given (or the scene's) order, or reorder by :func:`order_by_proximity`.
-        Default: ``"given"`` when ``views`` are named, else ``"proximity"`` (a scene's file
-        order need not follow its cameras: templeSparseRing's jumps across the ring, and a
-        path in that order goes through the temple).
+        Default: ``"given"`` when ``views`` are named or the scene is a video's frames
+        (``scene.meta["capture"] == "video"``: time order), else ``"proximity"`` (a scene's
+        file order need not follow its cameras: templeSparseRing's jumps across the ring,
+        and a path in that order goes through the temple).
     n_frames : int, or ``seconds`` × ``fps``
     width, height : int, optional
         Frame size (default: the first key camera's, times ``scale``: W×H swapped when
@@ -781,6 +782,10 @@ def _path_keys(scene, views, order) -> tuple[list, list, bool]:
             logger.info("interpolate: a light field's grid: a loop through %d views round its border "
                         "(order 'proximity': through all %d, row by row)", len(loop), len(cams))
             return [cams[i] for i in loop] + [cams[loop[0]]], [names[i] for i in loop] + [names[loop[0]]], True
+    if order is None and views is None and scene.meta.get("capture") == "video":
+        logger.info("interpolate: the frames of a video: in time order (--order proximity to reorder them; "
+                    "--smooth 2 calms a hand-held walk)")
+        order = "given"
     order = ("given" if views is not None else "proximity") if order is None else order
     if order not in ("given", "proximity"):
         raise VibrInputError(f"order must be 'given' or 'proximity', got {order!r}")

@@ -57,7 +57,8 @@ def register(sub) -> None:
     p.add_argument("--views", type=names, help="interpolate: comma-separated views to pass through, in order (default: all)")
     p.add_argument("--order", choices=["given", "proximity"], default=None,
                    help="interpolate: keep the given order or reorder the views by proximity (default: "
-                        "proximity through all the scene's views, the given order with --views)")
+                        "proximity through all the scene's views, the given order with --views or for the "
+                        "frames of a video, from 'vibr calibrate VIDEO': time order)")
     p.add_argument("--roll", choices=list(ROLL_MODES), default=None,
                    help="interpolate: how the key cameras are turned about their axes: "
                         + "; ".join(f"{k}: {v}" for k, v in ROLL_MODES.items()) + " (default: snap)")

@@ -31,7 +31,8 @@ the folders every frame shares (``cam0/0001``).
 not) gives :attr:`vibr.scene.View.mask`, resized and undistorted with the image.
 
 vibr extras (ignored by other tools): top level ``vibr_grid: [rows, cols]``, ``vibr_name``
-(scene name), ``ply_file_path`` (sparse points, nerfstudio's key), ``sigma_z`` (scalar, may be
+(scene name), ``vibr_capture: "video"`` (the frames of a video, in time order: ``vibr
+calibrate VIDEO``; ``scene.meta["capture"]``), ``ply_file_path`` (sparse points, nerfstudio's key), ``sigma_z`` (scalar, may be
 per frame); per frame ``vibr_name`` (view name), ``vibr_skew`` (K[0, 1]), ``vibr_grid_pos:
 [row, col]``, ``sigma_z_file_path`` (.npy map).
 
@@ -381,6 +382,8 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         smeta["undistorted"] = undistorted
     if grid_pos:
         smeta["grid_pos"] = {n: p for n, p in grid_pos.items() if n in names}
+    if meta.get("vibr_capture") == "video":
+        smeta["capture"] = "video"
     name = meta.get("vibr_name", base.name)
     name = name if isinstance(name, str) and name else base.name
     return Scene(vs, name=name, root=base, grid=grid, points=points, meta=smeta)
@@ -510,6 +513,8 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
             doc.update({k: frames[0][k] for k in ("fl_x", "fl_y", "cx", "cy", "w", "h")})
         if scene.grid is not None:
             doc["vibr_grid"] = [int(scene.grid[0]), int(scene.grid[1])]
+        if scene.meta.get("capture") == "video":
+            doc["vibr_capture"] = "video"
         if scene.points is not None and len(scene.points):
             write_ply_points(tmp / "sparse_pc.ply", scene.points)
             doc["ply_file_path"] = "sparse_pc.ply"
