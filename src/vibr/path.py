@@ -783,8 +783,7 @@ def _path_keys(scene, views, order) -> tuple[list, list, bool]:
                         "(order 'proximity': through all %d, row by row)", len(loop), len(cams))
             return [cams[i] for i in loop] + [cams[loop[0]]], [names[i] for i in loop] + [names[loop[0]]], True
     if order is None and views is None and scene.meta.get("capture") == "video":
-        logger.info("interpolate: the frames of a video: in time order (--order proximity to reorder them; "
-                    "--smooth 2 calms a hand-held walk)")
+        logger.info("interpolate: the frames of a video: in time order (--order proximity reorders them)")
         order = "given"
     order = ("given" if views is not None else "proximity") if order is None else order
     if order not in ("given", "proximity"):
