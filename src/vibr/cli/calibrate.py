@@ -12,7 +12,8 @@ from ..video_frames import DEFAULT_FRAMES
 from . import add_quiet, count
 
 _EPILOG = """\
-stages: [video: sharpest frame of each stretch ->] resize -> SIFT features -> matching -> incremental mapping -> undistortion to pinhole;
+stages: [a video: the sharpest frame near the middle of each of --frames stretches ->]
+resize -> SIFT features -> matching -> incremental mapping -> undistortion to pinhole;
 the scene is written as transforms.json + images + sparse_pc.ply (the sparse points bound the
 depth range of 'vibr depth'). The reconstruction's scale and orientation are arbitrary.
 
