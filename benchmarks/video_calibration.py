@@ -136,6 +136,17 @@ def reading_speed(data: Path, out: Path) -> int:
         times.append(time.perf_counter() - t0)
     print(f"read 240 frames of 1920x1080, kept {len(kept.files)}: {statistics.median(times):.2f} s "
           f"(runs {', '.join(f'{t:.2f}' for t in times)}), {240 / statistics.median(times):.0f} frames a second")
+    import imageio.v3 as iio
+
+    frame = iio.imread(kept.files[0])
+    for name, kw in (("BMP", {}), ("PNG, zlib level 1", {"compress_level": 1}), ("PNG, Pillow's default", {})):
+        f = out / ("one.bmp" if name == "BMP" else "one.png")
+        ts = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            iio.imwrite(f, frame, **kw)
+            ts.append(time.perf_counter() - t0)
+        print(f"writing one 1920x1080 frame as {name}: {1000 * statistics.median(ts):.0f} ms (median of 5)")
     return 0
 
 

@@ -142,8 +142,8 @@ def _count_frames(path: Path) -> int:
 def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
     """Keep the sharpest frame of each of ``n`` equal stretches of ``video`` as image files
     ``frame_NNNNNN.bmp`` (NNNNNN the frame's number from 0) in ``out_dir`` (emptied first):
-    BMP, lossless and written 30x faster than PNG (8 ms for a 1080p frame against 270 ms at
-    zlib level 1), as calibration's first step reads them once and writes its own copies.
+    BMP, lossless and far faster to write than PNG (docs/CALIBRATE.md), as calibration's
+    first step reads them once and writes its own copies.
 
     All frames are kept when the video has ``n`` or fewer. Raises :class:`VibrInputError`
     naming the video when it cannot be decoded or holds no frame.
