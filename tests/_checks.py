@@ -10,19 +10,24 @@ from vibr.render.operators import stencil_apply
 
 
 @contextlib.contextmanager
-def warnings_logged(name: str):
-    """The messages of the warnings logger ``name`` logs inside the block (a list, filled
-    as they come): a handler of its own, since the CLI's tests stop the "vibr" logger's
-    propagation to pytest's capture."""
+def messages_logged(name: str, level: int = logging.WARNING):
+    """The messages logger ``name`` logs at ``level`` or above inside the block (a list,
+    filled as they come): a handler of its own, since the CLI's tests stop the "vibr"
+    logger's propagation to pytest's capture; the logger's level is lowered to ``level``
+    for the block when it was higher."""
     seen = []
-    handler = logging.Handler(logging.WARNING)
+    handler = logging.Handler(level)
     handler.emit = lambda record: seen.append(record.getMessage())
     lg = logging.getLogger(name)
+    before = lg.level
     lg.addHandler(handler)
+    if not lg.isEnabledFor(level):
+        lg.setLevel(level)
     try:
         yield seen
     finally:
         lg.removeHandler(handler)
+        lg.setLevel(before)
 
 
 def assert_quadratic_form(s, w, rng):

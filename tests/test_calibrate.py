@@ -201,6 +201,15 @@ def test_missing_or_empty_folder(tmp_path):
     _write_png(tmp_path / "b.png", np.zeros((8, 8, 3)))
     iio.imwrite(tmp_path / "c.webp", np.zeros((8, 8, 3), np.uint8))
     assert [p.name for p in list_photos(tmp_path)] == ["b.png", "c.webp"]
+    (tmp_path / "clip.mp4").write_bytes(b"\0")  # a phone's folder: photos and a video
+    import logging
+
+    from _checks import messages_logged
+
+    with messages_logged("vibr.calibrate", logging.INFO) as seen:
+        assert [p.name for p in list_photos(tmp_path)] == ["b.png", "c.webp"]
+    assert any("clip.mp4 in the folder: not used" in m for m in seen), seen
+    (tmp_path / "clip.mp4").unlink()
     (tmp_path / "notes.txt").write_text("x")  # neither a folder nor a video: the error says what is read
     with pytest.raises(VibrInputError, match=r"not a folder of photos nor a video .*\.mp4, \.mov"):
         list_photos(tmp_path / "notes.txt")

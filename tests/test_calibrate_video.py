@@ -9,7 +9,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from _checks import warnings_logged
+from _checks import messages_logged
 from scipy import ndimage
 
 from vibr.calibrate import pose_errors
@@ -170,7 +170,7 @@ def test_a_video_cut_short_is_said(tmp_path):
     data = video.read_bytes()
     cut = tmp_path / "cut.mp4"
     cut.write_bytes(data[: len(data) // 2])  # faststart: the header, then the first half of the frames
-    with warnings_logged("vibr.video_frames") as seen:
+    with messages_logged("vibr.video_frames") as seen:
         kept = extract_frames(cut, tmp_path / "frames", 8)
     assert 0 < kept.n_read < 40 and len(kept.files) < 8
     assert any("ended after" in m and "of the 40 frames" in m for m in seen), seen

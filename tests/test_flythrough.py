@@ -266,7 +266,7 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     ring's inside (where the temple stands). Through all the views the default order is by
     proximity, and the path stays near the ring; the view with the same pose as its
     neighbour by proximity (templeSR0011, templeSR0001's) is left out with a warning."""
-    from _checks import warnings_logged
+    from _checks import messages_logged
 
     from vibr.path import interpolate, scene_centre
 
@@ -277,7 +277,7 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     def closest(p):
         return min(np.linalg.norm(c.centre - X) for c in p.cameras) / ring
 
-    with warnings_logged("vibr.path") as seen:
+    with messages_logged("vibr.path") as seen:
         p = interpolate(scene, n_frames=200)
     assert any("templeSR0011.png (after templeSR0001.png) left out" in m for m in seen)
     assert len(p.meta["views"]) == 15 and closest(p) > 0.8

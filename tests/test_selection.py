@@ -104,7 +104,7 @@ def test_prepare_warns_before_estimating_depth_for_many_sources(monkeypatch):
     """Depth estimated for every source of a large scene (the default sources) takes one
     estimate per view: prepare says so, with the way out, and says nothing when n_views or
     the sources are given."""
-    from _checks import warnings_logged
+    from _checks import messages_logged
 
     import vibr.stereo
     from vibr.pipeline import MANY_SOURCES, prepare
@@ -112,7 +112,7 @@ def test_prepare_warns_before_estimating_depth_for_many_sources(monkeypatch):
     monkeypatch.setattr(vibr.stereo, "estimate_depth", lambda src, **kw: src)
     scene = _grid_scene()
     assert len(scene) - 1 > MANY_SOURCES
-    with warnings_logged("vibr.pipeline") as seen:
+    with messages_logged("vibr.pipeline") as seen:
         prepare(scene, "v22", depth="estimated", fallback="never")
         assert len(seen) == 1 and "all 24 source views" in seen[0] and "--views K" in seen[0]
         prepare(scene, "v22", depth="estimated", n_views=8, fallback="never")

@@ -104,6 +104,10 @@ def list_photos(photos_dir) -> list[Path]:
             f"no photos found (looked for {', '.join(IMAGE_EXTENSIONS)})"
             + ("; HEIC photos (a phone's default) need converting to JPEG first" if heic else ""), d
         )
+    videos = sorted(p.name for p in d.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_INPUTS)
+    if videos:  # a phone's folder holds both: the photos are calibrated, the video is not mixed in
+        logger.info(f"calibrate: {', '.join(videos[:3])}{', ...' if len(videos) > 3 else ''} in the folder: "
+                    f"not used with the photos ('vibr calibrate {videos[0]} OUT' calibrates a video's frames)")
     stems = [p.stem for p in files]
     dup = sorted({s for s in stems if stems.count(s) > 1})
     if dup:
