@@ -210,6 +210,11 @@ def test_missing_or_empty_folder(tmp_path):
         assert [p.name for p in list_photos(tmp_path)] == ["b.png", "c.webp"]
     assert any("clip.mp4 in the folder: not used" in m for m in seen), seen
     (tmp_path / "clip.mp4").unlink()
+    only_video = tmp_path / "only_video"
+    only_video.mkdir()
+    (only_video / "walk.MOV").write_bytes(b"\0")
+    with pytest.raises(VibrInputError, match=r"no photos found .*; for the video, 'vibr calibrate .*walk.MOV OUT'"):
+        list_photos(only_video)
     (tmp_path / "notes.txt").write_text("x")  # neither a folder nor a video: the error says what is read
     with pytest.raises(VibrInputError, match=r"not a folder of photos nor a video .*\.mp4, \.mov"):
         list_photos(tmp_path / "notes.txt")

@@ -98,13 +98,14 @@ def list_photos(photos_dir) -> list[Path]:
         raise VibrInputError("not a folder of photos nor a video (calibrate reads a folder of photos, "
                              f"or a video: {', '.join(VIDEO_INPUTS)})", d)
     files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS)
+    videos = sorted(p.name for p in d.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_INPUTS)
     if not files:
         heic = any(p.suffix.lower() in (".heic", ".heif") for p in d.iterdir())
         raise VibrInputError(
             f"no photos found (looked for {', '.join(IMAGE_EXTENSIONS)})"
-            + ("; HEIC photos (a phone's default) need converting to JPEG first" if heic else ""), d
+            + ("; HEIC photos (a phone's default) need converting to JPEG first" if heic else "")
+            + (f"; for the video, 'vibr calibrate {d / videos[0]} OUT'" if videos else ""), d
         )
-    videos = sorted(p.name for p in d.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_INPUTS)
     if videos:  # a phone's folder holds both: the photos are calibrated, the video is not mixed in
         logger.info(f"calibrate: {', '.join(videos[:3])}{', ...' if len(videos) > 3 else ''} in the folder: "
                     f"not used with the photos ('vibr calibrate {videos[0]} OUT' calibrates a video's frames)")
