@@ -163,8 +163,9 @@ def test_a_path_through_a_videos_frames_keeps_their_time_order():
 
 
 def test_a_video_cut_short_is_said(tmp_path):
-    """A copy interrupted half-way decodes up to where it stops: what was kept is kept, and a
-    warning says the video ended before the frames its header announces."""
+    """A copy interrupted half-way decodes up to where it stops: the stretches are cut again
+    for the frames it has (a second reading), so the frames asked for are kept, spread over
+    them, and a warning says the video ended before the frames its header announces."""
     video = tmp_path / "walk.mp4"
     write_video(video, [_texture(k) for k in range(40)], fps=10, crf=18)
     data = video.read_bytes()
@@ -172,8 +173,10 @@ def test_a_video_cut_short_is_said(tmp_path):
     cut.write_bytes(data[: len(data) // 2])  # faststart: the header, then the first half of the frames
     with messages_logged("vibr.video_frames") as seen:
         kept = extract_frames(cut, tmp_path / "frames", 8)
-    assert 0 < kept.n_read < 40 and len(kept.files) < 8
+    assert 8 <= kept.n_read < 40 and len(kept.files) == 8 and kept.total == kept.n_read
+    assert kept.indices[-1] >= kept.n_read - kept.n_read // 8  # the last stretch ends where the video does
     assert any("ended after" in m and "of the 40 frames" in m for m in seen), seen
+    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == [f.name for f in kept.files]
 
 
 def test_no_room_for_the_frames_is_said_before_reading(tmp_path, monkeypatch):

@@ -89,6 +89,7 @@ class VideoFrames:
     n_read: int
     sharpness: list[float] = field(default_factory=list)
     median_sharpness: float = 0.0
+    total: int = 0  # the frame count the stretches were cut for
 
     def summary(self) -> str:
         gain = np.median(self.sharpness) / self.median_sharpness if self.median_sharpness > 0 else float("nan")
@@ -145,29 +146,45 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
     BMP, lossless and far faster to write than PNG (docs/CALIBRATE.md), as calibration's
     first step reads them once and writes its own copies.
 
-    All frames are kept when the video has ``n`` or fewer. Raises :class:`VibrInputError`
-    naming the video when it cannot be decoded or holds no frame.
+    The stretches are cut by the frame count the video's header gives (frame rate ×
+    duration); a video that ends sooner (cut short, or a header that is wrong) is read a
+    second time with the count its first reading found, with a warning. All frames are kept
+    when the video has ``n`` or fewer. Raises :class:`VibrInputError` naming the video when
+    it cannot be decoded or holds no frame.
     """
-    import imageio.v3 as iio
-
     video, out = Path(video), Path(out_dir)
     if int(n) != n or n < 1:
         raise VibrInputError(f"frames must be an integer >= 1, got {n}", video)
-    n = int(n)
+    kept = _read_stretches(video, out, int(n), None)
+    if len(kept.files) < min(n, kept.n_read):  # stretches cut for frames that never came
+        logger.warning(f"calibrate: {video.name} ended after {kept.n_read} of the {kept.total} frames its "
+                       f"header announces (cut short?): reading it again for {min(n, kept.n_read)} frames")
+        kept = _read_stretches(video, out, int(n), kept.n_read)
+    if not kept.files:
+        raise VibrInputError("the video holds no frame", video)
+    logger.info(f"calibrate: {kept.summary()}")
+    return kept
+
+
+def _read_stretches(video: Path, out: Path, n: int, total: int | None) -> VideoFrames:
+    """One reading of the video: the best frame of each stretch into ``out`` (emptied),
+    the stretches cut for ``total`` frames (None: the header's count)."""
+    import imageio.v3 as iio
+
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
     kept = VideoFrames([], [], None, 0)
     scores: list[float] = []
-    n_read = 0
     with open_video(video) as (info, frames):
         kept.info = info
-        total = info.n_frames or _count_frames(video)
+        total = total or info.n_frames or _count_frames(video)
+        kept.total = total
         _check_space(out, min(n, max(total, 1)), info)
         logger.info(f"calibrate: video {video.name}: {info.width}x{info.height}"
                     f"{' (turned upright)' if info.rotated else ''}, {info.fps:.3g} fps, "
                     f"{info.duration_s:.1f} s, about {total} frames; keeping {min(n, max(total, 1))}")
-        best = (-1.0, -1, None)  # sharpness, index, frame of the current stretch
+        best = (-1.0, -1, None)  # weighted sharpness, index, frame of the current stretch
         current = 0
         reach = REACH_S * info.fps if info.fps > 0 else float("inf")
         for i, frame in enumerate(progress(frames, desc="calibrate: video frames", total=total or None)):
@@ -176,7 +193,7 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
                 _keep(best, out, kept, iio)
                 best = (-1.0, -1, None)
             current = k
-            n_read = i + 1
+            kept.n_read = i + 1
             weight = _centre_weight(i, total, n, reach)
             if weight == 0.0:
                 continue  # too far from the stretch's middle: not even scored
@@ -186,14 +203,7 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
                 best = (s * weight, i, frame.copy())
         if best[2] is not None:
             _keep(best, out, kept, iio)
-    if not kept.files:
-        raise VibrInputError("the video holds no frame", video)
-    kept.n_read = n_read
-    kept.median_sharpness = float(np.median(scores))
-    if len(kept.files) < min(n, kept.n_read):  # the stretches were cut for frames that never came
-        logger.warning(f"calibrate: {video.name} ended after {kept.n_read} of the {total} frames its header "
-                       f"announces (cut short?): {len(kept.files)} frames kept, not {min(n, total)}")
-    logger.info(f"calibrate: {kept.summary()}")
+    kept.median_sharpness = float(np.median(scores)) if scores else 0.0
     return kept
 
 
