@@ -112,7 +112,7 @@ def test_bad_videos_are_refused_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-def test_calibrate_a_video_of_a_walk(tmp_path):
+def test_calibrate_a_video_of_a_walk(tmp_path, capsys):
     """24 frames along an arc of the synthetic world, as an H.264 video: ``vibr calibrate
     VIDEO --frames 8`` keeps one frame of each stretch of 3, matches them sequentially and
     recovers the cameras of those frames."""
@@ -125,6 +125,8 @@ def test_calibrate_a_video_of_a_walk(tmp_path):
     write_video(video, [v.image for v in truth.views], fps=8, crf=12)
     out = tmp_path / "scene"
     assert main(["calibrate", str(video), str(out), "--frames", "8", "-q"]) == 0
+    said = capsys.readouterr().out  # what to run next: a path along the walk, then the video
+    assert f"next: vibr path interpolate {out} -o walk.json --smooth 2 && vibr render {out} --path" in said
     info = json.loads((out / "calibration.json").read_text())
     assert info["matcher"] == "sequential"
     kept = info["video"]["frames_kept"]

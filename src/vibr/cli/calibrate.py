@@ -4,6 +4,7 @@ COLMAP (CPU)."""
 from __future__ import annotations
 
 import argparse
+import shlex
 
 from ..calibrate import CAMERA_MODELS, MATCHERS
 from ..errors import VibrInputError
@@ -96,4 +97,11 @@ def run(args) -> int:
         verbose=verbosity(args) > 0,  # -v shows COLMAP's own log
     )
     print(f"calibrate: wrote {count(len(scene), 'view')} to {args.out}")
+    out = shlex.quote(str(args.out))
+    if scene.meta.get("capture") == "video":
+        print(f"next: vibr path interpolate {out} -o walk.json --smooth 2 && "
+              f"vibr render {out} --path walk.json -o walk.mp4")
+    else:
+        print(f"next: vibr render {out} --target {shlex.quote(scene.names[0])} -o view.png (depth is estimated "
+              f"on the way), or vibr path interpolate {out} -o path.json")
     return 0
