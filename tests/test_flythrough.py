@@ -1052,3 +1052,39 @@ def test_cli_smooth(tmp_path, arc_scene, capsys):
         err = capsys.readouterr().err.strip()
         assert rc == 2 and said in err and len(err.splitlines()) == 1
     assert not (tmp_path / "q.json").exists()
+
+
+def test_smooth_keys_property():
+    """For any steady motion (hypothesis: centres on a line at a constant speed, a constant
+    turn per key about any axis, any σ and number of keys) ``smooth_keys`` leaves every key
+    where it is; for any shaken sequence the end keys stay, and every smoothed centre lies
+    within the hull of the window's keys and their reflections."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from scipy.spatial.transform import Rotation
+
+    from vibr.path import smooth_keys
+
+    vec = st.lists(st.floats(-1, 1, allow_nan=False), min_size=3, max_size=3)
+    K = Camera.intrinsics(100, 160, 120)
+
+    @settings(max_examples=80, deadline=None)
+    @given(n=st.integers(2, 25), sigma=st.floats(0.3, 4.0), start=vec, step=vec, axis=vec,
+           turn=st.floats(-3.0, 3.0), seed=st.integers(0, 2**16))
+    def check(n, sigma, start, step, axis, turn, seed):
+        a = np.asarray(axis) / (np.linalg.norm(axis) or 1.0)
+        R0 = Rotation.from_rotvec([0.1, -0.2, 0.3])
+        cams = [Camera.from_centre(K, (Rotation.from_rotvec(a * np.radians(turn * i)) * R0).as_matrix().T,
+                                   np.asarray(start) + i * np.asarray(step), 160, 120) for i in range(n)]
+        for c, s in zip(cams, smooth_keys(cams, sigma)):
+            assert np.allclose(s.centre, c.centre, atol=1e-9)
+            assert np.allclose(s.R, c.R, atol=1e-6) and np.allclose(s.K, c.K)
+        rng = np.random.default_rng(seed)
+        shaken = [Camera.from_centre(K, c.R, c.centre + rng.normal(0, 0.1, 3), 160, 120) for c in cams]
+        sm = smooth_keys(shaken, sigma)
+        assert np.allclose(sm[0].centre, shaken[0].centre) and np.allclose(sm[-1].centre, shaken[-1].centre)
+        C = np.array([c.centre for c in shaken])
+        lo, hi = (2 * C.min(0) - C.max(0)) - 1e-9, (2 * C.max(0) - C.min(0)) + 1e-9  # reflections included
+        assert all(np.all((s.centre >= lo) & (s.centre <= hi)) for s in sm)
+
+    check()
