@@ -180,7 +180,7 @@ def _finish_ffmpeg(proc, log, path) -> None:
     lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
     rc = proc.returncode
     if lines:
-        why = re.sub(r"^\[[^\]]*\]\s*", "", lines[-1])
+        why = _without_tag(lines[-1])
     else:
         why = f"stopped by {signal.Signals(-rc).name}" if -rc in signal.valid_signals() else f"exit status {rc}"
     raise OutputFailed(f"cannot write the video: ffmpeg: {why}", path)
@@ -248,6 +248,11 @@ def open_video(path):
         reader.close()
 
 
+def _without_tag(line: str) -> str:
+    """An ffmpeg message without the ``[component @ 0x…]`` it starts with."""
+    return re.sub(r"^\[[^\]]*\]\s*", "", line)
+
+
 #: What ffmpeg's messages mean for a user, first match wins: (what ffmpeg says, what to say).
 _FFMPEG_REASONS = (
     ("does not contain any stream", "it holds no video stream (a sound file?)"),
@@ -265,7 +270,7 @@ def _ffmpeg_reason(text: str) -> str:
     lines = [ln.strip() for ln in text.splitlines() if ln.strip() and not ln.startswith(" ")]
     skip = ("ffmpeg version", "built with", "configuration:", "lib", "===", "Could not load meta")
     useful = [ln for ln in lines if not ln.startswith(skip)]
-    return re.sub(r"^\[[^\]]*\]\s*", "", useful[-1]) if useful else "ffmpeg could not decode it"
+    return _without_tag(useful[-1]) if useful else "ffmpeg could not decode it"
 
 
 def read_video_info(path) -> tuple[int, int, int, float]:
