@@ -21,13 +21,16 @@ FOUNDATION = ("camera", "scene", "errors", "metrics")
 #: area → the areas it must never import (docs/ARCHITECTURE.md, "Import rules").
 FORBIDDEN = {
     **{a: {"io", "geometry", "render", "stereo", "pipeline", "evaluate", "calibrate", "video_frames",
-           "synthetic", "figures", "cli"} for a in FOUNDATION},
+           "pan_calibration", "synthetic", "figures", "cli"} for a in FOUNDATION},
     "io": {"geometry", "render", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
     "geometry": {"render", "io", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
     "render": {"io", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
     # stereo resamples images with vibr.io.images.resize_image (the one resize of vibr)
     "stereo": {"render", "geometry", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
     "synthetic": {"render", "geometry", "io", "stereo", "pipeline", "evaluate", "calibrate", "video_frames", "cli"},
+    # a solver of COLMAP's matches: it knows nothing of vibr's scenes, images or renders
+    "pan_calibration": {"io", "geometry", "render", "stereo", "pipeline", "evaluate", "calibrate", "video_frames",
+                        "synthetic", "figures", "camera", "scene", "depthcache", "cli"},
 }
 #: Nothing outside the CLI imports it.
 CLI_IMPORTERS = {"cli", "__main__"}

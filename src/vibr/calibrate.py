@@ -46,6 +46,7 @@ from .camera import Camera
 from .errors import OutputExists, VibrInputError
 from .io.images import IMAGE_EXTS
 from .io.video import VIDEO_INPUTS, is_video_input
+from .pan_calibration import Choice, fit_one_centre, focal_note, prefer_one_centre
 from .progress import progress
 from .scene import Scene, View
 from .video_frames import DEFAULT_FRAMES, extract_frames
@@ -324,6 +325,12 @@ class CalibrateOptions:
         its covariance shows the photos determine it (:func:`_refine_principal_point`).
         Held at the centre when it is off centre, the poses absorb the offset as a small
         common rotation of every camera (docs/CALIBRATE.md).
+    pan : bool, optional
+        Photographs turned on the spot (a panorama, a video panned from one place): one
+        centre for every camera, rotations and intrinsics fitted to the tracks without the
+        mapper's translations (:mod:`vibr.pan_calibration`). None ("auto", the default):
+        when the photographs show no parallax (the test of :func:`check_rotation_only`);
+        True: always; False: never (the mapper's cameras as they are).
     min_registered : int
         Fewer registered images raise :class:`VibrInputError` naming the unregistered ones.
     max_features : int
@@ -342,6 +349,7 @@ class CalibrateOptions:
     camera_model: str = "SIMPLE_RADIAL"
     single_camera: bool = True
     refine_principal_point: bool | None = None
+    pan: bool | None = None
     min_registered: int = MIN_REGISTERED
     max_features: int = 8192
     num_threads: int = 2
@@ -418,11 +426,15 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             times["features"] = _extract_features(db, img_dir, names, sizes, opt)
             times["matching"] = _match_features(db, opt)
             t0 = time.perf_counter()
-            recs = _incremental_mapping(db, img_dir, sparse, len(files), opt)
-            times["mapping"] = time.perf_counter() - t0
+            one = fit_one_centre(db, opt.seed, force=bool(opt.pan)) if opt.pan is not False else None
+            times["one_centre"] = time.perf_counter() - t0
+            recs, choice = _mapping_or_one_centre(one, db, img_dir, sparse, len(files), opt, times)
+            taken = choice is not None and choice.one_centre
             best_key, rec, registered, unregistered = _kept_model(recs, names, stem, photos_dir, opt)
             pp_note = "refined in mapping" if opt.refine_principal_point else "fixed at the image centre"
-            if opt.refine_principal_point is None:
+            if taken:
+                pp_note = "fixed at the image centre (turned on the spot)"
+            elif opt.refine_principal_point is None:
                 t0 = time.perf_counter()
                 rec, pp_note = _refine_principal_point(rec, opt.num_threads)
                 times["principal_point"] = time.perf_counter() - t0
@@ -446,6 +458,9 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             times_s=times,
         )
         meta = _calibration_meta(photos_dir, opt, pp_note, report, pycolmap.__version__, frames)
+        meta["calibration"]["turned_on_the_spot"] = taken
+        if one is not None:
+            meta["calibration"]["one_centre"] = _one_centre_summary(one, choice)
         scene = scene_from_reconstruction(
             urec, undist / "images", name=photos_dir.resolve().stem if video else photos_dir.resolve().name,
             root=None, meta=meta
@@ -609,6 +624,45 @@ def _kept_model(recs, names: list[str], stem: dict, photos_dir: Path, opt: Calib
         logger.warning(f"calibrate: {len(unregistered)} of {len(names)} photos not registered (left out): "
                        + ", ".join(stem[n] for n in unregistered))
     return best_key, rec, registered, unregistered
+
+
+def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tuple[dict, Choice | None]:
+    """COLMAP's mapper, or the model of one centre (:mod:`vibr.pan_calibration`): asked for
+    (``opt.pan``), or fitted because the pairs are related by homographies and then compared
+    with the mapper's. Returns the models to keep the largest of, and the choice (None
+    where there was none to make)."""
+    if opt.pan and one.reconstruction is not None:
+        logger.info("calibrate [4/5] one centre for every photo (as asked): rotations and intrinsics")
+        return {0: one.reconstruction}, Choice(True, "asked for (pan=True)")
+    t0 = time.perf_counter()
+    try:
+        recs = _incremental_mapping(db, img_dir, sparse, n_photos, opt)
+    finally:
+        times["mapping"] = time.perf_counter() - t0
+    if one is None or one.reconstruction is None:
+        return recs, None
+    choice = prefer_one_centre(one, max((recs or {}).values(), key=lambda r: r.num_reg_images(), default=None))
+    logger.info(f"calibrate: {one.homography_pairs} of {one.pairs} image pairs related by homographies; "
+                + ("one centre for every photo: " if choice.one_centre else "the mapper's centres: ") + choice.why)
+    note = focal_note(one) if choice.one_centre else None
+    if note:
+        logger.warning(f"calibrate: {note}; --pan no keeps COLMAP's mapper (docs/CALIBRATE.md)")
+    return ({0: one.reconstruction} if choice.one_centre else recs), choice
+
+
+def _one_centre_summary(one, choice) -> dict:
+    """calibration.json's record of the test (:mod:`vibr.pan_calibration`)."""
+    out = {"taken": bool(choice and choice.one_centre), "homography_pairs": f"{one.homography_pairs} of {one.pairs}",
+           "pair_homographies_px": round(one.homography_px, 4)}
+    if one.fit is not None:
+        out["matches_px"] = round(one.fit.median_px, 4)
+        out["focal_px"] = [round(float(p[0]), 2) for p in one.fit.params]
+    if choice is not None:
+        out["why"] = choice.why
+    if choice is not None and all(np.isfinite(choice.points_px)):
+        out["registered"] = {"one_centre": choice.registered[0], "mapper": choice.registered[1]}
+        out["points_px"] = {"one_centre": round(choice.points_px[0], 4), "mapper": round(choice.points_px[1], 4)}
+    return out
 
 
 def _calibration_meta(photos_dir: Path, opt: CalibrateOptions, pp_note: str,

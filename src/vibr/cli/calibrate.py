@@ -14,13 +14,15 @@ from . import add_quiet, count
 
 _EPILOG = """\
 stages: [a video: the sharpest frame near the middle of each of --frames stretches ->]
-resize -> SIFT features -> matching -> incremental mapping -> undistortion to pinhole;
+resize -> SIFT features -> matching -> incremental mapping [or one centre for photos turned
+on the spot: --pan] -> undistortion to pinhole;
 the scene is written as transforms.json + images + sparse_pc.ply (the sparse points bound the
 depth range of 'vibr depth'). The reconstruction's scale and orientation are arbitrary.
 
 examples:
   vibr calibrate photos/ scene/ --scale 0.5
   vibr calibrate walk.mp4 scene/ --frames 40 --scale 0.5
+  vibr calibrate panorama/ scene/ --pan yes              photos from a tripod, turned on the spot
   vibr depth scene/ && vibr render scene/ --target 5 -o view5.png
 """
 
@@ -56,6 +58,11 @@ def register(sub) -> None:
                    help="fixed: at the image centre; refine: by bundle adjustment throughout; "
                    "auto (default): refined by a final bundle adjustment, kept only if its "
                    "covariance shows the photos determine it")
+    p.add_argument("--pan", choices=["auto", "yes", "no"], default="auto",
+                   help="photos turned on the spot (a panorama, a video panned from one place): one "
+                   "centre for every camera, rotations and focal length fitted to the matches. auto "
+                   "(default): when most image pairs are related by homographies and COLMAP's mapper, "
+                   "with a centre per photo, explains its points no better or registers fewer photos")
     p.add_argument("--min-registered", type=int, default=3,
                    help="fail if fewer photos register (default 3)")
     p.add_argument("--max-features", type=int, default=8192, help="SIFT features per photo (default 8192)")
@@ -89,6 +96,7 @@ def run(args) -> int:
         camera_model=args.camera_model,
         single_camera=not args.per_image_cameras,
         refine_principal_point={"auto": None, "fixed": False, "refine": True}[args.principal_point],
+        pan={"auto": None, "yes": True, "no": False}[args.pan],
         min_registered=args.min_registered,
         max_features=args.max_features,
         num_threads=args.threads,
@@ -97,6 +105,9 @@ def run(args) -> int:
         verbose=verbosity(args) > 0,  # -v shows COLMAP's own log
     )
     print(f"calibrate: wrote {count(len(scene), 'view')} to {args.out}")
+    if scene.meta["calibration"].get("turned_on_the_spot"):
+        print("calibrate: turned on the spot: one centre for every photo, the focal length fitted to the "
+              "rotations (renders need no depth; --pan no for COLMAP's mapper)")
     out = shlex.quote(str(args.out))
     if scene.meta.get("capture") == "video":
         print(f"next: vibr path interpolate {out} -o walk.json --smooth 2 && "

@@ -100,8 +100,12 @@ def _calibration_lines(scene) -> list:
         src = Path(c["photos"]).name
         what = (f"{src}, {len(video['frames_kept'])} of its {video['frames_read']} frames (the sharpest of each "
                 f"stretch)" if video else f"the photos of {src}")
-        return [f"calib    {c.get('tool', 'COLMAP')} from {what}: {reg} of {reg + unreg} registered, "
-                f"mean reprojection error {c['mean_reprojection_error_px']:.3f} px"]
+        lines = [f"calib    {c.get('tool', 'COLMAP')} from {what}: {reg} of {reg + unreg} registered, "
+                 f"mean reprojection error {c['mean_reprojection_error_px']:.3f} px"]
+        if c.get("turned_on_the_spot"):
+            lines.append("calib    turned on the spot: one centre for every photo, the rotations and focal length "
+                         "fitted to the matches (" + c.get("one_centre", {}).get("why", "as asked") + ")")
+        return lines
     except (OSError, ValueError, KeyError, TypeError):  # another tool's file, or an older one: not ours to read
         return []
 
