@@ -200,7 +200,9 @@ def test_calibrate_a_video_panned_on_the_spot(tmp_path, capsys):
     write_video(video, [syn.render_view(world, c)[0] for c in cams], fps=12, crf=18)
     out = tmp_path / "scene"
     assert main(["calibrate", str(video), str(out), "--frames", "12", "-q"]) == 0
-    assert "calibrate: turned on the spot: one centre for every photo" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "calibrate: turned on the spot: one centre for every photo" in said
+    assert f"next: vibr path interpolate {out} -o pan.json --smooth 2 && vibr render {out} --path pan.json" in said
     info = json.loads((out / "calibration.json").read_text())
     assert info["turned_on_the_spot"] is True and info["one_centre"]["taken"] is True
     assert info["principal_point"] == "fixed at the image centre (turned on the spot)"
@@ -215,3 +217,26 @@ def test_calibrate_a_video_panned_on_the_spot(tmp_path, capsys):
     err = [Rotation.from_matrix(t.R @ align @ v.camera.R.T).magnitude() for v, t in zip(scene.views, truth)]
     assert np.degrees(max(err)) < 0.2
     assert "turned on the spot: one centre for every photo" in describe(scene)
+
+
+def test_pan_yes_and_no_are_obeyed(tmp_path):
+    """``--pan yes`` gives one centre to a walk without the test (and without the mapper);
+    ``--pan no`` keeps the mapper's model without fitting one centre at all."""
+    import vibr.synthetic as syn
+    from vibr.camera import shared_centre
+    from vibr.cli import main
+    from vibr.io import load_scene
+    from vibr.io.video import write_video
+
+    truth = syn.make_scene("arc", n_views=24, width=W, height=H, seed=0)
+    video = tmp_path / "walk.mp4"
+    write_video(video, [v.image for v in truth.views], fps=8, crf=12)
+    for pan in ("yes", "no"):
+        out = tmp_path / pan
+        assert main(["calibrate", str(video), str(out), "--frames", "8", "--pan", pan, "-q"]) == 0
+        info = json.loads((out / "calibration.json").read_text())
+        scene = load_scene(out)
+        one = shared_centre([v.camera for v in scene.views], scene.points) is not None
+        assert info["turned_on_the_spot"] is one is (pan == "yes")
+        assert ("one_centre" in info) is (pan == "yes")
+        assert ("mapping" in info["times_s"]) is (pan == "no")

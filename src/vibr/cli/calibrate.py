@@ -109,7 +109,11 @@ def run(args) -> int:
         print("calibrate: turned on the spot: one centre for every photo, the focal length fitted to the "
               "rotations (renders need no depth; --pan no for COLMAP's mapper)")
     out = shlex.quote(str(args.out))
-    if scene.meta.get("capture") == "video":
+    if scene.meta["calibration"].get("turned_on_the_spot"):
+        smooth = " --smooth 2" if scene.meta.get("capture") == "video" else ""
+        print(f"next: vibr path interpolate {out} -o pan.json{smooth} && "
+              f"vibr render {out} --path pan.json -o pan.mp4 (one centre: no depth to estimate)")
+    elif scene.meta.get("capture") == "video":
         print(f"next: vibr path interpolate {out} -o walk.json --smooth 2 && "
               f"vibr render {out} --path walk.json -o walk.mp4")
     else:
