@@ -253,11 +253,19 @@ def focal_from_homographies(m: Matches, scales=np.geomspace(0.25, 4.0, 49)) -> f
 
 def with_focal_scaled(m: Matches, factor: float) -> Matches:
     """``m`` with every camera's focal length(s) multiplied by ``factor``."""
-    cams = []
+    params = []
     for c in m.cameras:
-        c = copy.copy(c)
         p = np.array(c.params, np.float64)
         p[list(c.focal_length_idxs())] *= factor
+        params.append(p)
+    return _with_params(m, params)
+
+
+def _with_params(m: Matches, params: list) -> Matches:
+    """``m`` with its cameras' parameters replaced (copies: ``m``'s cameras unchanged)."""
+    cams = []
+    for c, p in zip(m.cameras, params):
+        c = copy.copy(c)
         c.params = p
         cams.append(c)
     return replace(m, cameras=cams)
@@ -600,24 +608,13 @@ def _track_errors(tracks: Tracks, m: Matches, R: np.ndarray, images: np.ndarray)
     return out
 
 
-def _with_params(m: Matches, params: list) -> Matches:
-    cams = []
-    for c, p in zip(m.cameras, params):
-        c = copy.copy(c)
-        c.params = p
-        cams.append(c)
-    return replace(m, cameras=cams)
-
-
 def focal_note(one: OneCentre) -> str | None:
     """A warning where a fitted focal length is outside :data:`PLAUSIBLE_FOCAL` times its
     image's longer side (a flat scene filmed while moving sideways fits one centre with an
     ever longer focal length), else None."""
     if one.fit is None:
         return None
-    for cam, p in zip(one.matches.cameras, one.fit.params):
-        c = copy.copy(cam)
-        c.params = p
+    for c in _with_params(one.matches, one.fit.params).cameras:
         ratio = c.mean_focal_length() / max(c.width, c.height)
         if not PLAUSIBLE_FOCAL[0] <= ratio <= PLAUSIBLE_FOCAL[1]:
             return (f"one centre's focal length {c.mean_focal_length():.0f} px is {ratio:.2g}x the image's longer "
