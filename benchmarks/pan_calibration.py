@@ -75,6 +75,11 @@ def _rotation_error_deg(est: list, ref: list) -> float:
     return float(max(err))
 
 
+def _px(v) -> str:
+    """An error in px as the table gives it ("-" where there is none: no model, no points)."""
+    return "-" if v is None else f"{v:.3f}"
+
+
 def run_case(case: str, work: Path, pan) -> dict:
     from vibr.calibrate import calibrate
     from vibr.cli import main
@@ -106,8 +111,8 @@ def run_case(case: str, work: Path, pan) -> dict:
     pts, reg = one.get("points_px", {}), one.get("registered", {})
     return {
         "case": case, "pan": "auto" if pan is None else str(pan), "pairs": one.get("homography_pairs", "-"),
-        "h_px": one.get("pair_homographies_px", np.nan), "one_px": one.get("matches_px", np.nan),
-        "pts": f"{pts.get('one_centre', np.nan):.3f} / {pts.get('mapper', np.nan):.3f}",
+        "h_px": _px(one.get("pair_homographies_px")), "one_px": _px(one.get("matches_px")),
+        "pts": f"{_px(pts.get('one_centre'))} / {_px(pts.get('mapper'))}",
         "reg": f"{reg.get('one_centre', '-')} / {reg.get('mapper', '-')}",
         "one_centre": c["turned_on_the_spot"], "registered": f"{len(c['registered'])}/{frames}",
         "focal": float(est[0].K[0, 0]), "rot_deg": _rotation_error_deg(est, ref),
@@ -136,7 +141,7 @@ def main() -> None:
     print(head)
     print("|" + "|".join(["---"] * (head.count("|") - 1)) + "|")
     for r in rows:
-        print(f"| {r['case']} | {r['pan']} | {r['pairs']} | {r['h_px']:.3f} | {r['one_px']:.3f} | {r['pts']} | "
+        print(f"| {r['case']} | {r['pan']} | {r['pairs']} | {r['h_px']} | {r['one_px']} | {r['pts']} | "
               f"{r['reg']} | "
               f"{'yes' if r['one_centre'] else 'no'} | {r['registered']} | {r['focal']:.1f} | {r['rot_deg']:.2f} | "
               f"{r['spread']:.3f} | {r['psnr']:.2f} | {r['seconds']:.1f} |")

@@ -329,8 +329,9 @@ class CalibrateOptions:
         Photographs turned on the spot (a panorama, a video panned from one place): one
         centre for every camera, rotations and intrinsics fitted to the tracks without the
         mapper's translations (:mod:`vibr.pan_calibration`). None ("auto", the default):
-        when the photographs show no parallax (the test of :func:`check_rotation_only`);
-        True: always; False: never (the mapper's cameras as they are).
+        when most image pairs are related by homographies and the mapper's model does no
+        better (:func:`vibr.pan_calibration.prefer_one_centre`); True: always; False: never
+        (the mapper's cameras as they are).
     min_registered : int
         Fewer registered images raise :class:`VibrInputError` naming the unregistered ones.
     max_features : int
@@ -651,17 +652,21 @@ def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tu
 
 
 def _one_centre_summary(one, choice) -> dict:
-    """calibration.json's record of the test (:mod:`vibr.pan_calibration`)."""
+    """calibration.json's record of the test (:mod:`vibr.pan_calibration`); an error that
+    could not be measured (no homography pairs, a model without points) is null."""
+    def px(v):
+        return round(float(v), 4) if np.isfinite(v) else None
+
     out = {"taken": bool(choice and choice.one_centre), "homography_pairs": f"{one.homography_pairs} of {one.pairs}",
-           "pair_homographies_px": round(one.homography_px, 4)}
+           "pair_homographies_px": px(one.homography_px)}
     if one.fit is not None:
-        out["matches_px"] = round(one.fit.median_px, 4)
+        out["matches_px"] = px(one.fit.median_px)
         out["focal_px"] = [round(float(p[0]), 2) for p in one.fit.params]
     if choice is not None:
         out["why"] = choice.why
-    if choice is not None and all(np.isfinite(choice.points_px)):
-        out["registered"] = {"one_centre": choice.registered[0], "mapper": choice.registered[1]}
-        out["points_px"] = {"one_centre": round(choice.points_px[0], 4), "mapper": round(choice.points_px[1], 4)}
+        if choice.registered != (0, 0):
+            out["registered"] = {"one_centre": choice.registered[0], "mapper": choice.registered[1]}
+            out["points_px"] = {"one_centre": px(choice.points_px[0]), "mapper": px(choice.points_px[1])}
     return out
 
 

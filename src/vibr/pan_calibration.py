@@ -3,7 +3,7 @@
 COLMAP's incremental mapper gives every image a translation and triangulates points from the
 baseline. Photographs taken from one point (a panorama from a tripod, a video panned on the
 spot) have no baseline: on a synthetic pan the mapper either invented one (20 frames spread
-over 11 scene units, a focal length of 386 px for a true 307 px) or registered 9 of 20 frames
+over 11 scene units, a focal length of 386 px for a true 307 px) or registered 9–11 of 20 frames
 without a single point (docs/CALIBRATE.md, "Turned on the spot").
 
 **The rotation-only model.** Every observation ``x_ij`` of track ``j`` in image ``i`` is the
