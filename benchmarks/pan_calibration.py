@@ -1,11 +1,12 @@
 """Videos turned on the spot, and videos that are not, through ``vibr calibrate``.
 
 Each case films the synthetic world (`vibr.synthetic`, ray-cast) as 60 frames of 320×240
-(``wide``: 180), H.264 at crf 18, and calibrates it with ``vibr.calibrate.calibrate(VIDEO, OUT,
+(``wide``: 180, ``full``: 72), H.264 at crf 18, and calibrates it with ``vibr.calibrate.calibrate(VIDEO, OUT,
 frames=N)``, N a third of the frames:
 
 * ``tripod``: turning 50° about one point (:func:`vibr.synthetic.pan_cameras`);
 * ``wide``: turning 90° in 180 frames, of which 60 are calibrated;
+* ``full``: turning a full circle (72 frames) in a room of four textured walls 4 units away;
 * ``hand pan ρ``: the same turn with the camera ρ scene units in front of the axis it turns
   about (a phone held out while the body turns; the scene is 2.6–6 units away);
 * ``wall walk``: walking 2 units along a flat textured wall 4 units away, looking at it
@@ -56,6 +57,18 @@ def _cameras(case: str) -> tuple[list, object]:
             a = c.R[2] * [1, 0, 1]
             out.append(Camera.from_centre(c.K, c.R, c.centre + rho * a / np.linalg.norm(a), w, h))
         return out, syn.default_world(0)
+    if case == "full":
+        world = syn.World()
+        for k, (p0, u) in enumerate([([-4, -2, 4], [8, 0, 0]), ([4, -2, 4], [0, 0, -8]),
+                                     ([4, -2, -4], [-8, 0, 0]), ([-4, -2, -4], [0, 0, 8])]):
+            world.add_rect(p0, u, [0, 4, 0], ["astronaut", "coffee", "chelsea", "rocket"][k], tile=4.0)
+        world.add_rect([-4, 2, -4], [8, 0, 0], [0, 0, 8], "gravel", tile=2.0, name="floor")
+        K = Camera.intrinsics(syn._focal(w, FOV_DEG), w, h)
+        out = []
+        for a in np.radians(np.arange(72) * 5.0):
+            R = np.array([[np.cos(a), 0, -np.sin(a)], [0, 1, 0], [np.sin(a), 0, np.cos(a)]])
+            out.append(Camera.from_centre(K, R, [0.0, 0.0, 0.0], w, h))
+        return out, world
     if case == "wall":
         world = syn.World()
         world.add_rect([-6.0, -3.0, 4.0], [12.0, 0, 0], [0, 6.0, 0], "astronaut", tile=3.0, name="wall")
@@ -123,7 +136,7 @@ def run_case(case: str, work: Path, pan) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cases", default="tripod,wide,hand0.03,hand0.1,hand0.3,wall,arc")
+    ap.add_argument("--cases", default="tripod,wide,full,hand0.03,hand0.1,hand0.3,wall,arc")
     ap.add_argument("--compare", action="store_true", help="also COLMAP's mapper alone where one centre was taken")
     ap.add_argument("--work", default=None, help="keep videos and scenes here (default: a temporary folder)")
     args = ap.parse_args()
