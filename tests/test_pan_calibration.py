@@ -240,3 +240,25 @@ def test_pan_yes_and_no_are_obeyed(tmp_path):
         assert info["turned_on_the_spot"] is one is (pan == "yes")
         assert ("one_centre" in info) is (pan == "yes")
         assert ("mapping" in info["times_s"]) is (pan == "no")
+
+
+def test_a_failed_fit_leaves_the_mapper_to_it(tmp_path, monkeypatch):
+    """A numerical failure of the one-centre fit is a warning, not the end of the
+    calibration: COLMAP's mapper calibrates the walk as before."""
+    import vibr.calibrate as cal
+    import vibr.synthetic as syn
+    from _checks import messages_logged
+
+    from vibr.io.video import write_video
+
+    def broken(*a, **k):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(cal, "fit_one_centre", broken)
+    truth = syn.make_scene("arc", n_views=12, width=W, height=H, seed=0)
+    video = tmp_path / "walk.mp4"
+    write_video(video, [v.image for v in truth.views], fps=8, crf=12)
+    with messages_logged("vibr.calibrate") as said:
+        scene, _ = cal.calibrate_scene(video, frames=6)
+    assert len(scene) == 6 and scene.meta["calibration"]["turned_on_the_spot"] is False
+    assert any("fit of one centre for every photo failed (Singular matrix)" in m for m in said)

@@ -427,7 +427,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             times["features"] = _extract_features(db, img_dir, names, sizes, opt)
             times["matching"] = _match_features(db, opt)
             t0 = time.perf_counter()
-            one = fit_one_centre(db, opt.seed, force=bool(opt.pan)) if opt.pan is not False else None
+            one = _fit_one_centre(db, opt)
             times["one_centre"] = time.perf_counter() - t0
             recs, choice = _mapping_or_one_centre(one, db, img_dir, sparse, len(files), opt, times)
             taken = choice is not None and choice.one_centre
@@ -625,6 +625,18 @@ def _kept_model(recs, names: list[str], stem: dict, photos_dir: Path, opt: Calib
         logger.warning(f"calibrate: {len(unregistered)} of {len(names)} photos not registered (left out): "
                        + ", ".join(stem[n] for n in unregistered))
     return best_key, rec, registered, unregistered
+
+
+def _fit_one_centre(db: Path, opt: CalibrateOptions):
+    """:func:`vibr.pan_calibration.fit_one_centre` unless ``opt.pan`` is False; a fit that
+    fails numerically leaves COLMAP's mapper to do the work, with a warning."""
+    if opt.pan is False:
+        return None
+    try:
+        return fit_one_centre(db, opt.seed, force=bool(opt.pan))
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        logger.warning(f"calibrate: the fit of one centre for every photo failed ({exc}); COLMAP's mapper alone")
+        return None
 
 
 def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tuple[dict, Choice | None]:
