@@ -132,6 +132,7 @@ def test_calibrate_a_video_of_a_walk(tmp_path, capsys):
     # walking, not turned on the spot: COLMAP's mapper, the test stopped at its gate
     assert info["turned_on_the_spot"] is False and info["one_centre"]["taken"] is False
     assert "matches_px" not in info["one_centre"]
+    assert info["one_centre"]["why"] == "the pairs are not related by homographies"
     kept = info["video"]["frames_kept"]
     assert [k // 3 for k in kept] == list(range(8)) and info["video"]["frames_read"] == 24
     assert len(info["registered"]) == 8 and not info["unregistered"]

@@ -652,9 +652,11 @@ def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tu
         recs = _incremental_mapping(db, img_dir, sparse, n_photos, opt)
     finally:
         times["mapping"] = time.perf_counter() - t0
-    if one is None or one.reconstruction is None:
+    if one is None:
         return recs, None
     choice = prefer_one_centre(one, max((recs or {}).values(), key=lambda r: r.num_reg_images(), default=None))
+    if one.reconstruction is None:
+        return recs, choice
     logger.info(f"calibrate: {one.homography_pairs} of {one.pairs} image pairs related by homographies; "
                 + ("one centre for every photo: " if choice.one_centre else "the mapper's centres: ") + choice.why)
     note = focal_note(one) if choice.one_centre else None
