@@ -255,6 +255,8 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     n_outer = max(1, int(p["n_outer"]))
     energy, terms, outer = [], [], []
     tv_w = tv_weight_map(cov.acc, p["tv_weighting"])
+    # lam_density: the TV weight of a MAP estimate, constant against the data's sum
+    lam_eff = p["lam"] * (p["lam_density"] / rho_c if p.get("lam_density") else 1.0)
     prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=tv_w)
     grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
     power_state: dict = {}
@@ -274,7 +276,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         t0 = time.perf_counter()
         Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
         model = QuadraticModel(A, b, float(c), Ag, bg, float(cg),
-                               p["alpha"], gamma, p["lam"] / s, s, p["coupled_tv"], grad_scheme, tv_w)
+                               p["alpha"], gamma, lam_eff / s, s, p["coupled_tv"], grad_scheme, tv_w)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         outer.append(len(energy))
