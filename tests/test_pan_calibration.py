@@ -262,3 +262,18 @@ def test_a_failed_fit_leaves_the_mapper_to_it(tmp_path, monkeypatch):
         scene, _ = cal.calibrate_scene(video, frames=6)
     assert len(scene) == 6 and scene.meta["calibration"]["turned_on_the_spot"] is False
     assert any("fit of one centre for every photo failed (Singular matrix)" in m for m in said)
+
+
+def test_no_model_from_tracks_no_rotation_explains(tmp_path, monkeypatch):
+    """Homography pairs whose matches are noise (the tracks that survive, ~150 px off):
+    fewer than MIN_TRACKS tracks survive, and there is no model of one centre."""
+    rng = np.random.default_rng(5)
+    kp = [rng.uniform(0, [W, H], (200, 2)) for _ in range(4)]
+    pairs = np.array([[0, 1], [1, 2], [2, 3], [0, 2]])
+    inl = [np.c_[np.arange(200), rng.permutation(200)] for _ in pairs]
+    m = replace(_matches(_camera(), 4), keypoints=kp, pairs=pairs, inliers=inl,
+                H=np.repeat(np.eye(3)[None], 4, 0), homography=np.ones(4, bool))
+    monkeypatch.setattr(pc, "read_matches", lambda db: m)
+    one = pc.fit_one_centre(tmp_path / "database.db")
+    assert one.fit is None and one.reconstruction is None
+    assert not pc.prefer_one_centre(one, None).one_centre

@@ -56,6 +56,7 @@ __all__ = [
     "MAX_MAPPER_RATIO",
     "MAX_TRACKS",
     "COARSE_TRACKS",
+    "MIN_TRACKS",
     "START_ERROR_FACTOR",
     "MIN_HOMOGRAPHY_SHARE",
     "PLAUSIBLE_FOCAL",
@@ -96,6 +97,8 @@ MAX_HOMOGRAPHY_RATIO = 2.0
 #: after a first fit on ``COARSE_TRACKS`` of them.
 MAX_TRACKS = 3000
 COARSE_TRACKS = 500
+#: Fewer tracks than this that the model explains: no model of one centre.
+MIN_TRACKS = 20
 #: Focal lengths, in units of the image's longer side, that a camera plausibly has (the
 #: range :func:`focal_from_homographies` searches from COLMAP's prior of 1.2).
 PLAUSIBLE_FOCAL = (0.3, 4.8)
@@ -588,9 +591,13 @@ def fit_one_centre(database, seed: int = 0, force: bool = False) -> OneCentre:
     # the fit uses the tracks each of whose observations its starting model explains
     err = _track_errors(tracks, m, R0, images)
     good = np.flatnonzero(err <= max(MAX_REPROJECTION_PX, START_ERROR_FACTOR * np.median(err)))
+    if len(good) < MIN_TRACKS:
+        return one
     coarse = fit_rotation_only(tracks.subset(np.sort(rng.permutation(good)[:COARSE_TRACKS])), m, R0, images)
     m_fit = _with_params(m, coarse.params)
     good = np.flatnonzero(_track_errors(tracks, m_fit, coarse.rotations, images) <= MAX_REPROJECTION_PX)
+    if len(good) < MIN_TRACKS:
+        return one
     one.fit = fit_rotation_only(tracks.subset(np.sort(rng.permutation(good)[:MAX_TRACKS])), m_fit,
                                 coarse.rotations, images)
     one.fit.iterations += coarse.iterations
