@@ -240,6 +240,7 @@ def test_pan_yes_and_no_are_obeyed(tmp_path):
         assert info["turned_on_the_spot"] is one is (pan == "yes")
         assert ("one_centre" in info) is (pan == "yes")
         assert ("mapping" in info["times_s"]) is (pan == "no")
+        assert ("one_centre" in info["times_s"]) is (pan == "yes")
 
 
 def test_a_failed_fit_leaves_the_mapper_to_it(tmp_path, monkeypatch):

@@ -428,7 +428,8 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             times["matching"] = _match_features(db, opt)
             t0 = time.perf_counter()
             one = _fit_one_centre(db, opt)
-            times["one_centre"] = time.perf_counter() - t0
+            if opt.pan is not False:
+                times["one_centre"] = time.perf_counter() - t0
             recs, choice = _mapping_or_one_centre(one, db, img_dir, sparse, len(files), opt, times)
             taken = choice is not None and choice.one_centre
             best_key, rec, registered, unregistered = _kept_model(recs, names, stem, photos_dir, opt)
