@@ -1,5 +1,6 @@
-"""``lam_density``: lam scaled by rho_ref / rho_c (the TV weight of a MAP estimate, constant
-against the data's sum), or at 0 (the default) lam against density-normalised data terms."""
+"""``lam_density``: lam scaled by rho_ref over the density counted in views (the TV weight of a
+MAP estimate, constant against the data's sum), or at 0 (the default) lam against
+density-normalised data terms."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import pytest
 from vibr.errors import VibrInputError
 from vibr.render import render
 from vibr.render.methods import method_params
+from vibr.render.variational import view_density
 from vibr.synthetic import make_scene
 
 
@@ -18,17 +20,33 @@ def arc():
 
 
 def test_lam_density_scales_lam_by_the_reference_over_the_density(arc):
-    """rho_ref = 2 rho_c gives the render of lam × 2, bit for bit; 0, the default, leaves lam
-    alone."""
+    """rho_ref = twice the density in views gives the render of lam × 2, bit for bit; 0, the
+    default, leaves lam alone."""
     src, tv = arc
     base = render(src, tv.camera, lam=0.6)
     rho_c = base.params["colour_density"]
     assert 1.0 < rho_c < 5.0
-    doubled = render(src, tv.camera, lam=0.6, lam_density=2.0 * rho_c)
+    views = view_density(rho_c, src_samples(src, tv))
+    assert 0.5 * rho_c < views < 2.0 * rho_c  # sources and target of one resolution
+    doubled = render(src, tv.camera, lam=0.6, lam_density=2.0 * views)
     assert np.array_equal(doubled.image, render(src, tv.camera, lam=1.2).image)
     assert not np.array_equal(doubled.image, base.image)
     assert np.array_equal(render(src, tv.camera, lam=0.6, lam_density=0.0).image, base.image)
     assert method_params("gradient")["lam_density"] == 0.0
+
+
+def src_samples(src, tv):
+    """The samples ``render`` computes for ``tv`` from ``src``."""
+    from vibr.geometry import compute_samples
+
+    return compute_samples(src, tv.camera)
+
+
+def test_the_density_in_views_counts_finer_sources_once():
+    """Each source pixel's target area |det ∂tau/∂x| (1 / inv_det): four samples a pixel from
+    a source twice as fine count as one view."""
+    s = type("S", (), {"inv_det": np.array([4.0, 4.0, 4.0, 4.0, 0.0], np.float32)})()
+    assert view_density(8.0, s) == pytest.approx(2.0)
 
 
 @pytest.mark.parametrize("bad", [-1.0, float("nan")])

@@ -55,11 +55,12 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   scenes' results, so it is not the default (docs/RENDERER.md, "Solver settings").
 * ``lam_density = 0``: lam as it is, against data terms divided by their density rho (so
   that lam means the same whatever the number of views). A number ``rho_ref`` scales lam by
-  ``rho_ref / rho_c`` instead (rho_c the colour term's density, about the views seeing a
-  pixel weighed by the view prior): the TV weight of a MAP estimate, constant against the
-  data's sum, so fewer samples get more smoothing. Measured, not the default: 3 gains
-  0.13 dB on the sweep's held-out half but loses 1.5 dB where sources finer than the target
-  give many samples a pixel (docs/RENDERER.md, "lam and the sample density").
+  ``rho_ref`` over the colour term's density counted in views
+  (:func:`vibr.render.variational.view_density`): the TV weight of a MAP estimate, constant
+  against the data's sum, so fewer views get more smoothing. Measured, not the default: 3
+  gains 0.1 dB on the sweep's held-out half but loses 0.4–0.8 dB where sources finer than
+  the target are rendered with the bilinear PSF (docs/RENDERER.md, "lam and the sample
+  density").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).

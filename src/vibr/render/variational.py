@@ -4,6 +4,7 @@
                       unweighted coverage Bᵀ1 and, with the gradient term, Bᵀ B and Bᵀ ∇v
     sample_density    rho, the mean coverage: data terms are divided by it
     colour_density    rho_c, rho weighted by the view prior: the colour term's divisor
+    view_density      rho_c counted in views (lam_density's divisor)
     initial_image     the W-weighted blend of the samples, holes filled by push–pull
     assemble_model    the quadratic model of one outer pass (colour and gradient stencils)
     solve_variational the outer passes: re-estimate the weights from u, assemble, FISTA
@@ -29,7 +30,7 @@ from .result import RenderResult
 from .solver import QuadraticModel, fista
 from .tv import TVProx
 
-__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "colour_density", "initial_image", "solve_variational",
+__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "colour_density", "view_density", "initial_image", "solve_variational",
            "TV_WEIGHTINGS", "tv_weight_map"]
 
 logger = logging.getLogger(__name__)
@@ -124,6 +125,15 @@ def sample_density(acc, coverage, normalise: bool) -> float:
     and lam mean the same whatever the number of views (the authors' code divides the data
     gradient by the accumulated splat weight to the same effect)."""
     return float(acc[coverage].mean()) if normalise and coverage.any() else 1.0
+
+
+def view_density(rho_c: float, samples) -> float:
+    """rho_c counted in views rather than samples: times the mean target area of a source
+    pixel, ``|det ∂tau/∂x|`` (``1 / inv_det``), so that sources finer than the target, which
+    put several samples in a pixel each, count once (``lam_density``'s divisor)."""
+    inv = np.asarray(samples.inv_det, np.float64)
+    inv = inv[inv > 0]
+    return max(rho_c * float(np.mean(1.0 / inv)), 1e-12) if inv.size else rho_c
 
 
 def colour_density(rho: float, prior, normalise: bool) -> float:
@@ -255,8 +265,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     n_outer = max(1, int(p["n_outer"]))
     energy, terms, outer = [], [], []
     tv_w = tv_weight_map(cov.acc, p["tv_weighting"])
-    # lam_density: the TV weight of a MAP estimate, constant against the data's sum
-    lam_eff = p["lam"] * (p["lam_density"] / rho_c if p.get("lam_density") else 1.0)
+    lam_eff = p["lam"] * (p["lam_density"] / view_density(rho_c, samples) if p.get("lam_density") else 1.0)
     prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=tv_w)
     grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
     power_state: dict = {}
