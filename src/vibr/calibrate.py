@@ -647,23 +647,26 @@ def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tu
     where there was none to make)."""
     if opt.pan and one.reconstruction is not None:
         logger.info("calibrate [4/5] one centre for every photo (as asked): rotations and intrinsics")
-        return {0: one.reconstruction}, Choice(True, "asked for (pan=True)")
-    t0 = time.perf_counter()
-    try:
-        recs = _incremental_mapping(db, img_dir, sparse, n_photos, opt)
-    finally:
-        times["mapping"] = time.perf_counter() - t0
-    if one is None:
-        return recs, None
-    choice = prefer_one_centre(one, max((recs or {}).values(), key=lambda r: r.num_reg_images(), default=None))
-    if one.reconstruction is None:
-        return recs, choice
-    logger.info(f"calibrate: {one.homography_pairs} of {one.pairs} image pairs related by homographies; "
-                + ("one centre for every photo: " if choice.one_centre else "the mapper's centres: ") + choice.why)
+        recs, choice = {0: one.reconstruction}, Choice(True, "asked for (pan=True)")
+    else:
+        t0 = time.perf_counter()
+        try:
+            recs = _incremental_mapping(db, img_dir, sparse, n_photos, opt)
+        finally:
+            times["mapping"] = time.perf_counter() - t0
+        if one is None:
+            return recs, None
+        choice = prefer_one_centre(one, max((recs or {}).values(), key=lambda r: r.num_reg_images(), default=None))
+        if one.reconstruction is None:
+            return recs, choice
+        logger.info(f"calibrate: {one.homography_pairs} of {one.pairs} image pairs related by homographies; "
+                    + ("one centre for every photo: " if choice.one_centre else "the mapper's centres: ")
+                    + choice.why)
+        recs = {0: one.reconstruction} if choice.one_centre else recs
     note = focal_note(one) if choice.one_centre else None
-    if note:
+    if note:  # asked for or chosen, an implausible focal length is said
         logger.warning(f"calibrate: {note}; --pan no keeps COLMAP's mapper (docs/CALIBRATE.md)")
-    return ({0: one.reconstruction} if choice.one_centre else recs), choice
+    return recs, choice
 
 
 def _one_centre_summary(one, choice) -> dict:

@@ -506,7 +506,7 @@ def fit_rotation_only(tracks: Tracks, m: Matches, R0: np.ndarray, images: np.nda
     x, history = robust_lm(model.residuals, model.jacobian, model.x0(), max_iter=max_iter)
     R, _, params = model.unpack(x)
     err = np.linalg.norm(model.errors(R, params, model.directions(R, params)), axis=1)
-    return RotationFit(R, params, images, float(np.median(np.nan_to_num(err, nan=np.inf))), len(history))
+    return RotationFit(R, params, images, float(np.median(np.nan_to_num(err, nan=np.inf))), len(history) - 1)
 
 
 def huber_cost(r: np.ndarray, delta: float = 1.0) -> float:
