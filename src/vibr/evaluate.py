@@ -97,7 +97,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
                    render_kw: dict | None = None, intensity_scale: float | None = None,
                    geometry_kw: dict | None = None, use_lpips: bool = True,
                    view_split: int | None = None, uncertainty: bool = False,
-                   fallback: str | bool = "auto", cache_dir=False) -> Evaluation:
+                   fallback: str | bool = "auto", cache_dir=False, supersample="auto") -> Evaluation:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
@@ -128,6 +128,9 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         The fallback proxy for source pixels of unknown depth (:func:`vibr.pipeline.prepare`).
     cache_dir : path, None or False
         The cache of estimated depth (:func:`vibr.pipeline.prepare`); False (default): none.
+    supersample : "auto" or int
+        The grid every setting renders on, as :func:`vibr.render.render` chooses it (a
+        held-out view at its sources' resolution: the target's own).
 
     Returns an :class:`Evaluation` whose ``report`` is JSON-serialisable: ``scene``,
     ``target``, ``sources``, ``scale`` (the image scale the scene was loaded at),
@@ -148,11 +151,12 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)
     t0 = time.perf_counter()
-    samples = compute_samples(src, tview.camera, **_geometry_kw(geometry_kw, settings, render_kw))
+    src, grid = _eval_grid(src, tview, settings, render_kw, supersample)
+    samples = compute_samples(src, grid[0], **_geometry_kw(geometry_kw, settings, render_kw))
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
-    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty)
+    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty, grid)
     cover = np.ones(tview.shape, bool) if tview.mask is None else tview.mask.copy()
     if mask == "reconstructed":
         for _, res, _ in rows:
@@ -225,16 +229,36 @@ def _geometry_kw(geometry_kw, settings, render_kw) -> dict:
     return with_sample_fields(geometry_kw, *((s.method, {**(render_kw or {}), **s.params}) for s in settings))
 
 
-def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False):
-    """Render the target once per setting from the shared samples: ``[(setting, result,
-    seconds)]``."""
+def _eval_grid(src, tview, settings, render_kw, supersample):
+    """The sources and ``(camera, plan)`` of the grid every setting renders on
+    (:func:`vibr.render.fine_grid`, as :func:`vibr.render.render` chooses it; on "auto",
+    the target's own grid when a setting models fine sources, ``psf="footprint"``)."""
+    from .geometry.resolution import ResolutionPlan, check_supersample
+    from .render import fine_grid
+    from .render.methods import wants_fine_sources
+
+    supersample = check_supersample(supersample)
+    if supersample == "auto" and any(wants_fine_sources(s.method, **{**(render_kw or {}), **s.params})
+                                     for s in settings):
+        return src, (tview.camera, ResolutionPlan())
+    src, cam, _, plan = fine_grid(src, tview.camera, supersample)
+    return src, (cam, plan)
+
+
+def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False,
+                     grid=None):
+    """Render the target once per setting from the shared samples (on ``grid``, from
+    :func:`_eval_grid`): ``[(setting, result, seconds)]``."""
     from .render import render
 
+    cam, plan = grid if grid is not None else (tview.camera, None)
+    k = plan.supersample if plan is not None else 1
     rows = []
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
         params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
         t = time.perf_counter()
-        res = render(src, tview.camera, method=s.method, samples=samples, uncertainty=uncertainty, **params)
+        res = render(src, cam, method=s.method, samples=samples, uncertainty=uncertainty, **params).box_reduced(k)
+        res.params.update(supersample=k, reduced_sources=dict(plan.scales) if plan is not None else {})
         rows.append((s, res, time.perf_counter() - t))
     return rows
 

@@ -91,6 +91,7 @@ class FrameContext:
     prepared: dict = field(default_factory=dict)  # per source: prepare_depth's (z, z_x, z_y)
     job_key: str = ""  # what every frame depends on besides its camera (:func:`job_key`)
     uncertainty: bool = False  # also each frame's σ map (sigma_NNNNN.npz)
+    supersample: object = "auto"  # sources finer than a frame (vibr.render.fine_grid)
 
     def __post_init__(self):
         # the optional sample fields the method reads (the footprint PSF's Jacobians), once
@@ -146,7 +147,7 @@ def job_key(ctx: FrameContext) -> str:
     sigma_z, fallback masks, photograph masks)."""
     from .io.checkpoint import code_fingerprint, digest
 
-    parts = [code_fingerprint(), ctx.method, ctx.params, ctx.n_views, ctx.blend, ctx.geometry_kw]
+    parts = [code_fingerprint(), ctx.method, ctx.params, ctx.n_views, ctx.blend, ctx.geometry_kw, str(ctx.supersample)]
     for v in ctx.sources.views:
         c = v.camera
         parts += [v.name, c.K, c.R, c.t, list(c.shape), v.image, v.depth,
@@ -247,6 +248,18 @@ def view_weights(sources: Scene, camera: Camera, n_views: int | None, *, blend: 
     return w
 
 
+def _frame_grid(ctx: FrameContext, sub: Scene, cam: Camera):
+    """:func:`vibr.render.fine_grid` for a frame (nothing to do on "auto" with the footprint
+    PSF, as in :func:`vibr.render.render`): ``(sources, camera, prepared, plan)``."""
+    from .geometry.resolution import ResolutionPlan
+    from .render import fine_grid
+    from .render.methods import wants_fine_sources
+
+    if ctx.supersample == "auto" and wants_fine_sources(ctx.method, **ctx.params):
+        return sub, cam, ctx.prepared or None, ResolutionPlan()
+    return fine_grid(sub, cam, ctx.supersample, ctx.prepared or None)
+
+
 def render_frame(ctx: FrameContext, i: int) -> dict:
     """Render frame ``i`` of the path and write it (the per-frame task, see the module
     docstring). Returns a small dict: index, skipped, seconds, views and weights, and the
@@ -272,7 +285,8 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     tm["view weights"] = -t0 + (t := time.perf_counter())
     try:
-        samples = compute_samples(sub, cam, prepared=ctx.prepared or None, **ctx.geometry_kw)
+        sub, fine, prepared, plan = _frame_grid(ctx, sub, cam)
+        samples = compute_samples(sub, fine, prepared=prepared, **ctx.geometry_kw)
     except VibrInputError as exc:
         return {"index": i, "skipped": False, "seconds": 0.0, "failed": f"{exc.problem} (camera {cam})"}
     tm["geometry"] = -t + (t := time.perf_counter())
@@ -280,7 +294,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     if np.any(ws < 1.0):
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
-                         target_centre=cam.centre, uncertainty=ctx.uncertainty, **ctx.params)
+                         target_centre=cam.centre, uncertainty=ctx.uncertainty, **ctx.params).box_reduced(plan.supersample)
     tm["render"] = -t + (t := time.perf_counter())
     if ctx.uncertainty:  # first: a colour frame on disk with its key says the frame is done
         _write_sigma_frame(os.path.join(ctx.frames_dir, sigma_name(i)), res.uncertainty, key)
@@ -288,7 +302,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     tm["write"] = time.perf_counter() - t
     tm.update({f"geometry: {k}": v for k, v in samples.meta.get("times", {}).items()})
     tm.update({f"render: {k}": v for k, v in res.times.items() if k != "total"})
-    return {"index": i, "skipped": False, "seconds": time.perf_counter() - t0,
+    return {"index": i, "skipped": False, "seconds": time.perf_counter() - t0, "supersample": plan.supersample,
             "views": [v.name for v in views], "weights": ws.tolist(), "times": tm, "samples": len(samples),
             "coverage": float(res.coverage.mean()), "iterations": res.iterations}
 
@@ -387,16 +401,22 @@ def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
     return out, None
 
 
-def _check_frame_memory(scene: Scene, cams, n_views, source) -> None:
+def _check_frame_memory(scene: Scene, cams, n_views, source, supersample="auto") -> None:
     """Refuse, before the depth work, a path whose largest frame could not be rendered in
-    the memory available (:func:`vibr.validate.check_render_memory`; the largest sources)."""
+    the memory available (:func:`vibr.validate.check_render_memory`; the largest sources, the
+    frame on the grid it is rendered on: with "auto", as fine as the largest source's pixels
+    allow, at most ``SUPERSAMPLE_MAX`` times)."""
+    from .geometry.resolution import SUPERSAMPLE_MAX
     from .validate import check_render_memory
 
     if not cams:
         return
     big = max(cams, key=lambda c: c.width * c.height)
     shapes = sorted((v.camera.shape for v in scene.views), key=lambda s: s[0] * s[1], reverse=True)
-    check_render_memory(shapes[:n_views] if n_views else shapes, big.shape, source,
+    k = supersample
+    if k == "auto":
+        k = int(min(SUPERSAMPLE_MAX, max(1, round(max(shapes[0]) / max(big.shape)))))
+    check_render_memory(shapes[:n_views] if n_views else shapes, big.scaled(k).shape if k > 1 else big.shape, source,
                         way_out="make the path with smaller frames (vibr path --size WxH)")
 
 
@@ -405,7 +425,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
                 depth: str = "auto", estimate_kw: dict | None = None, cache_dir=None,
                 exclude=(), frames_dir=None, crf: int = 18, fps: float | None = None,
                 blend: float = 0.25, geometry_kw: dict | None = None, progress: bool = True,
-                check_scene: bool = True, uncertainty=None) -> FlyResult:
+                check_scene: bool = True, uncertainty=None, supersample="auto") -> FlyResult:
     """Render every camera of ``camera_path`` from ``scene`` to numbered PNGs and a video.
 
     Parameters
@@ -435,11 +455,17 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         grey levels of 255, colour-mapped on one scale for the whole path with its scale
         bar: :func:`write_sigma_video`); the maps stay in the frames folder as
         ``sigma_NNNNN.npz``.
+    supersample : "auto" or int
+        Frames coarser than the photographs are rendered on a finer grid and averaged back
+        (:func:`vibr.render.render`'s ``supersample``; the factor is in each frame's record).
     """
     from .depthcache import scene_with_depth
     from .render.methods import METHODS
 
+    from .geometry.resolution import check_supersample
+
     t_start = time.perf_counter()
+    supersample = check_supersample(supersample)
     if method not in METHODS:
         raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(METHODS)})")
     if n_views is not None and n_views < 1:
@@ -463,7 +489,7 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     cams = list(camera_path.cameras)
     if check_scene:
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
-    _check_frame_memory(scene, cams, n_views, camera_path.meta.get("file"))
+    _check_frame_memory(scene, cams, n_views, camera_path.meta.get("file"), supersample)
     t0 = time.perf_counter()
     # depth, when estimated, for the views the frames may use, on the engine the caller
     # named (on "auto" here: on one machine the sweeps' kernels already use every core)
@@ -473,7 +499,8 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
     ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,
-                       overwrite, dict(geometry_kw or {}), uncertainty=uncertainty is not None)
+                       overwrite, dict(geometry_kw or {}), uncertainty=uncertainty is not None,
+                       supersample=supersample)
     prepare_sources(ctx)
     t_first = time.perf_counter() - t_start
     t0 = time.perf_counter()

@@ -37,6 +37,17 @@ def _weight(text: str):
         raise argparse.ArgumentTypeError(f"expected a number or {AUTO!r}, got {text!r}") from None
 
 
+def _supersample(text: str):
+    """"auto" or an integer >= 1 (:func:`vibr.geometry.resolution.check_supersample`)."""
+    from ..errors import VibrInputError
+    from ..geometry.resolution import check_supersample
+
+    try:
+        return check_supersample(text)
+    except VibrInputError as exc:
+        raise argparse.ArgumentTypeError(exc.problem) from None
+
+
 def method_help() -> str:
     return "; ".join(f"{m.name}: {m.summary}" for m in REGISTRY.values())
 
@@ -50,8 +61,8 @@ def add_method_option(p: argparse.ArgumentParser) -> None:
 def add_psf_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--psf", choices=PSFS, default=None,
                    help=f"image-formation model of the variational methods (default: {DEFAULTS['psf']}): "
-                        "bilinear, or footprint (the source pixel's parallelogram; worth it when the "
-                        "sources are finer than the target)")
+                        "bilinear, or footprint (the source pixel's parallelogram: sources finer than the "
+                        "target, on the target's own grid)")
 
 
 def add_intensity_scale_option(p: argparse.ArgumentParser) -> None:
@@ -83,6 +94,12 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
                         "authors' code applies them (gamma x 0.1/4, lam x 255 on [0, 1] intensities, "
                         "gradient term weighted by W, spatially varying TV; docs/RENDERER.md)")
     add_psf_option(p)
+    from ..geometry.resolution import SUPERSAMPLE_MAX
+
+    p.add_argument("--supersample", type=_supersample, default=AUTO, metavar="K|" + AUTO,
+                   help="render on a grid K times finer and average KxK blocks, for sources finer than the "
+                        f"target (default {AUTO}: K from the sources' pixel size in the target, at most "
+                        f"{SUPERSAMPLE_MAX}; 1: the target's own grid)")
 
 
 def render_params(args) -> dict:

@@ -130,7 +130,7 @@ def run(args) -> int:
                               depth_files=args.depth_files, n_views=args.views, fallback=args.fallback,
                               cache_dir=cache_dir_from_args(args))
     res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
-                 **render_params(args))  # -v: per pass
+                 supersample=args.supersample, **render_params(args))  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth or 8)
     if args.uncertainty:
         from ..uncertainty_figures import write_sigma
@@ -138,8 +138,9 @@ def run(args) -> int:
         write_sigma(args.uncertainty, res.uncertainty)
         print(f"wrote {args.uncertainty}")
     t = res.times
+    k = res.params.get("supersample", 1)
     logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
-                f"{res.n_samples} samples, coverage {100 * res.coverage.mean():.1f} %, "
+                f"{res.n_samples} samples{f' on a grid {k}x finer' if k > 1 else ''}, coverage {100 * res.coverage.mean():.1f} %, "
                 f"{t.get('total', 0):.2f} s (geometry {t.get('geometry', 0):.2f}, solve {t.get('solve', 0):.2f})")
     if res.metrics:
         print(f"PSNR {res.metrics['psnr']:.2f} dB  DSSIM {res.metrics['dssim']:.1f}  "
@@ -201,7 +202,7 @@ def _run_path(args) -> int:
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
                       crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor,
-                      uncertainty=args.uncertainty or None)
+                      uncertainty=args.uncertainty or None, supersample=args.supersample)
     t = res.times
     what = f"{res.video} ({count(res.video_frames, 'frame')}, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir

@@ -526,23 +526,28 @@ def headers_only():
         _HEADERS_ONLY.reset(token)
 
 
+def scaled_view(v, s: float):
+    """One view resized by ``s`` as :func:`vibr.io.load_scene` does with ``scale``: the image
+    by :func:`resize_image`, the camera by :meth:`vibr.camera.Camera.scaled`, depth, sigma_z
+    and fallback maps by nearest neighbour (:func:`resize_depth`), the mask by
+    :func:`resize_mask`. ``s = 1``: the view."""
+    if s == 1.0:
+        return v
+    cam = v.camera.scaled(s)
+    sz = v.sigma_z
+    if sz is not None and np.ndim(sz) > 0:
+        sz = resize_depth(np.asarray(sz, np.float32), cam.shape)
+    fb = None if v.fallback is None else resize_depth(v.fallback, cam.shape)
+    return v.replace(camera=cam, image=resize_image(v.image, cam.shape),
+                     depth=None if v.depth is None else resize_depth(v.depth, cam.shape), sigma_z=sz,
+                     fallback=fb, mask=None if v.mask is None else resize_mask(v.mask, cam.shape))
+
+
 def scaled_scene(scene, s: float):
-    """Every view of ``scene`` resized by ``s`` as :func:`vibr.io.load_scene` does with
-    ``scale``: images by :func:`resize_image`, cameras by :meth:`vibr.camera.Camera.scaled`,
-    depth, sigma_z and fallback maps by nearest neighbour (:func:`resize_depth`), masks by
-    :func:`resize_mask`. ``s = 1``: the scene."""
+    """Every view of ``scene`` resized by ``s`` (:func:`scaled_view`). ``s = 1``: the scene."""
     if s == 1.0:
         return scene
-    views = []
-    for v in scene.views:
-        cam = v.camera.scaled(s)
-        sz = v.sigma_z
-        if sz is not None and np.ndim(sz) > 0:
-            sz = resize_depth(np.asarray(sz, np.float32), cam.shape)
-        fb = None if v.fallback is None else resize_depth(v.fallback, cam.shape)
-        views.append(v.replace(camera=cam, image=resize_image(v.image, cam.shape),
-                               depth=None if v.depth is None else resize_depth(v.depth, cam.shape), sigma_z=sz,
-                               fallback=fb, mask=None if v.mask is None else resize_mask(v.mask, cam.shape)))
+    views = [scaled_view(v, s) for v in scene.views]
     meta = dict(scene.meta)
     if meta.get("missing_views"):  # a light field's absent positions (vibr.io.hci)
         from ..camera import Camera

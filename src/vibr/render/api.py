@@ -11,10 +11,10 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
 from ..scene import Scene, View
-from .methods import get_method, method_params
+from .methods import get_method, method_params, wants_fine_sources
 from .result import RenderResult
 
-__all__ = ["RenderResult", "render", "render_samples"]
+__all__ = ["RenderResult", "render", "render_samples", "fine_grid"]
 
 logger = logging.getLogger(__name__)
 
@@ -75,10 +75,59 @@ def _ready_sources(sources: Scene, target) -> Scene:
     return full.replace(views=[v for v in full.views if v.name != tname])
 
 
+def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict | None = None):
+    """The grid to render ``camera`` on, and the sources to render it from
+    (:func:`vibr.geometry.resolution.resolution_plan`).
+
+    Returns ``(sources, camera, prepared, plan)``: ``camera`` scaled by ``plan.supersample``
+    (:meth:`Camera.scaled`: pixel centres such that ``k × k`` blocks average back to the
+    target's pixels, :meth:`RenderResult.box_reduced`); the sources in ``plan.scales``
+    resized by :func:`vibr.io.images.scaled_view` (as :func:`vibr.io.load_scene` resizes
+    with ``scale``); ``prepared`` (depth prepared per view name, for
+    :func:`vibr.geometry.compute_samples`) without those, whose full-size preparation no
+    longer applies.
+    """
+    from ..geometry.resolution import resolution_plan
+
+    plan = resolution_plan(sources, camera, supersample)
+    if plan.scales:
+        from ..io.images import scaled_view
+
+        sources = sources.replace(views=[scaled_view(v, plan.scales[v.name]) if v.name in plan.scales else v
+                                         for v in sources.views])
+        if prepared:
+            prepared = {k: val for k, val in prepared.items() if k not in plan.scales}
+    if plan.supersample > 1 or plan.scales:
+        logger.debug("target %dx%d rendered ×%d finer; sources reduced first: %s", camera.width, camera.height,
+                     plan.supersample, ", ".join(f"{k} ×{r:.3g}" for k, r in plan.scales.items()) or "none")
+    cam = camera.scaled(plan.supersample) if plan.supersample > 1 else camera
+    return sources, cam, prepared, plan
+
+
+def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):
+    """The geometry stage of :func:`render`: ``(sources, samples, plan)``, the samples on
+    :func:`fine_grid`'s grid (the plan None with the footprint PSF)."""
+    from ..geometry import compute_samples
+    from ..validate import check_render_memory
+    from .methods import with_sample_fields
+
+    from ..geometry.resolution import check_supersample
+
+    supersample = check_supersample(supersample)
+    src = _ready_sources(sources, target)
+    gkw = with_sample_fields(geometry_kw, (m, params))
+    plan = None
+    if supersample != "auto" or not wants_fine_sources(m, **params):
+        src, cam, gkw["prepared"], plan = fine_grid(src, cam, supersample, gkw.get("prepared"))
+    check_render_memory([v.camera.shape for v in src.views], cam.shape, cam.source,  # before allocating
+                        keep=gkw["keep"])
+    return src, compute_samples(src, cam, **gkw), plan
+
+
 def render(sources: Scene, target: View | Camera, method="gradient", *,
            samples: Samples | None = None, callback=None, progress_bar: bool = False,
            verbose: bool = False, geometry_kw: dict | None = None, uncertainty: bool = False,
-           **params) -> RenderResult:
+           supersample="auto", **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
     Minimises (docs/METHOD.md §5, paper eq. energy_final)
@@ -114,6 +163,13 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     uncertainty : bool
         Also fill ``RenderResult.uncertainty``, the per-pixel std. dev. in grey levels
         (:mod:`vibr.render.uncertainty`).
+    supersample : "auto" or int
+        Sources finer than the target: render on a grid ``k`` times finer, then average
+        ``k × k`` blocks (:func:`fine_grid`; "auto": ``k`` from the sources' pixel size in
+        the target, at most 4; sources still more than twice finer than that grid are reduced
+        first). Not with ``samples`` given; "auto" does nothing with ``psf="footprint"``, which
+        models fine sources itself. ``RenderResult.params`` records ``supersample`` and
+        ``reduced_sources``.
     **params
         alpha (1.0), gamma (1.0; gradient only), lam (0.1), sigma_s (1.0, grey levels),
         sigma_z (None: the geometry's), scale (255: the intensity scale all these refer to;
@@ -140,26 +196,20 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     if not isinstance(sources, Scene):
         raise VibrInputError(f"sources must be a Scene, got {type(sources).__name__}")
     t0 = time.perf_counter()
-    src = sources
-    if samples is not None and isinstance(target, View) and target.name in sources.names:
-        src = sources.replace(views=[v for v in sources.views if v.name != target.name])
+    src, plan = sources, None
     if samples is None:
-        from ..geometry import compute_samples
-
-        from ..validate import check_render_memory
-
-        from .methods import with_sample_fields
-
-        src = _ready_sources(sources, target)
-        gkw = with_sample_fields(geometry_kw, (m, params))
-        check_render_memory([v.camera.shape for v in src.views], cam.shape, cam.source,  # before allocating
-                            keep=gkw["keep"])
-        samples = compute_samples(src, cam, **gkw)
+        src, samples, plan = _fine_samples(sources, target, cam, m, params, geometry_kw, supersample)
+    elif isinstance(target, View) and target.name in sources.names:
+        src = sources.replace(views=[v for v in sources.views if v.name != target.name])
     t_geo = time.perf_counter() - t0
     params = _resolve_auto(src, cam, m, params)
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
                          verbose=verbose, uncertainty=uncertainty, **params)
+    if plan is not None and plan.supersample > 1:
+        res = res.box_reduced(plan.supersample)
+    res.params["supersample"] = plan.supersample if plan else 1
+    res.params["reduced_sources"] = dict(plan.scales) if plan else {}
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:

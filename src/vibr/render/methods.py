@@ -76,7 +76,7 @@ from .operators import PSFS as _PSFS
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "get_method",
            "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields",
-           "with_sample_fields"]
+           "with_sample_fields", "wants_fine_sources"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
@@ -300,8 +300,15 @@ def sample_fields(method="gradient", **params) -> tuple:
     of ``method`` with ``params`` reads, for :func:`vibr.geometry.compute_samples`'s
     ``keep``: ``("jac",)`` with the footprint PSF, else none. ``params`` as
     :func:`method_params` takes them ("auto" values allowed)."""
+    return ("jac",) if wants_fine_sources(method, **params) else ()
+
+
+def wants_fine_sources(method="gradient", **params) -> bool:
+    """True where the render models sources finer than the target itself (the footprint
+    PSF, ``psf="footprint"``, reads the warps' Jacobians): then
+    :func:`vibr.render.api.reduce_sources` leaves the sources at their resolution."""
     p = method_params(method, **{k: v for k, v in params.items() if not isinstance(v, str) or v != "auto"})
-    return ("jac",) if p["psf"] == "footprint" else ()
+    return p["psf"] == "footprint"
 
 
 def with_sample_fields(geometry_kw: dict | None, *renders) -> dict:

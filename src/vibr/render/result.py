@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -63,3 +63,22 @@ class RenderResult:
     iterations: int = 0
     power_iterations: int = 0
     uncertainty: np.ndarray | None = None
+
+    def box_reduced(self, k: int) -> "RenderResult":
+        """The result of a render on a grid ``k`` times finer, brought back to the target's
+        pixels: the image (and ``init``) averaged over ``k × k`` blocks, a pixel covered where
+        its whole block is, the uncertainty the root mean square of its block's (a bound: the
+        block's errors are not independent). Energies, times and counts stay the fine grid's."""
+        k = int(k)
+        if k == 1:
+            return self
+        H, W = self.coverage.shape[0] // k, self.coverage.shape[1] // k
+
+        def blocks(a):
+            a = np.asarray(a)[: H * k, : W * k]
+            return a.reshape((H, k, W, k) + a.shape[2:])
+
+        mean = lambda a: None if a is None else blocks(a).astype(np.float64).mean(axis=(1, 3)).astype(np.float32)  # noqa: E731
+        unc = None if self.uncertainty is None else np.sqrt(mean(np.square(self.uncertainty, dtype=np.float64)))
+        return replace(self, image=mean(self.image), init=mean(self.init), coverage=blocks(self.coverage).all(axis=(1, 3)),
+                       uncertainty=None if unc is None else unc.astype(np.float32), params=dict(self.params))

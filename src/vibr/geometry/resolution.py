@@ -1,0 +1,148 @@
+"""How large a source pixel is in the target, and the grid to render on.
+
+A source photographed at a finer resolution than the target (a 1080p video from 4K photos,
+a thumbnail, a camera far from the scene) puts several samples in each target pixel. The
+bilinear image-formation model (``psf="bilinear"``, paper §4.1) reads each of them as a point
+sample of the target image, so the solution fits an aliased image. Rendering on a grid
+``k`` times finer and averaging ``k × k`` blocks (a pixel-integrating sensor) avoids it
+(docs/RENDERER.md, "Sources finer than the target"). :func:`source_pixel_size` measures
+the ratio, :func:`resolution_plan` chooses ``k`` and the sources to reduce first (those
+still much finer than the fine grid: the cost stays that of a render at the sources'
+resolution), which :func:`vibr.render.render` applies.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import VibrInputError
+from ..scene import View
+
+__all__ = ["source_pixel_size", "reduction_scale", "resolution_plan", "ResolutionPlan", "check_supersample",
+           "REDUCTION_STEP",
+           "SIZE_GRID", "SUPERSAMPLE_MAX", "REDUCE_BELOW"]
+
+#: Reduction factors are powers of ``REDUCTION_STEP`` (1, 0.707, 0.5, 0.354, 0.25, ...): a
+#: camera moving along a path reuses the same few resolutions, and a source is never reduced
+#: below the target's resolution by more than this step's rounding.
+REDUCTION_STEP = 1.0 / math.sqrt(2.0)
+
+#: Source pixels measured per side (a regular grid over the view).
+SIZE_GRID = 48
+
+#: The largest supersampling factor ``k`` "auto" chooses (k² times the target's pixels).
+SUPERSAMPLE_MAX = 4
+
+#: A source whose pixels are smaller than this many pixels of the (supersampled) grid is
+#: reduced first (:func:`reduction_scale`) ...
+REDUCE_BELOW = 0.5
+#: ... unless its shorter side would fall below this many pixels.
+MIN_REDUCED_SIDE = 16
+
+
+def _focal(cam: Camera) -> float:
+    return math.sqrt(float(cam.K[0, 0]) * float(cam.K[1, 1]))
+
+
+def source_pixel_size(view: View, camera: Camera, grid: int = SIZE_GRID) -> float:
+    """The linear size, in pixels of ``camera``, of a pixel of ``view`` (median over the view).
+
+    For a source pixel at orthogonal depth ``z_s`` that the target sees at depth ``z_t``:
+
+    .. math:: s = \\frac{f_t / z_t}{f_s / z_s}, \\qquad f = \\sqrt{f_x f_y}
+
+    (a fronto-parallel patch; the slant of the surface is ignored), the median over a
+    ``grid × grid`` lattice of the view's pixels with a depth (or a fallback depth) that
+    project in front of the target and inside its image. ``s < 1``: the source is finer
+    than the target. NaN when fewer than 16 such pixels (nothing to measure).
+    """
+    z = view.depth if view.depth is not None else view.fallback
+    if z is None:
+        return math.nan
+    cs = view.camera
+    ys = np.linspace(0, cs.height - 1, min(grid, cs.height)).round().astype(np.intp)
+    xs = np.linspace(0, cs.width - 1, min(grid, cs.width)).round().astype(np.intp)
+    zs = np.asarray(z, np.float64)[np.ix_(ys, xs)]
+    yy, xx = np.meshgrid(ys, xs, indexing="ij")
+    ok = np.isfinite(zs) & (zs > 0)
+    if view.mask is not None:
+        ok &= np.asarray(view.mask, bool)[np.ix_(ys, xs)]
+    pix = np.stack([xx[ok], yy[ok]], axis=-1).astype(np.float64)
+    xy, zt = camera.project(cs.backproject(pix, zs[ok]))
+    inside = (zt > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= camera.width - 0.5) \
+        & (xy[:, 1] >= -0.5) & (xy[:, 1] <= camera.height - 0.5)
+    if np.count_nonzero(inside) < 16:
+        return math.nan
+    size = (_focal(camera) / zt[inside]) * (zs[ok][inside] / _focal(cs))
+    return float(np.median(size))
+
+
+def reduction_scale(size: float) -> float:
+    """The factor a source whose pixels are ``size`` target pixels wide is resized by: the
+    smallest power of :data:`REDUCTION_STEP` that is at least ``size`` (so the reduced
+    source is never coarser than the target), 1 for ``size ≥ REDUCTION_STEP`` or unknown.
+
+    >>> reduction_scale(0.5), reduction_scale(0.6), reduction_scale(0.8)
+    (0.5, 0.7071067811865476, 1.0)
+    """
+    if not math.isfinite(size) or size >= REDUCTION_STEP - 1e-12:
+        return 1.0
+    j = math.floor(math.log(size) / math.log(REDUCTION_STEP) + 1e-9)
+    return 2.0 ** (-j / 2.0)
+
+
+@dataclass(frozen=True)
+class ResolutionPlan:
+    """How a target is rendered from its sources (:func:`resolution_plan`).
+
+    ``supersample``: the target is rendered on a grid ``k`` times finer
+    (:meth:`vibr.camera.Camera.scaled`) and ``k × k`` blocks are averaged; ``scales``: view
+    name → factor that source is resized by first; ``sizes``: view name →
+    :func:`source_pixel_size` (target pixels, NaN where unmeasured)."""
+
+    supersample: int = 1
+    scales: dict = field(default_factory=dict)
+    sizes: dict = field(default_factory=dict)
+
+
+def resolution_plan(sources, camera: Camera, supersample="auto", max_factor: int = SUPERSAMPLE_MAX) -> ResolutionPlan:
+    """The supersampling factor and the source reductions for rendering ``camera``.
+
+    ``supersample="auto"``: ``k = round(1 / s̃)`` clipped to ``[1, max_factor]``, ``s̃`` the
+    median :func:`source_pixel_size` of the sources (1 where none is measured: sources
+    coarser than the target, or at its resolution, give ``k = 1``); an integer fixes ``k``.
+    A source with ``s · k < REDUCE_BELOW`` (still more than twice finer than the grid) is
+    reduced by ``reduction_scale(s · k)`` (unless its shorter side would fall below
+    :data:`MIN_REDUCED_SIDE` pixels).
+    """
+    supersample = check_supersample(supersample)
+    sizes = {v.name: source_pixel_size(v, camera) for v in sources.views}
+    finite = [x for x in sizes.values() if math.isfinite(x)]
+    k = supersample
+    if k == "auto":
+        k = int(min(max_factor, max(1, round(1.0 / float(np.median(finite)))))) if finite else 1
+    scales = {}
+    for v in sources.views:
+        x = sizes[v.name]
+        r = reduction_scale(x * k) if math.isfinite(x) and x * k < REDUCE_BELOW else 1.0
+        if r < 1.0 and min(v.camera.width, v.camera.height) * r >= MIN_REDUCED_SIDE:
+            scales[v.name] = r
+    return ResolutionPlan(k, scales, sizes)
+
+
+def check_supersample(value):
+    """``value`` as "auto" or an int ≥ 1 (an integral float or string accepted); else
+    :class:`VibrInputError`."""
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return "auto"
+    try:
+        k = float(value)
+    except (TypeError, ValueError):
+        k = math.nan
+    if not (math.isfinite(k) and k >= 1 and k == int(k)) or isinstance(value, bool):
+        raise VibrInputError(f"supersample must be 'auto' or an integer >= 1, got {value!r}")
+    return int(k)
