@@ -207,3 +207,22 @@ def test_cli_supersample_option(tmp_path, capsys):
     assert main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(tmp_path / "o.png"),
                  "--supersample", "1", "-q"]) == 0
     assert not (tmp_path / "o.png.tmp").exists() and (tmp_path / "o.png").exists()
+
+
+def test_cli_path_says_when_frames_are_supersampled(tmp_path, capsys):
+    """`vibr render --path` with frames half the photographs' size says it rendered them on
+    a finer grid (and how to turn it off); at the photographs' size it says nothing."""
+    from vibr.cli import main
+    from vibr.io import load_scene, save_scene
+    from vibr.path import write_camera_path
+    from vibr.synthetic import make_scene
+
+    save_scene(make_scene("grid", n_views=9, width=64, height=64, seed=1), tmp_path / "s")
+    cam = load_scene(tmp_path / "s")["view_004"].camera
+    for name, c, said in (("half", cam.scaled(0.5), True), ("full", cam, False)):
+        write_camera_path(tmp_path / f"{name}.json", [c], fps=1.0)
+        capsys.readouterr()
+        assert main(["render", str(tmp_path / "s"), "--path", str(tmp_path / f"{name}.json"), "-o",
+                     str(tmp_path / name), "--workers", "1", "-q"]) == 0
+        out = capsys.readouterr().out
+        assert ("rendered on a grid 2x finer and averaged back (--supersample 1" in out) == said

@@ -210,6 +210,10 @@ def _run_path(args) -> int:
     print(f"rendered {count(res.rendered, 'frame')} ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}"
           f"{per}; total {t['total']:.1f} s (depth: {res.depth_source} "
           f"({t['depth']:.1f} s); video {t['video']:.1f} s); wrote {what}")
+    ks = sorted({f.get("supersample", 1) for f in res.frames if not f.get("skipped")} - {1})
+    if ks:
+        print(f"the photographs are finer than the frames: rendered on a grid {'-'.join(map(str, ks))}x finer and "
+              "averaged back (--supersample 1: on the frames' own grid, faster)")
     if res.sigma_video:
         print(f"wrote {res.sigma_video} (sigma of every frame, 0 to {res.sigma_vmax:g} grey levels)")
     return 0
