@@ -32,7 +32,7 @@ __all__ = ["source_pixel_size", "reduction_scale", "resolution_plan", "Resolutio
 REDUCTION_STEP = 1.0 / math.sqrt(2.0)
 
 #: Source pixels measured per side (a regular grid over the view).
-SIZE_GRID = 48
+SIZE_GRID = 24
 
 #: The largest supersampling factor ``k`` "auto" chooses (k² times the target's pixels).
 SUPERSAMPLE_MAX = 4
