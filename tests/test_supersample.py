@@ -226,3 +226,30 @@ def test_cli_path_says_when_frames_are_supersampled(tmp_path, capsys):
                      str(tmp_path / name), "--workers", "1", "-q"]) == 0
         out = capsys.readouterr().out
         assert ("rendered on a grid 2x finer and averaged back (--supersample 1" in out) == said
+
+
+# ------------------------------------------------------------------ the gradient's frame
+def test_chain_gradient_is_the_jacobian_transposed_inverse(grid):
+    """``grad_model="chain"`` gives every sample ``J⁻ᵀ ∇v`` (J the warp's Jacobian, kept
+    with ``keep=("jac",)``), where 1/|det J| is under the cap; "translation" gives ``∇v``
+    as it is. Closed form: the target camera for half-size images has J = ½ I, so the
+    chain gradients are twice the translation ones."""
+    from vibr.geometry import compute_samples
+
+    src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
+    cam = grid["view_004"].camera
+    a = compute_samples(src, cam, keep=("jac",))
+    b = compute_samples(src, cam, keep=("jac",), grad_model="chain")
+    assert a.meta["grad_model"] == "translation" and b.meta["grad_model"] == "chain"
+    assert np.array_equal(a.xy, b.xy) and np.array_equal(a.colour, b.colour)
+    det = np.linalg.det(a.jac.astype(np.float64))
+    ok = np.abs(det) * 4.0 > 1.0
+    want = np.einsum("nji,ncj->nci", np.linalg.inv(a.jac[ok].astype(np.float64)), a.grad[ok].astype(np.float64))
+    assert ok.mean() > 0.9 and np.allclose(b.grad[ok], want, rtol=1e-4, atol=1e-5)
+    v = src.views[0]
+    one = src.subset([v.name])
+    h = compute_samples(one, v.camera.scaled(0.5), grad_model="chain")
+    t = compute_samples(one, v.camera.scaled(0.5))
+    assert np.allclose(h.grad, 2.0 * t.grad, rtol=1e-5, atol=1e-6)
+    with pytest.raises(VibrInputError, match="grad_model"):
+        compute_samples(one, v.camera, grad_model="affine")

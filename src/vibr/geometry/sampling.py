@@ -38,6 +38,15 @@ __all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL", "OPTIONAL_
 #: the 108 bytes a sample takes.
 OPTIONAL_FIELDS = ("jac", "src_xy")
 
+#: How the gradient term reads a source's image gradient ``∇v`` (per source pixel) against
+#: the target's ``D u`` (per target pixel): "translation", as it is (the paper's
+#: approximation, eq. gradient: the warp is locally a translation); "chain", carried to the
+#: target's pixels by the warp's Jacobian, ``∇u(τ(x)) = J⁻ᵀ ∇v(x)`` (``J = ∂τ/∂x``, 1/det
+#: capped as the deformation weight is): right where a source is finer or coarser than the
+#: target, or seen slanted.
+GRAD_MODELS = ("translation", "chain")
+DEFAULT_GRAD_MODEL = "translation"
+
 #: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
 #: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
 #: estimates; the renderer's geometric weight, docs/METHOD.md §3, scales with it).
@@ -111,14 +120,15 @@ def _cell_dest(key, n_cells):
 
 
 @njit(parallel=True, cache=True)
-def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, forward, max_inv_det, sig_map, sig_scalar,
-                   k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
+def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, forward, chain, max_inv_det, sig_map,
+                   sig_scalar, k_view, xy, jac, inv_det, dtau, X, colour, grad, src, sig, view):
     """Write the fields of the VISIBLE pixels of one view; row ``i``'s samples are numbered
     from ``row_off[i]`` in source order, and sample ``s`` is written at ``dest[s]``
     (``jac``, ``src`` only when they have a row per sample). The image gradient ``∇v`` is
     formed row by row from ``img`` (H, W, C) by the one gradient
     (:func:`vibr.geometry.gradient._grad_row`, ``forward`` or central), in cache: no planar
-    copy of the image and no gradient image in memory."""
+    copy of the image and no gradient image in memory; with ``chain``, carried to the
+    target's pixels, ``J⁻ᵀ ∇v`` (:data:`GRAD_MODELS`)."""
     H, W = z.shape
     C = img.shape[2]
     use_map = sig_map.shape[0] > 0
@@ -160,10 +170,18 @@ def _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, Ck, img, forward, m
                 src[s, 1] = i
             view[s] = k_view
             sig[s] = sig_map[i, j] if use_map else sig_scalar
-            for ch in range(3):
-                colour[s, ch] = img[i, j, ch]
-                grad[s, ch, 0] = gx[ch, j]
-                grad[s, ch, 1] = gy[ch, j]
+            if chain:  # ∇u = J⁻ᵀ ∇v, 1/det capped as inv_det is
+                sd = inv_det[s] if buf[9] >= 0.0 else -inv_det[s]
+                for ch in range(3):
+                    colour[s, ch] = img[i, j, ch]
+                    a, b = gx[ch, j], gy[ch, j]
+                    grad[s, ch, 0] = (buf[6] * a - buf[5] * b) * sd
+                    grad[s, ch, 1] = (buf[3] * b - buf[4] * a) * sd
+            else:
+                for ch in range(3):
+                    colour[s, ch] = img[i, j, ch]
+                    grad[s, ch, 0] = gx[ch, j]
+                    grad[s, ch, 1] = gy[ch, j]
 
 
 def _view_sigma(view: View, z: np.ndarray, sigma_z_default):
@@ -181,7 +199,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
                     edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
                     sigma_z_default: float | None = None, splat_mode: str = "affine",
                     return_zbuffer: bool = False, prepared: dict | None = None,
-                    grad_scheme: str | None = None, keep=()) -> Samples:
+                    grad_scheme: str | None = None, keep=(), grad_model: str | None = None) -> Samples:
     """Visible warped source samples for a target camera (paper §5).
 
     Parameters
@@ -218,6 +236,9 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         Discretisation of the sources' ``∇v`` (:data:`vibr.geometry.gradient.GRAD_SCHEMES`;
         default :data:`vibr.geometry.gradient.DEFAULT_GRAD_SCHEME`), recorded in
         ``meta["grad_scheme"]``: the renderer applies the same ``D`` to the target.
+    grad_model : {"translation", "chain"}, optional
+        The sources' ``∇v`` as the gradient term compares them with the target's (:data:`GRAD_MODELS`;
+        default :data:`DEFAULT_GRAD_MODEL`).
     keep : iterable of str
         Optional fields to compute (:data:`OPTIONAL_FIELDS`): ``"jac"`` (the footprint PSF
         reads it; :func:`vibr.render.methods.sample_fields` says what a render needs),
@@ -237,6 +258,9 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         A source without depth, or no source sample landing in the target.
     """
     grad_scheme = DEFAULT_GRAD_SCHEME if grad_scheme is None else grad_scheme
+    grad_model = DEFAULT_GRAD_MODEL if grad_model is None else grad_model
+    if grad_model not in GRAD_MODELS:
+        raise VibrInputError(f"grad_model must be one of {GRAD_MODELS}, got {grad_model!r}")
     keep = (keep,) if isinstance(keep, str) else tuple(keep)
     if set(keep) - set(OPTIONAL_FIELDS):
         raise VibrInputError(f"keep: unknown field(s) {sorted(set(keep) - set(OPTIONAL_FIELDS))} "
@@ -267,7 +291,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
             for name, c in cnt.items():
                 counts[name].update({"fallback visible": c["visible"], "fallback hidden": c["occluded"]})
     with _Timer(times, cpu, "assembly"):
-        out = _gather_samples(known + proxy, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme, keep)
+        out = _gather_samples(known + proxy, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme, keep,
+                              grad_model)
         del known, proxy, states
     if len(out) == 0:
         raise VibrInputError("no source view sees the target", tname)
@@ -276,6 +301,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     out.meta["cpu_times"] = cpu
     out.meta["vis_threshold"] = float(vis_threshold)
     out.meta["grad_scheme"] = grad_scheme
+    out.meta["grad_model"] = grad_model
     # where the views are: ULR and the view prior weigh the samples by the rays' angles
     out.meta["source_centres"] = np.array([v.camera.centre for v in sources.views], np.float64)
     out.meta["target_centre"] = np.asarray(cam.centre, np.float64)
@@ -349,7 +375,8 @@ def _visibility(layers, zbuf, vis_threshold):
     return states, counts
 
 
-def _gather_samples(layers, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep) -> Samples:
+def _gather_samples(layers, states, shape, max_inv_det, sigma_z_default, grad_scheme, keep,
+                    grad_model=None) -> Samples:
     """The fields of every visible pixel, sorted by target cell (:func:`_cell_dest`): one
     allocation for all samples, each layer's kernel writing its samples in place.
 
@@ -392,7 +419,8 @@ def _gather_samples(layers, states, shape, max_inv_det, sigma_z_default, grad_sc
         else:
             sig_map, sig_scalar = np.ascontiguousarray(sz, dtype=np.float64), 0.0
         _fields_kernel(state, row_off, dest, z, zx, zy, M, c, A, np.ascontiguousarray(v.camera.centre),
-                       v.image, grad_scheme == "forward", float(max_inv_det), sig_map, sig_scalar, np.int32(k),
+                       v.image, grad_scheme == "forward", grad_model == "chain", float(max_inv_det), sig_map,
+                       sig_scalar, np.int32(k),
                        xy, jac, inv_det, dtau, X, colour, grad, src, sig, view)
     return Samples(xy, colour, grad, jac if "jac" in keep else None, inv_det, dtau, sig, view,
                    src if "src_xy" in keep else None, X, tuple(shape))
