@@ -128,9 +128,13 @@ def test_supersampled_render_beats_the_target_grid(grid, method):
     assert auto.image.shape == own.image.shape == ref.shape
     both = auto.coverage & own.coverage
     assert psnr(auto.image, ref, mask=both, border=2) > psnr(own.image, ref, mask=both, border=2) + 3.0
-    # the same as rendering the fine grid by hand and averaging
-    fine = render(src, cam.scaled(2), method, supersample=1)
+    # the same as rendering the fine grid by hand (lam / 2 there) and averaging
+    fine = render(src, cam.scaled(2), method, supersample=1, grid_factor=2)
     assert np.array_equal(auto.image, fine.box_reduced(2).image)
+    if method == "gradient":
+        assert auto.params["grid_factor"] == 2
+        half = render(src, cam.scaled(2), method, supersample=1, lam=0.3)
+        assert np.array_equal(fine.image, half.image)
 
 
 def test_the_target_at_the_sources_resolution_is_unchanged(grid):

@@ -250,12 +250,15 @@ def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, 
     """Render the target once per setting from the shared samples (on ``grid``, from
     :func:`_eval_grid`): ``[(setting, result, seconds)]``."""
     from .render import render
+    from .render.methods import get_method
 
     cam, plan = grid if grid is not None else (tview.camera, None)
     k = plan.supersample if plan is not None else 1
     rows = []
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
         params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
+        if k > 1 and get_method(s.method).solve:
+            params["grid_factor"] = k
         t = time.perf_counter()
         res = render(src, cam, method=s.method, samples=samples, uncertainty=uncertainty, **params).box_reduced(k)
         res.params.update(supersample=k, reduced_sources=dict(plan.scales) if plan is not None else {})

@@ -268,6 +268,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     from .geometry import compute_samples
     from .io import write_image
     from .render import render_samples
+    from .render.methods import get_method
 
     out = os.path.join(ctx.frames_dir, frame_name(i))
     key = frame_key(ctx, i)
@@ -293,8 +294,11 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     ws = w[idx]
     if np.any(ws < 1.0):
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
+    params = ctx.params
+    if plan.supersample > 1 and get_method(ctx.method).solve:
+        params = {**params, "grid_factor": plan.supersample}
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
-                         target_centre=cam.centre, uncertainty=ctx.uncertainty, **ctx.params).box_reduced(plan.supersample)
+                         target_centre=cam.centre, uncertainty=ctx.uncertainty, **params).box_reduced(plan.supersample)
     tm["render"] = -t + (t := time.perf_counter())
     if ctx.uncertainty:  # first: a colour frame on disk with its key says the frame is done
         _write_sigma_frame(os.path.join(ctx.frames_dir, sigma_name(i)), res.uncertainty, key)

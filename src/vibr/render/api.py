@@ -203,6 +203,8 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         src = sources.replace(views=[v for v in sources.views if v.name != target.name])
     t_geo = time.perf_counter() - t0
     params = _resolve_auto(src, cam, m, params)
+    if plan is not None and plan.supersample > 1 and m.solve:
+        params = {**params, "grid_factor": plan.supersample}
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
                          verbose=verbose, uncertainty=uncertainty, **params)

@@ -61,6 +61,10 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   gains 0.1 dB on the sweep's held-out half but loses 0.4–0.8 dB where sources finer than
   the target are rendered with the bilinear PSF (docs/RENDERER.md, "lam and the sample
   density").
+* ``grid_factor = 1``: the samples lie on a grid this many times finer than the target
+  (set by :func:`vibr.render.render` when it supersamples, :func:`vibr.render.fine_grid`);
+  lam is divided by it, since the ``k × k`` average that follows smooths too (measured on
+  four scenes at two factors: docs/RENDERER.md, "Sources finer than the target").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -84,7 +88,7 @@ DEFAULTS = dict(
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, precond=True, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0,
+    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0, grid_factor=1,
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")

@@ -265,7 +265,10 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     n_outer = max(1, int(p["n_outer"]))
     energy, terms, outer = [], [], []
     tv_w = tv_weight_map(cov.acc, p["tv_weighting"])
-    lam_eff = p["lam"] * (p["lam_density"] / view_density(rho_c, samples) if p.get("lam_density") else 1.0)
+    # on a grid k times finer than the target (supersampling), lam / k: the k × k average
+    # smooths too (docs/RENDERER.md, "Sources finer than the target")
+    lam_eff = p["lam"] / p["grid_factor"] * (p["lam_density"] / view_density(rho_c, samples)
+                                            if p.get("lam_density") else 1.0)
     prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=tv_w)
     grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
     power_state: dict = {}
