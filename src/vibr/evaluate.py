@@ -141,6 +141,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     """
     from .geometry import compute_samples
     from .pipeline import prepare
+    from .render import fine_grid
 
     settings, intensity_scale = _checked_settings(settings, mask, intensity_scale)
     check_measurable(scene.views[scene.index(target)].camera.shape, border, scene.root)
@@ -151,12 +152,14 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)
     t0 = time.perf_counter()
-    src, grid = _eval_grid(src, tview, settings, render_kw, supersample)
-    samples = compute_samples(src, grid[0], **_geometry_kw(geometry_kw, settings, render_kw))
+    src, cam, _, plan = fine_grid(src, tview.camera, supersample,
+                                  renders=[(s.method, {**(render_kw or {}), **s.params}) for s in settings])
+    samples = compute_samples(src, cam, **_geometry_kw(geometry_kw, settings, render_kw))
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
-    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty, grid)
+    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty,
+                            (cam, plan))
     cover = np.ones(tview.shape, bool) if tview.mask is None else tview.mask.copy()
     if mask == "reconstructed":
         for _, res, _ in rows:
@@ -229,36 +232,17 @@ def _geometry_kw(geometry_kw, settings, render_kw) -> dict:
     return with_sample_fields(geometry_kw, *((s.method, {**(render_kw or {}), **s.params}) for s in settings))
 
 
-def _eval_grid(src, tview, settings, render_kw, supersample):
-    """The sources and ``(camera, plan)`` of the grid every setting renders on
-    (:func:`vibr.render.fine_grid`, as :func:`vibr.render.render` chooses it; on "auto",
-    the target's own grid when a setting models fine sources, ``psf="footprint"``)."""
-    from .geometry.resolution import ResolutionPlan, check_supersample
-    from .render import fine_grid
-    from .render.methods import wants_fine_sources
-
-    supersample = check_supersample(supersample)
-    if supersample == "auto" and any(wants_fine_sources(s.method, **{**(render_kw or {}), **s.params})
-                                     for s in settings):
-        return src, (tview.camera, ResolutionPlan())
-    src, cam, _, plan = fine_grid(src, tview.camera, supersample)
-    return src, (cam, plan)
-
-
 def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False,
                      grid=None):
-    """Render the target once per setting from the shared samples (on ``grid``, from
-    :func:`_eval_grid`): ``[(setting, result, seconds)]``."""
-    from .render import render
-    from .render.methods import get_method
+    """Render the target once per setting from the shared samples, on ``grid`` = (camera,
+    plan) of :func:`vibr.render.fine_grid`: ``[(setting, result, seconds)]``."""
+    from .render import grid_params, render
 
     cam, plan = grid if grid is not None else (tview.camera, None)
     k = plan.supersample if plan is not None else 1
     rows = []
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
-        params = {"scale": intensity_scale, **(render_kw or {}), **s.params}
-        if k > 1 and get_method(s.method).solve:
-            params["grid_factor"] = k
+        params = grid_params(s.method, {"scale": intensity_scale, **(render_kw or {}), **s.params}, plan)
         t = time.perf_counter()
         res = render(src, cam, method=s.method, samples=samples, uncertainty=uncertainty, **params).box_reduced(k)
         res.params.update(supersample=k, reduced_sources=dict(plan.scales) if plan is not None else {})

@@ -248,18 +248,6 @@ def view_weights(sources: Scene, camera: Camera, n_views: int | None, *, blend: 
     return w
 
 
-def _frame_grid(ctx: FrameContext, sub: Scene, cam: Camera):
-    """:func:`vibr.render.fine_grid` for a frame (nothing to do on "auto" with the footprint
-    PSF, as in :func:`vibr.render.render`): ``(sources, camera, prepared, plan)``."""
-    from .geometry.resolution import ResolutionPlan
-    from .render import fine_grid
-    from .render.methods import wants_fine_sources
-
-    if ctx.supersample == "auto" and wants_fine_sources(ctx.method, **ctx.params):
-        return sub, cam, ctx.prepared or None, ResolutionPlan()
-    return fine_grid(sub, cam, ctx.supersample, ctx.prepared or None)
-
-
 def render_frame(ctx: FrameContext, i: int) -> dict:
     """Render frame ``i`` of the path and write it (the per-frame task, see the module
     docstring). Returns a small dict: index, skipped, seconds, views and weights, and the
@@ -267,8 +255,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     file (:func:`render_path` then names every such frame in one error)."""
     from .geometry import compute_samples
     from .io import write_image
-    from .render import render_samples
-    from .render.methods import get_method
+    from .render import fine_grid, grid_params, render_samples
 
     out = os.path.join(ctx.frames_dir, frame_name(i))
     key = frame_key(ctx, i)
@@ -286,7 +273,8 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     sub = Scene(views, ctx.sources.name, ctx.sources.root, None, ctx.sources.points, {})
     tm["view weights"] = -t0 + (t := time.perf_counter())
     try:
-        sub, fine, prepared, plan = _frame_grid(ctx, sub, cam)
+        sub, fine, prepared, plan = fine_grid(sub, cam, ctx.supersample, ctx.prepared or None,
+                                              [(ctx.method, ctx.params)])
         samples = compute_samples(sub, fine, prepared=prepared, **ctx.geometry_kw)
     except VibrInputError as exc:
         return {"index": i, "skipped": False, "seconds": 0.0, "failed": f"{exc.problem} (camera {cam})"}
@@ -294,11 +282,9 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     ws = w[idx]
     if np.any(ws < 1.0):
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
-    params = ctx.params
-    if plan.supersample > 1 and get_method(ctx.method).solve:
-        params = {**params, "grid_factor": plan.supersample}
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
-                         target_centre=cam.centre, uncertainty=ctx.uncertainty, **params).box_reduced(plan.supersample)
+                         target_centre=cam.centre, uncertainty=ctx.uncertainty,
+                         **grid_params(ctx.method, ctx.params, plan)).box_reduced(plan.supersample)
     tm["render"] = -t + (t := time.perf_counter())
     if ctx.uncertainty:  # first: a colour frame on disk with its key says the frame is done
         _write_sigma_frame(os.path.join(ctx.frames_dir, sigma_name(i)), res.uncertainty, key)
@@ -464,9 +450,8 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         (:func:`vibr.render.render`'s ``supersample``; the factor is in each frame's record).
     """
     from .depthcache import scene_with_depth
-    from .render.methods import METHODS
-
     from .geometry.resolution import check_supersample
+    from .render.methods import METHODS
 
     t_start = time.perf_counter()
     supersample = check_supersample(supersample)

@@ -14,7 +14,7 @@ from ..scene import Scene, View
 from .methods import get_method, method_params, wants_fine_sources
 from .result import RenderResult
 
-__all__ = ["RenderResult", "render", "render_samples", "fine_grid"]
+__all__ = ["RenderResult", "render", "render_samples", "fine_grid", "grid_params"]
 
 logger = logging.getLogger(__name__)
 
@@ -75,7 +75,7 @@ def _ready_sources(sources: Scene, target) -> Scene:
     return full.replace(views=[v for v in full.views if v.name != tname])
 
 
-def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict | None = None):
+def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict | None = None, renders=()):
     """The grid to render ``camera`` on, and the sources to render it from
     (:func:`vibr.geometry.resolution.resolution_plan`).
 
@@ -85,10 +85,16 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     resized by :func:`vibr.io.images.scaled_view` (as :func:`vibr.io.load_scene` resizes
     with ``scale``); ``prepared`` (depth prepared per view name, for
     :func:`vibr.geometry.compute_samples`) without those, whose full-size preparation no
-    longer applies.
+    longer applies. On "auto", when one of ``renders`` (``(method, params)`` pairs) models
+    fine sources itself (:func:`vibr.render.methods.wants_fine_sources`: the footprint PSF),
+    the target's own grid and the sources as they are. Render on the grid with
+    :func:`grid_params`.
     """
-    from ..geometry.resolution import resolution_plan
+    from ..geometry.resolution import ResolutionPlan, check_supersample, resolution_plan
 
+    supersample = check_supersample(supersample)
+    if supersample == "auto" and any(wants_fine_sources(m, **p) for m, p in renders):
+        return sources, camera, prepared, ResolutionPlan()
     plan = resolution_plan(sources, camera, supersample)
     if plan.scales:
         from ..io.images import scaled_view
@@ -104,21 +110,26 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     return sources, cam, prepared, plan
 
 
+def grid_params(method, params: dict, plan) -> dict:
+    """``params`` for a render of ``method`` on ``plan``'s grid: ``grid_factor`` = its
+    supersampling factor (lam / k there, :mod:`vibr.render.methods`) for the variational
+    methods."""
+    k = 1 if plan is None else plan.supersample
+    if k > 1 and get_method(method).solve:
+        return {**params, "grid_factor": k}
+    return params
+
+
 def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):
     """The geometry stage of :func:`render`: ``(sources, samples, plan)``, the samples on
-    :func:`fine_grid`'s grid (the plan None with the footprint PSF)."""
+    :func:`fine_grid`'s grid."""
     from ..geometry import compute_samples
     from ..validate import check_render_memory
     from .methods import with_sample_fields
 
-    from ..geometry.resolution import check_supersample
-
-    supersample = check_supersample(supersample)
     src = _ready_sources(sources, target)
     gkw = with_sample_fields(geometry_kw, (m, params))
-    plan = None
-    if supersample != "auto" or not wants_fine_sources(m, **params):
-        src, cam, gkw["prepared"], plan = fine_grid(src, cam, supersample, gkw.get("prepared"))
+    src, cam, gkw["prepared"], plan = fine_grid(src, cam, supersample, gkw.get("prepared"), [(m, params)])
     check_render_memory([v.camera.shape for v in src.views], cam.shape, cam.source,  # before allocating
                         keep=gkw["keep"])
     return src, compute_samples(src, cam, **gkw), plan
@@ -202,9 +213,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     elif isinstance(target, View) and target.name in sources.names:
         src = sources.replace(views=[v for v in sources.views if v.name != target.name])
     t_geo = time.perf_counter() - t0
-    params = _resolve_auto(src, cam, m, params)
-    if plan is not None and plan.supersample > 1 and m.solve:
-        params = {**params, "grid_factor": plan.supersample}
+    params = grid_params(m, _resolve_auto(src, cam, m, params), plan)
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
                          verbose=verbose, uncertainty=uncertainty, **params)
