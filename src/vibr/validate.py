@@ -58,6 +58,8 @@ def check_render_params(p: dict) -> dict:
     for k in ("sigma_s", "scale", "grad_max"):
         if k in p:
             _real("intensity_scale (scale)" if k == "scale" else k, p[k], lo=0.0, lo_open=True)
+    if "grid_source_size" in p:
+        _real("grid_source_size", p["grid_source_size"], lo=0.0, lo_open=True)
     if "lam_density" in p:
         _real("lam_density", p["lam_density"], lo=0.0, none_ok=True)
     if "tol_outer" in p:

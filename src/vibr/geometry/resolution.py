@@ -102,11 +102,19 @@ class ResolutionPlan:
     ``supersample``: the target is rendered on a grid ``k`` times finer
     (:meth:`vibr.camera.Camera.scaled`) and ``k × k`` blocks are averaged; ``scales``: view
     name → factor that source is resized by first; ``sizes``: view name →
-    :func:`source_pixel_size` (target pixels, NaN where unmeasured)."""
+    :func:`source_pixel_size` (target pixels, NaN where unmeasured); ``grid_source_size``:
+    their median on the grid rendered on."""
 
     supersample: int = 1
     scales: dict = field(default_factory=dict)
     sizes: dict = field(default_factory=dict)
+
+    @property
+    def grid_source_size(self) -> float:
+        """The median size of a source pixel in pixels of the grid rendered on (after the
+        reductions); 1 where none is measured. Above 1 the sources are coarser than it."""
+        on_grid = [x * self.supersample / self.scales.get(n, 1.0) for n, x in self.sizes.items() if math.isfinite(x)]
+        return float(np.median(on_grid)) if on_grid else 1.0
 
 
 def resolution_plan(sources, camera: Camera, supersample="auto", max_factor: int = SUPERSAMPLE_MAX) -> ResolutionPlan:

@@ -111,13 +111,18 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
 
 
 def grid_params(method, params: dict, plan) -> dict:
-    """``params`` for a render of ``method`` on ``plan``'s grid: ``grid_factor`` = its
-    supersampling factor (lam / k there, :mod:`vibr.render.methods`) for the variational
-    methods."""
-    k = 1 if plan is None else plan.supersample
-    if k > 1 and get_method(method).solve:
-        return {**params, "grid_factor": k}
-    return params
+    """``params`` for a render of ``method`` on ``plan``'s grid (the variational methods):
+    ``grid_factor`` = its supersampling factor (lam / k there) and ``grid_source_size`` = the
+    median size of a source pixel on it (gamma / s² where the sources are coarser), see
+    :mod:`vibr.render.methods`."""
+    if plan is None or not get_method(method).solve:
+        return params
+    out = dict(params)
+    if plan.supersample > 1:
+        out["grid_factor"] = plan.supersample
+    if plan.grid_source_size > 1.0:
+        out["grid_source_size"] = plan.grid_source_size
+    return out
 
 
 def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):

@@ -65,6 +65,11 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (set by :func:`vibr.render.render` when it supersamples, :func:`vibr.render.fine_grid`);
   lam is divided by it, since the ``k × k`` average that follows smooths too (measured on
   four scenes at two factors: docs/RENDERER.md, "Sources finer than the target").
+* ``grid_source_size = 1``: the median size of a source pixel on the grid rendered on (set
+  with ``grid_factor``); above 1, sources coarser than the target (a camera closer to the
+  scene than the photographs, a video larger than them), gamma is divided by its square: a
+  coarse source's gradient says nothing of the finer grid's detail, and the term then pulls
+  the image toward its blur (docs/RENDERER.md, "Sources coarser than the target").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -89,6 +94,7 @@ DEFAULTS = dict(
     grad_weighting="visibility", grad_max=64.0, precond=True, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
     robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0, grid_factor=1,
+    grid_source_size=1.0,
 )
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")

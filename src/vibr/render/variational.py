@@ -238,7 +238,8 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     t_all = time.perf_counter()
     times = {"weights": 0.0, "init": 0.0, "assembly": 0.0, "solve": 0.0}
     s = float(p["scale"])
-    gamma = p["gamma"] if method.gradient else 0.0
+    # sources coarser than the grid: their gradients weigh less (methods: grid_source_size)
+    gamma = p["gamma"] / max(1.0, p["grid_source_size"]) ** 2 if method.gradient else 0.0
     t0 = time.perf_counter()
     sp = make_splat(samples, p["psf"] == "footprint")
     times["assembly"] += time.perf_counter() - t0
