@@ -22,7 +22,15 @@ estimated from the sources (cached on disk: a second run is rendering only).
 PSNR dB over the pixels every render of the row covers, 2-px border; seconds: geometry and
 render of that column (numba warm).
 
+``--coarser``: the opposite, sources ``f`` times coarser than the target (a camera closer to
+the scene than the photographs, a video larger than them): the sources resized by ``1/f``
+(``vibr.io.images.scaled_scene``; temple and fountain loaded at ``1/f`` of the target's scale
+and their depth estimated there), the target at its own size against its own photograph;
+*before*: the target's grid with the gradient term as it was; *auto*: ``render()`` (the
+gradient term weighed by ``1 / s²``, ``s`` the sources' pixel size on the grid).
+
     python benchmarks/finer_sources.py [--cases cotton,synthetic,temple,fountain] [--factors 2,4]
+    python benchmarks/finer_sources.py --coarser [--factors 2,4]
 """
 
 from __future__ import annotations
@@ -75,6 +83,47 @@ def fountain():
     return "fountain 0005 at ×0.5, 10 views, estimated depth", src, tgt
 
 
+def coarser_case(key, f):
+    """``(name, sources, target)``: the sources ``f`` times coarser than the target."""
+    from paper_tables import data_dir
+    from vibr.io import load_scene
+    from vibr.io.images import scaled_scene
+    from vibr.pipeline import prepare
+
+    if key in ("cotton", "synthetic"):
+        name, src, tgt = CASES[key]()
+        return name, scaled_scene(src, 1.0 / f), tgt
+    folder, target, scale, kw = {"temple": ("middlebury_templeSparseRing", "templeSR0004", 1.0, {"n_views": 6}),
+                                 "fountain": ("strecha_fountain-P11", "0005", 0.25, {})}[key]
+    lo = load_scene(data_dir(None) / folder, scale=scale / f)
+    src, _ = prepare(lo, target, depth="estimated", **kw)
+    name = {"temple": "temple 0004, 6 best views, estimated depth",
+            "fountain": "fountain 0005 at ×0.25, 10 views, estimated depth"}[key]
+    return name, src, load_scene(data_dir(None) / folder, scale=scale)[target]
+
+
+def run_coarser(key, factors):
+    from vibr.metrics import psnr
+
+    rows = []
+    for f in factors:
+        name, src, tgt = coarser_case(key, f)
+        render_way(src, tgt.camera, "ulr", "target grid")  # numba warm
+        # ulr and bvs read no gradient: "auto" renders them as before
+        res = {(m, w): render_way(src, tgt.camera, m, w)
+               for m, w in (("ulr", "target grid"), ("bvs", "target grid"), ("gradient", "target grid"),
+                            ("gradient", "auto"))}
+        cover = np.logical_and.reduce([r.coverage for r, _ in res.values()])
+        s = res["gradient", "auto"][0].params.get("grid_source_size", 1.0)
+        cells = [f"{psnr(r.image, tgt.image, mask=cover, border=2):.2f}" for r, _ in res.values()]
+        W, H = src.views[0].camera.width, src.views[0].camera.height
+        line = (f"| {name} ({SPLIT[key]}) | {W}×{H} → {tgt.camera.width}×{tgt.camera.height} | {s:.2f} | "
+                + " | ".join(cells) + " |")
+        print(line, flush=True)
+        rows.append(line)
+    return rows
+
+
 CASES = {"cotton": cotton, "synthetic": synthetic, "temple": temple, "fountain": fountain}
 SPLIT = {"cotton": "choose", "synthetic": "choose", "temple": "held out", "fountain": "held out"}
 
@@ -125,8 +174,17 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", default="cotton,synthetic,temple,fountain")
     ap.add_argument("--factors", default="2,4", help="target = sources / factor (integers)")
+    ap.add_argument("--coarser", action="store_true", help="sources f times coarser than the target instead")
     a = ap.parse_args(argv)
     factors = [int(x) for x in a.factors.split(",")]
+    if a.coarser:
+        print("# sources coarser than the target; PSNR dB against the target's photograph, pixels every render "
+              "covers, border 2; s: the sources' median pixel size on the target")
+        print("| case | sources → target | s | ulr | bvs | gradient before | gradient auto |")
+        print("|---|---|---|---|---|---|---|")
+        for c in a.cases.split(","):
+            run_coarser(c, factors)
+        return
     head = " | ".join(f"{m} {w}" for m in METHODS for w in WAYS)
     print("# PSNR dB against the photograph averaged over f×f blocks, pixels every render covers, border 2")
     print(f"| case | sources → target | k (auto) | {head} | gradient s: " + " / ".join(WAYS) + " |")

@@ -257,3 +257,32 @@ def test_chain_gradient_is_the_jacobian_transposed_inverse(grid):
     assert np.allclose(h.grad, 2.0 * t.grad, rtol=1e-5, atol=1e-6)
     with pytest.raises(VibrInputError, match="grad_model"):
         compute_samples(one, v.camera, grad_model="affine")
+
+
+# ------------------------------------------------------------------ coarser sources
+def test_coarser_sources_weigh_their_gradients_less():
+    """Sources at half the target's resolution (a camera closer than the photographs): the
+    median source pixel is 2 pixels of the grid, gamma is divided by 4 (bit for bit the render
+    with gamma / 4 on the target's grid), and the render is at least 0.5 dB closer to the
+    photograph than with gamma as it is (the coarse gradients pull the image toward their
+    blur)."""
+    from vibr.geometry import compute_samples
+    from vibr.geometry.resolution import resolution_plan
+    from vibr.metrics import psnr
+    from vibr.render import render, render_samples
+    from vibr.synthetic import make_scene
+
+    lo = make_scene("grid", n_views=9, width=64, height=64, seed=3)
+    hi = make_scene("grid", n_views=9, width=128, height=128, seed=3)
+    tgt = hi.views[4]
+    src = lo.subset([v.name for v in lo.views if v.name != tgt.name])
+    plan = resolution_plan(src, tgt.camera)
+    assert plan.supersample == 1 and plan.grid_source_size == pytest.approx(2.0, rel=1e-6)
+    auto = render(src, tgt.camera)
+    assert auto.params["grid_source_size"] == pytest.approx(2.0, rel=1e-6)
+    S = compute_samples(src, tgt.camera)
+    quarter = render_samples(S, gamma=auto.params["gamma"] / plan.grid_source_size ** 2)
+    before = render_samples(S)
+    assert np.array_equal(auto.image, quarter.image)
+    both = auto.coverage & before.coverage
+    assert psnr(auto.image, tgt.image, mask=both, border=2) > psnr(before.image, tgt.image, mask=both, border=2) + 0.5
