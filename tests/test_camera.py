@@ -117,3 +117,19 @@ def test_a_view_refuses_negative_or_infinite_sigma_z(sz):
         _view(sigma_z=sz)
     assert _view(sigma_z=0.0).sigma_z == 0.0
     assert np.isnan(_view(sigma_z=np.full((12, 16), np.nan)).sigma_z).all()
+
+
+def test_sees_is_in_front_and_within_the_image():
+    """``Camera.sees``: the image spans [−½, W − ½] × [−½, H − ½] (pixel centres at
+    integers), points behind the camera are not seen."""
+    import numpy as np
+
+    from vibr.camera import Camera
+
+    cam = Camera.from_centre(Camera.intrinsics(10.0, 4, 3), np.eye(3), np.zeros(3), 4, 3)
+    # pixel (x, y) at depth 10 is X = ((x − 1.5), (y − 1), 10) with f = 10
+    pts = np.array([[-2.0, 0, 10], [-2.01, 0, 10], [2.0, 0, 10], [2.01, 0, 10], [0, 1.5, 10], [0, 1.51, 10],
+                    [0, 0, -10]])
+    xy, z, inside = cam.sees(pts)
+    assert inside.tolist() == [True, False, True, False, True, False, False]
+    assert np.allclose(xy[0], [-0.5, 1.0]) and z[-1] == -10

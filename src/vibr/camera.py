@@ -181,6 +181,15 @@ class Camera:
             xy = xh[..., :2] / xh[..., 2:3]
         return xy, z
 
+    def sees(self, X) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Project (N, 3) world points: ``(xy, z, inside)``, ``inside`` where a point is in
+        front of the camera and within the image (pixel centres at integers, so the image
+        spans ``[−½, W − ½] × [−½, H − ½]``)."""
+        xy, z = self.project(X)
+        inside = (z > 0) & (xy[..., 0] >= -0.5) & (xy[..., 0] <= self.width - 0.5) & \
+                 (xy[..., 1] >= -0.5) & (xy[..., 1] <= self.height - 0.5)
+        return xy, z, inside
+
     def pixel_rays(self, xy) -> np.ndarray:
         """(..., 2) pixels → (..., 3) camera-frame rays ``K⁻¹ x̄`` with unit third
         coordinate (so ``depth * ray`` is the camera-frame point)."""

@@ -115,10 +115,7 @@ def _points_in_target(view_points, target: Camera, max_points: int = 1024):
     if not pts:
         return None
     P = np.concatenate(pts)
-    xy, z = target.project(P)
-    inside = (z > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= target.width - 0.5) & \
-             (xy[:, 1] >= -0.5) & (xy[:, 1] <= target.height - 0.5)
-    P = P[inside]
+    P = P[target.sees(P)[2]]
     if not len(P):
         return None
     if len(P) > max_points:

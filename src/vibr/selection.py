@@ -55,10 +55,7 @@ def target_points(sources: Scene, target: Camera, max_points: int = 1024) -> np.
         pts = [np.asarray(sources.points, dtype=np.float64)]
     if pts:
         P = np.concatenate(pts)
-        xy, z = target.project(P)
-        inside = (z > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= target.width - 0.5) & \
-                 (xy[:, 1] >= -0.5) & (xy[:, 1] <= target.height - 0.5)
-        P = P[inside]
+        P = P[target.sees(P)[2]]
         if len(P):
             if len(P) > max_points:
                 P = P[np.random.default_rng(0).choice(len(P), max_points, replace=False)]
@@ -91,9 +88,7 @@ def rank_views(sources: Scene, target: Camera, *, beta: float = 1.0, min_overlap
     overlap = np.zeros(n)
     for k, v in enumerate(sources.views):
         cam = v.camera
-        xy, z = cam.project(X)
-        seen = (z > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= cam.width - 0.5) & \
-               (xy[:, 1] >= -0.5) & (xy[:, 1] <= cam.height - 0.5)
+        seen = cam.sees(X)[2]
         overlap[k] = seen.mean() if len(X) else 0.0
         if not np.any(seen):
             continue

@@ -24,7 +24,7 @@ from ..scene import View
 
 __all__ = ["source_pixel_size", "reduction_scale", "resolution_plan", "ResolutionPlan", "check_supersample",
            "REDUCTION_STEP",
-           "SIZE_GRID", "SUPERSAMPLE_MAX", "REDUCE_BELOW"]
+           "SIZE_GRID", "SUPERSAMPLE_MAX", "REDUCE_BELOW", "MIN_REDUCED_SIDE"]
 
 #: Reduction factors are powers of ``REDUCTION_STEP`` (1, 0.707, 0.5, 0.354, 0.25, ...): a
 #: camera moving along a path reuses the same few resolutions, and a source is never reduced
@@ -72,9 +72,7 @@ def source_pixel_size(view: View, camera: Camera, grid: int = SIZE_GRID) -> floa
     if view.mask is not None:
         ok &= np.asarray(view.mask, bool)[np.ix_(ys, xs)]
     pix = np.stack([xx[ok], yy[ok]], axis=-1).astype(np.float64)
-    xy, zt = camera.project(cs.backproject(pix, zs[ok]))
-    inside = (zt > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= camera.width - 0.5) \
-        & (xy[:, 1] >= -0.5) & (xy[:, 1] <= camera.height - 0.5)
+    _, zt, inside = camera.sees(cs.backproject(pix, zs[ok]))
     if np.count_nonzero(inside) < 16:
         return math.nan
     size = (_focal(camera) / zt[inside]) * (zs[ok][inside] / _focal(cs))

@@ -147,7 +147,4 @@ def points_in_view(points: np.ndarray, camera) -> np.ndarray:
     """The rows of ``points`` (N, 3) in front of ``camera`` and inside its image."""
     if len(points) == 0:
         return points
-    xy, z = camera.project(points)
-    inside = (z > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] <= camera.width - 0.5) & \
-             (xy[:, 1] >= -0.5) & (xy[:, 1] <= camera.height - 0.5)
-    return points[inside]
+    return points[camera.sees(points)[2]]
