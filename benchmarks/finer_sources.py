@@ -25,9 +25,13 @@ render of that column (numba warm).
 ``--coarser``: the opposite, sources ``f`` times coarser than the target (a camera closer to
 the scene than the photographs, a video larger than them): the sources resized by ``1/f``
 (``vibr.io.images.scaled_scene``; temple and fountain loaded at ``1/f`` of the target's scale
-and their depth estimated there), the target at its own size against its own photograph;
-*before*: the target's grid with the gradient term as it was; *auto*: ``render()`` (the
-gradient term weighed by ``1 / s²``, ``s`` the sources' pixel size on the grid).
+and their depth estimated there), the target at its own size against its own photograph,
+PSNR over all pixels (on the target's own grid most pixels receive no sample when ``f = 4``:
+its coverage is no common ground). Per method: *own grid* (``compute_samples`` +
+``render_samples``: the gradient term with gamma as it is); for the default also
+``render(..., supersample=1)`` (the target's grid, the gradient term weighed by ``1 / s²``,
+``s`` the sources' pixel size on the grid); *auto*: ``render()`` (a grid ``g`` times coarser,
+enlarged, :func:`vibr.geometry.resolution.coarsen_factor`).
 
     python benchmarks/finer_sources.py [--cases cotton,synthetic,temple,fountain] [--factors 2,4]
     python benchmarks/finer_sources.py --coarser [--factors 2,4]
@@ -104,21 +108,29 @@ def coarser_case(key, f):
 
 def run_coarser(key, factors):
     from vibr.metrics import psnr
+    from vibr.render import render
 
     rows = []
     for f in factors:
         name, src, tgt = coarser_case(key, f)
-        render_way(src, tgt.camera, "ulr", "target grid")  # numba warm
-        # ulr and bvs read no gradient: "auto" renders them as before
-        res = {(m, w): render_way(src, tgt.camera, m, w)
-               for m, w in (("ulr", "target grid"), ("bvs", "target grid"), ("gradient", "target grid"),
-                            ("gradient", "auto"))}
-        cover = np.logical_and.reduce([r.coverage for r, _ in res.values()])
-        s = res["gradient", "auto"][0].params.get("grid_source_size", 1.0)
-        cells = [f"{psnr(r.image, tgt.image, mask=cover, border=2):.2f}" for r, _ in res.values()]
+        cam = tgt.camera
+        render_way(src, cam, "ulr", "target grid")  # numba warm
+        res = {}
+        for m in METHODS:
+            res[m, "own"] = render_way(src, cam, m, "target grid")
+            if m == "gradient":
+                t0 = time.perf_counter()
+                res[m, "own s2"] = render(src, cam, m, supersample=1), None
+                res[m, "own s2"] = res[m, "own s2"][0], time.perf_counter() - t0
+            res[m, "auto"] = render_way(src, cam, m, "auto")
+        auto = res["gradient", "auto"][0]
+        s = res["gradient", "own s2"][0].params.get("grid_source_size", 1.0)
+        cells = [f"{psnr(r.image, tgt.image, border=2):.2f}" for r, _ in res.values()]
+        cover = f"{100 * res['gradient', 'own'][0].coverage.mean():.0f} / {100 * auto.coverage.mean():.0f}"
+        secs = f"{res['gradient', 'own s2'][1]:.2f} / {res['gradient', 'auto'][1]:.2f}"
         W, H = src.views[0].camera.width, src.views[0].camera.height
-        line = (f"| {name} ({SPLIT[key]}) | {W}×{H} → {tgt.camera.width}×{tgt.camera.height} | {s:.2f} | "
-                + " | ".join(cells) + " |")
+        line = (f"| {name} ({SPLIT[key]}) | {W}×{H} → {cam.width}×{cam.height} | {s:.2f} | "
+                f"{auto.params.get('coarsen', 1.0):.2f} | " + " | ".join(cells) + f" | {cover} | {secs} |")
         print(line, flush=True)
         rows.append(line)
     return rows
@@ -178,10 +190,12 @@ def main(argv=None):
     a = ap.parse_args(argv)
     factors = [int(x) for x in a.factors.split(",")]
     if a.coarser:
-        print("# sources coarser than the target; PSNR dB against the target's photograph, pixels every render "
-              "covers, border 2; s: the sources' median pixel size on the target")
-        print("| case | sources → target | s | ulr | bvs | gradient before | gradient auto |")
-        print("|---|---|---|---|---|---|---|")
+        print("# sources coarser than the target; PSNR dB against the target's photograph, all pixels, border 2; "
+              "s: the sources' median pixel size on the target; g: the coarser grid of auto")
+        print("| case | sources → target | s | g | ulr own grid | ulr auto | bvs own grid | bvs auto | gradient own grid, "
+              "gamma as is | gradient own grid, gamma / s² | gradient auto | covered % own / auto | gradient s, "
+              "own grid / auto |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for c in a.cases.split(","):
             run_coarser(c, factors)
         return

@@ -239,13 +239,15 @@ def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, 
     from .render import grid_params, render
 
     cam, plan = grid if grid is not None else (tview.camera, None)
-    k = plan.supersample if plan is not None else 1
     rows = []
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
         params = grid_params(s.method, {"scale": intensity_scale, **(render_kw or {}), **s.params}, plan)
         t = time.perf_counter()
-        res = render(src, cam, method=s.method, samples=samples, uncertainty=uncertainty, **params).box_reduced(k)
-        res.params.update(supersample=k, reduced_sources=dict(plan.scales) if plan is not None else {})
+        res = render(src, cam, method=s.method, samples=samples, uncertainty=uncertainty, **params)
+        res = res.on_target(plan, tview.shape)
+        res.params.update(supersample=plan.supersample if plan is not None else 1,
+                          coarsen=plan.coarsen if plan is not None else 1.0,
+                          reduced_sources=dict(plan.scales) if plan is not None else {})
         rows.append((s, res, time.perf_counter() - t))
     return rows
 

@@ -281,7 +281,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
                          target_centre=cam.centre, uncertainty=ctx.uncertainty,
-                         **grid_params(ctx.method, ctx.params, plan)).box_reduced(plan.supersample)
+                         **grid_params(ctx.method, ctx.params, plan)).on_target(plan, cam.shape)
     tm["render"] = -t + (t := time.perf_counter())
     if ctx.uncertainty:  # first: a colour frame on disk with its key says the frame is done
         _write_sigma_frame(os.path.join(ctx.frames_dir, sigma_name(i)), res.uncertainty, key)
@@ -290,6 +290,7 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     tm.update({f"geometry: {k}": v for k, v in samples.meta.get("times", {}).items()})
     tm.update({f"render: {k}": v for k, v in res.times.items() if k != "total"})
     return {"index": i, "skipped": False, "seconds": time.perf_counter() - t0, "supersample": plan.supersample,
+            "coarsen": plan.coarsen,
             "views": [v.name for v in views], "weights": ws.tolist(), "times": tm, "samples": len(samples),
             "coverage": float(res.coverage.mean()), "iterations": res.iterations}
 

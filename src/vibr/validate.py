@@ -117,6 +117,9 @@ def check_depth_params(**kw) -> None:
 RENDER_BYTES_PER_TARGET_PIXEL = 400
 #: Geometry buffers per target pixel and source view (z-buffer and visibility, float64).
 GEOMETRY_BYTES_PER_TARGET_PIXEL_VIEW = 16
+#: A render on a coarser grid enlarged to the target (RenderResult.enlarged): per target
+#: pixel, the image and its start twice in float64 (3 channels) and once in float32, σ, coverage.
+ENLARGE_BYTES_PER_TARGET_PIXEL = 2 * (3 * 8 * 2 + 3 * 4) + 4 + 1
 
 
 def available_memory() -> int | None:
@@ -172,10 +175,17 @@ def render_memory(source_shapes, target_shape, keep=()) -> int:
                + tpx * len(source_shapes) * GEOMETRY_BYTES_PER_TARGET_PIXEL_VIEW)
 
 
-def check_render_memory(source_shapes, target_shape, source=None, keep=(), way_out=None) -> None:
-    """Refuse a render whose :func:`render_memory` exceeds the available memory."""
+def check_render_memory(source_shapes, target_shape, source=None, keep=(), way_out=None,
+                        output_shape=None) -> None:
+    """Refuse a render whose :func:`render_memory` exceeds the available memory; with
+    ``output_shape`` (a render on a coarser grid enlarged to it) that enlargement counted too,
+    and named."""
+    need = render_memory(source_shapes, target_shape, keep)
+    if output_shape is not None and tuple(output_shape) != tuple(target_shape):
+        need += int(float(output_shape[0]) * float(output_shape[1]) * ENLARGE_BYTES_PER_TARGET_PIXEL)
+        target_shape = output_shape
     th, tw = target_shape
-    check_memory(render_memory(source_shapes, target_shape, keep),
+    check_memory(need,
                  f"rendering {tw}x{th} from {len(source_shapes)} views",
                  way_out or "render at a lower resolution (--scale 0.5, or a smaller camera) or from "
                  "fewer views (--views K)", source)

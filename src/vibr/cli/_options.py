@@ -99,7 +99,8 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
     p.add_argument("--supersample", type=_supersample, default=AUTO, metavar="K|" + AUTO,
                    help="render on a grid K times finer and average KxK blocks, for sources finer than the "
                         f"target (default {AUTO}: K from the sources' pixel size in the target, at most "
-                        f"{SUPERSAMPLE_MAX}; 1: the target's own grid)")
+                        f"{SUPERSAMPLE_MAX}, and for sources coarser than the target a coarser grid, enlarged; "
+                        "1: the target's own grid)")
 
 
 def render_params(args) -> dict:

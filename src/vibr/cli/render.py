@@ -138,9 +138,10 @@ def run(args) -> int:
         write_sigma(args.uncertainty, res.uncertainty)
         print(f"wrote {args.uncertainty}")
     t = res.times
-    k = res.params.get("supersample", 1)
+    k, g = res.params.get("supersample", 1), res.params.get("coarsen", 1.0)
+    grid = f" on a grid {k}x finer" if k > 1 else f" on a grid {g:.3g}x coarser, enlarged" if g > 1 else ""
     logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
-                f"{res.n_samples} samples{f' on a grid {k}x finer' if k > 1 else ''}, coverage {100 * res.coverage.mean():.1f} %, "
+                f"{res.n_samples} samples{grid}, coverage {100 * res.coverage.mean():.1f} %, "
                 f"{t.get('total', 0):.2f} s (geometry {t.get('geometry', 0):.2f}, solve {t.get('solve', 0):.2f})")
     if res.metrics:
         print(f"PSNR {res.metrics['psnr']:.2f} dB  DSSIM {res.metrics['dssim']:.1f}  "
@@ -214,6 +215,10 @@ def _run_path(args) -> int:
     if ks:
         print(f"the photographs are finer than the frames: rendered on a grid {'-'.join(map(str, ks))}x finer and "
               "averaged back (--supersample 1: on the frames' own grid, faster)")
+    gs = sorted({f.get("coarsen", 1.0) for f in res.frames if not f.get("skipped")} - {1.0})
+    if gs:
+        print(f"the photographs are coarser than the frames: rendered on a grid {'-'.join(f'{g:.3g}' for g in gs)}x "
+              "coarser and enlarged (--supersample 1: on the frames' own grid)")
     if res.sigma_video:
         print(f"wrote {res.sigma_video} (sigma of every frame, 0 to {res.sigma_vmax:g} grey levels)")
     return 0

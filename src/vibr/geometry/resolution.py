@@ -9,12 +9,18 @@ sample of the target image, so the solution fits an aliased image. Rendering on 
 the ratio, :func:`resolution_plan` chooses ``k`` and the sources to reduce first (those
 still much finer than the fine grid: the cost stays that of a render at the sources'
 resolution), which :func:`vibr.render.render` applies.
+
+The other way round (a camera closer to the scene than the photographs), a source pixel
+covers ``s > 1`` target pixels and most target pixels receive no sample: the image between
+them would be the TV prior's. The target is then rendered on a grid ``g ≈ s / √2`` times
+coarser, where every pixel has samples, and enlarged (bicubic) to its size
+(docs/RENDERER.md, "Sources coarser than the target").
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -22,8 +28,8 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import View
 
-__all__ = ["source_pixel_size", "reduction_scale", "resolution_plan", "ResolutionPlan", "check_supersample",
-           "REDUCTION_STEP",
+__all__ = ["source_pixel_size", "reduction_scale", "coarsen_factor", "resolution_plan", "ResolutionPlan",
+           "check_supersample", "REDUCTION_STEP",
            "SIZE_GRID", "SUPERSAMPLE_MAX", "REDUCE_BELOW", "MIN_REDUCED_SIDE"]
 
 #: Reduction factors are powers of ``REDUCTION_STEP`` (1, 0.707, 0.5, 0.354, 0.25, ...): a
@@ -42,6 +48,12 @@ SUPERSAMPLE_MAX = 4
 REDUCE_BELOW = 0.5
 #: ... unless its shorter side would fall below this many pixels.
 MIN_REDUCED_SIDE = 16
+
+#: Sources coarser than the target: the grid is coarser by a power of √2 such that a source
+#: pixel is about this many pixels of it (a little finer than the sources: the views' samples
+#: fall at different sub-pixel places; chosen on the *choose* cases of
+#: ``benchmarks/finer_sources.py --coarser``, docs/RENDERER.md).
+COARSE_GRID_SOURCE_SIZE = math.sqrt(2.0)
 
 
 def _focal(cam: Camera) -> float:
@@ -93,25 +105,54 @@ def reduction_scale(size: float) -> float:
     return 2.0 ** (-j / 2.0)
 
 
+def coarsen_factor(size: float, shape) -> float:
+    """How many times coarser than a target of ``shape = (h, w)`` to render it when its
+    sources' pixels are ``size`` target pixels wide: the power of √2 nearest (in log) to
+    ``size / COARSE_GRID_SOURCE_SIZE``, 1 when that is below √2 (``size < 2^0.75 ≈ 1.68``) or
+    unknown, and never so coarse that the grid's shorter side falls below
+    :data:`MIN_REDUCED_SIDE` pixels.
+
+    >>> coarsen_factor(1.5, (480, 640)), coarsen_factor(2.0, (480, 640)), coarsen_factor(4.0, (480, 640))
+    (1.0, 1.4142135623730951, 2.8284271247461903)
+    """
+    if not math.isfinite(size) or size <= 0:
+        return 1.0
+    j = math.floor(2.0 * math.log2(size / COARSE_GRID_SOURCE_SIZE) + 0.5)
+    while j > 0 and min(shape) / 2.0 ** (j / 2.0) < MIN_REDUCED_SIDE:
+        j -= 1
+    return 2.0 ** (j / 2.0) if j > 0 else 1.0
+
+
 @dataclass(frozen=True)
 class ResolutionPlan:
     """How a target is rendered from its sources (:func:`resolution_plan`).
 
     ``supersample``: the target is rendered on a grid ``k`` times finer
-    (:meth:`vibr.camera.Camera.scaled`) and ``k × k`` blocks are averaged; ``scales``: view
-    name → factor that source is resized by first; ``sizes``: view name →
+    (:meth:`vibr.camera.Camera.scaled`) and ``k × k`` blocks are averaged; ``coarsen``: on a
+    grid ``g`` times coarser, enlarged after (at most one of the two differs from 1);
+    ``scales``: view name → factor that source is resized by first; ``sizes``: view name →
     :func:`source_pixel_size` (target pixels, NaN where unmeasured); ``grid_source_size``:
     their median on the grid rendered on."""
 
     supersample: int = 1
     scales: dict = field(default_factory=dict)
     sizes: dict = field(default_factory=dict)
+    coarsen: float = 1.0
+    #: the grid's resolution over the target's: ``k``, or about ``1 / g`` (the coarser grid's
+    #: size is rounded: ``√(s_x s_y)`` of :meth:`vibr.camera.Camera.scaled`)
+    grid_scale: float = 1.0
+
+    def grid_camera(self, camera: Camera) -> Camera:
+        """``camera`` on this plan's grid."""
+        if self.supersample > 1:
+            return camera.scaled(self.supersample)
+        return camera.scaled(1.0 / self.coarsen) if self.coarsen > 1 else camera
 
     @property
     def grid_source_size(self) -> float:
         """The median size of a source pixel in pixels of the grid rendered on (after the
         reductions); 1 where none is measured. Above 1 the sources are coarser than it."""
-        on_grid = [x * self.supersample / self.scales.get(n, 1.0) for n, x in self.sizes.items() if math.isfinite(x)]
+        on_grid = [x * self.grid_scale / self.scales.get(n, 1.0) for n, x in self.sizes.items() if math.isfinite(x)]
         return float(np.median(on_grid)) if on_grid else 1.0
 
 
@@ -119,25 +160,32 @@ def resolution_plan(sources, camera: Camera, supersample="auto", max_factor: int
     """The supersampling factor and the source reductions for rendering ``camera``.
 
     ``supersample="auto"``: ``k = round(1 / s̃)`` clipped to ``[1, max_factor]``, ``s̃`` the
-    median :func:`source_pixel_size` of the sources (1 where none is measured: sources
-    coarser than the target, or at its resolution, give ``k = 1``); an integer fixes ``k``.
-    A source with ``s · k < REDUCE_BELOW`` (still more than twice finer than the grid) is
-    reduced by ``reduction_scale(s · k)`` (unless its shorter side would fall below
+    median :func:`source_pixel_size` of the sources (1 where none is measured); where the
+    sources are coarser (``s̃`` above about 1.68), ``k = 1`` and the grid is
+    ``g = coarsen_factor(s̃)`` times coarser. An integer fixes ``k`` (and ``g = 1``). A source
+    with ``s · grid_scale < REDUCE_BELOW`` (still more than twice finer than the grid) is
+    reduced by ``reduction_scale(s · grid_scale)`` (unless its shorter side would fall below
     :data:`MIN_REDUCED_SIDE` pixels).
     """
     supersample = check_supersample(supersample)
     sizes = {v.name: source_pixel_size(v, camera) for v in sources.views}
     finite = [x for x in sizes.values() if math.isfinite(x)]
-    k = supersample
+    k, g = supersample, 1.0
     if k == "auto":
-        k = int(min(max_factor, max(1, round(1.0 / float(np.median(finite)))))) if finite else 1
+        median = float(np.median(finite)) if finite else 1.0
+        k = int(min(max_factor, max(1, round(1.0 / median))))
+        g = coarsen_factor(median, camera.shape) if k == 1 else 1.0
+    plan = ResolutionPlan(k, {}, sizes, g, float(k))
+    if g > 1:
+        grid = plan.grid_camera(camera)
+        plan = replace(plan, grid_scale=math.sqrt(grid.width / camera.width * grid.height / camera.height))
     scales = {}
     for v in sources.views:
-        x = sizes[v.name]
-        r = reduction_scale(x * k) if math.isfinite(x) and x * k < REDUCE_BELOW else 1.0
+        x = sizes[v.name] * plan.grid_scale
+        r = reduction_scale(x) if math.isfinite(x) and x < REDUCE_BELOW else 1.0
         if r < 1.0 and min(v.camera.width, v.camera.height) * r >= MIN_REDUCED_SIDE:
             scales[v.name] = r
-    return ResolutionPlan(k, scales, sizes)
+    return replace(plan, scales=scales)
 
 
 def check_supersample(value):

@@ -79,9 +79,10 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     """The grid to render ``camera`` on, and the sources to render it from
     (:func:`vibr.geometry.resolution.resolution_plan`).
 
-    Returns ``(sources, camera, prepared, plan)``: ``camera`` scaled by ``plan.supersample``
+    Returns ``(sources, camera, prepared, plan)``: ``camera`` scaled by ``plan.grid_scale``
     (:meth:`Camera.scaled`: pixel centres such that ``k × k`` blocks average back to the
-    target's pixels, :meth:`RenderResult.box_reduced`); the sources in ``plan.scales``
+    target's pixels, or a coarser grid enlarges onto them; :meth:`RenderResult.on_target`
+    brings the result back); the sources in ``plan.scales``
     resized by :func:`vibr.io.images.scaled_view` (as :func:`vibr.io.load_scene` resizes
     with ``scale``); ``prepared`` (depth prepared per view name, for
     :func:`vibr.geometry.compute_samples`) without those, whose full-size preparation no
@@ -103,11 +104,10 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
                                          for v in sources.views])
         if prepared:
             prepared = {k: val for k, val in prepared.items() if k not in plan.scales}
-    if plan.supersample > 1 or plan.scales:
-        logger.debug("target %dx%d rendered ×%d finer; sources reduced first: %s", camera.width, camera.height,
-                     plan.supersample, ", ".join(f"{k} ×{r:.3g}" for k, r in plan.scales.items()) or "none")
-    cam = camera.scaled(plan.supersample) if plan.supersample > 1 else camera
-    return sources, cam, prepared, plan
+    if plan.grid_scale != 1 or plan.scales:
+        logger.debug("target %dx%d rendered on a grid ×%.3g; sources reduced first: %s", camera.width, camera.height,
+                     plan.grid_scale, ", ".join(f"{k} ×{r:.3g}" for k, r in plan.scales.items()) or "none")
+    return sources, plan.grid_camera(camera), prepared, plan
 
 
 def grid_params(method, params: dict, plan) -> dict:
@@ -134,10 +134,10 @@ def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):
 
     src = _ready_sources(sources, target)
     gkw = with_sample_fields(geometry_kw, (m, params))
-    src, cam, gkw["prepared"], plan = fine_grid(src, cam, supersample, gkw.get("prepared"), [(m, params)])
-    check_render_memory([v.camera.shape for v in src.views], cam.shape, cam.source,  # before allocating
-                        keep=gkw["keep"])
-    return src, compute_samples(src, cam, **gkw), plan
+    src, grid, gkw["prepared"], plan = fine_grid(src, cam, supersample, gkw.get("prepared"), [(m, params)])
+    check_render_memory([v.camera.shape for v in src.views], grid.shape, cam.source,  # before allocating
+                        keep=gkw["keep"], output_shape=cam.shape)
+    return src, compute_samples(src, grid, **gkw), plan
 
 
 def render(sources: Scene, target: View | Camera, method="gradient", *,
@@ -222,9 +222,9 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
                          verbose=verbose, uncertainty=uncertainty, **params)
-    if plan is not None and plan.supersample > 1:
-        res = res.box_reduced(plan.supersample)
+    res = res.on_target(plan, cam.shape)
     res.params["supersample"] = plan.supersample if plan else 1
+    res.params["coarsen"] = plan.coarsen if plan else 1.0
     res.params["reduced_sources"] = dict(plan.scales) if plan else {}
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all

@@ -82,3 +82,32 @@ class RenderResult:
         unc = None if self.uncertainty is None else np.sqrt(mean(np.square(self.uncertainty, dtype=np.float64)))
         return replace(self, image=mean(self.image), init=mean(self.init), coverage=blocks(self.coverage).all(axis=(1, 3)),
                        uncertainty=None if unc is None else unc.astype(np.float32), params=dict(self.params))
+
+    def enlarged(self, shape) -> "RenderResult":
+        """The result of a render on a coarser grid brought to ``shape = (h, w)`` (the grid of
+        :meth:`vibr.camera.Camera.scaled`, whose pixel centres the resize maps back): the
+        image (and ``init``) by bicubic interpolation clipped to [0, 1], the uncertainty
+        bilinear, a pixel covered where every grid pixel under its bilinear footprint is
+        (:func:`vibr.io.images.resize_mask`). Energies, times and counts stay the grid's."""
+        from ..io.images import resize_image, resize_mask
+
+        shape = tuple(int(v) for v in shape)
+        if self.coverage.shape == shape:
+            return self
+
+        def cubic(a):
+            return None if a is None else np.clip(resize_image(a, shape, order=3, quantise=False), 0.0, 1.0)
+
+        unc = None if self.uncertainty is None else resize_image(self.uncertainty, shape, quantise=False)
+        return replace(self, image=cubic(self.image), init=cubic(self.init), coverage=resize_mask(self.coverage, shape),
+                       uncertainty=unc, params=dict(self.params))
+
+    def on_target(self, plan, shape) -> "RenderResult":
+        """The result of a render on ``plan``'s grid (:func:`vibr.render.fine_grid`) at the
+        target's ``shape = (h, w)``: :meth:`box_reduced` from a finer grid, :meth:`enlarged`
+        from a coarser one."""
+        if plan is None:
+            return self
+        if plan.supersample > 1:
+            return self.box_reduced(plan.supersample)
+        return self.enlarged(shape) if plan.coarsen > 1 else self
