@@ -382,10 +382,18 @@ def resize_image(img: np.ndarray, shape, *, box: bool = True, mode: str = "edge"
     return quantise16(img) if quantise else img
 
 
-def _neighbours(n_out: int, n_in: int):
-    """The two input pixels on either side of each output pixel's centre (clamped)."""
+def _centres(n_out: int, n_in: int):
+    """Each output pixel's centre in input pixels, ``x = (i + ½) n_in / n_out − ½`` (the mapping
+    of :func:`resize_image` and :meth:`Camera.scaled`): the input pixel at or before it and the
+    fraction past that pixel."""
     x = (np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5
     i0 = np.floor(x).astype(np.intp)
+    return i0, x - i0
+
+
+def _neighbours(n_out: int, n_in: int):
+    """The two input pixels on either side of each output pixel's centre (clamped)."""
+    i0, _ = _centres(n_out, n_in)
     return np.clip(i0, 0, n_in - 1), np.clip(i0 + 1, 0, n_in - 1)
 
 
@@ -395,9 +403,7 @@ def _bspline_rows(n_out: int, n_in: int):
     coefficients a row, indices clamped at the border."""
     from scipy import sparse
 
-    x = (np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5
-    i0 = np.floor(x).astype(np.intp)
-    t = x - i0
+    i0, t = _centres(n_out, n_in)
     w = np.stack([(1 - t) ** 3, 3 * t**3 - 6 * t**2 + 4, -3 * t**3 + 3 * t**2 + 3 * t + 1, t**3], axis=1) / 6.0
     cols = np.clip(i0[:, None] + np.arange(-1, 3)[None, :], 0, n_in - 1)
     return sparse.csr_matrix((w.ravel(), (np.repeat(np.arange(n_out), 4), cols.ravel())), shape=(n_out, n_in))
