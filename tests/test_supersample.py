@@ -152,7 +152,8 @@ def test_the_target_at_the_sources_resolution_is_unchanged(grid):
 
 def test_footprint_psf_keeps_the_target_grid(grid):
     """The footprint PSF models fine sources itself: "auto" leaves it on the target's grid
-    with the sources as they are; an explicit factor still applies."""
+    with the sources as they are; an explicit factor still applies, and so does the coarser
+    grid for coarser sources (the footprint model shrinks their footprints to a pixel)."""
     from vibr.render import render
 
     src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
@@ -160,6 +161,9 @@ def test_footprint_psf_keeps_the_target_grid(grid):
     r = render(src, cam, psf="footprint")
     assert r.params["supersample"] == 1 and r.params["reduced_sources"] == {}
     assert render(src, cam, psf="footprint", supersample=2).params["supersample"] == 2
+    near = grid["view_004"].camera.scaled(4)  # sources coarser: its footprints shrink to 1 px, a coarser grid
+    r = render(src, near, psf="footprint")
+    assert r.params["coarsen"] == pytest.approx(2 * math.sqrt(2.0)) and r.image.shape[:2] == near.shape
 
 
 def test_far_finer_sources_are_reduced(grid):

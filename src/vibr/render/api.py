@@ -88,15 +88,15 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     :func:`vibr.geometry.compute_samples`) without those, whose full-size preparation no
     longer applies. On "auto", when one of ``renders`` (``(method, params)`` pairs) models
     fine sources itself (:func:`vibr.render.methods.wants_fine_sources`: the footprint PSF),
-    the target's own grid and the sources as they are. Render on the grid with
-    :func:`grid_params`.
+    the target's own grid and the sources as they are, unless the sources are coarser (a
+    coarser grid then, as for the others). Render on the grid with :func:`grid_params`.
     """
     from ..geometry.resolution import ResolutionPlan, check_supersample, resolution_plan
 
     supersample = check_supersample(supersample)
-    if supersample == "auto" and any(wants_fine_sources(m, **p) for m, p in renders):
-        return sources, camera, prepared, ResolutionPlan()
     plan = resolution_plan(sources, camera, supersample)
+    if supersample == "auto" and plan.coarsen == 1 and any(wants_fine_sources(m, **p) for m, p in renders):
+        return sources, camera, prepared, ResolutionPlan()
     if plan.scales:
         from ..io.images import scaled_view
 
