@@ -13,7 +13,7 @@ resolution), which :func:`vibr.render.render` applies.
 The other way round (a camera closer to the scene than the photographs), a source pixel
 covers ``s > 1`` target pixels and most target pixels receive no sample: the image between
 them would be the TV prior's. The target is then rendered on a grid ``g ≈ s / √2`` times
-coarser, where every pixel has samples, and enlarged (bicubic) to its size
+coarser, where every pixel has samples, and enlarged (cubic spline) to its size
 (docs/RENDERER.md, "Sources coarser than the target").
 """
 
@@ -108,8 +108,8 @@ def reduction_scale(size: float) -> float:
 def coarsen_factor(size: float, shape) -> float:
     """How many times coarser than a target of ``shape = (h, w)`` to render it when its
     sources' pixels are ``size`` target pixels wide: the power of √2 nearest (in log) to
-    ``size / COARSE_GRID_SOURCE_SIZE``, 1 when that is below √2 (``size < 2^0.75 ≈ 1.68``) or
-    unknown, and never so coarse that the grid's shorter side falls below
+    ``size / COARSE_GRID_SOURCE_SIZE``, 1 when that nearest power is 1 (``size < 2^0.75 ≈
+    1.68``) or the size is unknown, and never so coarse that the grid's shorter side falls below
     :data:`MIN_REDUCED_SIDE` pixels.
 
     >>> coarsen_factor(1.5, (480, 640)), coarsen_factor(2.0, (480, 640)), coarsen_factor(4.0, (480, 640))

@@ -413,8 +413,8 @@ def _spline_enlarge(img: np.ndarray, shape) -> np.ndarray:
     """Cubic-spline interpolation of an H×W(×C) image onto a larger ``shape``, separable: the
     spline's coefficients (scipy's recursive prefilter along each axis, border "nearest"),
     then four of them per output sample and axis (sparse products; skimage's resize with
-    ``order=3`` evaluates 4³ taps when it interpolates across the channels as well, 5–25×
-    slower)."""
+    ``order=3`` interpolates across the colour channels as well, 4³ taps a sample: timings in
+    docs/RENDERER.md, "Sources coarser than the target")."""
     from scipy.ndimage import spline_filter1d
 
     (h, w), (H, W) = img.shape[:2], shape
