@@ -146,3 +146,29 @@ def test_estimated_depth_leaves_masked_pixels_unknown(layout):
                            for u in sc.views])
     d = estimate_depth(sc, views=[v.name])[v.name].depth
     assert np.isnan(d[~m]).all() and np.isfinite(d[m]).mean() > 0.3
+
+
+def test_light_field_matching_reads_the_masks(grid, monkeypatch):
+    """The light-field estimate's plane sweep and slanted-plane refinement (coarse and full
+    size) are given each source's mask, as the multi-view estimate's are: a masked sample
+    does not match (``plane_sweep(src_masks=)``); views without a mask pass None."""
+    import vibr.stereo.lightfield as L
+    from vibr.stereo import estimate_depth
+
+    seen = []
+    for name in ("plane_sweep", "refine_planes"):
+        real = getattr(L, name)
+
+        def spy(*a, _real=real, _name=name, **kw):
+            seen.append((_name, kw.get("src_masks"), [s.shape[:2] for s in a[2]]))
+            return _real(*a, **kw)
+
+        monkeypatch.setattr(L, name, spy)
+    sc = _with_intruder(grid)
+    sc = sc.replace(views=[u.replace(depth=None, sigma_z=None) for u in sc.views])
+    estimate_depth(sc, views=["view_004"])
+    assert {n for n, _, _ in seen} == {"plane_sweep", "refine_planes"}
+    for _, masks, shapes in seen:
+        given = [m for m in masks if m is not None]
+        assert len(masks) == len(shapes) and len(given) == 1  # view_003's, at each level's size
+        assert given[0].shape in shapes and not given[0].all()

@@ -599,7 +599,7 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
         if executor is not None:
             logger.info("depth: a light field's views are estimated in this process (the executor is for MVS)")
         depths, sigmas, stats = _estimate_lightfield(scene, targets, inputs, cams, imgs, opt)
-        for i in targets:  # the light-field estimate reads every pixel; a masked one gets no depth
+        for i in targets:  # masked samples did not match; a masked pixel gets no depth
             m = imgs.mask(i)
             if m is not None:
                 depths[i] = np.where(m, depths[i], np.nan).astype(np.float32)

@@ -342,6 +342,11 @@ def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max
     cam = cams[ref]
     nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
     scale, coarse_iter = coarse
+    mask = getattr(img, "mask", None)  # the photographs' masks: a masked sample does not match
+
+    def masks(views, cs=None):
+        return None if mask is None else [mask(k, None if cs is None else cs[k]) for k in views]
+
     refine_kw = dict(n_best=min(n_best, len(nbr)), eps=eps, max_cost=max_cost,
                      radius=radius if pm_radius is None else pm_radius, stride=pm_stride,
                      sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
@@ -357,20 +362,21 @@ def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max
         res = plane_sweep(_small(img, ref, cs[ref]), cs[ref], [_small(img, k, cs[k]) for k in nb],
                           [cs[k] for k in nb], dr, n_planes=max(16, int(np.ceil(n_planes * scale))),
                           radius=radius, n_best=n_best, max_cost=max_cost, mem_bytes=mem_bytes, eps=eps,
-                          desc=desc)
+                          desc=desc, src_masks=masks(nb, cs))
         if coarse_iter > 0:
             res = refine_planes(_small(img, ref, cs[ref]), cs[ref], [_small(img, k, cs[k]) for k in nbr],
-                                [cs[k] for k in nbr], res, n_iter=coarse_iter, **refine_kw)
+                                [cs[k] for k in nbr], res, n_iter=coarse_iter, src_masks=masks(nbr, cs),
+                                **refine_kw)
             coarse_done = True
         res = upsample_sweep(res, cs[ref], cam)
     else:
         res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
                           n_planes=n_planes, radius=radius, n_best=n_best,
-                          max_cost=max_cost, mem_bytes=mem_bytes, eps=eps, desc=desc)
+                          max_cost=max_cost, mem_bytes=mem_bytes, eps=eps, desc=desc, src_masks=masks(nb))
     if pm_iter > 0:
         res = refine_planes(img(ref), cam, [img(k) for k in nbr], [cams[k] for k in nbr], res,
                             n_iter=pm_iter, fronto_init=not coarse_done, joint_perturbation=not coarse_done,
-                            normal_perturbation=not coarse_done, **refine_kw)
+                            normal_perturbation=not coarse_done, src_masks=masks(nbr), **refine_kw)
     if median_radius:
         res = median_planes(img(ref), res, radius=median_radius)
     return res
