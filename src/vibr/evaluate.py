@@ -245,9 +245,6 @@ def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, 
         t = time.perf_counter()
         res = render(src, cam, method=s.method, samples=samples, uncertainty=uncertainty, **params)
         res = res.on_target(plan, tview.shape)
-        res.params.update(supersample=plan.supersample if plan is not None else 1,
-                          coarsen=plan.coarsen if plan is not None else 1.0,
-                          reduced_sources=dict(plan.scales) if plan is not None else {})
         rows.append((s, res, time.perf_counter() - t))
     return rows
 

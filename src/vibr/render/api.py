@@ -223,9 +223,6 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
                          verbose=verbose, uncertainty=uncertainty, **params)
     res = res.on_target(plan, cam.shape)
-    res.params["supersample"] = plan.supersample if plan else 1
-    res.params["coarsen"] = plan.coarsen if plan else 1.0
-    res.params["reduced_sources"] = dict(plan.scales) if plan else {}
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:

@@ -103,11 +103,15 @@ class RenderResult:
                        uncertainty=unc, params=dict(self.params))
 
     def on_target(self, plan, shape) -> "RenderResult":
-        """The result of a render on ``plan``'s grid (:func:`vibr.render.fine_grid`) at the
-        target's ``shape = (h, w)``: :meth:`box_reduced` from a finer grid, :meth:`enlarged`
-        from a coarser one."""
-        if plan is None:
-            return self
-        if plan.supersample > 1:
-            return self.box_reduced(plan.supersample)
-        return self.enlarged(shape) if plan.coarsen > 1 else self
+        """The result of a render on ``plan``'s grid (:func:`vibr.render.fine_grid`; None: the
+        target's own) at the target's ``shape = (h, w)``: :meth:`box_reduced` from a finer
+        grid, :meth:`enlarged` from a coarser one; ``params`` records the grid
+        (``supersample``, ``coarsen``, ``reduced_sources``)."""
+        res = self
+        if plan is not None and plan.supersample > 1:
+            res = self.box_reduced(plan.supersample)
+        elif plan is not None and plan.coarsen > 1:
+            res = self.enlarged(shape)
+        res.params.update(supersample=plan.supersample if plan else 1, coarsen=plan.coarsen if plan else 1.0,
+                          reduced_sources=dict(plan.scales) if plan else {})
+        return res
