@@ -1,4 +1,7 @@
+import logging
+
 import numpy as np
+import pytest
 
 from vibr import Camera, Scene, View
 from vibr.selection import rank_views, select_views
@@ -100,24 +103,42 @@ def test_prepare_keeps_the_n_best_views():
     assert len(prepare(scene, "v22", depth="gt")[0]) == 24
 
 
-def test_prepare_warns_before_estimating_depth_for_many_sources(monkeypatch):
-    """Depth estimated for every source of a large scene (the default sources) takes one
-    estimate per view: prepare says so, with the way out, and says nothing when n_views or
-    the sources are given."""
+def test_prepare_estimates_depth_for_the_best_views_only(monkeypatch):
+    """With depth to estimate and no sources or n_views given, a target of a large scene is
+    rendered from its ESTIMATED_SOURCES best views (one estimate per source: a 9×9 light
+    field's 80 took 10 minutes), announced once with the way back ("all"); "all", a count,
+    a list of sources or known depth keep what they ask, without the line."""
     from _checks import messages_logged
 
     import vibr.stereo
-    from vibr.pipeline import MANY_SOURCES, prepare
+    from vibr.errors import VibrInputError
+    from vibr.pipeline import ALL_VIEWS, ESTIMATED_SOURCES, prepare
+    from vibr.selection import select_views
 
-    monkeypatch.setattr(vibr.stereo, "estimate_depth", lambda src, **kw: src)
+    estimated = []
+    monkeypatch.setattr(vibr.stereo, "estimate_depth", lambda src, **kw: estimated.append(len(src)) or src)
     scene = _grid_scene()
-    assert len(scene) - 1 > MANY_SOURCES
-    with messages_logged("vibr.pipeline") as seen:
-        prepare(scene, "v22", depth="estimated", fallback="never")
-        assert len(seen) == 1 and "all 24 source views" in seen[0] and "--views K" in seen[0]
-        prepare(scene, "v22", depth="estimated", n_views=8, fallback="never")
-        prepare(scene, "v22", depth="estimated", sources=[n for n in scene.names if n != "v22"], fallback="never")
-    assert len(seen) == 1
+    assert len(scene) - 1 > ESTIMATED_SOURCES
+    rest, tv = scene.split("v22")
+    best = [rest.names[i] for i in select_views(rest, tv.camera, ESTIMATED_SOURCES)]
+    with messages_logged("vibr.pipeline", logging.INFO) as seen:
+        src, _ = prepare(scene, "v22", depth="estimated", fallback="never")
+        assert src.names == best and estimated == [ESTIMATED_SOURCES]
+        assert len(seen) == 1 and f"the {ESTIMATED_SOURCES} best of the scene's 25 views" in seen[0]
+        assert "--views all" in seen[0]
+        assert len(prepare(scene, "v22", depth="estimated", n_views=ALL_VIEWS, fallback="never")[0]) == 24
+        assert len(prepare(scene, "v22", depth="estimated", n_views=8, fallback="never")[0]) == 8
+        listed = [n for n in scene.names if n != "v22"]
+        assert len(prepare(scene, "v22", depth="estimated", sources=listed, fallback="never")[0]) == 24
+        assert len(prepare(scene, "v22", depth="gt", fallback="never")[0]) == 24
+    assert len(seen) == 1 and estimated == [ESTIMATED_SOURCES, 24, 8, 24]
+    small = _grid_scene(n=3)  # fewer views than the default: all of them, nothing said
+    with messages_logged("vibr.pipeline", logging.INFO) as seen:
+        assert len(prepare(small, "v11", depth="estimated", fallback="never")[0]) == 8
+    assert seen == []
+    for bad in (0, -1, 2.5, "some", True):
+        with pytest.raises(VibrInputError, match="n_views must be a positive integer or 'all'"):
+            prepare(scene, "v22", depth="gt", n_views=bad)
 
 
 def test_cli_views_option_selects_the_sources(tmp_path, monkeypatch, capsys):
@@ -143,3 +164,13 @@ def test_cli_views_option_selects_the_sources(tmp_path, monkeypatch, capsys):
                  "--views", "4", "--method", "ulr", "-q"]) == 0
     assert seen and seen[-1][0] == 4
     assert sorted(seen[-1][1]) == ["view_001", "view_003", "view_005", "view_007"]
+    assert main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(tmp_path / "o.png"),
+                 "--views", "all", "--method", "ulr", "-q"]) == 0
+    assert seen[-1][0] == "all" and len(seen[-1][1]) == 8
+    for bad in ("0", "-2", "some", "2.5"):
+        with pytest.raises(SystemExit) as e:
+            main(["render", str(tmp_path / "s"), "--target", "view_004", "-o", str(tmp_path / "x.png"),
+                  "--views", bad, "-q"])
+        err = capsys.readouterr().err.strip()
+        assert e.value.code == 2 and "\n" not in err and "expected a positive integer or 'all'" in err, err
+    assert not (tmp_path / "x.png").exists()

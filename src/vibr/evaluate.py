@@ -92,7 +92,7 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], **kw)
 
 def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting], *,
                    sources: Sequence[int | str] | None = None, depth: str = "auto",
-                   depth_files=None, n_views: int | None = None, mask: str = "reconstructed",
+                   depth_files=None, n_views: int | str | None = None, mask: str = "reconstructed",
                    border: int = METRIC_BORDER, estimate_kw: dict | None = None,
                    render_kw: dict | None = None, intensity_scale: float | None = None,
                    geometry_kw: dict | None = None, use_lpips: bool = True,

@@ -48,14 +48,17 @@ from .camera import Camera
 from .errors import VibrInputError
 from .scene import Scene, View
 
-__all__ = ["DEPTH_MODES", "prepare"]
+__all__ = ["ALL_VIEWS", "DEPTH_MODES", "ESTIMATED_SOURCES", "prepare"]
 
 logger = logging.getLogger(__name__)
 
-#: Estimating depth for more source views than this, because every view is a source by
-#: default, is worth a warning: it takes one view's estimate per view (a 9×9 light field:
-#: minutes), where a render needs its few best views.
-MANY_SOURCES = 16
+#: When depth is estimated and neither ``sources`` nor ``n_views`` is given, a target is
+#: rendered from this many best views (:mod:`vibr.selection`): each source costs one depth
+#: estimate, and a 9×9 light field's 80 cost minutes for a few hundredths of a dB
+#: (docs/PERFORMANCE.md, "Many views and estimated depth"). Known depth keeps every view.
+ESTIMATED_SOURCES = 16
+#: ``n_views`` that asks for every view as a source (CLI ``--views all``).
+ALL_VIEWS = "all"
 
 #: The one depth vocabulary (module docstring); "auto" is the default everywhere.
 DEPTH_MODES = ("auto", "gt", "estimated", "planar", "files")
@@ -74,7 +77,7 @@ def _depth_file_for(folder: Path, name: str) -> Path:
 
 
 def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int | str] | None = None,
-            depth: str = "auto", depth_files: str | os.PathLike | None = None, n_views: int | None = None,
+            depth: str = "auto", depth_files: str | os.PathLike | None = None, n_views: int | str | None = None,
             estimate_kw: dict | None = None, fallback: str | bool = "auto",
             cache_dir=False) -> tuple[Scene, View | Camera]:
     """Choose the target and the sources, and give every source a depth map.
@@ -91,9 +94,11 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Where the sources' depth comes from (module docstring).
     depth_files : path, optional
         Folder of depth files, for ``depth="files"``.
-    n_views : int, optional
+    n_views : int or "all", optional
         Keep only this many source views, the best for the target (:mod:`vibr.selection`)
         among ``sources`` when given (until 2026-11-26 a list of sources ignored it).
+        Default: every view, but the :data:`ESTIMATED_SOURCES` best when the depth is
+        estimated and ``sources`` is not given; ``"all"``: every view in any case.
     estimate_kw : dict, optional
         Extra arguments of :func:`vibr.stereo.estimate_depth`.
     fallback : {"auto", "always", "never"} or bool
@@ -114,9 +119,12 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     """
     auto = depth == "auto"
     depth = depth_mode(scene, depth)  # an unknown mode is refused here
+    n_views, note = _source_count(scene, n_views, sources, depth)
     src, tview, ti = _hold_out(scene, target, sources, n_views)  # its errors first
     if auto and depth == "estimated":
         logger.info("the scene has no depth maps: the sources get depth estimated from them (or cached)")
+    if note:
+        logger.info(note)
     tcam = tview if isinstance(tview, Camera) else tview.camera
     if depth == "gt":
         src = _gt_depth(scene, src, ti)
@@ -126,9 +134,6 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         if len(src) < 2:  # the target takes no part in its sources' depth
             raise VibrInputError("depth is estimated from the sources alone and one source is too few: "
                                  "use two or more (--views K, --sources), or --depth planar / files", scene.root)
-        if len(src) > MANY_SOURCES and n_views is None and sources is None:
-            logger.warning(f"estimating depth for all {len(src)} source views, one after the other: "
-                           f"n_views=K (--views K) renders from the K best views only")
         src = estimated_depth(src, estimate_kw, cache_dir)
     elif depth == "planar":
         src = _planar_depth(scene, src, tcam)
@@ -137,6 +142,22 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     from .geometry import apply_fallback
 
     return apply_fallback(src, fallback), tview
+
+
+def _source_count(scene: Scene, n_views, sources, depth: str):
+    """``(n_views, note)``: ``n_views`` as :func:`_hold_out` takes it (None: every view;
+    :data:`ALL_VIEWS` is None; not given, :data:`ESTIMATED_SOURCES` when the depth is
+    estimated and no ``sources`` are listed) and the line that announces that default when
+    the scene has more views (else "")."""
+    if n_views == ALL_VIEWS:
+        return None, ""
+    if isinstance(n_views, (str, bool, float)) or (n_views is not None and n_views < 1):
+        raise VibrInputError(f"n_views must be a positive integer or {ALL_VIEWS!r}, got {n_views!r}")
+    if n_views is None and sources is None and depth == "estimated":
+        note = (f"depth is estimated for each source view: rendering from the {ESTIMATED_SOURCES} best of the "
+                f"scene's {len(scene)} views (n_views='all', --views all: every view)")
+        return ESTIMATED_SOURCES, note if len(scene) - 1 > ESTIMATED_SOURCES else ""
+    return n_views, ""
 
 
 def depth_mode(scene: Scene, depth: str = "auto") -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..pipeline import DEPTH_MODES
+from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES
 from ..metrics import METRIC_BORDER
 from ..autotune import AUTO, GAMMA_GRID, LAM_GRID
 from ..render.methods import DEFAULTS, METHODS, PRESETS, PSFS, REGISTRY
@@ -218,7 +218,21 @@ def names(text: str) -> list[str]:
 
 def add_source_options(p: argparse.ArgumentParser) -> None:
     """``--sources`` (a list) and ``--views K`` (the K best), as :func:`vibr.pipeline.prepare`."""
-    p.add_argument("--sources", type=names, help="comma-separated source views (default: all others)")
-    p.add_argument("--views", type=int, metavar="K",
+    p.add_argument("--sources", type=names, help="comma-separated source views (default: all others, see --views)")
+    p.add_argument("--views", type=view_count, metavar="K|all",
                    help="render from the K best source views for the target, of --sources when given "
-                        "(ULR ranking; default: all)")
+                        f"(ULR ranking), or all of them (default: all, but the {ESTIMATED_SOURCES} best "
+                        f"when depth is estimated, one estimate per source; '{ALL_VIEWS}': every view)")
+
+
+def view_count(text: str):
+    """``--views``: a positive integer or "all" (:data:`vibr.pipeline.ALL_VIEWS`)."""
+    if text.strip().lower() == ALL_VIEWS:
+        return ALL_VIEWS
+    try:
+        k = int(text)
+    except ValueError:
+        k = 0
+    if k < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or '{ALL_VIEWS}', got {text!r}")
+    return k

@@ -157,8 +157,6 @@ def run(args) -> int:
                                             ("depth_range", args.depth_range)) if v is not None})
     if args.border < 0:
         raise VibrInputError(f"--border must be >= 0, got {args.border}")
-    if args.views is not None and args.views < 1:
-        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     scene = load_scene(args.scene, scale=args.scale)
     check_not_scene_file(args.json, scene, "--json")
     scene.meta.setdefault("scale", args.scale)

@@ -97,8 +97,6 @@ def run(args) -> int:
                   sigma_s=args.sigma_s,
                   sigma_z=args.sigma_z, scale=args.intensity_scale, n_outer=args.outer,
                   max_iter=args.iterations)  # parameters checked before the work
-    if args.views is not None and args.views < 1:
-        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     if (args.path is None) == (args.target is None):
         raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
     if args.path is not None:
@@ -124,8 +122,6 @@ def run(args) -> int:
         target = scene[tgt].name
         if args.sources and target in [scene[s].name for s in args.sources]:
             raise VibrInputError(f"target view {target} is also listed as a source", args.scene)
-    if args.views is not None and args.views < 1:
-        raise VibrInputError(f"--views must be at least 1, got {args.views}")
     sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views, fallback=args.fallback,
                               cache_dir=cache_dir_from_args(args))
@@ -166,6 +162,13 @@ def _refuse_path_options(args) -> None:
         raise VibrInputError(f"{', '.join(given)} {'apply' if len(given) > 1 else 'applies'} to --path only{hint}")
 
 
+def _path_views(views):
+    """``--views`` of a fly-through: 8 per frame by default, "all" every view (None)."""
+    from ..pipeline import ALL_VIEWS
+
+    return 8 if views is None else (None if views == ALL_VIEWS else views)
+
+
 def _run_path(args) -> int:
     """``--path``: a thin layer over :func:`vibr.flythrough.render_path`."""
     from ..errors import VibrInputError
@@ -199,7 +202,7 @@ def _run_path(args) -> int:
     scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
     params = {k: v for k, v in render_params(args).items() if v is not None}
     res = render_path(scene, cpath, out, method=args.method,
-                      n_views=8 if args.views is None else args.views, params=params,
+                      n_views=_path_views(args.views), params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
                       crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor,
