@@ -221,8 +221,8 @@ def add_source_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sources", type=names, help="comma-separated source views (default: all others, see --views)")
     p.add_argument("--views", type=view_count, metavar="K|all",
                    help="render from the K best source views for the target, of --sources when given "
-                        f"(ULR ranking), or all of them (default: all, but the {ESTIMATED_SOURCES} best "
-                        f"when depth is estimated, one estimate per source; '{ALL_VIEWS}': every view)")
+                        f"(ULR ranking), or '{ALL_VIEWS}' (default: all, but the {ESTIMATED_SOURCES} best "
+                        "when depth is estimated, one estimate per source, and no --sources are listed)")
 
 
 def view_count(text: str):
