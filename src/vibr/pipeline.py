@@ -54,7 +54,7 @@ logger = logging.getLogger(__name__)
 
 #: When depth is estimated and neither ``sources`` nor ``n_views`` is given, a target is
 #: rendered from this many best views (:mod:`vibr.selection`): each source costs one depth
-#: estimate, and a 9×9 light field's 80 cost minutes for a few hundredths of a dB
+#: estimate, and a 9×9 light field's 80 cost ten minutes and gain nothing over the 16 best
 #: (docs/PERFORMANCE.md, "Many views and estimated depth"). Known depth keeps every view.
 ESTIMATED_SOURCES = 16
 #: ``n_views`` that asks for every view as a source (CLI ``--views all``).
