@@ -7,6 +7,7 @@ import logging
 import os
 
 from ..io.video import VIDEO_FORMATS, is_video
+from ..pipeline import ALL_VIEWS
 from ._executor import add_executor_args, executor_from_args
 from . import add_quiet, count
 from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
@@ -164,8 +165,6 @@ def _refuse_path_options(args) -> None:
 
 def _path_views(views):
     """``--views`` of a fly-through: 8 per frame by default, "all" every view (None)."""
-    from ..pipeline import ALL_VIEWS
-
     return 8 if views is None else (None if views == ALL_VIEWS else views)
 
 
