@@ -60,6 +60,17 @@ def test_cli_help_defaults_from_defaults():
     assert ev["--depth"].default == opt["--depth"].default == "auto"
 
 
+@pytest.mark.parametrize("flags, expected", [([], None), (["--precond"], True), (["--no-precond"], False)])
+def test_cli_precond_both_ways(flags, expected):
+    """The preconditioner is on by default: the CLI can turn it off as well as on."""
+    from vibr.cli._options import render_params
+
+    args = _subparser("render").parse_args(["scene", "-o", "x.png", *flags])
+    assert render_params(args)["precond"] is expected
+    assert method_params("gradient", **{k: v for k, v in render_params(args).items() if v is not None})[
+        "precond"] is (DEFAULTS["precond"] if expected is None else expected)
+
+
 def test_scene_replace_copies_meta():
     from vibr.synthetic import make_scene
 

@@ -88,7 +88,11 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
     add_intensity_scale_option(p)
     p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {method_default('n_outer')})")
     p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")
-    p.add_argument("--precond", action="store_true", help="diagonally preconditioned FISTA")
+    over = [m.name for m in REGISTRY.values() if m.solve and not m.overrides.get("precond", DEFAULTS["precond"])]
+    p.add_argument("--precond", action=argparse.BooleanOptionalAction, default=None,
+                   help="diagonally preconditioned FISTA, or plain FISTA with --no-precond (default: "
+                        f"{'on' if DEFAULTS['precond'] else 'off'}" + (f"; off for {', '.join(over)}" if over else "")
+                        + ")")
     p.add_argument("--preset", choices=tuple(PRESETS), default=None,
                    help="read --alpha/--gamma/--lam in these units: paper = the paper's symbols as the "
                         "authors' code applies them (gamma x 0.1/4, lam x 255 on [0, 1] intensities, "
@@ -108,7 +112,7 @@ def render_params(args) -> dict:
     the method's default)."""
     params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
                   scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
-                  precond=True if args.precond else None, psf=args.psf)
+                  precond=args.precond, psf=args.psf)
     if getattr(args, "preset", None) is not None:
         params["preset"] = args.preset
     if args.sigma_z is not None:

@@ -187,15 +187,15 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         models fine sources itself. ``RenderResult.params`` records ``supersample`` and
         ``reduced_sources``.
     **params
-        alpha (1.0), gamma (1.0; gradient only), lam (0.1), sigma_s (1.0, grey levels),
+        The defaults are :data:`vibr.render.methods.DEFAULTS` with the method's overrides:
+        alpha, gamma (gradient only), lam, sigma_s (grey levels),
         sigma_z (None: the geometry's), scale (255: the intensity scale all these refer to;
-        images are [0, 1] internally), n_outer (2), max_iter (60), tol (1e-4, relative
-        energy change), tv_iter (2), coupled_tv (True), grad_weighting ("visibility" | "none"
-        | "W"), grad_max (64 grey levels / px), precond (False), hole_threshold (0.5),
-        ulr_k (4), ulr_beta_res (0.1), psf ("bilinear" | "footprint": the image-formation
-        model ``v_k = B_k u``, paper §4.1 eq. normal; with "footprint"
-        ``B_kmp = area(P_km ∩ p) / area(P_km)``, ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²``
-        the source pixel's parallelogram, footprints larger than one target pixel shrunk
+        images are [0, 1] internally), n_outer, max_iter, tol (relative
+        energy change), tv_iter, coupled_tv, grad_weighting ("visibility" | "none" | "W"),
+        grad_max (grey levels / px), precond, hole_threshold, ulr_k, ulr_beta_res,
+        psf ("bilinear" | "footprint": the image-formation model ``v_k = B_k u``, paper
+        §4.1 eq. normal; with "footprint" ``B_kmp = area(P_km ∩ p) / area(P_km)``,
+        ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²`` the source pixel's parallelogram, footprints larger than one target pixel shrunk
         per axis to 1 px; ulr ignores it). See :mod:`vibr.render.methods`.
 
     Returns
