@@ -22,7 +22,9 @@ gamma ∈ {0.1, 0.25, 0.5}, lam 0.1 and at gamma 0.1, lam 0.3; with ULR's view p
 (``view_k=4``) at lam 0.3: gamma 0.1 and 0.25, gamma 0.1 with ``grad_weighting="W"``, gamma
 0.1 with TV "samples"; with the preconditioned solver (``precond=True``) at (gamma, lam) =
 (0, 0.3), (0.1, 0.1), (0.1, 0.3), (0.25, 0.3) and with the view prior at gamma × lam =
-{0.1, 0.2, 0.3} × {0.3, 0.6, 1}; and ``gamma="auto", lam="auto"`` (``vibr.autotune``:
+{0.1, 0.2, 0.3} × {0.3, 0.6, 1}, the same nine with the gradient term's consistency weights
+(``grad_consistency=24``) and (0.2, 0.6) with the scales 12 and 48 (every other setting:
+``grad_consistency=0``); and ``gamma="auto", lam="auto"`` (``vibr.autotune``:
 leave-one-source-out on the sources, never the target image), whose tuning time is measured
 against the median full-size render time of the target over the case's gradient settings
 (same process, same minutes: the machine's load hits both alike).
@@ -68,7 +70,12 @@ BORDER = 2
 
 
 #: every gradient setting pins what the library's defaults may change
-BASE = {"tv_weighting": "uniform", "view_k": 0, "precond": False, "grad_weighting": "visibility"}
+BASE = {"tv_weighting": "uniform", "view_k": 0, "precond": False, "grad_weighting": "visibility",
+        "grad_consistency": 0.0}
+#: the gradient term's consistency scale of the settings labelled C (grey levels / px), and the
+#: other scales tried at the former default's (gamma, lam)
+CONSISTENCY = 24.0
+CONSISTENCY_OTHERS = (12.0, 48.0)
 
 
 def settings():
@@ -97,6 +104,13 @@ def _settings():
     out += [(f"γ{g:g} λ{l:g} P V4", "gradient", {"gamma": g, "lam": l, "tv_weighting": "uniform", "precond": True,
                                                  "view_k": 4})
             for g in PV4_GAMMAS for l in PV4_LAMS]
+    # the same with the gradient term's consistency weights (docs/RENDERER.md, "The gradient
+    # term's consistency weights"), and two other scales at (0.2, 0.6)
+    pc = {"tv_weighting": "uniform", "precond": True, "view_k": 4}
+    out += [(f"γ{g:g} λ{l:g} P V4 C", "gradient", {"gamma": g, "lam": l, **pc, "grad_consistency": CONSISTENCY})
+            for g in PV4_GAMMAS for l in PV4_LAMS]
+    out += [(f"γ0.2 λ0.6 P V4 C{c:g}", "gradient", {"gamma": 0.2, "lam": 0.6, **pc, "grad_consistency": c})
+            for c in CONSISTENCY_OTHERS]
     return out
 
 
@@ -225,7 +239,8 @@ def table(reps, chosen):
          f"Chosen on the *choose* half (best mean all-pixel PSNR): **{chosen}** "
          f"({', '.join(f'{k} {v}' for k, v in params[chosen].items())}). "
          "Labels: γ gamma, λ lam, TVs `tv_weighting=\"samples\"` (else uniform), V4 `view_k=4` "
-         "(ULR's view prior), W `grad_weighting=\"W\"`, P `precond=True` (variable-metric FISTA). "
+         "(ULR's view prior), W `grad_weighting=\"W\"`, P `precond=True` (variable-metric FISTA), "
+         f"C `grad_consistency={CONSISTENCY:g}` (C12, C48: other scales; without C: 0). "
          "PSNR dB over all pixels / over the covered pixels (2-px border excluded). *oracle*: the best "
          "gradient setting of the sweep for that case (all pixels). *auto*: `gamma=\"auto\", lam=\"auto\"` "
          "(its choice; *tune / render*: its tuning time over the median full-size render time of the case's gradient settings).", "",

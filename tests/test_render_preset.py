@@ -10,7 +10,7 @@ from vibr.render.methods import method_params
 def test_paper_preset_maps_the_units():
     p = method_params("gradient", preset="paper", alpha=0.1, gamma=3.0, lam=0.002)
     assert p["alpha"] == 0.1 and abs(p["gamma"] - 0.075) < 1e-12 and abs(p["lam"] - 0.51) < 1e-12
-    assert p["grad_weighting"] == "W" and p["tv_weighting"] == "samples"
+    assert p["grad_weighting"] == "W" and p["tv_weighting"] == "samples" and p["grad_consistency"] == 0
     q = method_params("gradient", preset="paper")  # the light-field setting
     assert abs(q["gamma"] - 0.025) < 1e-12 and abs(q["lam"] - 0.255) < 1e-12
     assert method_params("bvs", preset="paper", gamma=3.0)["gamma"] == 0.0

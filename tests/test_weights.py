@@ -76,3 +76,56 @@ def test_fused_assembly_equals_weights_then_normal():
         wd = (geometric_weights(S, None, 1.5, dtype=np.float32) * S.meta["sample_weight"]).astype(np.float64)
         np.testing.assert_allclose(wsum[0], sp.adjoint(wd), rtol=1e-5, atol=1e-6)
         np.testing.assert_allclose(bw, sp.adjoint(S.colour, wd).transpose(2, 0, 1), rtol=1e-5, atol=1e-6)
+
+
+def test_gradient_consistency_equals_its_formula():
+    """w_m = 1 / (1 + |∇v_m − (B Ḡ)_m|² / c²), Ḡ = Bᵀ(sw ∇v) / Bᵀ sw, for both PSFs; and
+    coverage_blend(stencils=False) gives Bᵀ sw and Bᵀ (sw ∇v) in one pass."""
+    from vibr.render.operators import Splat
+    from vibr.render.weights import coverage_blend, gradient_consistency
+
+    rng = np.random.default_rng(5)
+    H, W, n = 17, 21, 3000
+    xy = np.c_[rng.uniform(0, W - 1, n), rng.uniform(0, H - 1, n)]
+    S = _samples(xy, np.zeros((n, 2)), np.zeros(n), np.ones(n), (H, W))
+    S.grad[:] = rng.normal(0, 0.1, (n, 3, 2))
+    S.jac[:] = np.eye(2) * 0.8 + rng.normal(0, 0.1, (n, 2, 2))
+    sw = rng.uniform(0.2, 1, n).astype(np.float32)
+    S.meta["sample_weight"] = sw
+    g = S.grad.reshape(n, 6).astype(np.float64)
+    for psf in ("bilinear", "footprint"):
+        sp = Splat(S.xy, (H, W), jac=S.jac, psf=psf)
+        A0, btg, _, _, _ = coverage_blend(S, sp, 1.0, gradient=True, stencils=False)
+        assert A0.shape == (1, H, W)
+        acc = sp.adjoint(sw.astype(np.float64))
+        np.testing.assert_allclose(A0[0], acc, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(btg, sp.adjoint(g, sw.astype(np.float64)).transpose(2, 0, 1), rtol=1e-5, atol=1e-6)
+        c = 0.05
+        w = gradient_consistency(S.grad.reshape(n, 6), sp, btg, A0[0].astype(np.float64), c)
+        G = sp.adjoint(g, sw.astype(np.float64)) / np.maximum(acc, 1e-12)[..., None]
+        want = 1.0 / (1.0 + np.sum((g - sp.apply(G)) ** 2, axis=1) / c ** 2)
+        assert w.dtype == np.float32 and w.shape == (n,)
+        np.testing.assert_allclose(w, want, rtol=2e-4)
+
+
+def test_gradient_consistency_weighs_the_dissenting_view_down():
+    """Four views land on the same pixels; three agree on the gradient, one says otherwise:
+    the mean is 0.05 per channel, so (closed form) the three keep 1 / (1 + 3·0.05²/c²) and
+    the fourth 1 / (1 + 3·0.15²/c²), a quarter of that."""
+    from vibr.render.operators import Splat
+    from vibr.render.weights import coverage_blend, gradient_consistency
+
+    H, W = 6, 6
+    pts = np.array([[x + 0.5, y + 0.5] for y in range(1, 4) for x in range(1, 4)], float)
+    xy = np.tile(pts, (4, 1))
+    n = len(xy)
+    S = _samples(xy, np.zeros((n, 2)), np.zeros(n), np.ones(n), (H, W))
+    S.grad[:, :, 0] = 0.1  # 25.5 grey levels per pixel in x
+    S.grad[3 * len(pts):, :, 0] = -0.1  # the fourth view's edge runs the other way
+    sp = Splat(S.xy, (H, W))
+    A0, btg, _, _, _ = coverage_blend(S, sp, 1.0, gradient=True, stencils=False)
+    c = 24.0 / 255
+    w = gradient_consistency(S.grad.reshape(n, 6), sp, btg, A0[0].astype(np.float64), c)
+    np.testing.assert_allclose(w[: 3 * len(pts)], 1 / (1 + 3 * 0.05 ** 2 / c ** 2), rtol=1e-5)
+    np.testing.assert_allclose(w[3 * len(pts):], 1 / (1 + 3 * 0.15 ** 2 / c ** 2), rtol=1e-5)
+    assert w[-1] < 0.25 * w[0]

@@ -13,11 +13,12 @@ gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term,
 Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/METHOD.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
-* ``gamma = 0.2`` gradient-term weight for ``gradient`` and ``lam = 0.6`` TV weight (grey
+* ``gamma = 0.3`` gradient-term weight for ``gradient`` and ``lam = 0.6`` TV weight (grey
   levels of 255: a 1-grey-level step costs 0.6 per pixel of edge), with the uniform TV
   (eq. energy_final; vibr's units: forward differences, docs/RENDERER.md "One image
   gradient"; the paper's γ is reached through ``preset="paper"``), the view prior
-  (``view_k = 4``) and the preconditioned solver (``precond = True``): chosen together by
+  (``view_k = 4``), the gradient term's consistency weights (``grad_consistency = 24``)
+  and the preconditioned solver (``precond = True``): chosen together by
   ``benchmarks/sweep_defaults.py`` (issue 23), the best mean all-pixel PSNR over the
   *choose* half of a sweep across cotton, fountain, temple and the synthetic scenes, reported
   on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs,
@@ -70,6 +71,13 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   scene than the photographs, a video larger than them), gamma is divided by its square: a
   coarse source's gradient says nothing of the finer grid's detail, and the term then pulls
   the image toward its blur (docs/RENDERER.md, "Sources coarser than the target").
+* ``grad_consistency = 24`` (grey levels per pixel, on the intensity scale ``scale``): each
+  sample's weight in the gradient term is multiplied by ``1 / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,
+  ``Ḡ = Bᵀ∇v / Bᵀ1`` the mean of the views' gradients at each target pixel (a Cauchy
+  M-estimator's weight, Holland & Welsch 1977, against the views' consensus): a gradient no
+  other view confirms (a misregistered edge, an occlusion boundary) stops steering the image,
+  where integrated it would drift (docs/RENDERER.md, "The gradient term's consistency
+  weights"). 0: every visible sample at full weight, the paper's term.
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -89,9 +97,9 @@ __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
-    alpha=1.0, gamma=0.2, lam=0.6, sigma_s=1.0, sigma_z=None, scale=255.0,
+    alpha=1.0, gamma=0.3, lam=0.6, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
-    grad_weighting="visibility", grad_max=64.0, precond=True, d_floor=0.05,
+    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, precond=True, d_floor=0.05,
     hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
     robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0, grid_factor=1,
     grid_source_size=1.0,
@@ -245,7 +253,8 @@ def paper_params(params: dict) -> dict:
     """The paper's units → vibr's (docs/RENDERER.md, "The paper's units"): ``alpha`` kept,
     ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
     weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``), the spatially
-    varying TV (``tv_weighting="samples"``), no view prior and plain FISTA unless given.
+    varying TV (``tv_weighting="samples"``), no view prior, every gradient sample at full
+    weight (``grad_consistency=0``) and plain FISTA unless given.
     ``params`` holds the paper's alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any
     other vibr parameter."""
     out = dict(params)
@@ -256,7 +265,8 @@ def paper_params(params: dict) -> dict:
         raise VibrInputError("preset 'paper' fixes the intensity scale to 255")
     out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
                lam=paper["lam"] * PAPER_LAM_FACTOR)
-    for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples"), ("view_k", 0), ("precond", False)):
+    for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples"), ("view_k", 0), ("precond", False),
+                 ("grad_consistency", 0.0)):
         if out.get(k) is None:
             out[k] = v
     return out

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
-from .weights import coverage_blend, robust_factor, view_prior, weighted_normal
+from .weights import coverage_blend, gradient_consistency, robust_factor, view_prior, weighted_normal
 from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
@@ -49,6 +49,7 @@ class SplatCoverage:
     grad_vals: np.ndarray | None = None
     wsum: np.ndarray | None = None   # (1, H, W) Bᵀ w, w the deformation-only weight (initial blend)
     bw: np.ndarray | None = None     # (3, H, W) Bᵀ (w · colour)
+    grad_conf: np.ndarray | None = None  # (N,) the gradient term's consistency weights (grad_consistency > 0)
 
 
 def make_splat(samples: Samples, footprint: bool) -> Splat:
@@ -69,20 +70,30 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
     parallelogram (paper §4.1, fig. discretization right; footprints over 1 px shrunk per
     axis); otherwise the bilinear PSF. With ``gradient``, ``Bᵀ B`` and ``Bᵀ ∇v`` with unit
     weights: the gradient term's stencil up to its constant weight (grad_weighting
-    visibility/none), and ``Σ_s (BᵀB)[s] = Bᵀ1`` is the coverage. ``blend_factor`` (N,)
+    visibility/none), and ``Σ_s (BᵀB)[s] = Bᵀ1`` is the coverage; with ``grad_consistency``
+    > 0 the stencil weighs each sample by :func:`vibr.render.weights.gradient_consistency`
+    (the coverage still counts every sample). ``blend_factor`` (N,)
     multiplies the initial blend's weights (the view prior, :func:`vibr.render.weights.view_prior`);
     ``splat``: ``B`` already built (:func:`make_splat` with the same ``footprint``).
     """
     sp = splat if splat is not None else make_splat(samples, footprint)
+    c = float(p.get("grad_consistency") or 0.0) if gradient else 0.0
     # one pass: the unit-weight stencils (the per-sample blend weight sw in [0, 1] of
-    # vibr.flythrough, else 1) and the initial blend's deformation-weighted splat
-    A0, rhs0, c0, wsum, bw = coverage_blend(samples, sp, p["sigma_s"], gradient, blend_factor)
-    if gradient:
+    # vibr.flythrough, else 1), or with consistency weights only the mean gradient they need,
+    # and the initial blend's deformation-weighted splat
+    A0, rhs0, c0, wsum, bw = coverage_blend(samples, sp, p["sigma_s"], gradient, blend_factor, stencils=c <= 0)
+    if not gradient:
+        acc = A0[0].astype(np.float64)
+        return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], wsum=wsum, bw=bw))
+    grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
+    if c <= 0:
         acc = A0.sum(0, dtype=np.float64)
-        grad_vals = samples.grad.reshape(len(samples), -1)  # (N, 6): (c0x, c0y, c1x, ...)
         return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], A0, rhs0, c0, grad_vals, wsum, bw))
     acc = A0[0].astype(np.float64)
-    return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], wsum=wsum, bw=bw))
+    conf = gradient_consistency(grad_vals, sp, rhs0, acc, c / float(p["scale"]))
+    sw = samples.meta.get("sample_weight")
+    BtB, Btg, cg = sp.normal(conf if sw is None else conf * sw, grad_vals, dtype=np.float32)
+    return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg, grad_vals, wsum, bw, conf))
 
 
 def _covering(cov: SplatCoverage) -> SplatCoverage:
@@ -209,7 +220,8 @@ class _GradientTerm:
     def stencils(self, Wk):
         cov, p = self.cov, self.p
         if p["grad_weighting"] == "W":
-            self.Ag, self.bg, self.cg = cov.splat.normal(Wk, cov.grad_vals, dtype=np.float32)
+            w = Wk if cov.grad_conf is None else Wk * cov.grad_conf
+            self.Ag, self.bg, self.cg = cov.splat.normal(w, cov.grad_vals, dtype=np.float32)
         elif self.Ag is None:
             # visibility / none: every (visible) sample, sensor precision 1/sigma_s²
             cw = 1.0 / (p["sigma_s"] ** 2 * self.rho)

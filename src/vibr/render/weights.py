@@ -26,7 +26,8 @@ from .operators import _row_coef, _sum_in_order, accumulate_bucket, sample_at
 from .solver import median
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
-           "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior", "ulr_pixels"]
+           "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior", "ulr_pixels",
+           "gradient_consistency"]
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
 
@@ -308,13 +309,16 @@ def _opt(a, dtype=np.float32):
     return np.zeros(0, dtype) if a is None else np.ascontiguousarray(a, dtype)
 
 
-def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool = True, blend_factor=None):
+def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool = True, blend_factor=None,
+                   stencils: bool = True):
     """One pass over the samples for what the render needs before its first estimate.
 
     Returns ``(A0, rhs0, c0, wsum, bw)``: with ``gradient``, ``A0 = Σ Bᵀ diag(sw) B`` (9, H, W)
     and ``rhs0 = Bᵀ (sw·∇v)`` (6, H, W), ``c0 = ½ Σ sw |∇v|²`` (the gradient term's stencils
-    at unit weight, ``sw`` = ``meta["sample_weight"]`` or 1); without, ``A0 = Bᵀ sw``
-    (1, H, W) and an empty ``rhs0``; and the deformation-only weighted splat of the
+    at unit weight, ``sw`` = ``meta["sample_weight"]`` or 1), or with ``stencils=False``
+    ``A0 = Bᵀ sw`` (1, H, W) beside that ``rhs0`` (what :func:`gradient_consistency` needs);
+    without ``gradient``, ``A0 = Bᵀ sw`` (1, H, W) and an empty ``rhs0``; and the
+    deformation-only weighted splat of the
     initial blend, ``wsum = Bᵀ w`` (1, H, W), ``bw = Bᵀ (w·colour)`` (3, H, W), ``w = sw ·``
     :func:`sample_weight` (u unknown) ``· blend_factor`` (N,) when given (e.g. :func:`view_prior`).
     float32 outputs, float64 sums."""
@@ -323,7 +327,7 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
     sw = samples.meta.get("sample_weight")
     if gradient:
         gv = np.ascontiguousarray(samples.grad, np.float32).reshape(n, -1)
-        A0, rhs0 = np.zeros((9, H, W), np.float32), np.zeros((gv.shape[1], H, W), np.float32)
+        A0, rhs0 = np.zeros((9 if stencils else 1, H, W), np.float32), np.zeros((gv.shape[1], H, W), np.float32)
     else:
         gv = np.zeros((n, 0), np.float32)
         A0, rhs0 = np.zeros((1, H, W), np.float32), np.zeros((0, H, W), np.float32)
@@ -332,6 +336,43 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
                           np.asarray(samples.inv_det), float(sigma_s) ** 2, np.asarray(samples.colour), A0.shape[0],
                           A0, rhs0, wsum, bw)
     return A0, rhs0, float(c0), wsum, bw
+
+
+@njit(parallel=True, cache=True)
+def _consistency_kernel(x0, y0, fx, fy, coef, g, G, inv_c2, out):
+    """``out[m] = 1 / (1 + |g_m − (B G)_m|² · inv_c2)``, G planar (K, H, W)."""
+    n = x0.shape[0]
+    K = G.shape[0]
+    use_coef = coef.shape[0] == n and n > 0
+    for i in prange(n):
+        w00, w01, w10, w11 = _row_coef(fx, fy, coef, use_coef, i)
+        x, y = x0[i], y0[i]
+        r2 = 0.0
+        for k in range(K):
+            m = (w00 * G[k, y, x] + w01 * G[k, y, x + 1]
+                 + w10 * G[k, y + 1, x] + w11 * G[k, y + 1, x + 1])
+            d = np.float64(g[i, k]) - m
+            r2 += d * d
+        out[i] = np.float32(1.0 / (1.0 + r2 * inv_c2))
+
+
+def gradient_consistency(grad_vals, splat, btg, acc, c: float) -> np.ndarray:
+    """The gradient term's consistency weight of each sample (docs/RENDERER.md, "The
+    gradient term's consistency weights"):
+
+        ``w_m = 1 / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,  ``Ḡ = Bᵀ∇v / Bᵀ1``
+
+    the Cauchy M-estimator's weight (Holland & Welsch 1977) of the sample's gradient against
+    the mean of every view's gradients at the target pixels it lands on. ``grad_vals`` (N, K)
+    the samples' gradients, ``btg`` (K, H, W) ``Bᵀ∇v`` and ``acc`` (H, W) ``Bᵀ1`` (both from
+    :func:`coverage_blend`, with the same per-sample weight), ``c`` in the gradients' units
+    (intensity per pixel). Returns (N,) float32 in (0, 1]."""
+    G = (btg / np.maximum(acc, 1e-12)).astype(np.float32)
+    out = np.empty(splat.n, np.float32)
+    coef = splat.coef if splat.coef.shape[0] == splat.n else np.zeros((0, 4))
+    _consistency_kernel(splat.bx0, splat.by0, splat.fx, splat.fy, coef, np.ascontiguousarray(grad_vals), G,
+                        1.0 / float(c) ** 2, out)
+    return out
 
 
 def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=None, *, scale: float = 255.0,
