@@ -101,11 +101,14 @@ def test_gradient_consistency_equals_its_formula():
         np.testing.assert_allclose(A0[0], acc, rtol=1e-5, atol=1e-6)
         np.testing.assert_allclose(btg, sp.adjoint(g, sw.astype(np.float64)).transpose(2, 0, 1), rtol=1e-5, atol=1e-6)
         c = 0.05
-        w = gradient_consistency(S.grad.reshape(n, 6), sp, btg, A0[0].astype(np.float64), c)
+        A, b, cst, w = gradient_consistency(S, sp, btg, A0[0].astype(np.float64), c)
         G = sp.adjoint(g, sw.astype(np.float64)) / np.maximum(acc, 1e-12)[..., None]
         want = 1.0 / (1.0 + np.sum((g - sp.apply(G)) ** 2, axis=1) / c ** 2)
         assert w.dtype == np.float32 and w.shape == (n,)
         np.testing.assert_allclose(w, want, rtol=2e-4)
+        # the stencils assembled in the same pass are Splat.normal's with those weights
+        Ar, br, cr = sp.normal(w * sw, S.grad.reshape(n, 6), dtype=np.float32)
+        assert np.array_equal(A, Ar) and np.array_equal(b, br) and cst == cr
 
 
 def test_gradient_consistency_weighs_the_dissenting_view_down():
@@ -125,7 +128,7 @@ def test_gradient_consistency_weighs_the_dissenting_view_down():
     sp = Splat(S.xy, (H, W))
     A0, btg, _, _, _ = coverage_blend(S, sp, 1.0, gradient=True, stencils=False)
     c = 24.0 / 255
-    w = gradient_consistency(S.grad.reshape(n, 6), sp, btg, A0[0].astype(np.float64), c)
+    w = gradient_consistency(S, sp, btg, A0[0].astype(np.float64), c)[3]
     np.testing.assert_allclose(w[: 3 * len(pts)], 1 / (1 + 3 * 0.05 ** 2 / c ** 2), rtol=1e-5)
     np.testing.assert_allclose(w[3 * len(pts):], 1 / (1 + 3 * 0.15 ** 2 / c ** 2), rtol=1e-5)
     assert w[-1] < 0.25 * w[0]

@@ -49,7 +49,7 @@ class SplatCoverage:
     grad_vals: np.ndarray | None = None
     wsum: np.ndarray | None = None   # (1, H, W) Bᵀ w, w the deformation-only weight (initial blend)
     bw: np.ndarray | None = None     # (3, H, W) Bᵀ (w · colour)
-    grad_conf: np.ndarray | None = None  # (N,) the gradient term's consistency weights (grad_consistency > 0)
+    grad_conf: np.ndarray | None = None  # (N,) the gradient term's consistency weights (kept for grad_weighting W)
 
 
 def make_splat(samples: Samples, footprint: bool) -> Splat:
@@ -90,9 +90,9 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
         acc = A0.sum(0, dtype=np.float64)
         return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], A0, rhs0, c0, grad_vals, wsum, bw))
     acc = A0[0].astype(np.float64)
-    conf = gradient_consistency(grad_vals, sp, rhs0, acc, c / float(p["scale"]))
-    sw = samples.meta.get("sample_weight")
-    BtB, Btg, cg = sp.normal(conf if sw is None else conf * sw, grad_vals, dtype=np.float32)
+    # the weights themselves only for the W weighting, which multiplies them by W each pass
+    BtB, Btg, cg, conf = gradient_consistency(samples, sp, rhs0, acc, c / float(p["scale"]),
+                                              keep_weights=p["grad_weighting"] == "W")
     return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg, grad_vals, wsum, bw, conf))
 
 

@@ -339,40 +339,77 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
 
 
 @njit(parallel=True, cache=True)
-def _consistency_kernel(x0, y0, fx, fy, coef, g, G, inv_c2, out):
-    """``out[m] = 1 / (1 + |g_m − (B G)_m|² · inv_c2)``, G planar (K, H, W)."""
-    n = x0.shape[0]
-    K = G.shape[0]
+def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, sw, A, rhs, conf):
+    """Per row bucket: each sample's consistency weight ``conf[m] = 1 / (1 + |g_m − (B G)_m|² ·
+    inv_c2)`` (G (H, W, K): a pixel's K values side by side), then ``A = Σ Bᵀ diag(sw·conf) B`` and ``rhs = Bᵀ (sw·conf·g)``
+    in the same pass (:func:`vibr.render.operators.accumulate_bucket`), the weights kept in
+    ``conf`` when it has N entries; returns ``½ Σ sw·conf |g|²``."""
+    n = fx.shape[0]
+    K = G.shape[2]
+    W = rhs.shape[2]
+    n_rows = starts.shape[0] - 1
     use_coef = coef.shape[0] == n and n > 0
-    for i in prange(n):
-        w00, w01, w10, w11 = _row_coef(fx, fy, coef, use_coef, i)
-        x, y = x0[i], y0[i]
-        r2 = 0.0
-        for k in range(K):
-            m = (w00 * G[k, y, x] + w01 * G[k, y, x + 1]
-                 + w10 * G[k, y + 1, x] + w11 * G[k, y + 1, x + 1])
-            d = np.float64(g[i, k]) - m
-            r2 += d * d
-        out[i] = np.float32(1.0 / (1.0 + r2 * inv_c2))
+    use_sw = sw.shape[0] == n
+    keep = conf.shape[0] == n
+    cpart = np.zeros(n_rows, np.float64)
+    for parity in range(2):
+        for r in prange(n_rows):
+            q0, q1 = starts[r], starts[r + 1]
+            if r % 2 != parity or q0 == q1:
+                continue
+            wb = np.empty(q1 - q0, np.float32)
+            gb = np.empty((4, K), np.float64)  # the mean at the current block's 4 pixels
+            cur = -1
+            for q in range(q0, q1):
+                i = sample_at(order, q)
+                w00, w01, w10, w11 = _row_coef(fx, fy, coef, use_coef, i)
+                x = bx0[i]
+                if x != cur:  # the samples come block by block: read each block's means once
+                    cur = x
+                    for k in range(K):
+                        gb[0, k] = G[r, x, k]
+                        gb[1, k] = G[r, x + 1, k]
+                        gb[2, k] = G[r + 1, x, k]
+                        gb[3, k] = G[r + 1, x + 1, k]
+                r2 = 0.0
+                for k in range(K):
+                    m = w00 * gb[0, k] + w01 * gb[1, k] + w10 * gb[2, k] + w11 * gb[3, k]
+                    d = np.float64(g[i, k]) - m
+                    r2 += d * d
+                w = np.float32(1.0 / (1.0 + r2 * inv_c2))
+                if keep:
+                    conf[i] = w
+                wb[q - q0] = w * sw[i] if use_sw else w
+            la = np.empty((2, W, 9 + K), np.float64)
+            cpart[r] = accumulate_bucket(r, q0, q1, order, wb, bx0, fx, fy, coef, use_coef, g, 9, la, A, rhs)
+    return _sum_in_order(cpart)
 
 
-def gradient_consistency(grad_vals, splat, btg, acc, c: float) -> np.ndarray:
-    """The gradient term's consistency weight of each sample (docs/RENDERER.md, "The
-    gradient term's consistency weights"):
+def gradient_consistency(samples: Samples, splat, btg, acc, c: float, keep_weights: bool = True):
+    """The gradient term's stencils with each sample's consistency weight (docs/RENDERER.md,
+    "The gradient term's consistency weights"):
 
-        ``w_m = 1 / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,  ``Ḡ = Bᵀ∇v / Bᵀ1``
+        ``w_m = 1 / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,  ``Ḡ = Bᵀ(sw ∇v) / Bᵀ sw``
 
     the Cauchy M-estimator's weight (Holland & Welsch 1977) of the sample's gradient against
-    the mean of every view's gradients at the target pixels it lands on. ``grad_vals`` (N, K)
-    the samples' gradients, ``btg`` (K, H, W) ``Bᵀ∇v`` and ``acc`` (H, W) ``Bᵀ1`` (both from
-    :func:`coverage_blend`, with the same per-sample weight), ``c`` in the gradients' units
-    (intensity per pixel). Returns (N,) float32 in (0, 1]."""
-    G = (btg / np.maximum(acc, 1e-12)).astype(np.float32)
-    out = np.empty(splat.n, np.float32)
-    coef = splat.coef if splat.coef.shape[0] == splat.n else np.zeros((0, 4))
-    _consistency_kernel(splat.bx0, splat.by0, splat.fx, splat.fy, coef, np.ascontiguousarray(grad_vals), G,
-                        1.0 / float(c) ** 2, out)
-    return out
+    the mean of every view's gradients at the target pixels it lands on (``sw`` =
+    ``meta["sample_weight"]`` or 1). ``btg`` (K, H, W) ``Bᵀ (sw ∇v)`` and ``acc`` (H, W)
+    ``Bᵀ sw``, both from :func:`coverage_blend` (``stencils=False``); ``c`` in the
+    gradients' units (intensity per pixel).
+
+    Returns ``(A, b, cst, w)``: the stencil ``Σ Bᵀ diag(sw·w) B`` (9, H, W), ``Bᵀ (sw·w·∇v)``
+    (K, H, W), ``½ Σ sw·w |∇v|²`` (what :meth:`vibr.render.operators.Splat.normal` gives with
+    those weights) and ``w`` (N,) float32 in (0, 1] (None without ``keep_weights``). One pass
+    over the samples."""
+    n = len(samples)
+    gv = np.ascontiguousarray(samples.grad, np.float32).reshape(n, -1)
+    G = np.ascontiguousarray((btg / np.maximum(acc, 1e-12)).transpose(1, 2, 0), np.float32)
+    H, W = acc.shape
+    A, b = np.zeros((9, H, W), np.float32), np.zeros((gv.shape[1], H, W), np.float32)
+    w = np.empty(n if keep_weights else 0, np.float32)
+    cst = _consistency_kernel(splat.bx0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts, gv, G,
+                              1.0 / float(c) ** 2, _opt(samples.meta.get("sample_weight")), A, b, w)
+    return A, b, float(cst), w if keep_weights else None
 
 
 def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=None, *, scale: float = 255.0,
