@@ -144,9 +144,10 @@ class Method:
         """The render parameters this method does not read: ulr solves nothing (no weights,
         no energy, no PSF model), only ``gradient`` has gamma, savsr's weights carry no
         sigma_z. The CLI refuses a value given for one of them rather than ignore it."""
+        grad = ("gamma", "grad_consistency")
         if not self.solve:
-            return ("alpha", "gamma", "lam", "sigma_s", "sigma_z", "n_outer", "max_iter", "precond", "psf")
-        return (() if self.gradient else ("gamma",)) + (() if self.geometric else ("sigma_z",))
+            return ("alpha", *grad, "lam", "sigma_s", "sigma_z", "n_outer", "max_iter", "precond", "psf")
+        return (() if self.gradient else grad) + (() if self.geometric else ("sigma_z",))
 
     def render(self, samples, p: dict, *, source_centres=None, target_centre=None, callback=None,
                progress_bar: bool = False, verbose: bool = False, uncertainty=False):
