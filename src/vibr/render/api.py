@@ -195,8 +195,10 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         grad_max (grey levels / px), precond, hole_threshold, ulr_k, ulr_beta_res,
         psf ("bilinear" | "footprint": the image-formation model ``v_k = B_k u``, paper
         §4.1 eq. normal; with "footprint" ``B_kmp = area(P_km ∩ p) / area(P_km)``,
-        ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²`` the source pixel's parallelogram, footprints larger than one target pixel shrunk
-        per axis to 1 px; ulr ignores it). See :mod:`vibr.render.methods`.
+        ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²`` the source pixel's parallelogram,
+        footprints larger than one target pixel shrunk per axis to 1 px; ulr ignores it),
+        grad_consistency (grey levels / px; 0: the paper's gradient term). See
+        :mod:`vibr.render.methods`.
 
     Returns
     -------

@@ -340,10 +340,10 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
 
 @njit(parallel=True, cache=True)
 def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, sw, A, rhs, conf):
-    """Per row bucket: each sample's consistency weight ``conf[m] = 1 / (1 + |g_m − (B G)_m|² ·
-    inv_c2)`` (G (H, W, K): a pixel's K values side by side), then ``A = Σ Bᵀ diag(sw·conf) B`` and ``rhs = Bᵀ (sw·conf·g)``
-    in the same pass (:func:`vibr.render.operators.accumulate_bucket`), the weights kept in
-    ``conf`` when it has N entries; returns ``½ Σ sw·conf |g|²``."""
+    """Per row bucket: each sample's consistency weight ``w_m = 1 / (1 + |g_m − (B G)_m|² ·
+    inv_c2)`` (G (H, W, K): a pixel's K values side by side), then ``A = Σ Bᵀ diag(sw·w) B``
+    and ``rhs = Bᵀ (sw·w·g)`` in the same pass (:func:`vibr.render.operators.accumulate_bucket`),
+    the weights kept in ``conf`` when it has N entries; returns ``½ Σ sw·w |g|²``."""
     n = fx.shape[0]
     K = G.shape[2]
     W = rhs.shape[2]
