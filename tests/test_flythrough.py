@@ -479,6 +479,7 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
     ("v.mp4", ["--uncertainty", "v.mp4"], "the σ video must not be the frames' video"),
     ("v.mp4", ["--uncertainty", "u.mp4", "--crf", "60"], "crf must be in 0..51"),
     ("frames", ["--bit-depth", "16"], "--bit-depth does not apply to --path"),
+    ("v.mp4", ["--grad-consistency", "-1"], "grad_consistency must be >= 0"),  # every render parameter
 ])
 def test_bad_render_path_options_are_refused_before_any_frame(grid_dir, tmp_path, capsys, out, extra, msg):
     from vibr.cli import main

@@ -93,11 +93,8 @@ def run(args) -> int:
     from ..render.methods import method_params
 
     refuse_ignored_params(args)
-    numeric = lambda v: None if v == "auto" else v  # noqa: E731 - "auto" is resolved by render()
-    method_params(args.method, alpha=args.alpha, gamma=numeric(args.gamma), lam=numeric(args.lam),
-                  sigma_s=args.sigma_s,
-                  sigma_z=args.sigma_z, scale=args.intensity_scale, n_outer=args.outer,
-                  max_iter=args.iterations)  # parameters checked before the work
+    # every parameter checked before the work ("auto" is resolved by render())
+    method_params(args.method, **{k: None if v == "auto" else v for k, v in render_params(args).items()})
     if (args.path is None) == (args.target is None):
         raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
     if args.path is not None:
