@@ -99,7 +99,15 @@ def test_planar_proxy_is_fronto_parallel_in_the_target():
     px = planar_proxy(sc, tgt)
     D = px.meta["proxy"]["depth"]
     assert 2.0 < D < 4.0
-    assert px["a"].sigma_z >= 0.1 * D
+    # sigma_z: max(PROXY_SIGMA_Z_REL D, PROXY_SPREAD_REL (p95 - p5)) of the depth the target sees
+    from vibr.geometry.proxy import PROXY_SIGMA_Z_REL, PROXY_SPREAD_REL, _target_depths
+
+    wd = _target_depths(sc, tgt)
+    spread = np.percentile(wd, 95) - np.percentile(wd, 5)
+    assert PROXY_SPREAD_REL * spread > PROXY_SIGMA_Z_REL * D  # view a's depth spreads 2-4
+    assert px["a"].sigma_z == pytest.approx(PROXY_SPREAD_REL * spread, rel=1e-12)
+    flat = planar_proxy(sc.subset(["b"]), tgt)  # one depth: the floor
+    assert flat["b"].sigma_z == pytest.approx(PROXY_SIGMA_Z_REL * flat.meta["proxy"]["depth"], rel=1e-12)
     for v in px.views:
         X = v.camera.backproject(v.camera.pixel_grid(), v.depth)
         np.testing.assert_allclose(tgt.project(X)[1], D, rtol=1e-5)
