@@ -24,7 +24,8 @@ chosen geometry:
     few patches of the object (it loses on fountain); docs/RENDERER.md "Fallback proxy".
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
-    paper's coarsest proxy, with a large depth uncertainty. Its depth and uncertainty come
+    paper's coarsest proxy, with one depth uncertainty for every view (``max(0.02 D,
+    0.1 (p95 − p5))``, docs/RENDERER.md "The planar proxy's sigma_z"). Its depth and uncertainty come
     from the sources' depth or sparse points; when the sources have neither (a light field
     whose only depth is the held-out centre's), from the scene's views that have depth —
     two scalars (median and spread of that depth seen from the target), as
