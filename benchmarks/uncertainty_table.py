@@ -226,7 +226,8 @@ def write_docs(reports, cmd, seconds):
 
 def planar_figure(path, size=256):
     """docs figure: a synthetic 3×3 grid (exact depth), centre view rendered by ``gradient``
-    from its 8 neighbours through the planar proxy; panels: reference, render, per-pixel
+    from its 4 best neighbours (``prepare``'s default with the planar proxy) through the
+    planar proxy; panels: reference, render, per-pixel
     error and σ (both in grey levels, the same colour scale)."""
     from PIL import Image, ImageDraw
 

@@ -141,6 +141,24 @@ def test_prepare_estimates_depth_for_the_best_views_only(monkeypatch):
             prepare(scene, "v22", depth="gt", n_views=bad)
 
 
+def test_planar_proxy_renders_from_the_best_views():
+    """With the planar proxy and no sources or n_views given, a target is rendered from its
+    PLANAR_SOURCES best views (the plane misplaces the farther ones), announced once with the
+    way back; "all", a count or a list of sources keep what they ask."""
+    from _checks import messages_logged
+
+    from vibr.pipeline import ALL_VIEWS, PLANAR_SOURCES, prepare
+
+    scene = _grid_scene()
+    with messages_logged("vibr.pipeline", logging.INFO) as seen:
+        src, _ = prepare(scene, "v22", depth="planar")
+    assert set(src.names) == {"v12", "v21", "v23", "v32"} and PLANAR_SOURCES == 4
+    assert len(seen) == 1 and "the 4 best of the scene's 25 views" in seen[0] and "--views all" in seen[0]
+    assert len(prepare(scene, "v22", depth="planar", n_views=ALL_VIEWS)[0]) == 24
+    assert len(prepare(scene, "v22", depth="planar", n_views=8)[0]) == 8
+    assert len(prepare(scene, "v22", depth="planar", sources=["v00", "v01", "v02", "v03", "v04"])[0]) == 5
+
+
 def test_cli_views_option_selects_the_sources(tmp_path, monkeypatch, capsys):
     """vibr render --views K renders from the K best views: the sources prepare() hands to
     the renderer are those of prepare(n_views=K)."""

@@ -49,7 +49,7 @@ from .camera import Camera
 from .errors import VibrInputError
 from .scene import Scene, View
 
-__all__ = ["ALL_VIEWS", "DEPTH_MODES", "ESTIMATED_SOURCES", "prepare"]
+__all__ = ["ALL_VIEWS", "DEPTH_MODES", "ESTIMATED_SOURCES", "PLANAR_SOURCES", "prepare"]
 
 logger = logging.getLogger(__name__)
 
@@ -58,6 +58,12 @@ logger = logging.getLogger(__name__)
 #: estimate, and a 9×9 light field's 80 cost ten minutes and gain nothing over the 16 best
 #: (docs/PERFORMANCE.md, "Many views and estimated depth"). Known depth keeps every view.
 ESTIMATED_SOURCES = 16
+#: With the planar proxy and neither ``sources`` nor ``n_views`` given, a target is rendered
+#: from this many best views: the plane misplaces a view in proportion to its baseline, and
+#: the gradient term reads every view that lands (the colour term only the view prior's
+#: few). Chosen across scenes with a held-out split (``benchmarks/planar_views.py``,
+#: docs/RENDERER.md "The planar proxy's sigma_z"): +1.4 and +1.3 dB over every view on its two halves.
+PLANAR_SOURCES = 4
 #: ``n_views`` that asks for every view as a source (CLI ``--views all``).
 ALL_VIEWS = "all"
 
@@ -99,7 +105,8 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Keep only this many source views, the best for the target (:mod:`vibr.selection`)
         among ``sources`` when given (until 2026-11-26 a list of sources ignored it).
         Default: every view, but the :data:`ESTIMATED_SOURCES` best when the depth is
-        estimated and ``sources`` is not given; ``"all"``: every view in any case.
+        estimated and the :data:`PLANAR_SOURCES` best with the planar proxy, when
+        ``sources`` is not given; ``"all"``: every view in any case.
     estimate_kw : dict, optional
         Extra arguments of :func:`vibr.stereo.estimate_depth`.
     fallback : {"auto", "always", "never"} or bool
@@ -147,17 +154,20 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
 
 def _source_count(scene: Scene, n_views, sources, depth: str):
     """``(n_views, note)``: ``n_views`` as :func:`_hold_out` takes it (None: every view;
-    :data:`ALL_VIEWS` is None; not given, :data:`ESTIMATED_SOURCES` when the depth is
-    estimated and no ``sources`` are listed) and the line that announces that default when
-    the scene has more views (else "")."""
+    :data:`ALL_VIEWS` is None; not given and no ``sources`` listed, :data:`ESTIMATED_SOURCES`
+    when the depth is estimated, :data:`PLANAR_SOURCES` with the planar proxy) and the line
+    that announces that default when the scene has more views (else "")."""
     if n_views == ALL_VIEWS:
         return None, ""
     if isinstance(n_views, (str, bool, float)) or (n_views is not None and n_views < 1):
         raise VibrInputError(f"n_views must be a positive integer or {ALL_VIEWS!r}, got {n_views!r}")
-    if n_views is None and sources is None and depth == "estimated":
-        note = (f"depth is estimated for each source view: rendering from the {ESTIMATED_SOURCES} best of the "
-                f"scene's {len(scene)} views (n_views='all', --views all: every view)")
-        return ESTIMATED_SOURCES, note if len(scene) - 1 > ESTIMATED_SOURCES else ""
+    default = {"estimated": (ESTIMATED_SOURCES, "depth is estimated for each source view"),
+               "planar": (PLANAR_SOURCES, "the planar proxy misplaces the farther views")}.get(depth)
+    if n_views is None and sources is None and default is not None:
+        n, why = default
+        note = (f"{why}: rendering from the {n} best of the scene's {len(scene)} views "
+                f"(n_views='all', --views all: every view)")
+        return n, note if len(scene) - 1 > n else ""
     return n_views, ""
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES
+from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES, PLANAR_SOURCES
 from ..metrics import METRIC_BORDER
 from ..autotune import AUTO, GAMMA_GRID, LAM_GRID
 from ..render.methods import DEFAULTS, METHODS, PRESETS, PSFS, REGISTRY
@@ -230,7 +230,8 @@ def add_source_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--views", type=view_count, metavar="K|all",
                    help="render from the K best source views for the target, of --sources when given "
                         f"(ULR ranking), or '{ALL_VIEWS}' (default: all, but the {ESTIMATED_SOURCES} best "
-                        "when depth is estimated, one estimate per source, and no --sources are listed)")
+                        f"when depth is estimated, one estimate per source, and the {PLANAR_SOURCES} best with "
+                        "--depth planar, when no --sources are listed)")
 
 
 def view_count(text: str):
