@@ -121,3 +121,27 @@ def test_planar_proxy_is_fronto_parallel_in_the_target():
     np.testing.assert_allclose(s.inv_det, 1.0, atol=1e-9)
     px2 = planar_proxy(sc, tgt, depth=5.0, sigma_z=0.7)
     assert px2.meta["proxy"] == {"depth": 5.0, "sigma_z": 0.7}
+
+
+def test_planar_proxy_without_depth_meets_the_optical_axes():
+    """No depth maps and no points: the plane goes through the point the sources' optical axes
+    meet at (a ring looking at its centre: exactly the centre, at the ring's radius from a
+    target on it), with sigma_z its floor; cameras sharing one centre (a turn on the spot) see
+    the same through any plane, at depth 1; parallel axes (a grid) are a one-line error."""
+    from vibr.geometry.proxy import PROXY_SIGMA_Z_REL
+
+    K = Camera.intrinsics(50.0, 32, 32)
+    ring = [Camera.look_at([5 * np.cos(a), 0.3, 5 * np.sin(a)], [0, 0.3, 0], [0, 1, 0], K, 32, 32)
+            for a in np.linspace(0, np.pi / 2, 5)]
+    img = np.zeros((32, 32, 3), np.float32)
+    src = Scene([View(f"c{k}", img, c) for k, c in enumerate(ring[:4])])
+    px = planar_proxy(src, ring[4])
+    assert px.meta["proxy"]["from"] == "optical axes"
+    assert px.meta["proxy"]["depth"] == pytest.approx(5.0, rel=1e-9)
+    assert px["c0"].sigma_z == pytest.approx(PROXY_SIGMA_Z_REL * 5.0, rel=1e-9)
+    turn = [Camera.look_at([0, 0, 0], [np.cos(a), 0, np.sin(a)], [0, 1, 0], K, 32, 32) for a in (0, 0.2, 0.4)]
+    pan = planar_proxy(Scene([View(f"t{k}", img, c) for k, c in enumerate(turn[:2])]), turn[2])
+    assert pan.meta["proxy"]["from"].startswith("shared centre") and pan.meta["proxy"]["depth"] == 1.0
+    a, b, _ = _two_cam_scene()  # parallel axes: nothing to place the plane at
+    with pytest.raises(VibrInputError, match="optical axes do not meet"):
+        planar_proxy(Scene([View("a", img, a), View("b", img, b)]), a)

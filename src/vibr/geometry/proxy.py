@@ -108,6 +108,25 @@ def _target_depths(sources: Scene, target: Camera, stride: int = 4) -> np.ndarra
     return np.concatenate(out) if out else np.zeros(0)
 
 
+def _axes_depth(sources: Scene, target: Camera) -> tuple[float, str]:
+    """(depth in ``target`` of the point the sources' optical axes meet at, how it was
+    placed); a one-line error when they do not meet in front of ``target`` (parallel axes: a
+    light-field grid). Cameras that share one centre (a rotation-only capture) see the same
+    image through any surface (``∂τ/∂z = 0``): the plane then sits at depth 1."""
+    from ..camera import axes_meeting_point, shared_centre
+
+    cams = [v.camera for v in sources.views]
+    if shared_centre(cams + [target]) is not None:
+        return 1.0, "shared centre (any depth renders the same)"
+    X = axes_meeting_point(cams)
+    d = float(target.project(X[None])[1][0]) if X is not None else 0.0
+    if not d > 0:
+        raise VibrInputError("planar proxy: the sources have no depth maps or sparse points seen from the "
+                             "target, and their optical axes do not meet in front of it, to place the plane at "
+                             "(planar_proxy(depth=D) places it)", sources.root)
+    return d, "optical axes"
+
+
 def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
                  sigma_z: float | None = None) -> Scene:
     """Replace every source depth map by a fronto-parallel plane of the target camera.
@@ -118,7 +137,10 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
     target_camera : Camera or View
     depth : float, optional
         Plane depth in the target frame (scene units). Default: the median of the
-        available depth (source depth maps, else sparse points) seen from the target.
+        available depth (source depth maps, else sparse points) seen from the target; with
+        neither, the depth of the point the sources' optical axes meet at
+        (:func:`vibr.camera.axes_meeting_point`: a ring, an arc or hand-held photos of an
+        object), sigma_z then its ``PROXY_SIGMA_Z_REL`` floor.
     sigma_z : float, optional
         Depth uncertainty given to every view; default
         ``max(PROXY_SIGMA_Z_REL·D, PROXY_SPREAD_REL·(p95 − p5))`` = ``max(0.02 D, 0.1 (p95 − p5))``
@@ -127,17 +149,19 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
     Returns
     -------
     Scene with the same views, their ``depth`` the plane and ``sigma_z`` the scalar above;
-    ``meta["proxy"] = {"depth": D, "sigma_z": sigma_z}``.
+    ``meta["proxy"] = {"depth": D, "sigma_z": sigma_z}`` (and ``"from"``: how it was placed,
+    when no depth or points placed it).
     """
     cam = target_camera.camera if isinstance(target_camera, View) else target_camera
     wd = None
     if depth is None or sigma_z is None:
         wd = _target_depths(sources, cam)
-    if depth is None:
-        if wd.size == 0:
-            raise VibrInputError("planar proxy: the sources have no depth maps or sparse points seen from the "
-                                 "target to place the plane at (planar_proxy(depth=D) places it)", sources.root)
+    placed = {}
+    if depth is None and wd.size:
         depth = float(np.median(wd))
+    elif depth is None:
+        depth, how = _axes_depth(sources, cam)
+        placed = {"from": how}
     depth = float(depth)
     if not depth > 0:
         raise VibrInputError(f"planar proxy: plane depth must be positive, got {depth}", sources.root)
@@ -146,7 +170,7 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
         sigma_z = max(PROXY_SIGMA_Z_REL * depth, PROXY_SPREAD_REL * spread)
     views = [v.replace(depth=plane_depth(v.camera, cam, depth), sigma_z=float(sigma_z))
              for v in sources.views]
-    meta = dict(sources.meta, proxy={"depth": depth, "sigma_z": float(sigma_z)})
+    meta = dict(sources.meta, proxy={"depth": depth, "sigma_z": float(sigma_z), **placed})
     return sources.replace(views=views, meta=meta)
 
 
