@@ -123,7 +123,7 @@ def _axes_depth(sources: Scene, target: Camera) -> tuple[float, str]:
     if not d > 0:
         raise VibrInputError("planar proxy: the sources have no depth maps or sparse points seen from the "
                              "target, and their optical axes do not meet in front of it, to place the plane at "
-                             "(planar_proxy(depth=D) places it)", sources.root)
+                             "(depth estimated from the photographs needs none: --depth estimated)", sources.root)
     return d, "optical axes"
 
 
