@@ -142,6 +142,9 @@ def test_planar_proxy_without_depth_meets_the_optical_axes():
     turn = [Camera.look_at([0, 0, 0], [np.cos(a), 0, np.sin(a)], [0, 1, 0], K, 32, 32) for a in (0, 0.2, 0.4)]
     pan = planar_proxy(Scene([View(f"t{k}", img, c) for k, c in enumerate(turn[:2])]), turn[2])
     assert pan.meta["proxy"]["from"].startswith("shared centre") and pan.meta["proxy"]["depth"] == 1.0
+    off = Camera.look_at([0.1, 0, 0], [1, 0, 0.2], [0, 1, 0], K, 32, 32)  # a target off that centre
+    pan_off = planar_proxy(Scene([View(f"t{k}", img, c) for k, c in enumerate(turn)]), off)
+    assert pan_off.meta["proxy"]["depth"] == 1.0 and np.isfinite(pan_off["t0"].depth).any()
     a, b, _ = _two_cam_scene()  # parallel axes: nothing to place the plane at
     with pytest.raises(VibrInputError, match="optical axes do not meet"):
         planar_proxy(Scene([View("a", img, a), View("b", img, b)]), a)

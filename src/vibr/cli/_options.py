@@ -147,9 +147,10 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
     """``--depth`` (vibr.pipeline.DEPTH_MODES) and ``--depth-files``."""
     p.add_argument("--depth", default="auto", choices=DEPTH_MODES,
                    help="source geometry: the scene's depth maps (gt), depth estimated from the "
-                        "sources (estimated; the target never takes part), a fronto-parallel plane of the target "
-                        "at the depth it sees, or where the cameras' axes meet (planar), NAME.npy/.pfm/.png files in --depth-files (files), or gt when the "
-                        "scene has depth and estimated when it has none (auto, the default)")
+                        "sources (estimated; the target never takes part), a fronto-parallel plane of "
+                        "the target at the depth it sees, or where the cameras' axes meet (planar), "
+                        "NAME.npy/.pfm/.png files in --depth-files (files), or gt when the scene has "
+                        "depth and estimated when it has none (auto, the default)")
     p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files (NAME.npy/.pfm/.png/.bin, orthogonal depth, 0 = unknown; a map of the view's aspect at another size, e.g. full size with --scale, is resized to it)")
     from ..geometry.proxy import FALLBACK_MIN_FRACTION, FALLBACK_MODES
 

@@ -111,12 +111,13 @@ def _target_depths(sources: Scene, target: Camera, stride: int = 4) -> np.ndarra
 def _axes_depth(sources: Scene, target: Camera) -> tuple[float, str]:
     """(depth in ``target`` of the point the sources' optical axes meet at, how it was
     placed); a one-line error when they do not meet in front of ``target`` (parallel axes: a
-    light-field grid). Cameras that share one centre (a rotation-only capture) see the same
-    image through any surface (``∂τ/∂z = 0``): the plane then sits at depth 1."""
+    light-field grid). Sources that share one centre (a rotation-only capture) see the same
+    image through any surface (``∂τ/∂z = 0``): the plane then sits at depth 1, the radius
+    :func:`sphere_proxy` takes without points."""
     from ..camera import axes_meeting_point, shared_centre
 
     cams = [v.camera for v in sources.views]
-    if shared_centre(cams + [target]) is not None:
+    if shared_centre(cams) is not None:
         return 1.0, "shared centre (any depth renders the same)"
     X = axes_meeting_point(cams)
     d = float(target.project(X[None])[1][0]) if X is not None else 0.0
