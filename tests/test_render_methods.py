@@ -144,7 +144,8 @@ def test_a_registered_method_renders():
 
 #: a value other than the default for each render parameter
 _OTHER = {"alpha": 2.0, "gamma": 0.7, "lam": 2.5, "sigma_s": 3.0, "sigma_z": 0.05, "n_outer": 3,
-          "max_iter": 4, "precond": True, "psf": "footprint", "grad_consistency": 4.0}
+          "max_iter": 4, "precond": True, "psf": "footprint", "grad_consistency": 4.0,
+          "grad_coverage": 20.0}  # above the 8 views' coverage: every gradient sample weighs less
 
 
 @pytest.mark.parametrize("name", METHODS)

@@ -79,8 +79,9 @@ def test_fused_assembly_equals_weights_then_normal():
 
 
 def test_gradient_consistency_equals_its_formula():
-    """w_m = 1 / (1 + |∇v_m − (B Ḡ)_m|² / c²), Ḡ = Bᵀ(sw ∇v) / Bᵀ sw, for both PSFs; and
-    coverage_blend(stencils=False) gives Bᵀ sw and Bᵀ (sw ∇v) in one pass."""
+    """w_m = 1 / (1 + |∇v_m − (B Ḡ)_m|² / c²), Ḡ = Bᵀ(sw ∇v) / Bᵀ sw, for both PSFs, times
+    min(1, (B acc)_m / t) with min_coverage t; and coverage_blend(stencils=False) gives Bᵀ sw
+    and Bᵀ (sw ∇v) in one pass."""
     from vibr.render.operators import Splat
     from vibr.render.weights import coverage_blend, gradient_consistency
 
@@ -109,6 +110,15 @@ def test_gradient_consistency_equals_its_formula():
         # the stencils assembled in the same pass are Splat.normal's with those weights
         Ar, br, cr = sp.normal(w * sw, S.grad.reshape(n, 6), dtype=np.float32)
         assert np.array_equal(A, Ar) and np.array_equal(b, br) and cst == cr
+        # with the coverage factor min(1, (B acc)_m / t): t above the typical coverage, so
+        # that the factor is below 1 for most samples and at 1 for some
+        t = float(np.quantile(sp.apply(acc[..., None].astype(np.float32))[:, 0], 0.7))
+        A, b, cst, wt = gradient_consistency(S, sp, btg, A0[0].astype(np.float64), c, min_coverage=t)
+        f = np.minimum(1.0, sp.apply(A0[0][..., None].astype(np.float64))[:, 0] / t)
+        assert 0.5 < np.mean(f < 1) < 0.9
+        np.testing.assert_allclose(wt, want * f, rtol=2e-4)
+        Ar, br, cr = sp.normal(wt * sw, S.grad.reshape(n, 6), dtype=np.float32)
+        assert np.array_equal(A, Ar) and np.array_equal(b, br) and cst == cr
 
 
 def test_gradient_consistency_weighs_the_dissenting_view_down():
@@ -132,3 +142,26 @@ def test_gradient_consistency_weighs_the_dissenting_view_down():
     np.testing.assert_allclose(w[: 3 * len(pts)], 1 / (1 + 3 * 0.05 ** 2 / c ** 2), rtol=1e-5)
     np.testing.assert_allclose(w[3 * len(pts):], 1 / (1 + 3 * 0.15 ** 2 / c ** 2), rtol=1e-5)
     assert w[-1] < 0.25 * w[0]
+
+
+def test_gradient_consistency_weighs_a_lone_sample_by_its_coverage():
+    """Closed form: one view lands alone on a pixel centre (coverage 1: its own bilinear
+    weight), four views land together on another pixel centre (coverage 4). With
+    ``min_coverage`` 1.5 the lone sample weighs 1/1.5 and the four keep their consistency
+    weight; with 0 (the former term) every agreeing sample weighs 1."""
+    from vibr.render.operators import Splat
+    from vibr.render.weights import coverage_blend, gradient_consistency
+
+    H, W = 6, 8
+    xy = np.array([[1.0, 1.0]] + [[5.0, 3.0]] * 4)  # pixel centres: integer coordinates
+    n = len(xy)
+    S = _samples(xy, np.zeros((n, 2)), np.zeros(n), np.ones(n), (H, W))
+    S.grad[:, :, 0] = 0.1
+    sp = Splat(S.xy, (H, W))
+    A0, btg, _, _, _ = coverage_blend(S, sp, 1.0, gradient=True, stencils=False)
+    assert A0[0][1, 1] == 1 and A0[0][3, 5] == 4
+    c = 24.0 / 255
+    w0 = gradient_consistency(S, sp, btg, A0[0].astype(np.float64), c)[3]
+    w = gradient_consistency(S, sp, btg, A0[0].astype(np.float64), c, min_coverage=1.5)[3]
+    np.testing.assert_allclose(w0, 1.0)
+    np.testing.assert_allclose(w, [1 / 1.5, 1, 1, 1, 1], rtol=1e-6)

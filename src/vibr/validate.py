@@ -52,7 +52,8 @@ def _int(name: str, v, *, lo: int, none_ok: bool = False) -> None:
 
 def check_render_params(p: dict) -> dict:
     """Check a filled render-parameter dict (see the module docstring); returns it."""
-    for k in ("alpha", "gamma", "lam", "d_floor", "ulr_beta_res", "tol", "grad_consistency"):
+    for k in ("alpha", "gamma", "lam", "d_floor", "ulr_beta_res", "tol", "grad_consistency",
+              "grad_coverage"):
         if k in p:
             _real(k, p[k], lo=0.0)
     for k in ("sigma_s", "scale", "grad_max"):

@@ -86,6 +86,10 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
                    help="gradient-term samples that the other views' gradients do not confirm weigh "
                         "1 / (1 + (residual / C)^2), C on the --intensity-scale per pixel; 0: every sample "
                         f"at full weight, the paper's term (default {_d('grad_consistency')}; method gradient only)")
+    p.add_argument("--grad-coverage", type=float, metavar="N",
+                   help="with --grad-consistency, a gradient-term sample landing where fewer than N samples "
+                        "land weighs (samples there) / N; 0: full weight (default "
+                        f"{_d('grad_coverage')}; method gradient only)")
     p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
     p.add_argument("--sigma-z", type=float,
                    help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")
@@ -116,7 +120,8 @@ def render_params(args) -> dict:
     the method's default)."""
     params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
                   scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
-                  precond=args.precond, psf=args.psf, grad_consistency=args.grad_consistency)
+                  precond=args.precond, psf=args.psf, grad_consistency=args.grad_consistency,
+                  grad_coverage=args.grad_coverage)
     if getattr(args, "preset", None) is not None:
         params["preset"] = args.preset
     if args.sigma_z is not None:
@@ -127,7 +132,8 @@ def render_params(args) -> dict:
 #: the command-line flag of each render parameter (:func:`render_params`)
 PARAM_FLAGS = {"alpha": "--alpha", "gamma": "--gamma", "lam": "--lam", "sigma_s": "--sigma-s",
                "sigma_z": "--sigma-z", "n_outer": "--outer", "max_iter": "--iterations",
-               "precond": "--precond", "psf": "--psf", "grad_consistency": "--grad-consistency"}
+               "precond": "--precond", "psf": "--psf", "grad_consistency": "--grad-consistency",
+               "grad_coverage": "--grad-coverage"}
 
 
 def refuse_ignored_params(args) -> None:

@@ -197,7 +197,9 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         §4.1 eq. normal; with "footprint" ``B_kmp = area(P_km ∩ p) / area(P_km)``,
         ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²`` the source pixel's parallelogram,
         footprints larger than one target pixel shrunk per axis to 1 px; ulr ignores it),
-        grad_consistency (grey levels / px; 0: the paper's gradient term). See
+        grad_consistency (grey levels / px; 0: the paper's gradient term), grad_coverage
+        (samples; with the consistency weights, a gradient sample landing where fewer land
+        weighs coverage / grad_coverage; 0: not). See
         :mod:`vibr.render.methods`.
 
     Returns

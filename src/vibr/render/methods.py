@@ -78,6 +78,13 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   other view confirms (a misregistered edge, an occlusion boundary) stops steering the image,
   where integrated it would drift (docs/RENDERER.md, "The gradient term's consistency
   weights"). 0: every visible sample at full weight, the paper's term.
+* ``grad_coverage = 1.5`` (samples): with the consistency weights, a sample's weight in the
+  gradient term is also multiplied by ``min(1, (B acc)_m / 1.5)``, ``acc = Bᵀ1`` the number
+  of samples landing on each target pixel: where fewer than 1.5 land (a crack between the
+  views' footprints, a border seen by one view), the views' mean gradient is mostly the
+  sample's own and confirms nothing, and the term's integrated gradients there, with almost
+  no colour data to hold them, drift (docs/RENDERER.md, "The gradient term where few samples
+  land"). 0: no such factor.
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -99,8 +106,8 @@ __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS
 DEFAULTS = dict(
     alpha=1.0, gamma=0.3, lam=0.6, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
-    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, precond=True, d_floor=0.05,
-    hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
+    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, precond=True,
+    d_floor=0.05, hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
     robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0, grid_factor=1,
     grid_source_size=1.0,
 )
@@ -144,7 +151,7 @@ class Method:
         """The render parameters this method does not read: ulr solves nothing (no weights,
         no energy, no PSF model), only ``gradient`` has gamma, savsr's weights carry no
         sigma_z. The CLI refuses a value given for one of them rather than ignore it."""
-        grad = ("gamma", "grad_consistency")
+        grad = ("gamma", "grad_consistency", "grad_coverage")
         if not self.solve:
             return ("alpha", *grad, "lam", "sigma_s", "sigma_z", "n_outer", "max_iter", "precond", "psf")
         return (() if self.gradient else grad) + (() if self.geometric else ("sigma_z",))
@@ -267,7 +274,7 @@ def paper_params(params: dict) -> dict:
     out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
                lam=paper["lam"] * PAPER_LAM_FACTOR)
     for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples"), ("view_k", 0), ("precond", False),
-                 ("grad_consistency", 0.0)):
+                 ("grad_consistency", 0.0), ("grad_coverage", 0.0)):
         if out.get(k) is None:
             out[k] = v
     return out

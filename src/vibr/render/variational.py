@@ -72,7 +72,8 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
     weights: the gradient term's stencil up to its constant weight (grad_weighting
     visibility/none), and ``Σ_s (BᵀB)[s] = Bᵀ1`` is the coverage; with ``grad_consistency``
     > 0 the stencil weighs each sample by :func:`vibr.render.weights.gradient_consistency`
-    (the coverage still counts every sample). ``blend_factor`` (N,)
+    (times its coverage over ``grad_coverage`` where that is lower; the coverage still counts
+    every sample). ``blend_factor`` (N,)
     multiplies the initial blend's weights (the view prior, :func:`vibr.render.weights.view_prior`);
     ``splat``: ``B`` already built (:func:`make_splat` with the same ``footprint``).
     """
@@ -92,7 +93,8 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
     acc = A0[0].astype(np.float64)
     # the weights themselves only for the W weighting, which multiplies them by W each pass
     BtB, Btg, cg, conf = gradient_consistency(samples, sp, rhs0, acc, c / float(p["scale"]),
-                                              keep_weights=p["grad_weighting"] == "W")
+                                              keep_weights=p["grad_weighting"] == "W",
+                                              min_coverage=float(p.get("grad_coverage") or 0.0))
     return _covering(SplatCoverage(sp, acc, acc >= p["hole_threshold"], BtB, Btg, cg, grad_vals, wsum, bw, conf))
 
 

@@ -339,9 +339,10 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
 
 
 @njit(parallel=True, cache=True)
-def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, sw, A, rhs, conf):
-    """Per row bucket: each sample's consistency weight ``w_m = 1 / (1 + |g_m − (B G)_m|² ·
-    inv_c2)`` (G (H, W, K): a pixel's K values side by side), then ``A = Σ Bᵀ diag(sw·w) B``
+def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, acc, inv_t, sw, A, rhs, conf):
+    """Per row bucket: each sample's consistency weight ``w_m = min(1, (B acc)_m · inv_t) /
+    (1 + |g_m − (B G)_m|² · inv_c2)`` (G (H, W, K): a pixel's K values side by side; ``acc``
+    (H, W) the coverage, ``inv_t`` 0: no coverage factor), then ``A = Σ Bᵀ diag(sw·w) B``
     and ``rhs = Bᵀ (sw·w·g)`` in the same pass (:func:`vibr.render.operators.accumulate_bucket`),
     the weights kept in ``conf`` when it has N entries; returns ``½ Σ sw·w |g|²``."""
     n = fx.shape[0]
@@ -351,6 +352,7 @@ def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, sw, A, r
     use_coef = coef.shape[0] == n and n > 0
     use_sw = sw.shape[0] == n
     keep = conf.shape[0] == n
+    use_t = inv_t > 0
     cpart = np.zeros(n_rows, np.float64)
     for parity in range(2):
         for r in prange(n_rows):
@@ -358,7 +360,7 @@ def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, sw, A, r
             if r % 2 != parity or q0 == q1:
                 continue
             wb = np.empty(q1 - q0, np.float32)
-            gb = np.empty((4, K), np.float64)  # the mean at the current block's 4 pixels
+            gb = np.empty((4, K + 1), np.float64)  # the mean (and the coverage) at the block's 4 pixels
             cur = -1
             for q in range(q0, q1):
                 i = sample_at(order, q)
@@ -371,12 +373,19 @@ def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, sw, A, r
                         gb[1, k] = G[r, x + 1, k]
                         gb[2, k] = G[r + 1, x, k]
                         gb[3, k] = G[r + 1, x + 1, k]
+                    gb[0, K] = acc[r, x]
+                    gb[1, K] = acc[r, x + 1]
+                    gb[2, K] = acc[r + 1, x]
+                    gb[3, K] = acc[r + 1, x + 1]
                 r2 = 0.0
                 for k in range(K):
                     m = w00 * gb[0, k] + w01 * gb[1, k] + w10 * gb[2, k] + w11 * gb[3, k]
                     d = np.float64(g[i, k]) - m
                     r2 += d * d
-                w = np.float32(1.0 / (1.0 + r2 * inv_c2))
+                f = 1.0
+                if use_t:
+                    f = min(1.0, (w00 * gb[0, K] + w01 * gb[1, K] + w10 * gb[2, K] + w11 * gb[3, K]) * inv_t)
+                w = np.float32(f / (1.0 + r2 * inv_c2))
                 if keep:
                     conf[i] = w
                 wb[q - q0] = w * sw[i] if use_sw else w
@@ -385,17 +394,21 @@ def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, sw, A, r
     return _sum_in_order(cpart)
 
 
-def gradient_consistency(samples: Samples, splat, btg, acc, c: float, keep_weights: bool = True):
+def gradient_consistency(samples: Samples, splat, btg, acc, c: float, keep_weights: bool = True,
+                         min_coverage: float = 0.0):
     """The gradient term's stencils with each sample's consistency weight (docs/RENDERER.md,
     "The gradient term's consistency weights"):
 
-        ``w_m = 1 / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,  ``Ḡ = Bᵀ(sw ∇v) / Bᵀ sw``
+        ``w_m = min(1, (B acc)_m / t) / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,  ``Ḡ = Bᵀ(sw ∇v) / Bᵀ sw``
 
     the Cauchy M-estimator's weight (Holland & Welsch 1977) of the sample's gradient against
     the mean of every view's gradients at the target pixels it lands on (``sw`` =
-    ``meta["sample_weight"]`` or 1). ``btg`` (K, H, W) ``Bᵀ (sw ∇v)`` and ``acc`` (H, W)
-    ``Bᵀ sw``, both from :func:`coverage_blend` (``stencils=False``); ``c`` in the
-    gradients' units (intensity per pixel).
+    ``meta["sample_weight"]`` or 1), times the coverage where it lands over ``t`` =
+    ``min_coverage`` (0: no such factor): where fewer than ``t`` samples land, the mean is
+    mostly the sample itself and confirms nothing (docs/RENDERER.md, "The gradient term where
+    few samples land"). ``btg`` (K, H, W) ``Bᵀ (sw ∇v)`` and ``acc`` (H, W) ``Bᵀ sw``, both
+    from :func:`coverage_blend` (``stencils=False``); ``c`` in the gradients' units
+    (intensity per pixel), ``t`` in samples.
 
     Returns ``(A, b, cst, w)``: the stencil ``Σ Bᵀ diag(sw·w) B`` (9, H, W), ``Bᵀ (sw·w·∇v)``
     (K, H, W), ``½ Σ sw·w |∇v|²`` (what :meth:`vibr.render.operators.Splat.normal` gives with
@@ -407,8 +420,10 @@ def gradient_consistency(samples: Samples, splat, btg, acc, c: float, keep_weigh
     H, W = acc.shape
     A, b = np.zeros((9, H, W), np.float32), np.zeros((gv.shape[1], H, W), np.float32)
     w = np.empty(n if keep_weights else 0, np.float32)
+    inv_t = 1.0 / float(min_coverage) if min_coverage > 0 else 0.0
     cst = _consistency_kernel(splat.bx0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts, gv, G,
-                              1.0 / float(c) ** 2, _opt(samples.meta.get("sample_weight")), A, b, w)
+                              1.0 / float(c) ** 2, np.ascontiguousarray(acc, np.float32), inv_t,
+                              _opt(samples.meta.get("sample_weight")), A, b, w)
     return A, b, float(cst), w if keep_weights else None
 
 
