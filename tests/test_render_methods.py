@@ -145,7 +145,8 @@ def test_a_registered_method_renders():
 #: a value other than the default for each render parameter
 _OTHER = {"alpha": 2.0, "gamma": 0.7, "lam": 2.5, "sigma_s": 3.0, "sigma_z": 0.05, "n_outer": 3,
           "max_iter": 4, "precond": True, "psf": "footprint", "grad_consistency": 4.0,
-          "grad_coverage": 20.0}  # above the 8 views' coverage: every gradient sample weighs less
+          "grad_coverage": 20.0,  # above the 8 views' coverage: every gradient sample weighs less
+          "z_corr": 0.5}
 
 
 @pytest.mark.parametrize("name", METHODS)
@@ -176,6 +177,7 @@ def test_ignored_params_are_really_ignored(name):
     ("render", ["--method", "bvs", "--gamma", "1"], "--gamma does not apply to --method bvs"),
     ("render", ["--method", "bvs", "--grad-consistency", "4"], "--grad-consistency does not apply to --method bvs"),
     ("render", ["--method", "savsr", "--sigma-z", "0.01"], "--sigma-z does not apply to --method savsr"),
+    ("render", ["--method", "savsr", "--z-corr", "0.5"], "--z-corr does not apply to --method savsr"),
     ("eval", ["--method", "ulr,bvs", "--gamma", "0.5"], "--gamma applies to gradient only, not to --method ulr,bvs"),
     ("eval", ["--method", "ulr", "--lam", "1"], "--lam applies to savsr, bvs, gradient only, not to --method ulr"),
     ("eval", ["--method", "ulr", "--psf", "footprint"], "--psf applies to savsr, bvs, gradient only, not to --method ulr"),

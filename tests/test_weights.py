@@ -165,3 +165,111 @@ def test_gradient_consistency_weighs_a_lone_sample_by_its_coverage():
     w = gradient_consistency(S, sp, btg, A0[0].astype(np.float64), c, min_coverage=1.5)[3]
     np.testing.assert_allclose(w0, 1.0)
     np.testing.assert_allclose(w, [1 / 1.5, 1, 1, 1, 1], rtol=1e-6)
+
+
+def _ramp(H, W, slope=0.01):
+    """u with luminance gradient (slope·255, 0) grey levels per pixel inside."""
+    return np.repeat((slope * np.arange(W))[None, :, None], H, 0).repeat(3, 2).astype(np.float32)
+
+
+def test_shared_depth_error_weights_are_the_gls_weights():
+    """Closed form: samples at one pixel centre (B's row picks that pixel alone) with
+    misregistrations a_k = sigma_z (∂τ/∂z · ∇u) and errors a_k δ_k whose depth errors δ_k
+    have correlation ρ: their weights are generalised least squares', Σ⁻¹1 with
+    Σ = diag((σ_s² + (1 − ρ) a_k²) / d_k) + ρ a aᵀ (d_k = 1/|det|). With ρ = 0 they are the
+    paper's d_k / (σ_s² + a_k²)."""
+    H, W = 8, 10
+    u = _ramp(H, W)
+    gx = 0.01 * 255
+    xy = [[4.0, 3.0]] * 3
+    dtau = [[2.0, 0.0], [-3.0, 1.0], [0.5, 7.0]]
+    sz, inv_det, s2 = [0.1, 0.1, 0.2], np.array([1.0, 0.5, 2.0]), 1.5 ** 2
+    S = _samples(xy, dtau, sz, inv_det, (H, W))
+    a = np.array(sz) * np.array(dtau)[:, 0] * gx
+    for rho in (0.0, 0.5, 0.9):
+        w = geometric_weights(S, u, sigma_s=1.5, grad_max=None, z_corr=rho)
+        cov = np.diag((s2 + (1 - rho) * a ** 2) / inv_det) + rho * np.outer(a, a)
+        want = np.linalg.solve(cov, np.ones(3))
+        assert np.all(want > 0)  # no weight clamped at 0 in this case
+        np.testing.assert_allclose(w, want, rtol=1e-5)
+        if rho == 0:
+            np.testing.assert_allclose(w, inv_det / (s2 + a ** 2), rtol=1e-5)
+
+
+def test_shared_depth_error_balances_opposite_views():
+    """Two views misregistered the opposite way by one depth error (a = +20 σ_s and −10 σ_s
+    per unit of it): the paper's weights (ρ 0), 1/401 and 1/101, favour the smaller error and
+    leave a first-order bias Σ w a / Σ w of about −4 σ_s per unit depth error; with ρ 0.99
+    the weights cancel most of it. Two views on the same side (a = 10 and 20): the GLS
+    weight of the second would be negative (an extrapolation); it is 0."""
+    H, W = 8, 10
+    u = _ramp(H, W)
+    gx = 0.01 * 255
+
+    def weights(a, rho):
+        S = _samples([[4.0, 3.0]] * len(a), [[x / gx, 0.0] for x in a], [1.0] * len(a), [1.0] * len(a), (H, W))
+        return geometric_weights(S, u, grad_max=None, z_corr=rho)
+
+    a = np.array([20.0, -10.0])
+    w0, w = weights(a, 0.0), weights(a, 0.99)
+    np.testing.assert_allclose(w0, [1 / 401, 1 / 101], rtol=1e-5)
+    bias0, bias = (w0 * a).sum() / w0.sum(), (w * a).sum() / w.sum()
+    assert -4.0 < bias0 < -3.9 and abs(bias) < 0.1 * abs(bias0)
+    w2 = weights(np.array([10.0, 20.0]), 0.99)
+    assert w2[0] > 0 and w2[1] == 0
+
+
+def test_fused_assembly_with_shared_depth_error():
+    """weighted_normal with z_corr is bit-identical to geometric_weights(z_corr, factor)
+    → ×1/rho, ×sample_weight, ×factor → Splat.normal (bilinear and footprint PSF), and
+    shared_error_beta is its formula."""
+    from vibr.render.operators import Splat
+    from vibr.render.weights import _weight_gradient, shared_error_beta, weighted_normal
+
+    rng = np.random.default_rng(4)
+    H, W, n = 19, 27, 3000
+    xy = np.c_[rng.uniform(0, W - 1, n), rng.uniform(0, H - 1, n)]
+    inv_det = rng.uniform(0.2, 3, n)
+    sz = rng.uniform(0, 0.05, n)
+    S = _samples(xy, rng.normal(0, 20, (n, 2)), sz, inv_det, (H, W))
+    S.colour[:] = rng.uniform(0, 1, (n, 3))
+    S.jac[:] = np.eye(2) * 0.7 + rng.normal(0, 0.1, (n, 2, 2))
+    S.meta["sample_weight"] = rng.uniform(0, 1, n).astype(np.float32)
+    u = rng.uniform(0, 1, (H, W, 3)).astype(np.float32)
+    rf = rng.uniform(0.1, 1, n).astype(np.float32)
+    g = _weight_gradient(u, 255.0, 64.0)
+    for psf in ("bilinear", "footprint"):
+        sp = Splat(S.xy, (H, W), jac=S.jac, psf=psf)
+        gs = sp.apply(g.astype(np.float64)) if psf == "bilinear" else None
+        w = geometric_weights(S, u, 1.5, None, splat=sp, dtype=np.float32, z_corr=0.8, factor=rf)
+        w *= np.float32(1 / 2.5)
+        w *= S.meta["sample_weight"]
+        w *= rf
+        A, b, c = sp.normal(w, S.colour, dtype=np.float32)
+        A2, b2, c2, w2 = weighted_normal(S, sp, u, 1.5, None, wscale=1 / 2.5, factor=rf, keep_weights=True,
+                                         z_corr=0.8)
+        assert np.array_equal(w, w2) and np.array_equal(A, A2) and np.array_equal(b, b2) and c == c2
+        if gs is None:
+            continue
+        a = sz * np.sum(np.asarray(S.dtau_dz) * gs, axis=1)
+        P = inv_det * S.meta["sample_weight"] * rf / (1.5 ** 2 + 0.2 * a * a)
+        want = 0.8 * sp.adjoint(P * a) / (1 + 0.8 * sp.adjoint(P * a * a))
+        np.testing.assert_allclose(shared_error_beta(S, sp, g, None, 1.5, 0.8, rf), want, rtol=1e-4, atol=1e-7)
+        wb = geometric_weights(S, u, 1.5, None, splat=sp, z_corr=0.8, factor=rf)
+        np.testing.assert_allclose(wb, inv_det / (1.5 ** 2 + 0.2 * a * a) * np.maximum(0, 1 - a * sp.apply(want)),
+                                   rtol=1e-4, atol=1e-9)
+
+
+def test_z_corr_is_validated():
+    """z_corr is a correlation: in [0, 1]; the baselines and the paper's preset keep the
+    paper's independent errors."""
+    import pytest
+
+    from vibr.errors import VibrInputError
+    from vibr.render.methods import method_params
+
+    for bad in (-0.1, 1.1, float("nan")):
+        with pytest.raises(VibrInputError, match="z_corr"):
+            method_params("gradient", z_corr=bad)
+    assert method_params("gradient")["z_corr"] > 0 and method_params("bvs")["z_corr"] == 0
+    assert method_params("gradient", preset="paper")["z_corr"] == 0

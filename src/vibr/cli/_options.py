@@ -93,6 +93,10 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
     p.add_argument("--sigma-z", type=float,
                    help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")
+    p.add_argument("--z-corr", type=float, metavar="RHO",
+                   help="correlation in [0, 1] of the views' depth errors at a target pixel: the colour "
+                        "term's weights then favour views whose misregistrations cancel; 0: independent, the "
+                        f"paper's model (default {method_default('z_corr')})")
     add_intensity_scale_option(p)
     p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {method_default('n_outer')})")
     p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")
@@ -121,7 +125,7 @@ def render_params(args) -> dict:
     params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
                   scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
                   precond=args.precond, psf=args.psf, grad_consistency=args.grad_consistency,
-                  grad_coverage=args.grad_coverage)
+                  grad_coverage=args.grad_coverage, z_corr=args.z_corr)
     if getattr(args, "preset", None) is not None:
         params["preset"] = args.preset
     if args.sigma_z is not None:
@@ -133,7 +137,7 @@ def render_params(args) -> dict:
 PARAM_FLAGS = {"alpha": "--alpha", "gamma": "--gamma", "lam": "--lam", "sigma_s": "--sigma-s",
                "sigma_z": "--sigma-z", "n_outer": "--outer", "max_iter": "--iterations",
                "precond": "--precond", "psf": "--psf", "grad_consistency": "--grad-consistency",
-               "grad_coverage": "--grad-coverage"}
+               "grad_coverage": "--grad-coverage", "z_corr": "--z-corr"}
 
 
 def refuse_ignored_params(args) -> None:

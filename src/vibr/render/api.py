@@ -199,7 +199,8 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         footprints larger than one target pixel shrunk per axis to 1 px; ulr ignores it),
         grad_consistency (grey levels / px; 0: the paper's gradient term), grad_coverage
         (samples; with the consistency weights, a gradient sample landing where fewer land
-        weighs coverage / grad_coverage; 0: not). See
+        weighs coverage / grad_coverage; 0: not), z_corr (the correlation of the views'
+        depth errors at a target pixel, [0, 1]; 0: independent, the paper's model). See
         :mod:`vibr.render.methods`.
 
     Returns

@@ -106,7 +106,7 @@ __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS
 DEFAULTS = dict(
     alpha=1.0, gamma=0.3, lam=0.6, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
-    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, precond=True,
+    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, z_corr=0.9, precond=True,
     d_floor=0.05, hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
     robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0, grid_factor=1,
     grid_source_size=1.0,
@@ -150,11 +150,12 @@ class Method:
     def ignored_params(self) -> tuple[str, ...]:
         """The render parameters this method does not read: ulr solves nothing (no weights,
         no energy, no PSF model), only ``gradient`` has gamma, savsr's weights carry no
-        sigma_z. The CLI refuses a value given for one of them rather than ignore it."""
+        sigma_z (nor its correlation z_corr). The CLI refuses a value given for one of them
+        rather than ignore it."""
         grad = ("gamma", "grad_consistency", "grad_coverage")
         if not self.solve:
-            return ("alpha", *grad, "lam", "sigma_s", "sigma_z", "n_outer", "max_iter", "precond", "psf")
-        return (() if self.gradient else grad) + (() if self.geometric else ("sigma_z",))
+            return ("alpha", *grad, "lam", "sigma_s", "sigma_z", "z_corr", "n_outer", "max_iter", "precond", "psf")
+        return (() if self.gradient else grad) + (() if self.geometric else ("sigma_z", "z_corr"))
 
     def render(self, samples, p: dict, *, source_centres=None, target_centre=None, callback=None,
                progress_bar: bool = False, verbose: bool = False, uncertainty=False):
@@ -217,7 +218,7 @@ register_method(Method("ulr", "Unstructured Lumigraph Rendering (direct blend, n
 # the baselines keep their published form (no view prior, plain FISTA) unless asked, and
 # the TV weight they had before the gradient method's defaults moved with the prior-weighted
 # density (docs/RENDERER.md, "Density with the view prior")
-_PUBLISHED = dict(view_k=0, precond=False, lam=0.3)
+_PUBLISHED = dict(view_k=0, precond=False, lam=0.3, z_corr=0.0)
 register_method(Method("savsr", "Wanner & Goldluecke 2012: deformation weights, one solve",
                        reweight=False, geometric=False, overrides=dict(gamma=0.0, n_outer=1, **_PUBLISHED)))
 register_method(Method("bvs", "Pujades et al. 2014: Bayesian weights re-estimated from u",
@@ -262,7 +263,8 @@ def paper_params(params: dict) -> dict:
     ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
     weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``), the spatially
     varying TV (``tv_weighting="samples"``), no view prior, every gradient sample at full
-    weight (``grad_consistency=0``) and plain FISTA unless given.
+    weight (``grad_consistency=0``), independent depth errors (``z_corr=0``) and plain FISTA
+    unless given.
     ``params`` holds the paper's alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any
     other vibr parameter."""
     out = dict(params)
@@ -274,7 +276,7 @@ def paper_params(params: dict) -> dict:
     out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
                lam=paper["lam"] * PAPER_LAM_FACTOR)
     for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples"), ("view_k", 0), ("precond", False),
-                 ("grad_consistency", 0.0), ("grad_coverage", 0.0)):
+                 ("grad_consistency", 0.0), ("grad_coverage", 0.0), ("z_corr", 0.0)):
         if out.get(k) is None:
             out[k] = v
     return out

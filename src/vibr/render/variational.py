@@ -206,7 +206,7 @@ class _ColourTerm:
             rf = self.prior if rf is None else rf * self.prior
         A, b, c, Wk = weighted_normal(self.samples, self.sp, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
                                       grad_max=p["grad_max"], wscale=1.0 / self.rho, factor=rf,
-                                      keep_weights=self.keep)
+                                      keep_weights=self.keep, z_corr=float(p.get("z_corr") or 0.0))
         self.times["weights"] += time.perf_counter() - t0
         return A, b, c, Wk
 

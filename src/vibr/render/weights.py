@@ -27,7 +27,7 @@ from .solver import median
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
            "robust_factor", "sample_weight", "weighted_normal", "coverage_blend", "view_prior", "ulr_pixels",
-           "gradient_consistency"]
+           "gradient_consistency", "misregistration", "shared_error_beta"]
 
 _LUMA = np.array([0.299, 0.587, 0.114], np.float32)  # Rec. 601
 
@@ -70,38 +70,136 @@ def grad_at(g, x, y, a, b):
 
 
 @njit(cache=True)
-def sample_weight(inv_det, cap, sz, dtau_x, dtau_y, gx, gy, sigma_s2):
-    """THE per-sample weight ``W_km`` (docs/METHOD.md §3), one sample, float64:
-    ``min(1/|det|, cap) / (sigma_s² + (sigma_z · ∂tau/∂z · ∇u(tau(x_m)))²)``; non-finite
-    ``inv_det`` or ``sz`` count as 0. Every kernel that weights samples calls this function
-    (:func:`geometric_weights` here, the fused assembly of :mod:`vibr.render.fused`)."""
+def misregistration(sz, dtau_x, dtau_y, gx, gy):
+    """``a = sigma_z · ∂tau/∂z · ∇u(tau(x_m))``, one sample, float64: the colour error (in
+    ``scale`` units) one standard deviation of depth error makes, signed; a non-finite
+    ``sz`` counts as 0."""
     s = sz
     if not math.isfinite(s):
         s = 0.0
+    return s * (dtau_x * gx + dtau_y * gy)
+
+
+@njit(cache=True)
+def sample_weight(inv_det, cap, sz, dtau_x, dtau_y, gx, gy, sigma_s2, z_corr=0.0, beta=0.0):
+    """THE per-sample weight ``W_km`` (docs/METHOD.md §3), one sample, float64:
+    ``min(1/|det|, cap) / (sigma_s² + a²)``, ``a`` the :func:`misregistration`; non-finite
+    ``inv_det`` counts as 0. With depth errors shared by the views (``z_corr`` ρ > 0,
+    docs/RENDERER.md, "Depth errors the views share"):
+    ``min(1/|det|, cap) / (sigma_s² + (1 − ρ) a²) · max(0, 1 − a β)``, ``β`` the landing
+    point's :func:`shared_error_beta`. Every kernel that weights samples calls this function
+    (:func:`geometric_weights` here, the fused assembly of :func:`weighted_normal`)."""
     d = inv_det
     if not math.isfinite(d):
         d = 0.0
     d = min(d, cap)
-    p = s * (dtau_x * gx + dtau_y * gy)
+    p = misregistration(sz, dtau_x, dtau_y, gx, gy)
+    if z_corr > 0:
+        return d / (sigma_s2 + (1.0 - z_corr) * p * p) * max(0.0, 1.0 - p * beta)
     return d / (sigma_s2 + p * p)
 
 
+@njit(cache=True)
+def _beta_at(beta, bx0, y, fx, fy, coef, use_coef, i):
+    """``(B β)_i``: the shared-error map ``beta`` (H, W) at sample i, whose row of B is the
+    2×2 block at (bx0[i], y)."""
+    w00, w01, w10, w11 = _row_coef(fx, fy, coef, use_coef, i)
+    x = bx0[i]
+    return w00 * beta[y, x] + w01 * beta[y, x + 1] + w10 * beta[y + 1, x] + w11 * beta[y + 1, x + 1]
+
+
 @njit(parallel=True, cache=True)
-def _weights_kernel(x0, y0, fx, fy, g, dtau, sz, sz_scalar, inv_det, cap, sigma_s2, out):
-    """out_m = :func:`sample_weight` with ∇u bilinearly interpolated from ``g`` (H, W, 2)."""
+def _weights_kernel(x0, y0, fx, fy, g, dtau, sz, sz_scalar, inv_det, cap, sigma_s2, z_corr, beta, bx0, by0, coef,
+                    out):
+    """out_m = :func:`sample_weight` with ∇u bilinearly interpolated from ``g`` (H, W, 2)
+    (and β from ``beta`` (H, W) through B's rows ``bx0, by0, coef`` when ``z_corr`` > 0)."""
     n = x0.shape[0]
     use_map = sz.shape[0] == n
+    use_coef = coef.shape[0] == n and n > 0
     for i in prange(n):
         gx, gy = grad_at(g, x0[i], y0[i], np.float64(fx[i]), np.float64(fy[i]))
         s = sz[i] if use_map else sz_scalar
+        bm = _beta_at(beta, bx0, by0[i], fx, fy, coef, use_coef, i) if z_corr > 0 else 0.0
         out[i] = sample_weight(np.float64(inv_det[i]), cap, np.float64(s), np.float64(dtau[i, 0]),
-                               np.float64(dtau[i, 1]), gx, gy, sigma_s2)
+                               np.float64(dtau[i, 1]), gx, gy, sigma_s2, z_corr, bm)
+
+
+@njit(parallel=True, cache=True)
+def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_scalar, dtau, g, sigma_s2,
+                         z_corr, sw, rf, out):
+    """``out[0] = Bᵀ(P a)`` and ``out[1] = Bᵀ(P a²)`` (2, H, W), ``a`` each sample's
+    :func:`misregistration` (∇u from ``g``) and ``P = 1/|det| · sw · rf / (sigma_s² + (1 − ρ) a²)``
+    its precision without the shared error (``sw``, ``rf`` empty: 1); row buckets of one
+    parity at a time, as :func:`vibr.render.operators.accumulate_bucket`."""
+    n = fx.shape[0]
+    W = out.shape[2]
+    n_rows = starts.shape[0] - 1
+    use_coef = coef.shape[0] == n and n > 0
+    use_map = sz.shape[0] == n
+    use_sw = sw.shape[0] == n
+    use_rf = rf.shape[0] == n
+    for parity in range(2):
+        for r in prange(n_rows):
+            q0, q1 = starts[r], starts[r + 1]
+            if r % 2 != parity or q0 == q1:
+                continue
+            la = np.zeros((2, W, 2), np.float64)
+            for q in range(q0, q1):
+                i = sample_at(order, q)
+                gx, gy = grad_at(g, x0[i], y0[i], np.float64(fx[i]), np.float64(fy[i]))
+                s = sz[i] if use_map else sz_scalar
+                a = misregistration(np.float64(s), np.float64(dtau[i, 0]), np.float64(dtau[i, 1]), gx, gy)
+                d = np.float64(inv_det[i])
+                if not math.isfinite(d):
+                    d = 0.0
+                if use_sw:
+                    d *= sw[i]
+                if use_rf:
+                    d *= rf[i]
+                v1 = d / (sigma_s2 + (1.0 - z_corr) * a * a) * a
+                v2 = v1 * a
+                w00, w01, w10, w11 = _row_coef(fx, fy, coef, use_coef, i)
+                x = bx0[i]
+                la[0, x, 0] += w00 * v1
+                la[0, x, 1] += w00 * v2
+                la[0, x + 1, 0] += w01 * v1
+                la[0, x + 1, 1] += w01 * v2
+                la[1, x, 0] += w10 * v1
+                la[1, x, 1] += w10 * v2
+                la[1, x + 1, 0] += w11 * v1
+                la[1, x + 1, 1] += w11 * v2
+            for ra in range(2):
+                for j in range(W):
+                    out[0, r + ra, j] += la[ra, j, 0]
+                    out[1, r + ra, j] += la[ra, j, 1]
+
+
+def shared_error_beta(samples: Samples, splat, g, sigma_z, sigma_s: float, z_corr: float, factor=None) -> np.ndarray:
+    """The shared depth error's correction per target pixel (docs/RENDERER.md, "Depth errors
+    the views share"):
+
+        ``β = ρ Σ_m B_m P_m a_m / (1 + ρ Σ_m B_m P_m a_m²)``,  ``P_m = 1/|det| · f_m / (σ_s² + (1 − ρ) a_m²)``
+
+    (H, W) float32, ``a_m`` the :func:`misregistration` (∇u from ``g`` (H, W, 2), the
+    weights' gradient), ``ρ`` = ``z_corr``, ``f_m`` = ``factor`` (N,) times
+    ``meta["sample_weight"]`` (None: 1). A sample's weight is then its
+    :func:`sample_weight` with ``β`` read at it through B: the generalised least-squares
+    weights of samples whose errors ``a_m δ`` share one depth error δ with correlation ρ.
+    One pass over the samples."""
+    H, W = samples.target_shape
+    sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z)
+    out = np.zeros((2, H, W), np.float64)
+    _shared_error_kernel(splat.x0, splat.y0, splat.fx, splat.fy, splat.bx0, splat.coef, splat.order, splat.starts,
+                         np.asarray(samples.inv_det), sz if sz.ndim == 1 else np.zeros(0),
+                         float(sz) if sz.ndim == 0 else 0.0, np.asarray(samples.dtau_dz), np.ascontiguousarray(g),
+                         float(sigma_s) ** 2, float(z_corr), _opt(samples.meta.get("sample_weight")), _opt(factor), out)
+    return (z_corr * out[0] / (1.0 + z_corr * out[1])).astype(np.float32)
 
 
 def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *,
                       scale: float = 255.0, grad_max: float | None = 64.0,
                       inv_det_cap: float | None = None, splat=None, dtype=np.float64,
-                      prior=None) -> np.ndarray:
+                      prior=None, z_corr: float = 0.0, factor=None) -> np.ndarray:
     """Data-term weights ``W_km`` (docs/METHOD.md §3), (N,) ``dtype`` (float64 by default).
 
     Parameters
@@ -127,14 +225,23 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
         Precomputed bilinear interpolation of ``samples.xy`` (saves its set-up).
     prior : (N,) array, optional
         Per-sample view prior (:func:`view_prior`), a factor of the weight.
+    z_corr : float
+        Correlation ρ in [0, 1) of the views' depth errors at a target pixel (0: independent,
+        the paper's model; :func:`shared_error_beta`).
+    factor : (N,) array, optional
+        The weight's other factors (``meta["sample_weight"]`` excepted) that the shared
+        error's precision sums read (:func:`shared_error_beta`; default ``prior``); they do
+        not multiply the result.
     """
-    w = _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_cap, splat, dtype)
+    w = _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_cap, splat, dtype, z_corr,
+                           factor, prior)
     if prior is not None:
         w *= np.asarray(prior, w.dtype)
     return w
 
 
-def _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_cap, splat, dtype):
+def _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_cap, splat, dtype, z_corr, factor,
+                       prior):
     sz = samples.sigma_z if sigma_z is None else sigma_z
     sz = np.asarray(sz, np.float64)
     base = 1.0 / (sigma_s ** 2)
@@ -147,9 +254,12 @@ def _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_ca
     out = np.empty(len(samples), dtype)
     sz_map = sz if sz.ndim == 1 else np.zeros(0)
     sz_scalar = float(sz) if sz.ndim == 0 else 0.0
+    beta = (shared_error_beta(samples, sp, g, sigma_z, sigma_s, z_corr, prior if factor is None else factor)
+            if z_corr > 0 else np.zeros((0, 0), np.float32))
     _weights_kernel(sp.x0, sp.y0, sp.fx, sp.fy, np.ascontiguousarray(g), np.asarray(samples.dtau_dz),
                     sz_map, sz_scalar, np.asarray(samples.inv_det),
-                    np.inf if inv_det_cap is None else float(inv_det_cap), float(sigma_s) ** 2, out)
+                    np.inf if inv_det_cap is None else float(inv_det_cap), float(sigma_s) ** 2, float(z_corr), beta,
+                    sp.bx0, sp.by0, sp.coef, out)
     return out
 
 
@@ -264,11 +374,11 @@ def _coverage_kernel(bx0, fx, fy, coef, order, starts, sw, bf, gvals, inv_det, s
 
 @njit(parallel=True, cache=True)
 def _weighted_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_scalar, dtau, g, use_g, sigma_s2,
-                     wscale, sw, rf, colour, A, rhs, w_out):
+                     z_corr, beta, wscale, sw, rf, colour, A, rhs, w_out):
     """``A = Σ Bᵀ diag(W) B``, ``b = Σ Bᵀ (W·colour)``, returns ``½ Σ W |colour|²`` with
     ``W = float32(sample_weight) · wscale · sw · rf`` computed on the fly (∇u from ``g``
-    when ``use_g``, else u unknown: deformation only; ``sw``, ``rf`` empty: 1); the weights
-    go to ``w_out`` too when it has N entries."""
+    when ``use_g``, else u unknown: deformation only; β from ``beta`` when ``z_corr`` > 0;
+    ``sw``, ``rf`` empty: 1); the weights go to ``w_out`` too when it has N entries."""
     n = fx.shape[0]
     W = rhs.shape[2]
     n_rows = starts.shape[0] - 1
@@ -277,6 +387,7 @@ def _weighted_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_s
     use_sw = sw.shape[0] == n
     use_rf = rf.shape[0] == n
     keep = w_out.shape[0] == n
+    use_beta = use_g and z_corr > 0
     cpart = np.zeros(n_rows, np.float64)
     for parity in range(2):
         for r in prange(n_rows):
@@ -290,8 +401,10 @@ def _weighted_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_s
                 if use_g:
                     gx, gy = grad_at(g, x0[i], y0[i], np.float64(fx[i]), np.float64(fy[i]))
                 s = sz[i] if use_map else sz_scalar
+                bm = _beta_at(beta, bx0, r, fx, fy, coef, use_coef, i) if use_beta else 0.0
                 w = np.float32(sample_weight(np.float64(inv_det[i]), np.inf, np.float64(s), np.float64(dtau[i, 0]),
-                                             np.float64(dtau[i, 1]), gx, gy, sigma_s2)) * wscale
+                                             np.float64(dtau[i, 1]), gx, gy, sigma_s2,
+                                             z_corr if use_beta else 0.0, bm)) * wscale
                 if use_sw:
                     w = w * sw[i]
                 if use_rf:
@@ -428,13 +541,15 @@ def gradient_consistency(samples: Samples, splat, btg, acc, c: float, keep_weigh
 
 
 def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=None, *, scale: float = 255.0,
-                    grad_max: float | None = 64.0, wscale: float = 1.0, factor=None, keep_weights: bool = False):
+                    grad_max: float | None = 64.0, wscale: float = 1.0, factor=None, keep_weights: bool = False,
+                    z_corr: float = 0.0):
     """The colour term's normal equations with the weights :func:`geometric_weights` would
     give (times ``wscale``, ``meta["sample_weight"]`` and ``factor`` (N,), e.g.
-    :func:`robust_factor`), computed inside the assembly: ``(A, b, c, W)`` with ``A`` (9, H,
-    W), ``b`` (3, H, W) float32 as :meth:`vibr.render.operators.Splat.normal` and ``W`` (N,)
-    float32 when ``keep_weights`` (else None). Bit-identical to ``splat.normal`` of the
-    float32 weights (tested)."""
+    :func:`robust_factor`; ``z_corr`` as there, its sums reading ``factor``), computed inside
+    the assembly: ``(A, b, c, W)`` with ``A`` (9, H, W), ``b`` (3, H, W) float32 as
+    :meth:`vibr.render.operators.Splat.normal` and ``W`` (N,) float32 when ``keep_weights``
+    (else None). Bit-identical to ``splat.normal`` of the float32 weights (tested); with
+    ``z_corr`` > 0 one more pass over the samples (:func:`shared_error_beta`)."""
     H, W = samples.target_shape
     n = len(samples)
     sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z)
@@ -445,9 +560,12 @@ def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=No
     A = np.zeros((9, H, W), np.float32)
     b = np.zeros((3, H, W), np.float32)
     w_out = np.empty(n if keep_weights else 0, np.float32)
+    z_corr = float(z_corr) if use_g else 0.0
+    beta = (shared_error_beta(samples, splat, g, sigma_z, sigma_s, z_corr, factor) if z_corr > 0
+            else np.zeros((0, 0), np.float32))
     c = _weighted_kernel(splat.x0, splat.y0, splat.fx, splat.fy, splat.bx0, splat.coef, splat.order, splat.starts,
                          np.asarray(samples.inv_det), sz_map, sz_scalar, np.asarray(samples.dtau_dz), g, use_g,
-                         float(sigma_s) ** 2, np.float32(wscale), _opt(samples.meta.get("sample_weight")),
+                         float(sigma_s) ** 2, z_corr, beta, np.float32(wscale), _opt(samples.meta.get("sample_weight")),
                          _opt(factor), np.asarray(samples.colour), A, b, w_out)
     return A, b, float(c), (w_out if keep_weights else None)
 

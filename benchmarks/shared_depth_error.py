@@ -1,0 +1,107 @@
+"""The correlation of the views' depth errors (``z_corr``), chosen across scenes with a
+held-out split (docs/RENDERER.md, "Depth errors the views share").
+
+Three sets of cases, each with its own split fixed in advance:
+
+* ``sweep``: ``sweep_defaults.py``'s 19 cases (ground-truth, estimated and planar depth,
+  fountain, temple, synthetic layouts) and templeSR0005 from its 15 others (not in either half);
+* ``planar 4``: ``planar_views.py``'s 11 cases from their 4 best views on the plane, what
+  ``vibr eval --depth planar`` renders by default (``PLANAR_SOURCES``);
+* ``plane``: ``planar_sigma_z.py``'s cases but cotton's (the sweep has those): fountain,
+  temple and the synthetic layouts from their sweep sources on the plane.
+
+Each case renders ULR, BVS and ``gradient`` at the library's defaults with ``z_corr`` over
+:data:`VALUES`; all-pixel PSNR dB, 2-px border. The value with the best mean over the three
+sets' *choose* halves together is the default, reported on the *report* halves.
+
+    python3 benchmarks/shared_depth_error.py [--workers 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+import sweep_defaults as S  # noqa: E402
+
+VALUES = (0.0, 0.5, 0.7, 0.8, 0.9, 0.95)
+SETS = ("sweep", "planar 4", "plane")
+
+
+def case_list():
+    import grad_weighting as G
+    import planar_sigma_z as P
+
+    out = [{**c, "set": "sweep"} for c in S.case_list()]
+    out.append({"name": G.EXTRA, "split": "extra", "family": "extra", "set": "sweep"})
+    out += [{"name": f"planar 4 #{i}", "index": i, "split": sp, "set": "planar 4"}
+            for i, sp in enumerate(["choose", "report", "choose"] + ["choose", "report"] * 4)]
+    out += [{**c, "set": "plane"} for c in P.planar_cases() if c["family"] != "cotton planar"]
+    return out
+
+
+def _sources(cache, case):
+    import grad_weighting as G
+    import planar_sigma_z as P
+
+    if case["set"] == "sweep":
+        return G._temple5(cache) if case["name"] == G.EXTRA else S._sources(cache, case)
+    if case["set"] == "plane":
+        return P._plane(cache, case)[:2]
+    from planar_views import cases
+    from vibr.pipeline import prepare
+
+    name, split, sc, t = list(cases())[case["index"]]
+    assert split == case["split"]
+    case["name"] = name
+    return prepare(sc, t, depth="planar", n_views=4)
+
+
+def run_case(cache, case) -> dict:
+    from vibr.geometry import compute_samples
+    from vibr.metrics import psnr
+    from vibr.render import render
+
+    src, tv = _sources(cache, case)
+    smp = compute_samples(src, tv.camera)
+    P = lambda m, **kw: float(psnr(render(src, tv.camera, m, samples=smp, **kw).image, tv.image, border=2))  # noqa: E731
+    res = {"ULR": P("ulr"), "BVS": P("bvs", lam=0.1) if case["set"] == "sweep" else P("bvs")}  # the sweep's BVS lam
+    res.update({f"ρ {z:g}": P("gradient", z_corr=z) for z in VALUES})
+    return {"name": case["name"], "split": case["split"], "set": case["set"], "psnr": res}
+
+
+def main(argv=None) -> None:
+    from vibr.executor import run_tasks
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
+    ap.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    reps = run_tasks(run_case, case_list(), setup=S.SceneCache, setup_args=(str(S.data_dir(a.data)),),
+                     executor=a.workers, desc="cases")
+    labs = list(reps[0]["psnr"])
+    print("| set | case | split | " + " | ".join(labs) + " |\n|---|---|---|" + "---|" * len(labs))
+    for r in reps:
+        print(f"| {r['set']} | {r['name']} | {r['split']} | " + " | ".join(f"{r['psnr'][k]:.2f}" for k in labs) + " |")
+    mean = lambda sel, k: np.mean([r["psnr"][k] for r in sel])  # noqa: E731
+    print("\n| mean | cases | " + " | ".join(labs) + " |\n|---|---|" + "---|" * len(labs))
+    for sp in ("choose", "report"):
+        for st in SETS + ("all",):
+            sel = [r for r in reps if r["split"] == sp and (st == "all" or r["set"] == st)]
+            print(f"| {sp}, {st} | {len(sel)} | " + " | ".join(f"{mean(sel, k):.3f}" for k in labs) + " |")
+    grad = [k for k in labs if k.startswith("ρ")]
+    best = max(grad, key=lambda k: mean([r for r in reps if r["split"] == "choose"], k))
+    print(f"\nbest on the choose halves: {best}; cases where it trails ULR or BVS: "
+          + (", ".join(f"{r['set']}: {r['name']}" for r in reps
+                       if r["psnr"][best] < max(r["psnr"]["ULR"], r["psnr"]["BVS"])) or "none"))
+    print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
