@@ -271,5 +271,26 @@ def test_z_corr_is_validated():
     for bad in (-0.1, 1.1, float("nan")):
         with pytest.raises(VibrInputError, match="z_corr"):
             method_params("gradient", z_corr=bad)
-    assert method_params("gradient")["z_corr"] > 0 and method_params("bvs")["z_corr"] == 0
+    assert method_params("gradient")["z_corr"] is None and method_params("bvs")["z_corr"] == 0
     assert method_params("gradient", preset="paper")["z_corr"] == 0
+
+
+def test_z_corr_defaults_to_the_geometrys():
+    """A proxy's samples (the plane: one depth for every view) carry PROXY_Z_CORR, per-view
+    depth 0; the default (None) renders with that, bit for bit."""
+    from vibr.geometry import compute_samples
+    from vibr.geometry.proxy import PROXY_Z_CORR
+    from vibr.pipeline import prepare
+    from vibr.render import render
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("arc", n_views=6, width=48, height=48, seed=2)
+    t = sc.views[3].name
+    src, tv = prepare(sc, t, depth="gt")
+    assert compute_samples(src, tv.camera).meta["z_corr"] == 0.0
+    src, tv = prepare(sc, t, depth="planar")
+    S = compute_samples(src, tv.camera)
+    assert S.meta["z_corr"] == PROXY_Z_CORR > 0
+    img = render(src, tv.camera, "gradient", samples=S).image
+    assert np.array_equal(img, render(src, tv.camera, "gradient", samples=S, z_corr=PROXY_Z_CORR).image)
+    assert not np.array_equal(img, render(src, tv.camera, "gradient", samples=S, z_corr=0.0).image)

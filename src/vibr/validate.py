@@ -68,7 +68,7 @@ def check_render_params(p: dict) -> dict:
     if "sigma_z" in p:
         _real("sigma_z", p["sigma_z"], lo=0.0, lo_open=True, none_ok=True)
     if "z_corr" in p:
-        _real("z_corr", p["z_corr"], lo=0.0, hi=1.0)
+        _real("z_corr", p["z_corr"], lo=0.0, hi=1.0, none_ok=True)
     if "hole_threshold" in p:
         _real("hole_threshold", p["hole_threshold"], lo=0.0, hi=1.0)
     for k, lo in (("max_iter", 1), ("n_outer", 0), ("min_iter", 0), ("tv_iter", 1), ("ulr_k", 1), ("grid_factor", 1)):

@@ -96,7 +96,8 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
     p.add_argument("--z-corr", type=float, metavar="RHO",
                    help="correlation in [0, 1] of the views' depth errors at a target pixel: the colour "
                         "term's weights then favour views whose misregistrations cancel; 0: independent, the "
-                        f"paper's model (default {method_default('z_corr')})")
+                        "paper's model (default: the geometry's, 0.9 for a proxy such as --depth planar, "
+                        "else 0; bvs: 0)")
     add_intensity_scale_option(p)
     p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {method_default('n_outer')})")
     p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")

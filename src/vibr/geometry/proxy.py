@@ -18,7 +18,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
 
-__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "sphere_proxy", "fallback_depth", "apply_fallback", "FALLBACK_MODES",
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "FALLBACK_MODES",
            "FALLBACK_MIN_FRACTION", "FALLBACK_FACTOR",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
@@ -30,6 +30,13 @@ __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL
 #: plane misplaces.
 PROXY_SIGMA_Z_REL = 0.02
 PROXY_SPREAD_REL = 0.1
+
+#: Correlation of the views' depth errors when one proxy stands in for every view's depth
+#: (``meta["proxy"]``: the plane, the sphere): the render's ``z_corr`` for their samples
+#: (:func:`vibr.render.weights.shared_error_beta`). Chosen across scenes with a held-out split
+#: (``benchmarks/shared_depth_error.py``, docs/RENDERER.md, "Depth errors the views share");
+#: per-view depth (ground truth, estimated, files) keeps the paper's independent errors, 0.
+PROXY_Z_CORR = 0.9
 
 
 def plane_depth(camera: Camera, target: Camera, D: float) -> np.ndarray:

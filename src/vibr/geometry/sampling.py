@@ -26,6 +26,7 @@ from ..errors import VibrInputError
 from ..scene import Scene, View
 from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_row
 from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
+from .proxy import PROXY_Z_CORR
 from .samples import Samples
 from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
                          reduce_zbuffers, splat_zbuffer, visibility_mask)
@@ -302,6 +303,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     out.meta["vis_threshold"] = float(vis_threshold)
     out.meta["grad_scheme"] = grad_scheme
     out.meta["grad_model"] = grad_model
+    # one proxy for every view: its depth error at a target pixel is the views' shared one
+    out.meta["z_corr"] = PROXY_Z_CORR if sources.meta.get("proxy") else 0.0
     # where the views are: ULR and the view prior weigh the samples by the rays' angles
     out.meta["source_centres"] = np.array([v.camera.centre for v in sources.views], np.float64)
     out.meta["target_centre"] = np.asarray(cam.centre, np.float64)

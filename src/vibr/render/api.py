@@ -200,7 +200,8 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         grad_consistency (grey levels / px; 0: the paper's gradient term), grad_coverage
         (samples; with the consistency weights, a gradient sample landing where fewer land
         weighs coverage / grad_coverage; 0: not), z_corr (the correlation of the views'
-        depth errors at a target pixel, [0, 1]; 0: independent, the paper's model). See
+        depth errors at a target pixel, [0, 1]; 0: independent, the paper's model; None:
+        the geometry's, ``samples.meta["z_corr"]``: PROXY_Z_CORR for a proxy, else 0). See
         :mod:`vibr.render.methods`.
 
     Returns

@@ -106,7 +106,7 @@ __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS
 DEFAULTS = dict(
     alpha=1.0, gamma=0.3, lam=0.6, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
-    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, z_corr=0.9, precond=True,
+    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, z_corr=None, precond=True,
     d_floor=0.05, hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
     robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0, grid_factor=1,
     grid_source_size=1.0,

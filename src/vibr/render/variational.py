@@ -195,10 +195,14 @@ class _ColourTerm:
         self.samples, self.p, self.sp, self.rho, self.times, self.keep = samples, p, sp, rho, times, keep
         self.sigma_z = p["sigma_z"] if geometric else 0.0
         self.prior = prior
+        # None: the geometry's (a proxy's views share its depth error; compute_samples says)
+        z = p.get("z_corr")
+        self.z_corr = float(samples.meta.get("z_corr", 0.0) if z is None else z) if geometric else 0.0
 
-    def __call__(self, u):
+    def __call__(self, u, z_corr=None):
         t0 = time.perf_counter()
         p = self.p
+        z_corr = self.z_corr if z_corr is None else z_corr
         rf = None
         if u is not None and p["robust"] != "none":
             rf = robust_factor(self.samples, u, self.sp, p["robust_c"], p["robust"])
@@ -206,7 +210,7 @@ class _ColourTerm:
             rf = self.prior if rf is None else rf * self.prior
         A, b, c, Wk = weighted_normal(self.samples, self.sp, u, p["sigma_s"], self.sigma_z, scale=float(p["scale"]),
                                       grad_max=p["grad_max"], wscale=1.0 / self.rho, factor=rf,
-                                      keep_weights=self.keep, z_corr=float(p.get("z_corr") or 0.0))
+                                      keep_weights=self.keep, z_corr=z_corr)
         self.times["weights"] += time.perf_counter() - t0
         return A, b, c, Wk
 
@@ -297,7 +301,8 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         if method.reweight or (o == 0 and p["robust"] != "none"):
             # savsr keeps its weights, but a robust loss reweights them once from the blend
             model = A = b = None  # the previous pass's stencils go before the new ones come
-            A, b, c, Wk = colour_term(u.transpose(1, 2, 0))
+            u_w = u  # the estimate the weights come from (fista copies it)
+            A, b, c, Wk = colour_term(u_w.transpose(1, 2, 0))
         elif o == 0:
             A, b, c, Wk = colour_term(None)  # deformation only
         t0 = time.perf_counter()
@@ -329,6 +334,12 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         from .uncertainty import variational_sigma
 
         t0 = time.perf_counter()
+        if colour_term.z_corr > 0 and method.reweight and Wk is not None:
+            # σ from the independent errors' weights: the shared-error weights count a first-order
+            # cancellation as certainty (docs/RENDERER.md, "Depth errors the views share")
+            A, b, c, Wk = colour_term(u_w.transpose(1, 2, 0), z_corr=0.0)
+            model = QuadraticModel(A, b, float(c), Ag, bg, float(cg), p["alpha"], gamma, lam_eff / s, s,
+                                   p["coupled_tv"], grad_scheme, tv_w)
         sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho_c,
                                 grad_density=rho,
                                 terms=uncertainty, view=samples.view)
