@@ -294,3 +294,42 @@ def test_z_corr_defaults_to_the_geometrys():
     img = render(src, tv.camera, "gradient", samples=S).image
     assert np.array_equal(img, render(src, tv.camera, "gradient", samples=S, z_corr=PROXY_Z_CORR).image)
     assert not np.array_equal(img, render(src, tv.camera, "gradient", samples=S, z_corr=0.0).image)
+
+
+def test_uncertainty_with_the_shared_depth_error_reads_the_independent_weights(monkeypatch):
+    """On a proxy (z_corr 0.9) the passes assemble the shared-error weights and σ reads the
+    independent errors' weights of the last estimate, assembled once more after the solve;
+    the image is the one rendered without σ, bit for bit, and σ is finite and positive where
+    the samples cover."""
+    import vibr.render.uncertainty as U
+    import vibr.render.variational as V
+    from vibr.geometry import compute_samples
+    from vibr.pipeline import prepare
+    from vibr.render import render
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("arc", n_views=6, width=48, height=48, seed=2)
+    src, tv = prepare(sc, sc.views[3].name, depth="planar")
+    S = compute_samples(src, tv.camera)
+    assert S.meta["z_corr"] > 0
+    plain = render(src, tv.camera, "gradient", samples=S)
+    calls, seen = [], []
+    wn, vs = V.weighted_normal, U.variational_sigma
+
+    def spy_wn(*a, **k):
+        out = wn(*a, **k)
+        calls.append((k.get("z_corr"), out[3]))
+        return out
+
+    def spy_vs(model, splat, weight, *a, **k):
+        seen.append(weight)
+        return vs(model, splat, weight, *a, **k)
+
+    monkeypatch.setattr(V, "weighted_normal", spy_wn)
+    monkeypatch.setattr(U, "variational_sigma", spy_vs)
+    r = render(src, tv.camera, "gradient", samples=S, uncertainty=True)
+    assert [z for z, _ in calls] == [S.meta["z_corr"]] * 2 + [0.0]
+    assert seen[0] is calls[-1][1]
+    assert np.array_equal(r.image, plain.image)
+    sig = r.uncertainty[r.coverage]
+    assert sig.size and np.all(np.isfinite(sig)) and np.all(sig > 0)
