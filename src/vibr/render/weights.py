@@ -129,8 +129,9 @@ def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, 
                          z_corr, sw, rf, out):
     """``out[0] = Bᵀ(P a)`` and ``out[1] = Bᵀ(P a²)`` (2, H, W), ``a`` each sample's
     :func:`misregistration` (∇u from ``g``) and ``P = 1/|det| · sw · rf / (sigma_s² + (1 − ρ) a²)``
-    its precision without the shared error (``sw``, ``rf`` empty: 1); row buckets of one
-    parity at a time, as :func:`vibr.render.operators.accumulate_bucket`."""
+    its precision without the shared error (:func:`sample_weight` at β = 0; ``sw``, ``rf``
+    empty: 1); row buckets of one parity at a time, as
+    :func:`vibr.render.operators.accumulate_bucket`."""
     n = fx.shape[0]
     W = out.shape[2]
     n_rows = starts.shape[0] - 1
@@ -147,16 +148,15 @@ def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, 
             for q in range(q0, q1):
                 i = sample_at(order, q)
                 gx, gy = grad_at(g, x0[i], y0[i], np.float64(fx[i]), np.float64(fy[i]))
-                s = sz[i] if use_map else sz_scalar
-                a = misregistration(np.float64(s), np.float64(dtau[i, 0]), np.float64(dtau[i, 1]), gx, gy)
-                d = np.float64(inv_det[i])
-                if not math.isfinite(d):
-                    d = 0.0
+                s = np.float64(sz[i] if use_map else sz_scalar)
+                tx, ty = np.float64(dtau[i, 0]), np.float64(dtau[i, 1])
+                a = misregistration(s, tx, ty, gx, gy)
+                pr = sample_weight(np.float64(inv_det[i]), np.inf, s, tx, ty, gx, gy, sigma_s2, z_corr, 0.0)
                 if use_sw:
-                    d *= sw[i]
+                    pr *= sw[i]
                 if use_rf:
-                    d *= rf[i]
-                v1 = d / (sigma_s2 + (1.0 - z_corr) * a * a) * a
+                    pr *= rf[i]
+                v1 = pr * a
                 v2 = v1 * a
                 w00, w01, w10, w11 = _row_coef(fx, fy, coef, use_coef, i)
                 x = bx0[i]
@@ -226,7 +226,7 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
     prior : (N,) array, optional
         Per-sample view prior (:func:`view_prior`), a factor of the weight.
     z_corr : float
-        Correlation ρ in [0, 1) of the views' depth errors at a target pixel (0: independent,
+        Correlation ρ in [0, 1] of the views' depth errors at a target pixel (0: independent,
         the paper's model; :func:`shared_error_beta`).
     factor : (N,) array, optional
         The weight's other factors (``meta["sample_weight"]`` excepted) that the shared
