@@ -65,7 +65,7 @@ def test_buehler_weights_with_views_tied_at_zero_penalty():
     a = np.zeros((5, 2))
     a[:, 1] = 1.0  # coverage 1, penalty sum 0
     out, srt = np.empty(5), np.empty(5)
-    top = _buehler_weights(a, 2, 1e-6, out, srt)
+    top = _buehler_weights(a, 2, 1e-6, 0.0, out, srt)
     assert np.isfinite(top) and np.allclose(out, top)
 
 

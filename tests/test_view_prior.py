@@ -180,7 +180,7 @@ def test_prepare_applies_the_fallback_when_asked():
     assert set(src.meta["fallback"]) == {v.name for v in src.views}
 
 
-def _reference_view_prior(S, Cs, Cu, k=4, beta_res=0.1, eps=1e-6):
+def _reference_view_prior(S, Cs, Cu, k=4, beta_res=0.1, eps=1e-6, tie=0.0):
     """The prior from ULR's own functions, view by view (a Splat per view)."""
     from vibr.render.operators import Splat
     from vibr.render.ulr import ulr_penalty, ulr_view_weights
@@ -197,7 +197,7 @@ def _reference_view_prior(S, Cs, Cu, k=4, beta_res=0.1, eps=1e-6):
             s = sp.adjoint(np.stack([pen[sel], np.ones(sel.size)], 1))
             ok = s[..., 1] > 1e-3
             pview[v][ok] = s[ok, 0] / s[ok, 1]
-    wt = ulr_view_weights(pview, k, eps)
+    wt = ulr_view_weights(pview, k, eps, tie)
     wt /= np.maximum(wt.max(0), 1e-300)[None]
     out = np.zeros(len(S), np.float32)
     for v, (sel, sp) in enumerate(splats):
@@ -215,11 +215,32 @@ def test_compiled_view_prior_equals_ulr_functions_view_by_view():
     src, tg = sc.split(3)
     S = compute_samples(src, tg.camera)
     Cs, Cu = S.meta["source_centres"], S.meta["target_centre"]
-    for k in (1, 4):
-        got = view_prior(S, Cs, Cu, k=k)
-        want = _reference_view_prior(S, Cs, Cu, k=k)
+    for k, tie in ((1, 0.0), (4, 0.0), (4, 1.25), (2, 3.0)):
+        got = view_prior(S, Cs, Cu, k=k, tie=tie)
+        want = _reference_view_prior(S, Cs, Cu, k=k, tie=tie)
         assert 0.05 < float(np.mean(got > 0.999)) < 0.95  # a real selection: some best, some not
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    assert np.any(view_prior(S, Cs, Cu, k=4, tie=1.25) != view_prior(S, Cs, Cu, k=4))  # the floor acts
+
+
+def test_views_that_tie_share_the_weight():
+    """Views about one baseline from the target (a grid's neighbours; penalties within 1 %)
+    and k = 4: Buehler's threshold (the largest inflated by 1 % where four land, the fifth
+    where five do) lies just above them, and the penalties' last digits weigh the worst of
+    four at about half the best's, of five at none; with ``tie`` 1.25 they all weigh within
+    7 % of each other. Views far from tying (a pair at three times the best penalty) are cut
+    as before, and ``tie`` ≤ 1 is Buehler's rule."""
+    from vibr.render.ulr import ulr_view_weights
+
+    for n in (4, 5):
+        near = np.array([1.0, 1.002, 1.006, 1.009, 1.012][:n])[:, None, None]
+        w0 = ulr_view_weights(near, k=4)[:, 0, 0]
+        assert w0[-1] < 0.55 * w0[0]
+        w = ulr_view_weights(near, k=4, tie=1.25)[:, 0, 0]
+        assert w.min() > 0.93 * w.max()
+    pairs = np.array([1.0, 1.02, 3.0, 3.1, 5.0])[:, None, None]  # the (k+1)-th: 5
+    np.testing.assert_array_equal(ulr_view_weights(pairs, k=4, tie=1.25), ulr_view_weights(pairs, k=4))
+    np.testing.assert_array_equal(ulr_view_weights(near, k=4, tie=1.0), ulr_view_weights(near, k=4))
 
 
 def test_cli_render_and_eval_take_the_fallback(tmp_path):

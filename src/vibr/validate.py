@@ -67,6 +67,8 @@ def check_render_params(p: dict) -> dict:
         _real("tol_outer", p["tol_outer"], lo=0.0, none_ok=True)
     if "sigma_z" in p:
         _real("sigma_z", p["sigma_z"], lo=0.0, lo_open=True, none_ok=True)
+    if "view_tie" in p:
+        _real("view_tie", p["view_tie"], lo=0.0)
     if "z_corr" in p:
         _real("z_corr", p["z_corr"], lo=0.0, hi=1.0, none_ok=True)
     if "hole_threshold" in p:

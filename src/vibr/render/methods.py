@@ -47,6 +47,9 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (:func:`vibr.render.weights.view_prior`: Buehler's angle + ``ulr_beta_res`` × resolution
   penalty, the ``view_k`` best views per pixel; docs/RENDERER.md "What ULR knows"); 0 weighs
   every view alike. Needs the camera centres (stored by :func:`vibr.geometry.compute_samples`).
+  ``view_tie = 1.1``: Buehler's threshold ``p_(k+1)`` is at least this times the pixel's best
+  penalty, so views that nearly tie with the best (a grid's four neighbours) share the
+  weight; ≤ 1: Buehler's threshold (docs/RENDERER.md "Views that tie").
 * ``precond = True``: variable-metric FISTA (:func:`vibr.render.solver.fista`, the authors'
   diagonal preconditioner, ``d_floor`` its floor); the same energy, reached in fewer
   iterations where the sample density is uneven (docs/RENDERER.md "Preconditioned solver").
@@ -108,7 +111,7 @@ DEFAULTS = dict(
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, z_corr=None, precond=True,
     d_floor=0.05, hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, lam_density=0.0, grid_factor=1,
+    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, view_tie=1.1, lam_density=0.0, grid_factor=1,
     grid_source_size=1.0,
 )
 

@@ -69,12 +69,17 @@ def ulr_penalty(samples: Samples, source_centres, target_centre, beta_res: float
     return np.arccos(cosang) + beta_res * np.maximum(0.0, na - nb) / np.maximum(nb, 1e-300)
 
 
-def ulr_view_weights(pview, k: int = 4, eps: float = 1e-6) -> np.ndarray:
+def ulr_view_weights(pview, k: int = 4, eps: float = 1e-6, tie: float = 0.0) -> np.ndarray:
     """Buehler's blending weights (V, H, W) float64 (not normalised) from the per-view
     penalties ``pview`` (V, H, W), +inf where a view does not land: the k best views get
     ``w = (1 − p / p_(k+1)) / p`` with ``p_(k+1)`` the (k+1)-th smallest penalty (where
     fewer than k+1 views land: the largest present penalty, inflated by 1 %; at least
-    ``eps``, so that views tied at zero penalty weigh alike), the others 0."""
+    ``eps``, so that views tied at zero penalty weigh alike), the others 0.
+
+    ``tie`` > 1 keeps the threshold at least ``tie`` times the best view's penalty, so that
+    views which nearly tie with the best share the weight instead of the order of their
+    penalties' last digits choosing among them (the view prior's default,
+    docs/RENDERER.md "Views that tie"); 0 (ULR as published) leaves Buehler's threshold."""
     V = pview.shape[0]
     order = np.sort(pview, axis=0)
     kk = min(k, V - 1)
@@ -84,6 +89,6 @@ def ulr_view_weights(pview, k: int = 4, eps: float = 1e-6) -> np.ndarray:
     last = np.take_along_axis(order, np.maximum(nfin - 1, 0)[None], 0)[0]
     thresh = np.where(np.isfinite(thresh), thresh, last * 1.01 + eps)
     # k+1 views tied at zero penalty (they share the target's centre): they weigh alike
-    thresh = np.maximum(thresh, eps)
+    thresh = np.maximum(np.maximum(thresh, tie * order[0]), eps)
     with np.errstate(invalid="ignore", divide="ignore"):  # absent views: inf penalties
         return np.where(np.isfinite(pview), np.maximum(0.0, 1.0 - pview / thresh[None]) / (pview + eps), 0.0)

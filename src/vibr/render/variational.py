@@ -180,7 +180,8 @@ def _view_prior(samples, p, centres, times, splat):
     if not p.get("view_k", 0) or centres[0] is None or centres[1] is None:
         return None
     t0 = time.perf_counter()
-    prior = view_prior(samples, centres[0], centres[1], int(p["view_k"]), p["ulr_beta_res"], splat=splat)
+    prior = view_prior(samples, centres[0], centres[1], int(p["view_k"]), p["ulr_beta_res"], splat=splat,
+                       tie=p["view_tie"])
     times["weights"] += time.perf_counter() - t0
     return prior
 

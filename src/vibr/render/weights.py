@@ -645,10 +645,11 @@ def _prior_splat(bx0, by0, fx, fy, coef, order, starts, view, X, Cs, Cu, beta_re
 
 
 @njit(cache=True)
-def _buehler_weights(a, k, eps, p, srt):
+def _buehler_weights(a, k, eps, tie, p, srt):
     """Buehler's weights of one pixel's views into ``p`` (V,) (:func:`vibr.render.ulr.ulr_view_weights`,
-    not normalised): from ``a`` (V, ≥2), each view's penalty sum and coverage; a view counts
-    where its coverage > 1e-3. ``srt`` (V,) scratch. Returns the largest weight."""
+    not normalised, ``tie`` its threshold's floor over the best penalty): from ``a`` (V, ≥2),
+    each view's penalty sum and coverage; a view counts where its coverage > 1e-3. ``srt``
+    (V,) scratch. Returns the largest weight."""
     V = p.shape[0]
     kk = min(k, V - 1)
     nfin = 0
@@ -666,7 +667,8 @@ def _buehler_weights(a, k, eps, p, srt):
     thresh = srt[kk] if V > k else np.inf
     if not math.isfinite(thresh):  # fewer than k+1 views: the largest present, inflated
         thresh = srt[max(nfin - 1, 0)] * 1.01 + eps
-    thresh = max(thresh, eps)  # k+1 views tied at zero penalty (at the target's centre): alike
+    # k+1 views tied at zero penalty (at the target's centre): alike
+    thresh = max(thresh, tie * srt[0], eps)
     top = 0.0
     for v in range(V):
         w = 0.0
@@ -678,9 +680,10 @@ def _buehler_weights(a, k, eps, p, srt):
 
 
 @njit(parallel=True, cache=True)
-def _prior_pixels(acc, k, eps, wt):
+def _prior_pixels(acc, k, eps, tie, wt):
     """Per pixel: each view's mean penalty (where its coverage > 1e-3), Buehler's weights of
-    the ``k`` best views (:func:`_buehler_weights`), divided by the largest.
+    the ``k`` best views (:func:`_buehler_weights`, ``tie`` the threshold's floor), divided by
+    the largest.
     ``acc`` (H, W, V, 2), ``wt`` (H, W, V); ``wt`` may be ``acc[..., 0]`` (a pixel's sums
     are read before its weights are written)."""
     H, W, V = wt.shape
@@ -688,7 +691,7 @@ def _prior_pixels(acc, k, eps, wt):
         p = np.empty(V, np.float64)
         srt = np.empty(V, np.float64)
         for x in range(W):
-            top = max(_buehler_weights(acc[y, x], k, eps, p, srt), 1e-300)
+            top = max(_buehler_weights(acc[y, x], k, eps, tie, p, srt), 1e-300)
             for v in range(V):
                 wt[y, x, v] = p[v] / top
 
@@ -707,7 +710,7 @@ def _ulr_pixels(acc, k, eps, img, cover, var):
         srt = np.empty(V, np.float64)
         for x in range(W):
             a = acc[y, x]
-            _buehler_weights(a, k, eps, p, srt)
+            _buehler_weights(a, k, eps, 0.0, p, srt)
             sw = 0.0
             s0 = s1 = s2 = 0.0
             cov = 0.0
@@ -754,7 +757,7 @@ def _prior_gather(bx0, by0, fx, fy, coef, view, wt, out):
 
 
 def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta_res: float = 0.1,
-               eps: float = 1e-6, splat=None) -> np.ndarray:
+               eps: float = 1e-6, splat=None, tie: float = 0.0) -> np.ndarray:
     """What ULR knows, as a per-sample factor of the data weight (N,) float32 in [0, 1].
 
     Buehler et al.'s penalty of each sample (:func:`vibr.render.ulr.ulr_penalty`: the angle
@@ -763,8 +766,10 @@ def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta
     and target pixel (splat ``B``: ``splat``, else the bilinear one of ``samples.xy``); per
     pixel the ``k`` best views get Buehler's weight ``(1 − p/p_(k+1)) / p``
     (:func:`vibr.render.ulr.ulr_view_weights`), divided by the pixel's largest, so the best
-    view has 1, the (k+1)-th and worse 0. A sample reads its view's map through ``B`` at its
-    landing point. Computed once per render (it does not depend on u); three compiled
+    view has 1, the (k+1)-th and worse 0; ``tie`` > 1 keeps ``p_(k+1)`` at least ``tie`` times
+    the pixel's best penalty, so that views which nearly tie with the best are not cut by the
+    order of their penalties (the render's ``view_tie``). A sample reads its view's map
+    through ``B`` at its landing point. Computed once per render (it does not depend on u); three compiled
     passes (penalty splat, per-pixel weights, gather)."""
     from .operators import Splat
 
@@ -779,7 +784,7 @@ def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta
     _prior_splat(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, sp.order, sp.starts, view, np.ascontiguousarray(samples.X),
                  Cs, Cu, float(beta_res), np.zeros((0, 3), np.float32), acc)
     wt = acc[..., 0]
-    _prior_pixels(acc, int(k), float(eps), wt)
+    _prior_pixels(acc, int(k), float(eps), float(tie), wt)
     out = np.empty(len(samples), np.float32)
     _prior_gather(sp.bx0, sp.by0, sp.fx, sp.fy, sp.coef, view, wt, out)
     return out
