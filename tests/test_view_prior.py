@@ -1,6 +1,8 @@
 """What ULR knows in the variational weights (issue 23): the view prior (angle and resolution
 penalties, the k best views per pixel) and the fallback proxy for unknown source depth."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -241,6 +243,11 @@ def test_views_that_tie_share_the_weight():
     pairs = np.array([1.0, 1.02, 3.0, 3.1, 5.0])[:, None, None]  # the (k+1)-th: 5
     np.testing.assert_array_equal(ulr_view_weights(pairs, k=4, tie=1.25), ulr_view_weights(pairs, k=4))
     np.testing.assert_array_equal(ulr_view_weights(near, k=4, tie=1.0), ulr_view_weights(near, k=4))
+    none = np.full((4, 1, 1), np.inf)  # a pixel no view lands on: no weight, no NaN, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for tie in (0.0, 1.1):
+            np.testing.assert_array_equal(ulr_view_weights(none, k=4, tie=tie), 0.0)
 
 
 def test_cli_render_and_eval_take_the_fallback(tmp_path):

@@ -89,6 +89,8 @@ def ulr_view_weights(pview, k: int = 4, eps: float = 1e-6, tie: float = 0.0) -> 
     last = np.take_along_axis(order, np.maximum(nfin - 1, 0)[None], 0)[0]
     thresh = np.where(np.isfinite(thresh), thresh, last * 1.01 + eps)
     # k+1 views tied at zero penalty (they share the target's centre): they weigh alike
-    thresh = np.maximum(np.maximum(thresh, tie * order[0]), eps)
+    if tie > 0:  # (0 · inf where no view lands would be NaN)
+        thresh = np.maximum(thresh, tie * order[0])
+    thresh = np.maximum(thresh, eps)
     with np.errstate(invalid="ignore", divide="ignore"):  # absent views: inf penalties
         return np.where(np.isfinite(pview), np.maximum(0.0, 1.0 - pview / thresh[None]) / (pview + eps), 0.0)

@@ -667,8 +667,9 @@ def _buehler_weights(a, k, eps, tie, p, srt):
     thresh = srt[kk] if V > k else np.inf
     if not math.isfinite(thresh):  # fewer than k+1 views: the largest present, inflated
         thresh = srt[max(nfin - 1, 0)] * 1.01 + eps
-    # k+1 views tied at zero penalty (at the target's centre): alike
-    thresh = max(thresh, tie * srt[0], eps)
+    if tie > 0.0:  # (0 · inf where no view lands would be NaN)
+        thresh = max(thresh, tie * srt[0])
+    thresh = max(thresh, eps)  # k+1 views tied at zero penalty (at the target's centre): alike
     top = 0.0
     for v in range(V):
         w = 0.0
