@@ -87,10 +87,13 @@ def run_case(cache, case) -> dict:
             "proxy": bool(smp.meta.get("z_corr"))}
 
 
-def main(argv=None) -> None:
+def main(argv=None, run_case=run_case, summary=None, doc=__doc__) -> None:
+    """Run ``run_case`` over :func:`case_list` (``--workers`` processes), print the per-case
+    table and ``summary(reps, labels)`` (this benchmark's, by default); ``view_prior_tie.py``
+    runs its own cases through it."""
     from vibr.executor import run_tasks
 
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
     ap.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes")
     ap.add_argument("--json", help="write the per-case results here")
@@ -104,7 +107,7 @@ def main(argv=None) -> None:
     print("| set | case | split | " + " | ".join(labs) + " |\n|---|---|---|" + "---|" * len(labs))
     for r in reps:
         print(f"| {r['set']} | {r['name']} | {r['split']} | " + " | ".join(f"{r['psnr'][k]:.2f}" for k in labs) + " |")
-    _summary(reps, labs)
+    (summary or _summary)(reps, labs)
     print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
 
 

@@ -23,17 +23,13 @@ within :data:`TIE` dB of it the smallest (the nearest Buehler's rule), reported 
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 import shared_depth_error as Z  # noqa: E402
-import sweep_defaults as S  # noqa: E402
 
 VALUES = (0.0, 1.1, 1.25, 1.5, 2.0)
 TIE = 0.005
@@ -51,27 +47,6 @@ def run_case(cache, case) -> dict:
     res.update({f"tie {t:g}": P("gradient", view_tie=t) for t in VALUES})
     res["default"] = P("gradient")
     return {"name": case["name"], "split": case["split"], "set": case["set"], "psnr": res}
-
-
-def main(argv=None) -> None:
-    from vibr.executor import run_tasks
-
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
-    ap.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes")
-    ap.add_argument("--json", help="write the per-case results here")
-    a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    reps = run_tasks(run_case, Z.case_list(), setup=S.SceneCache, setup_args=(str(S.data_dir(a.data)),),
-                     executor=a.workers, desc="cases")
-    if a.json:
-        Path(a.json).write_text(json.dumps(reps, indent=1))
-    labs = list(reps[0]["psnr"])
-    print("| set | case | split | " + " | ".join(labs) + " |\n|---|---|---|" + "---|" * len(labs))
-    for r in reps:
-        print(f"| {r['set']} | {r['name']} | {r['split']} | " + " | ".join(f"{r['psnr'][k]:.2f}" for k in labs) + " |")
-    _summary(reps, labs)
-    print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
 
 
 def _summary(reps, labs):
@@ -96,4 +71,4 @@ def _summary(reps, labs):
 
 
 if __name__ == "__main__":
-    main()
+    Z.main(run_case=run_case, summary=_summary, doc=__doc__)
