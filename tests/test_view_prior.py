@@ -335,3 +335,13 @@ def test_views_the_prior_leaves_out_do_not_change_the_render():
     d = np.abs(imgs[0] - imgs[1]).max(-1)[4:-4, 4:-4] * 255  # grey levels
     assert np.median(d) < 0.01
     assert np.mean(d > 0.5) < 0.05
+
+
+def test_view_tie_is_validated():
+    """view_tie is a ratio of penalties: a finite number ≥ 0, refused in one line otherwise."""
+    from vibr.render.methods import method_params
+
+    for bad in (-1.0, float("inf"), "1.1"):
+        with pytest.raises(VibrInputError, match="view_tie"):
+            method_params("gradient", view_tie=bad)
+    assert method_params("gradient")["view_tie"] == 1.1
