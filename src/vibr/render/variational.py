@@ -290,11 +290,15 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     lam_eff = p["lam"] / p["grid_factor"] * (p["lam_density"] / view_density(rho_c, samples)
                                             if p.get("lam_density") else 1.0)
     prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=tv_w)
+    grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
 
-    def make_model(A, b, c, Ag, bg, cg):
+    def make_model(A, b, c, Wk):
+        """The energy of one pass from the colour term's stencils and weights ``Wk`` (the
+        gradient term's stencils read them with grad_weighting W)."""
+        Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
         return QuadraticModel(A, b, float(c), Ag, bg, float(cg), p["alpha"], gamma, lam_eff / s, s, p["coupled_tv"],
                               grad_scheme, tv_w)
-    grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
+
     power_state: dict = {}
     n_iter = n_power = 0
     passes = range(n_outer)
@@ -311,8 +315,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         elif o == 0:
             A, b, c, Wk = colour_term(None)  # deformation only
         t0 = time.perf_counter()
-        Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
-        model = make_model(A, b, c, Ag, bg, cg)
+        model = make_model(A, b, c, Wk)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         outer.append(len(energy))
@@ -342,7 +345,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
             # σ from the independent errors' weights: the shared-error weights count a first-order
             # cancellation as certainty (docs/RENDERER.md, "Depth errors the views share")
             A, b, c, Wk = colour_term(u_w.transpose(1, 2, 0), z_corr=0.0)
-            model = make_model(A, b, c, Ag, bg, cg)
+            model = make_model(A, b, c, Wk)
         sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho_c,
                                 grad_density=rho,
                                 terms=uncertainty, view=samples.view)
