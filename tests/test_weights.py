@@ -194,6 +194,11 @@ def test_shared_depth_error_weights_are_the_gls_weights():
         np.testing.assert_allclose(w, want, rtol=1e-5)
         if rho == 0:
             np.testing.assert_allclose(w, inv_det / (s2 + a ** 2), rtol=1e-5)
+    # a cap on 1/|det| is the d_k of Σ too, in the shared error's sums as in the weights
+    d = np.minimum(inv_det, 1.2)
+    cov = np.diag((s2 + 0.1 * a ** 2) / d) + 0.9 * np.outer(a, a)
+    w = geometric_weights(S, u, sigma_s=1.5, grad_max=None, z_corr=0.9, inv_det_cap=1.2)
+    np.testing.assert_allclose(w, np.linalg.solve(cov, np.ones(3)), rtol=1e-5)
 
 
 def test_shared_depth_error_balances_opposite_views():
@@ -333,3 +338,15 @@ def test_uncertainty_with_the_shared_depth_error_reads_the_independent_weights(m
     assert np.array_equal(r.image, plain.image)
     sig = r.uncertainty[r.coverage]
     assert sig.size and np.all(np.isfinite(sig)) and np.all(sig > 0)
+    # with grad_weighting W the gradient term's stencils of σ's model read those weights too
+    calls.clear()
+    seen.clear()
+    st, grads = V._GradientTerm.stencils, []
+
+    def spy_st(self, Wk):
+        grads.append(Wk)
+        return st(self, Wk)
+
+    monkeypatch.setattr(V._GradientTerm, "stencils", spy_st)
+    render(src, tv.camera, "gradient", samples=S, uncertainty=True, grad_weighting="W")
+    assert grads[-1] is calls[-1][1] is seen[0] and calls[-1][0] == 0.0

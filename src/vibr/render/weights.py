@@ -125,10 +125,10 @@ def _weights_kernel(x0, y0, fx, fy, g, dtau, sz, sz_scalar, inv_det, cap, sigma_
 
 
 @njit(parallel=True, cache=True)
-def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_scalar, dtau, g, sigma_s2,
+def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, cap, sz, sz_scalar, dtau, g, sigma_s2,
                          z_corr, sw, rf, out):
     """``out[0] = Bᵀ(P a)`` and ``out[1] = Bᵀ(P a²)`` (2, H, W), ``a`` each sample's
-    :func:`misregistration` (∇u from ``g``) and ``P = 1/|det| · sw · rf / (sigma_s² + (1 − ρ) a²)``
+    :func:`misregistration` (∇u from ``g``) and ``P = min(1/|det|, cap) · sw · rf / (sigma_s² + (1 − ρ) a²)``
     its precision without the shared error (:func:`sample_weight` at β = 0; ``sw``, ``rf``
     empty: 1); row buckets of one parity at a time, as
     :func:`vibr.render.operators.accumulate_bucket`."""
@@ -151,7 +151,7 @@ def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, 
                 s = np.float64(sz[i] if use_map else sz_scalar)
                 tx, ty = np.float64(dtau[i, 0]), np.float64(dtau[i, 1])
                 a = misregistration(s, tx, ty, gx, gy)
-                pr = sample_weight(np.float64(inv_det[i]), np.inf, s, tx, ty, gx, gy, sigma_s2, z_corr, 0.0)
+                pr = sample_weight(np.float64(inv_det[i]), cap, s, tx, ty, gx, gy, sigma_s2, z_corr, 0.0)
                 if use_sw:
                     pr *= sw[i]
                 if use_rf:
@@ -174,7 +174,8 @@ def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, 
                     out[1, r + ra, j] += la[ra, j, 1]
 
 
-def shared_error_beta(samples: Samples, splat, g, sigma_z, sigma_s: float, z_corr: float, factor=None) -> np.ndarray:
+def shared_error_beta(samples: Samples, splat, g, sigma_z, sigma_s: float, z_corr: float, factor=None,
+                      inv_det_cap: float | None = None) -> np.ndarray:
     """The shared depth error's correction per target pixel (docs/RENDERER.md, "Depth errors
     the views share"):
 
@@ -182,7 +183,8 @@ def shared_error_beta(samples: Samples, splat, g, sigma_z, sigma_s: float, z_cor
 
     (H, W) float32, ``a_m`` the :func:`misregistration` (∇u from ``g`` (H, W, 2), the
     weights' gradient), ``ρ`` = ``z_corr``, ``f_m`` = ``factor`` (N,) times
-    ``meta["sample_weight"]`` (None: 1). A sample's weight is then its
+    ``meta["sample_weight"]`` (None: 1), ``1/|det|`` capped as the weights cap it
+    (``inv_det_cap``, None: not). A sample's weight is then its
     :func:`sample_weight` with ``β`` read at it through B: the generalised least-squares
     weights of samples whose errors ``a_m δ`` share one depth error δ with correlation ρ.
     One pass over the samples."""
@@ -190,7 +192,8 @@ def shared_error_beta(samples: Samples, splat, g, sigma_z, sigma_s: float, z_cor
     sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z)
     out = np.zeros((2, H, W), np.float64)
     _shared_error_kernel(splat.x0, splat.y0, splat.fx, splat.fy, splat.bx0, splat.coef, splat.order, splat.starts,
-                         np.asarray(samples.inv_det), sz if sz.ndim == 1 else np.zeros(0),
+                         np.asarray(samples.inv_det), np.inf if inv_det_cap is None else float(inv_det_cap),
+                         sz if sz.ndim == 1 else np.zeros(0),
                          float(sz) if sz.ndim == 0 else 0.0, np.asarray(samples.dtau_dz), np.ascontiguousarray(g),
                          float(sigma_s) ** 2, float(z_corr), _opt(samples.meta.get("sample_weight")), _opt(factor), out)
     return (z_corr * out[0] / (1.0 + z_corr * out[1])).astype(np.float32)
@@ -254,7 +257,8 @@ def _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_ca
     out = np.empty(len(samples), dtype)
     sz_map = sz if sz.ndim == 1 else np.zeros(0)
     sz_scalar = float(sz) if sz.ndim == 0 else 0.0
-    beta = (shared_error_beta(samples, sp, g, sigma_z, sigma_s, z_corr, prior if factor is None else factor)
+    beta = (shared_error_beta(samples, sp, g, sigma_z, sigma_s, z_corr, prior if factor is None else factor,
+                              inv_det_cap)
             if z_corr > 0 else np.zeros((0, 0), np.float32))
     _weights_kernel(sp.x0, sp.y0, sp.fx, sp.fy, np.ascontiguousarray(g), np.asarray(samples.dtau_dz),
                     sz_map, sz_scalar, np.asarray(samples.inv_det),
