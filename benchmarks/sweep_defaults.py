@@ -11,7 +11,10 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
   grid, arc, free and handheld layouts from the others;
 * every other view a source, as ``vibr eval`` renders by default: cotton's centre from its
   80 other views (ground-truth depth) and templeSR0004 from the 15 others (estimated depth,
-  the fallback proxy where it is unknown).
+  the fallback proxy where it is unknown);
+* few views (:func:`sparse_cases`, since 2026-11-28): the middle of 7 synthetic views of
+  256×192 (grid, arc, free, handheld layouts with exact depth; a pan turned on the spot,
+  without depth) from its 2 and its 4 best views, seeds 0 and 1.
 
 Estimated depth is computed from the sources only (the target never takes part) and cached
 on disk (``vibr.depthcache``, default ~/.cache/vibr): a second run is rendering only.
@@ -25,7 +28,9 @@ gamma ∈ {0.1, 0.25, 0.5}, lam 0.1 and at gamma 0.1, lam 0.3; with ULR's view p
 {0.1, 0.2, 0.3} × {0.3, 0.6, 1}, the same nine with the gradient term's consistency weights
 (``grad_consistency=24``, with the library's ``grad_coverage``) and (0.2, 0.6) with the
 scales 12 and 48 (every other setting: ``grad_consistency=0``, which leaves ``grad_coverage``
-no weight to scale); and ``gamma="auto", lam="auto"`` (``vibr.autotune``:
+no weight to scale); with the consistency weights, ``lam_density=3`` (lam against the data's
+sum) and ``hole_fill="push-pull"`` at gamma × lam = {0.2, 0.3} × {0.6, 0.8, 1} (D; every other
+setting: ``lam_density=0``, ``hole_fill="solve"``); and ``gamma="auto", lam="auto"`` (``vibr.autotune``:
 leave-one-source-out on the sources, never the target image), whose tuning time is measured
 against the median full-size render time of the target over the case's gradient settings
 (same process, same minutes: the machine's load hits both alike).
@@ -34,7 +39,7 @@ Metrics: PSNR over all pixels and over the covered pixels (those every setting o
 reconstructed), 2-pixel border excluded. The held-out split is fixed before any number is
 seen: within each family (cotton gt, cotton estimated, cotton planar, fountain, temple +
 synthetic, all views) the cases alternate, in the order listed above, between "choose" (1st, 3rd, ...)
-and "report" (2nd, 4th, ...). The default is the setting with the best mean all-pixel PSNR
+and "report" (2nd, 4th, ...); in the few-view family seed 0 is "choose", seed 1 "report". The default is the setting with the best mean all-pixel PSNR
 over the "choose" cases; it is reported on the "report" cases beside BVS, ULR, the auto
 weights and the per-case oracle (the best setting of the sweep for that case).
 
@@ -72,11 +77,17 @@ BORDER = 2
 
 #: every gradient setting pins what the library's defaults may change
 BASE = {"tv_weighting": "uniform", "view_k": 0, "precond": False, "grad_weighting": "visibility",
-        "grad_consistency": 0.0}
+        "grad_consistency": 0.0, "lam_density": 0.0, "hole_fill": "solve"}
+#: the settings labelled D: lam against the data's sum (``lam_density``, the reference density in
+#: views) and the holes filled by push-pull of the solved image, over gamma × lam
+LAM_DENSITY = 3.0
+D_GAMMAS = (0.2, 0.3)
+D_LAMS = (0.6, 0.8, 1.0)
 #: the gradient term's consistency scale of the settings labelled C (grey levels / px), and the
 #: other scales tried at the former default's (gamma, lam)
 CONSISTENCY = 24.0
 CONSISTENCY_OTHERS = (12.0, 48.0)
+SPARSE_LAYOUTS = ("grid", "arc", "free", "handheld", "pan")
 
 
 def settings():
@@ -112,6 +123,11 @@ def _settings():
             for g in PV4_GAMMAS for l in PV4_LAMS]
     out += [(f"γ0.2 λ0.6 P V4 C{c:g}", "gradient", {"gamma": 0.2, "lam": 0.6, **pc, "grad_consistency": c})
             for c in CONSISTENCY_OTHERS]
+    # the TV weight against the data's sum and the holes filled by push-pull (docs/RENDERER.md,
+    # "Few views: lam against the data's sum, holes by push-pull")
+    out += [(f"γ{g:g} λ{l:g} P V4 C D", "gradient", {"gamma": g, "lam": l, **pc, "grad_consistency": CONSISTENCY,
+                                                     "lam_density": LAM_DENSITY, "hole_fill": "push-pull"})
+            for g in D_GAMMAS for l in D_LAMS]
     return out
 
 
@@ -134,6 +150,14 @@ def case_list():
     return out
 
 
+def sparse_cases():
+    """The sweep's few-view family (not in :func:`case_list`, which other benchmarks share): the
+    middle of 7 synthetic views of 256×192 from its 2 or 4 best, seed 0 *choose*, seed 1 *report*."""
+    return [dict(kind="sparse", layout=lo, n=n, seed=sd, name=f"sparse {lo} from {n} seed {sd}", family="sparse",
+                 split="choose" if sd == 0 else "report")
+            for lo in SPARSE_LAYOUTS for n in (2, 4) for sd in (0, 1)]
+
+
 def _sources(cache, case):
     """(sources with depth, target View) of a case; estimated depth through the depth cache."""
     from vibr.depthcache import scene_with_depth
@@ -145,6 +169,13 @@ def _sources(cache, case):
 
         sc = make_scene(case["layout"], width=128, height=128)
         return sc.split(len(sc) // 2)
+    if case["kind"] == "sparse":
+        from vibr.synthetic import make_scene
+
+        sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=case["seed"])
+        if case["layout"] == "pan":  # a pan has no depth: the sphere round the shared centre
+            sc = sc.replace(views=[v.replace(depth=None, sigma_z=None) for v in sc.views])
+        return prepare(sc, 3, n_views=case["n"])
     if case["kind"] == "cotton":
         sc = cache.get("hci2016_cotton", 1.0)
         tname = "input_Cam040"
@@ -244,14 +275,16 @@ def table(reps, chosen):
          "Labels: γ gamma, λ lam, TVs `tv_weighting=\"samples\"` (else uniform), V4 `view_k=4` "
          "(ULR's view prior), W `grad_weighting=\"W\"`, P `precond=True` (variable-metric FISTA), "
          f"C `grad_consistency={CONSISTENCY:g}` with the library's `grad_coverage` "
-         f"{DEFAULTS['grad_coverage']:g} (C12, C48: other scales; without C: 0). "
+         f"{DEFAULTS['grad_coverage']:g} (C12, C48: other scales; without C: 0), "
+         f"D `lam_density={LAM_DENSITY:g}` and `hole_fill=\"push-pull\"` (without D: 0 and \"solve\"). "
          "PSNR dB over all pixels / over the covered pixels (2-px border excluded). *oracle*: the best "
          "gradient setting of the sweep for that case (all pixels). *auto*: `gamma=\"auto\", lam=\"auto\"` "
          "(its choice; *tune / render*: its tuning time over the median full-size render time of the case's gradient settings).", "",
          f"Command: `python3 benchmarks/sweep_defaults.py --workers 2 --write-docs`; code: "
          f"{', '.join(sorted({r.get('commit', '?') for r in reps}))}; {len(reps)} cases. Split fixed in "
          "advance: within each family (cotton gt / estimated / planar, fountain, temple + synthetic, all views) "
-         "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*. Estimated depth: from the "
+         "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*; few views (sparse): seed 0 *choose*, seed 1 *report*. "
+         "Issue 23's targets below are over its own cases (not the few-view family). Estimated depth: from the "
          "sources only, cached (`vibr.depthcache`).", "",
          "| case | split | ULR | BVS | chosen | auto (γ, λ) | oracle (setting) | chosen − BVS | auto − oracle | tune / render |",
          "|---|---|---|---|---|---|---|---|---|---|"]
@@ -297,7 +330,7 @@ def table(reps, chosen):
 def _targets(reps, k, labs):
     """Issue 23's done-when checks for setting ``k``, as text."""
     out = []
-    R = {r["name"]: r["results"] for r in reps}
+    R = {r["name"]: r["results"] for r in reps if r["family"] != "sparse"}  # the issue's cases
     for n in ("cotton gt s2", "cotton gt s4"):
         if n in R:
             d = R[n][k]["all"] - R[n]["BVS"]["all"]
@@ -342,7 +375,7 @@ def main(argv=None):
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    cases = [c for c in case_list() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
+    cases = [c for c in case_list() + sparse_cases() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     fname = lambda c: out / (c["name"].replace(" ", "_") + ".json")  # noqa: E731
     if a.report_only:
         reps = [json.loads(fname(c).read_text()) for c in cases if fname(c).is_file()]

@@ -20,19 +20,21 @@ def arc():
 
 
 def test_lam_density_scales_lam_by_the_reference_over_the_density(arc):
-    """rho_ref = twice the density in views gives the render of lam × 2, bit for bit; 0, the
-    default, leaves lam alone."""
+    """rho_ref = twice the density in views gives the render of lam × 2, bit for bit; 0 leaves
+    lam alone; the default is 3 for gradient, 0 for the baselines."""
     src, tv = arc
-    base = render(src, tv.camera, lam=0.6)
+    base = render(src, tv.camera, lam=0.6, lam_density=0.0)
     rho_c = base.params["colour_density"]
     assert 1.0 < rho_c < 5.0
     views = view_density(rho_c, src_samples(src, tv))
     assert 0.5 * rho_c < views < 2.0 * rho_c  # sources and target of one resolution
     doubled = render(src, tv.camera, lam=0.6, lam_density=2.0 * views)
-    assert np.array_equal(doubled.image, render(src, tv.camera, lam=1.2).image)
+    assert np.array_equal(doubled.image, render(src, tv.camera, lam=1.2, lam_density=0.0).image)
     assert not np.array_equal(doubled.image, base.image)
-    assert np.array_equal(render(src, tv.camera, lam=0.6, lam_density=0.0).image, base.image)
-    assert method_params("gradient")["lam_density"] == 0.0
+    at_views = render(src, tv.camera, lam=0.6, lam_density=views)  # the reference density itself
+    assert np.allclose(at_views.image, base.image, atol=1e-6)
+    assert method_params("gradient")["lam_density"] == 3.0
+    assert method_params("bvs")["lam_density"] == method_params("savsr")["lam_density"] == 0.0
 
 
 def src_samples(src, tv):
@@ -53,3 +55,19 @@ def test_the_density_in_views_counts_finer_sources_once():
 def test_lam_density_must_be_non_negative(bad):
     with pytest.raises(VibrInputError, match="lam_density"):
         method_params("gradient", lam_density=bad)
+
+
+def test_fewer_views_are_smoothed_more(arc):
+    """With the default the TV weight grows as the views that weigh a pixel fall: the same
+    target from 2 of its views gets lam × 3 / (their density), more than from 4."""
+    from vibr.render.variational import view_density as vd
+
+    src, tv = arc
+    two = src.subset([0, 1])
+    dens = []
+    for s in (src, two):
+        r = render(s, tv.camera, lam=0.6, lam_density=0.0)
+        dens.append(vd(r.params["colour_density"], src_samples(s, tv)))
+        scaled = render(s, tv.camera, lam=0.6)
+        assert np.array_equal(scaled.image, render(s, tv.camera, lam=0.6 * 3.0 / dens[-1], lam_density=0.0).image)
+    assert dens[1] < dens[0]

@@ -13,16 +13,19 @@ gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term,
 Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/METHOD.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
-* ``gamma = 0.3`` gradient-term weight for ``gradient`` and ``lam = 0.6`` TV weight (grey
-  levels of 255: a 1-grey-level step costs 0.6 per pixel of edge), with the uniform TV
+* ``gamma = 0.3`` gradient-term weight for ``gradient`` and ``lam = 0.8`` TV weight (grey
+  levels of 255: a 1-grey-level step costs 0.8 per pixel of edge where 3 views weigh a pixel,
+  ``lam_density`` below), with the uniform TV
   (eq. energy_final; vibr's units: forward differences, docs/RENDERER.md "One image
   gradient"; the paper's γ is reached through ``preset="paper"``), the view prior
-  (``view_k = 4``), the gradient term's consistency weights (``grad_consistency = 24``)
+  (``view_k = 4``), the gradient term's consistency weights (``grad_consistency = 24``),
+  the TV weight against the data's sum (``lam_density = 3``), the holes filled by push–pull
   and the preconditioned solver (``precond = True``): chosen together by
   ``benchmarks/sweep_defaults.py`` (issue 23), the best mean all-pixel PSNR over the
   *choose* half of a sweep across cotton, fountain, temple and the synthetic scenes, reported
   on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs,
-  which keep their published form (``view_k = 0``, ``precond = False``) unless given.
+  which keep their published form (``view_k = 0``, ``precond = False``, ``lam_density = 0``)
+  unless given.
   With the view prior the colour term is divided by the prior-weighted density
   (:func:`vibr.render.variational.colour_density`), the gradient term by the plain one.
   ``"auto"`` for either: chosen per scene by leave-one-source-out (:mod:`vibr.autotune`).
@@ -57,14 +60,13 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   fraction (the authors' rule); ``tol_outer = None``: the passes before the last stop at
   ``tol`` too. A looser ``tol_outer`` saves iterations at the same mean PSNR but moves single
   scenes' results, so it is not the default (docs/RENDERER.md, "Solver settings").
-* ``lam_density = 0``: lam as it is, against data terms divided by their density rho (so
-  that lam means the same whatever the number of views). A number ``rho_ref`` scales lam by
-  ``rho_ref`` over the colour term's density counted in views
-  (:func:`vibr.render.variational.view_density`): the TV weight of a MAP estimate, constant
-  against the data's sum, so fewer views get more smoothing. Measured, not the default: 3
-  gains 0.1 dB on the sweep's held-out half but loses 0.4–0.8 dB where sources finer than
-  the target are rendered with the bilinear PSF (docs/RENDERER.md, "lam and the sample
-  density").
+* ``lam_density = 3`` (views): lam is the TV weight where the colour term's density counted
+  in views (:func:`vibr.render.variational.view_density`) is 3, and scales by 3 over it
+  elsewhere: the TV weight of a MAP estimate, constant against the data's *sum*, so a pixel
+  that two views see is smoothed more than one that eight see. 0: lam as it is, against
+  data terms divided by their density rho (the paper's normalisation; bvs and savsr keep
+  it). Chosen with lam by the cross-scene sweep, its few-view cases included (docs/RENDERER.md,
+  "Few views").
 * ``grid_factor = 1``: the samples lie on a grid this many times finer than the target
   (set by :func:`vibr.render.render` when it supersamples, :func:`vibr.render.fine_grid`);
   lam is divided by it, since the ``k × k`` average that follows smooths too (measured on
@@ -88,6 +90,11 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   sample's own and confirms nothing, and the term's integrated gradients there, with almost
   no colour data to hold them, drift (docs/RENDERER.md, "The gradient term where few samples
   land"). 0: no such factor.
+* ``hole_fill = "push-pull"``: the holes (pixels no sample covers) take the push–pull fill
+  of the solved image's covered pixels, as ULR's blend and the initial image fill theirs;
+  ``"solve"``: the energy's minimiser there too, where only TV and the gradient term act
+  (the gradient samples at a hole's edge, integrated into it, streak it; docs/RENDERER.md,
+  "Holes").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
@@ -101,19 +108,22 @@ import numpy as np
 
 from .operators import PSFS as _PSFS
 
-__all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "get_method",
+__all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "HOLE_FILLS", "get_method",
            "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields",
            "with_sample_fields", "wants_fine_sources"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
-    alpha=1.0, gamma=0.3, lam=0.6, sigma_s=1.0, sigma_z=None, scale=255.0,
+    alpha=1.0, gamma=0.3, lam=0.8, sigma_s=1.0, sigma_z=None, scale=255.0,
     n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
     grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, z_corr=None, precond=True,
     d_floor=0.05, hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, view_tie=1.1, lam_density=0.0, grid_factor=1,
-    grid_source_size=1.0,
+    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, view_tie=1.1, lam_density=3.0, grid_factor=1,
+    grid_source_size=1.0, hole_fill="push-pull",
 )
+
+#: How the variational methods fill the holes (pixels no sample covers, ``Bᵀ1 < hole_threshold``).
+HOLE_FILLS = ("push-pull", "solve")
 
 GRAD_WEIGHTINGS = ("visibility", "none", "W")
 
@@ -221,7 +231,7 @@ register_method(Method("ulr", "Unstructured Lumigraph Rendering (direct blend, n
 # the baselines keep their published form (no view prior, plain FISTA) unless asked, and
 # the TV weight they had before the gradient method's defaults moved with the prior-weighted
 # density (docs/RENDERER.md, "Density with the view prior")
-_PUBLISHED = dict(view_k=0, precond=False, lam=0.3, z_corr=0.0)
+_PUBLISHED = dict(view_k=0, precond=False, lam=0.3, z_corr=0.0, lam_density=0.0)
 register_method(Method("savsr", "Wanner & Goldluecke 2012: deformation weights, one solve",
                        reweight=False, geometric=False, overrides=dict(gamma=0.0, n_outer=1, **_PUBLISHED)))
 register_method(Method("bvs", "Pujades et al. 2014: Bayesian weights re-estimated from u",
@@ -321,6 +331,8 @@ def method_params(method: str, preset: str | None = None, **params) -> dict:
 
     if p["tv_weighting"] not in TV_WEIGHTINGS:
         raise VibrInputError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {p['tv_weighting']!r}")
+    if p["hole_fill"] not in HOLE_FILLS:
+        raise VibrInputError(f"hole_fill must be one of {HOLE_FILLS}, got {p['hole_fill']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
     from ..validate import check_render_params

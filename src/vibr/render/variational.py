@@ -6,6 +6,7 @@
     colour_density    rho_c, rho weighted by the view prior: the colour term's divisor
     view_density      rho_c counted in views (lam_density's divisor)
     initial_image     the W-weighted blend of the samples, holes filled by push–pull
+    fill_holes        the solved image's holes filled by push–pull of its covered pixels
     assemble_model    the quadratic model of one outer pass (colour and gradient stencils)
     solve_variational the outer passes: re-estimate the weights from u, assemble, FISTA
 
@@ -30,7 +31,7 @@ from .result import RenderResult
 from .solver import QuadraticModel, fista
 from .tv import TVProx
 
-__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "colour_density", "view_density", "initial_image", "solve_variational",
+__all__ = ["SplatCoverage", "splat_coverage", "sample_density", "colour_density", "view_density", "initial_image", "fill_holes", "solve_variational",
            "TV_WEIGHTINGS", "tv_weight_map"]
 
 logger = logging.getLogger(__name__)
@@ -161,6 +162,16 @@ def colour_density(rho: float, prior, normalise: bool) -> float:
     if prior is None or not normalise or len(prior) == 0:
         return rho
     return max(rho * float(np.mean(prior, dtype=np.float64)), 1e-12)
+
+
+def fill_holes(img: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+    """``img`` with its holes (``~coverage``) replaced by the push–pull fill of its covered
+    pixels (:func:`vibr.render.pushpull.push_pull` with weight 1 there, 0 in the holes);
+    ``img`` itself where nothing or everything is covered."""
+    if coverage.all() or not coverage.any():
+        return img
+    m = coverage.astype(np.float32)
+    return np.where(coverage[..., None], img, push_pull(img * m[..., None], m)).astype(np.float32)
 
 
 def initial_image(cov: SplatCoverage) -> np.ndarray:
@@ -350,8 +361,10 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
                                 grad_density=rho,
                                 terms=uncertainty, view=samples.view)
         times["uncertainty"] = time.perf_counter() - t0
-    times["total"] = time.perf_counter() - t_all
     img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
+    if p["hole_fill"] == "push-pull":
+        img = fill_holes(img, cov.coverage)
+    times["total"] = time.perf_counter() - t_all
     p = dict(p, density=rho, colour_density=rho_c, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
     return RenderResult(img, cov.coverage, energy, terms, outer, times, method.name, p, len(samples),
                         init=init, iterations=n_iter, power_iterations=n_power, uncertainty=sig)
