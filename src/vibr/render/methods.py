@@ -276,8 +276,9 @@ def paper_params(params: dict) -> dict:
     ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
     weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``), the spatially
     varying TV (``tv_weighting="samples"``), no view prior, every gradient sample at full
-    weight (``grad_consistency=0``), independent depth errors (``z_corr=0``) and plain FISTA
-    unless given.
+    weight (``grad_consistency=0``), independent depth errors (``z_corr=0``), lam against the
+    per-pixel normalised data term (``lam_density=0``), the energy's minimiser in the holes too
+    (``hole_fill="solve"``) and plain FISTA unless given.
     ``params`` holds the paper's alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any
     other vibr parameter."""
     out = dict(params)
@@ -289,7 +290,8 @@ def paper_params(params: dict) -> dict:
     out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
                lam=paper["lam"] * PAPER_LAM_FACTOR)
     for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples"), ("view_k", 0), ("precond", False),
-                 ("grad_consistency", 0.0), ("grad_coverage", 0.0), ("z_corr", 0.0)):
+                 ("grad_consistency", 0.0), ("grad_coverage", 0.0), ("z_corr", 0.0), ("lam_density", 0.0),
+                 ("hole_fill", "solve")):
         if out.get(k) is None:
             out[k] = v
     return out
