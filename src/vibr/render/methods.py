@@ -91,10 +91,10 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   no colour data to hold them, drift (docs/RENDERER.md, "The gradient term where few samples
   land"). 0: no such factor.
 * ``hole_fill = "push-pull"``: the holes (pixels no sample covers) take the push–pull fill
-  of the solved image's covered pixels, as ULR's blend and the initial image fill theirs;
-  ``"solve"``: the energy's minimiser there too, where only TV and the gradient term act
-  (the gradient samples at a hole's edge, integrated into it, streak it; docs/RENDERER.md,
-  "Holes").
+  of the solved image's covered pixels, as ULR's blend and the initial image fill theirs,
+  for bvs and savsr too; ``"solve"``: the energy's minimiser there, where only TV and the
+  gradient term act and the gradient samples at a hole's edge, integrated into it, streak it
+  (docs/RENDERER.md, "Few views").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
   the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
