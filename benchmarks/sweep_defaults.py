@@ -35,6 +35,10 @@ leave-one-source-out on the sources, never the target image), whose tuning time 
 against the median full-size render time of the target over the case's gradient settings
 (same process, same minutes: the machine's load hits both alike).
 
+Each case renders every setting from one geometry stage, on the grid ``vibr render`` would
+choose (:func:`vibr.render.shared_geometry`: a supersampled or coarser grid, gamma / s² for
+coarser sources); before 2026-11-28 the sweep rendered on the target's own grid.
+
 Metrics: PSNR over all pixels and over the covered pixels (those every setting of the case
 reconstructed), 2-pixel border excluded. The held-out split is fixed before any number is
 seen: within each family (cotton gt, cotton estimated, cotton planar, fountain, temple +
@@ -206,19 +210,19 @@ def _sources(cache, case):
 def run_case(cache, case):
     """Render one case with every setting and the auto weights; return its measurements."""
     from vibr.autotune import tune
-    from vibr.geometry import compute_samples
     from vibr.metrics import psnr
-    from vibr.render import render
+    from vibr.render import shared_geometry
     from vibr.render.methods import DEFAULTS
 
     t0 = time.perf_counter()
     src, tv = _sources(cache, case)
     t_depth = time.perf_counter() - t0
-    S = compute_samples(src, tv.camera)
+    # the grid and samples vibr render / vibr eval would use (gamma / s² for coarser sources)
+    geo = shared_geometry(src, tv, [(m, kw) for _, m, kw in settings()])
     imgs, covs, secs = {}, [], []
     for label, m, kw in settings():
         t = time.perf_counter()
-        r = render(src, tv.camera, m, samples=S, **kw)
+        r = geo.render(m, **kw)
         if m == "gradient":
             secs.append(time.perf_counter() - t)
         imgs[label] = r.image
@@ -228,7 +232,7 @@ def run_case(cache, case):
     t = time.perf_counter()
     tuned = tune(src, tv.camera, "gradient")
     t_tune = time.perf_counter() - t
-    r = render(src, tv.camera, "gradient", samples=S, gamma=tuned.gamma, lam=tuned.lam)
+    r = geo.render("gradient", gamma=tuned.gamma, lam=tuned.lam)
     imgs["auto"] = r.image
     cover = np.logical_and.reduce(covs + [np.asarray(r.coverage, bool)])
     ref = tv.image

@@ -64,7 +64,7 @@ def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monke
 
 
 def test_intensity_scale_reaches_the_renderer(scene, monkeypatch):
-    import vibr.render as vr
+    import vibr.render.api as vr  # evaluate renders through vibr.render.shared_geometry
     from vibr.evaluate import Setting, evaluate
 
     seen = []

@@ -139,9 +139,8 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     parameter the renderer used), ``depth``, ``psnr``, ``dssim``, ``ssim``, ``seconds``,
     ``coverage``, ``iterations`` (and ``lpips`` when the ``lpips`` package works here).
     """
-    from .geometry import compute_samples
     from .pipeline import prepare
-    from .render import fine_grid
+    from .render import shared_geometry
 
     settings, intensity_scale = _checked_settings(settings, mask, intensity_scale)
     check_measurable(scene.views[scene.index(target)].camera.shape, border, scene.root)
@@ -152,14 +151,13 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)
     t0 = time.perf_counter()
-    src, cam, _, plan = fine_grid(src, tview.camera, supersample,
-                                  renders=[(s.method, {**(render_kw or {}), **s.params}) for s in settings])
-    samples = compute_samples(src, cam, **_geometry_kw(geometry_kw, settings, render_kw))
+    geo = shared_geometry(src, tview, [(s.method, {**(render_kw or {}), **s.params}) for s in settings],
+                          geometry_kw=geometry_kw, supersample=supersample)
+    src, samples = geo.sources, geo.samples
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
-    rows = _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty,
-                            (cam, plan))
+    rows = _render_settings(geo, tview, settings, intensity_scale, render_kw, depth, uncertainty)
     cover = np.ones(tview.shape, bool) if tview.mask is None else tview.mask.copy()
     if mask == "reconstructed":
         for _, res, _ in rows:
@@ -225,26 +223,14 @@ def _checked_settings(settings, mask: str, intensity_scale):
     return settings, intensity_scale
 
 
-def _geometry_kw(geometry_kw, settings, render_kw) -> dict:
-    """``geometry_kw`` keeping the sample fields any of the settings reads."""
-    from .render.methods import with_sample_fields
-
-    return with_sample_fields(geometry_kw, *((s.method, {**(render_kw or {}), **s.params}) for s in settings))
-
-
-def _render_settings(src, tview, samples, settings, intensity_scale, render_kw, depth, uncertainty=False,
-                     grid=None):
-    """Render the target once per setting from the shared samples, on ``grid`` = (camera,
-    plan) of :func:`vibr.render.fine_grid`: ``[(setting, result, seconds)]``."""
-    from .render import grid_params, render
-
-    cam, plan = grid if grid is not None else (tview.camera, None)
+def _render_settings(geo, tview, settings, intensity_scale, render_kw, depth, uncertainty=False):
+    """Render the target once per setting from the shared geometry ``geo``
+    (:func:`vibr.render.shared_geometry`): ``[(setting, result, seconds)]``."""
     rows = []
     for s in progress(settings, desc=f"render {tview.name} ({depth})"):
-        params = grid_params(s.method, {"scale": intensity_scale, **(render_kw or {}), **s.params}, plan)
         t = time.perf_counter()
-        res = render(src, cam, method=s.method, samples=samples, uncertainty=uncertainty, **params)
-        res = res.on_target(plan, tview.shape)
+        res = geo.render(s.method, uncertainty=uncertainty,
+                         **{"scale": intensity_scale, **(render_kw or {}), **s.params})
         rows.append((s, res, time.perf_counter() - t))
     return rows
 

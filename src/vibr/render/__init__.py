@@ -4,7 +4,8 @@ method registry (:mod:`vibr.render.methods`) and :func:`render`.
 ``from vibr.render import render`` is the function; ``vibr.render`` is this subpackage.
 """
 
-from .api import RenderResult, fine_grid, grid_params, render, render_samples
+from .api import RenderResult, SharedGeometry, fine_grid, grid_params, render, render_samples, shared_geometry
 from .methods import DEFAULTS, METHODS
 
-__all__ = ["render", "render_samples", "fine_grid", "grid_params", "RenderResult", "METHODS", "DEFAULTS"]
+__all__ = ["render", "render_samples", "fine_grid", "grid_params", "shared_geometry", "SharedGeometry",
+           "RenderResult", "METHODS", "DEFAULTS"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,7 +15,8 @@ from ..scene import Scene, View
 from .methods import get_method, method_params, wants_fine_sources
 from .result import RenderResult
 
-__all__ = ["RenderResult", "render", "render_samples", "fine_grid", "grid_params"]
+__all__ = ["RenderResult", "render", "render_samples", "fine_grid", "grid_params", "SharedGeometry",
+           "shared_geometry"]
 
 logger = logging.getLogger(__name__)
 
@@ -123,6 +125,47 @@ def grid_params(method, params: dict, plan) -> dict:
     if plan.grid_source_size > 1.0:
         out["grid_source_size"] = plan.grid_source_size
     return out
+
+
+@dataclass(frozen=True)
+class SharedGeometry:
+    """One geometry stage for several renders of one target (``vibr eval``'s settings, a
+    parameter sweep): the sources and the samples on the grid :func:`render` chooses
+    (:func:`fine_grid`), ``camera`` that grid's camera, ``plan`` its
+    :class:`~vibr.geometry.resolution.ResolutionPlan`, ``target_shape`` the target's (H, W).
+    Made by :func:`shared_geometry`."""
+
+    sources: Scene
+    camera: Camera
+    samples: Samples
+    plan: object
+    target_shape: tuple
+
+    def render(self, method="gradient", *, uncertainty: bool = False, **params) -> RenderResult:
+        """What :func:`render` gives for ``method`` and ``params`` (the grid's ``grid_factor``
+        and ``grid_source_size`` included, the result brought back to the target's size),
+        from the shared samples."""
+        params = grid_params(method, params, self.plan)
+        res = render(self.sources, self.camera, method, samples=self.samples, uncertainty=uncertainty, **params)
+        return res.on_target(self.plan, self.target_shape)
+
+
+def shared_geometry(sources: Scene, target: View | Camera, renders=(("gradient", {}),), *,
+                    geometry_kw: dict | None = None, supersample="auto") -> SharedGeometry:
+    """The geometry stage of :func:`render` done once for every ``(method, params)`` of
+    ``renders``: the grid :func:`fine_grid` chooses for them and the samples on it, with the
+    fields any of them reads (:func:`vibr.render.methods.with_sample_fields`).
+    ``SharedGeometry.render(method, **params)`` then equals ``render(sources, target, method,
+    **params)`` without computing the samples again. ``sources`` as :func:`render` takes them
+    when it is given samples: ready (:func:`vibr.pipeline.prepare`)."""
+    from ..geometry import compute_samples
+    from .methods import with_sample_fields
+
+    cam = target.camera if isinstance(target, View) else target
+    renders = list(renders)
+    src, grid, _, plan = fine_grid(sources, cam, supersample, None, renders)
+    samples = compute_samples(src, grid, **with_sample_fields(geometry_kw, *renders))
+    return SharedGeometry(src, grid, samples, plan, cam.shape)
 
 
 def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):
