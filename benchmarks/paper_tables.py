@@ -634,7 +634,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "refinement, consistency check; docs/DEPTH.md)"
          + (f" with `{FOUNTAIN_ESTIMATE}`" if FOUNTAIN_ESTIMATE else "") + ". Depth is estimated once per "
          "target (per stride for cotton) and shared by every setting; the warped samples are computed once per "
-         "geometry.",
+         "geometry, on the grid `vibr render` would render on (`vibr.render.shared_geometry`).",
          "* The paper's structured experiments used other light fields (buddha, stillLife, …) with "
          "Wanner–Goldluecke disparity; cotton is not in the paper, so the structured table has no paper "
          "numbers to set beside it — its point is the *ordering* of the methods (SAVSR, BVS, γ = 0 … 3) "
