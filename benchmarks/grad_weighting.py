@@ -49,13 +49,12 @@ def _temple5(cache):
 
 
 def run_case(cache, case) -> dict:
-    from vibr.geometry import compute_samples
     from vibr.metrics import psnr
-    from vibr.render import render
+    from vibr.render import shared_geometry
 
     src, tv = _temple5(cache) if case["name"] == EXTRA else S._sources(cache, case)
-    smp = compute_samples(src, tv.camera)
-    res = {lab: float(psnr(render(src, tv.camera, m, samples=smp, **kw).image, tv.image, border=2))
+    geo = shared_geometry(src, tv, [(m, kw) for _, m, kw in STUDIES[case["study"]]])
+    res = {lab: float(psnr(geo.render(m, **kw).image, tv.image, border=2))
            for lab, m, kw in STUDIES[case["study"]]}
     return {"name": case["name"], "split": case["split"], "psnr": res}
 

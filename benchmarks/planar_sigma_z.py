@@ -69,21 +69,20 @@ def rules(D, default):
 
 
 def run_case(cache, case):
-    from vibr.geometry import compute_samples
     from vibr.metrics import psnr
-    from vibr.render import render
+    from vibr.render import shared_geometry
 
     t0 = time.perf_counter()
     src, tv, D, default = _plane(cache, case)
     res = {}
     for lab, sz in rules(D, default).items():
         s = src.replace(views=[v.replace(sigma_z=sz) for v in src.views])
-        S = compute_samples(s, tv.camera)
+        geo = shared_geometry(s, tv)
         for m in ("gradient", "bvs"):
-            r = render(s, tv.camera, m, samples=S)
+            r = geo.render(m)
             res[f"{m} {lab}"] = float(psnr(r.image, tv.image, border=BORDER))
         if lab == "default":  # ULR has no use for sigma_z
-            r = render(s, tv.camera, "ulr", samples=S)
+            r = geo.render("ulr")
             res["ulr"] = float(psnr(r.image, tv.image, border=BORDER))
     return {**case, "D": D, "sigma_z": default, "results": res, "seconds": round(time.perf_counter() - t0, 1)}
 

@@ -73,18 +73,17 @@ def _sources(cache, case):
 
 
 def run_case(cache, case) -> dict:
-    from vibr.geometry import compute_samples
     from vibr.metrics import psnr
-    from vibr.render import render
+    from vibr.render import shared_geometry
 
     src, tv = _sources(cache, case)
-    smp = compute_samples(src, tv.camera)
-    P = lambda m, **kw: float(psnr(render(src, tv.camera, m, samples=smp, **kw).image, tv.image, border=2))  # noqa: E731
+    geo = shared_geometry(src, tv)
+    P = lambda m, **kw: float(psnr(geo.render(m, **kw).image, tv.image, border=2))  # noqa: E731
     res = {"ULR": P("ulr"), "BVS": P("bvs", lam=0.1) if case["set"] == "sweep" else P("bvs")}  # the sweep's BVS lam
     res.update({f"ρ {z:g}": P("gradient", z_corr=z) for z in VALUES})
     res["default"] = P("gradient")
     return {"name": case["name"], "split": case["split"], "set": case["set"], "psnr": res,
-            "proxy": bool(smp.meta.get("z_corr"))}
+            "proxy": bool(geo.samples.meta.get("z_corr"))}
 
 
 def main(argv=None, run_case=run_case, summary=None, doc=__doc__) -> None:

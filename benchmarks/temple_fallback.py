@@ -28,11 +28,11 @@ def main(argv=None):
     ap.add_argument("--figure", default=str(ROOT / "docs" / "img" / "temple_fallback.png"))
     ap.add_argument("--fountain", action="store_true", help="also fountain views 2, 5, 8 from the 10 others")
     args = ap.parse_args(argv)
-    from vibr.geometry import compute_samples, fallback_depth
+    from vibr.geometry import fallback_depth
     from vibr.io import load_scene
     from vibr.metrics import psnr
     from vibr.pipeline import prepare
-    from vibr.render import render
+    from vibr.render import render, shared_geometry
 
     data = Path(args.data or os.environ.get("VIBR_DATA") or ROOT.parent / "shared" / "data")
     scene = load_scene(data / "middlebury_templeSparseRing")
@@ -40,9 +40,9 @@ def main(argv=None):
     raw, tv = prepare(scene, "templeSR0004", n_views=4, depth="estimated", fallback=False)
     images, cover = {}, None
     for fb, src in (("without", raw), ("with", fallback_depth(raw))):
-        smp = compute_samples(src, tv.camera)
+        geo = shared_geometry(src, tv, [(m, {}) for m in METHODS])
         for m in METHODS:
-            r = render(src, tv.camera, method=m, samples=smp)
+            r = geo.render(m)
             images[(fb, m)] = r.image
             if fb == "without":
                 cover = r.coverage if cover is None else cover & r.coverage

@@ -47,17 +47,16 @@ def main(argv=None):
     args = ap.parse_args(argv)
     import numpy as np
 
-    from vibr.geometry import compute_samples
     from vibr.metrics import psnr
-    from vibr.render import render
+    from vibr.render import shared_geometry
 
     data = Path(args.data or os.environ.get("VIBR_DATA") or ROOT.parent / "shared" / "data")
     print("| case | " + " | ".join(f"{m} {json.dumps(p)}" for m, p in SETTINGS) + " |")
     print("|---" * (len(SETTINGS) + 1) + "|")
     for name in args.cases.split(","):
         src, tv = prepared(data, name)
-        smp = compute_samples(src, tv.camera)
-        res = [render(src, tv.camera, method=m, samples=smp, **p) for m, p in SETTINGS]
+        geo = shared_geometry(src, tv, SETTINGS)
+        res = [geo.render(m, **p) for m, p in SETTINGS]
         cov = np.logical_and.reduce([r.coverage for r in res])
         cells = [f"{psnr(r.image, tv.image, border=2):.2f} / {psnr(r.image, tv.image, mask=cov, border=2):.2f}"
                  for r in res]

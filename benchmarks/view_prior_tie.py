@@ -36,13 +36,12 @@ TIE = 0.005
 
 
 def run_case(cache, case) -> dict:
-    from vibr.geometry import compute_samples
     from vibr.metrics import psnr
-    from vibr.render import render
+    from vibr.render import shared_geometry
 
     src, tv = Z._sources(cache, case)
-    smp = compute_samples(src, tv.camera)
-    P = lambda m, **kw: float(psnr(render(src, tv.camera, m, samples=smp, **kw).image, tv.image, border=2))  # noqa: E731
+    geo = shared_geometry(src, tv)
+    P = lambda m, **kw: float(psnr(geo.render(m, **kw).image, tv.image, border=2))  # noqa: E731
     res = {"ULR": P("ulr"), "BVS": P("bvs", lam=0.1) if case["set"] == "sweep" else P("bvs")}  # the sweep's BVS lam
     res.update({f"tie {t:g}": P("gradient", view_tie=t) for t in VALUES})
     res["default"] = P("gradient")
