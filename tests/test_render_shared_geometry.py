@@ -35,3 +35,12 @@ def test_a_supersampled_grid_comes_back_to_the_target():
     img = geo.render("gradient").image
     assert img.shape[:2] == cam.shape
     assert np.array_equal(img, render(src, cam, "gradient").image)
+
+
+def test_sources_not_ready_are_made_ready_as_render_makes_them():
+    """The target among the sources is held out (as :func:`render` does it)."""
+    src, tv = _case()
+    with_target = src.replace(views=[*src.views, tv])
+    geo = shared_geometry(with_target, tv)
+    assert tv.name not in geo.sources.names
+    assert np.array_equal(geo.render("gradient").image, render(with_target, tv, "gradient").image)

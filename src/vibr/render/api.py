@@ -132,40 +132,40 @@ class SharedGeometry:
     """One geometry stage for several renders of one target (``vibr eval``'s settings, a
     parameter sweep): the sources and the samples on the grid :func:`render` chooses
     (:func:`fine_grid`), ``camera`` that grid's camera, ``plan`` its
-    :class:`~vibr.geometry.resolution.ResolutionPlan`, ``target_shape`` the target's (H, W).
+    :class:`~vibr.geometry.resolution.ResolutionPlan`, ``target`` the target's camera.
     Made by :func:`shared_geometry`."""
 
     sources: Scene
     camera: Camera
     samples: Samples
     plan: object
-    target_shape: tuple
+    target: Camera
 
     def render(self, method="gradient", *, uncertainty: bool = False, **params) -> RenderResult:
         """What :func:`render` gives for ``method`` and ``params`` (the grid's ``grid_factor``
-        and ``grid_source_size`` included, the result brought back to the target's size),
-        from the shared samples."""
-        params = grid_params(method, params, self.plan)
+        and ``grid_source_size`` included, "auto" weights tuned for the target's camera, the
+        result brought back to the target's size), from the shared samples."""
+        params = grid_params(method, _resolve_auto(self.sources, self.target, get_method(method), params), self.plan)
         res = render(self.sources, self.camera, method, samples=self.samples, uncertainty=uncertainty, **params)
-        return res.on_target(self.plan, self.target_shape)
+        return res.on_target(self.plan, self.target.shape)
 
 
 def shared_geometry(sources: Scene, target: View | Camera, renders=(("gradient", {}),), *,
                     geometry_kw: dict | None = None, supersample="auto") -> SharedGeometry:
     """The geometry stage of :func:`render` done once for every ``(method, params)`` of
-    ``renders``: the grid :func:`fine_grid` chooses for them and the samples on it, with the
-    fields any of them reads (:func:`vibr.render.methods.with_sample_fields`).
-    ``SharedGeometry.render(method, **params)`` then equals ``render(sources, target, method,
-    **params)`` without computing the samples again. ``sources`` as :func:`render` takes them
-    when it is given samples: ready (:func:`vibr.pipeline.prepare`)."""
+    ``renders``: the sources made ready as :func:`render` makes them, the grid
+    :func:`fine_grid` chooses for them and the samples on it, with the fields any of them
+    reads (:func:`vibr.render.methods.with_sample_fields`). ``SharedGeometry.render(method,
+    **params)`` then equals ``render(sources, target, method, **params)`` without computing
+    the samples again."""
     from ..geometry import compute_samples
     from .methods import with_sample_fields
 
     cam = target.camera if isinstance(target, View) else target
     renders = list(renders)
-    src, grid, _, plan = fine_grid(sources, cam, supersample, None, renders)
+    src, grid, _, plan = fine_grid(_ready_sources(sources, target), cam, supersample, None, renders)
     samples = compute_samples(src, grid, **with_sample_fields(geometry_kw, *renders))
-    return SharedGeometry(src, grid, samples, plan, cam.shape)
+    return SharedGeometry(src, grid, samples, plan, cam)
 
 
 def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):
