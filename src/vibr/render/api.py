@@ -10,6 +10,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import VibrInputError
+from ..geometry.resolution import ResolutionPlan
 from ..geometry.samples import Samples
 from ..scene import Scene, View
 from .methods import get_method, method_params, wants_fine_sources
@@ -93,7 +94,7 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     the target's own grid and the sources as they are, unless the sources are coarser (a
     coarser grid then, as for the others). Render on the grid with :func:`grid_params`.
     """
-    from ..geometry.resolution import ResolutionPlan, check_supersample, resolution_plan
+    from ..geometry.resolution import check_supersample, resolution_plan
 
     supersample = check_supersample(supersample)
     plan = resolution_plan(sources, camera, supersample)
@@ -138,7 +139,7 @@ class SharedGeometry:
     sources: Scene
     camera: Camera
     samples: Samples
-    plan: object
+    plan: ResolutionPlan
     target: Camera
 
     def render(self, method="gradient", *, uncertainty: bool = False, **params) -> RenderResult:
