@@ -102,8 +102,9 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
     ``depth="estimated"`` estimates it here, from the sources only), then the warped samples
-    (:func:`vibr.geometry.compute_samples`) are computed once and every setting renders from
-    them (``render(..., samples=...)``). Per-setting ``seconds`` are therefore render times
+    are computed once, on the grid :func:`vibr.render.render` would choose
+    (:func:`vibr.render.shared_geometry`), and every setting renders from them, as
+    ``render()`` would render it. Per-setting ``seconds`` are therefore render times
     only; ``depth_seconds`` and ``samples_seconds`` are reported once. Nothing is written:
     figures are :func:`vibr.figures.write_evaluation_figures`'s job.
 
