@@ -14,7 +14,11 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
   the fallback proxy where it is unknown);
 * few views (:func:`sparse_cases`, since 2026-11-28): the middle of 7 synthetic views of
   256×192 (grid, arc, free, handheld layouts with exact depth; a pan turned on the spot,
-  without depth) from its 2 and its 4 best views, seeds 0 and 1.
+  without depth) from its 2 and its 4 best views, seeds 0 and 1;
+* no geometry (:func:`nogeo_cases`, since 2026-11-28): the middle of 7 synthetic views of
+  256×192 (arc, free, hand-held layouts, seeds 0 and 1) from the 6 others, their depth
+  estimated from them as ``vibr eval`` does for a scene without depth maps (the fallback
+  proxy where it is unknown).
 
 Estimated depth is computed from the sources only (the target never takes part) and cached
 on disk (``vibr.depthcache``, default ~/.cache/vibr): a second run is rendering only.
@@ -43,7 +47,7 @@ Metrics: PSNR over all pixels and over the covered pixels (those every setting o
 reconstructed), 2-pixel border excluded. The held-out split is fixed before any number is
 seen: within each family (cotton gt, cotton estimated, cotton planar, fountain, temple +
 synthetic, all views) the cases alternate, in the order listed above, between "choose" (1st, 3rd, ...)
-and "report" (2nd, 4th, ...); in the few-view family seed 0 is "choose", seed 1 "report". The default is the setting with the best mean all-pixel PSNR
+and "report" (2nd, 4th, ...); in the few-view and no-geometry families seed 0 is "choose", seed 1 "report". The default is the setting with the best mean all-pixel PSNR
 over the "choose" cases; it is reported on the "report" cases beside BVS, ULR, the auto
 weights and the per-case oracle (the best setting of the sweep for that case).
 
@@ -92,6 +96,7 @@ D_LAMS = (0.6, 0.8, 1.0)
 CONSISTENCY = 24.0
 CONSISTENCY_OTHERS = (12.0, 48.0)
 SPARSE_LAYOUTS = ("grid", "arc", "free", "handheld", "pan")
+NOGEO_LAYOUTS = ("arc", "free", "handheld")
 
 
 def settings():
@@ -162,6 +167,15 @@ def sparse_cases():
             for lo in SPARSE_LAYOUTS for n in (2, 4) for sd in (0, 1)]
 
 
+def nogeo_cases():
+    """The sweep's no-geometry family (not in :func:`case_list`): the middle of 7 synthetic
+    views of 256×192 from the 6 others with depth estimated from them, seed 0 *choose*, seed 1
+    *report*."""
+    return [dict(kind="nogeo", layout=lo, seed=sd, name=f"no geometry {lo} seed {sd}", family="no geometry",
+                 split="choose" if sd == 0 else "report")
+            for lo in NOGEO_LAYOUTS for sd in (0, 1)]
+
+
 def _sources(cache, case):
     """(sources with depth, target View) of a case; estimated depth through the depth cache."""
     from vibr.depthcache import scene_with_depth
@@ -180,6 +194,14 @@ def _sources(cache, case):
         if case["layout"] == "pan":  # a pan has no depth: the sphere round the shared centre
             sc = sc.replace(views=[v.replace(depth=None, sigma_z=None) for v in sc.views])
         return prepare(sc, 3, n_views=case["n"])
+    if case["kind"] == "nogeo":
+        from vibr.depthcache import scene_with_depth
+        from vibr.synthetic import make_scene
+
+        sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=case["seed"])
+        src, tv = sc.split(3)
+        src = src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views])
+        return scene_with_depth(src, depth="estimated"), tv
     if case["kind"] == "cotton":
         sc = cache.get("hci2016_cotton", 1.0)
         tname = "input_Cam040"
@@ -287,8 +309,9 @@ def table(reps, chosen):
          f"Command: `python3 benchmarks/sweep_defaults.py --workers 2 --write-docs`; code: "
          f"{', '.join(sorted({r.get('commit', '?') for r in reps}))}; {len(reps)} cases. Split fixed in "
          "advance: within each family (cotton gt / estimated / planar, fountain, temple + synthetic, all views) "
-         "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*; few views (sparse): seed 0 *choose*, seed 1 *report*. "
-         "Issue 23's targets below are over its own cases (not the few-view family). Estimated depth: from the "
+         "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*; few views (sparse) and no geometry "
+         "(synthetic views, depth estimated): seed 0 *choose*, seed 1 *report*. "
+         "Issue 23's targets below are over its own cases (not the few-view and no-geometry families). Estimated depth: from the "
          "sources only, cached (`vibr.depthcache`).", "",
          "| case | split | ULR | BVS | chosen | auto (γ, λ) | oracle (setting) | chosen − BVS | auto − oracle | tune / render |",
          "|---|---|---|---|---|---|---|---|---|---|"]
@@ -334,7 +357,7 @@ def table(reps, chosen):
 def _targets(reps, k, labs):
     """Issue 23's done-when checks for setting ``k``, as text."""
     out = []
-    R = {r["name"]: r["results"] for r in reps if r["family"] != "sparse"}  # the issue's cases
+    R = {r["name"]: r["results"] for r in reps if r["family"] not in ("sparse", "no geometry")}  # the issue's cases
     for n in ("cotton gt s2", "cotton gt s4"):
         if n in R:
             d = R[n][k]["all"] - R[n]["BVS"]["all"]
@@ -379,7 +402,7 @@ def main(argv=None):
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    cases = [c for c in case_list() + sparse_cases() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
+    cases = [c for c in case_list() + sparse_cases() + nogeo_cases() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     fname = lambda c: out / (c["name"].replace(" ", "_") + ".json")  # noqa: E731
     if a.report_only:
         reps = [json.loads(fname(c).read_text()) for c in cases if fname(c).is_file()]

@@ -280,17 +280,20 @@ def test_cli_render_and_eval_take_the_fallback(tmp_path):
 
 def test_auto_fallback_only_for_mostly_unknown_views():
     """``fallback="auto"``: a view at least FALLBACK_MIN_FRACTION unknown (a backdrop) gets the
-    plane, a view with a few unknown patches keeps them; "never" leaves both."""
+    plane, a view with a few unknown patches of texture keeps them; "never" leaves both."""
     from vibr.geometry import apply_fallback
     from vibr.geometry.proxy import FALLBACK_MIN_FRACTION
 
+    rng = np.random.default_rng(0)
     sc = make_scene("grid", 4, 20, 20)
     views = []
     for i, v in enumerate(sc.views):
         z = v.depth.copy()
         rows = 16 if i % 2 == 0 else 2  # 80 % or 10 % unknown
         z[:rows] = np.nan
-        views.append(v.replace(depth=z))
+        img = v.image.copy()
+        img[:4] = rng.uniform(0.2, 0.8, img[:4].shape)  # textured where the few rows are unknown
+        views.append(v.replace(depth=z, image=img))
     sc = sc.replace(views=views)
     out = apply_fallback(sc, "auto")
     for i, v in enumerate(out.views):
@@ -299,6 +302,35 @@ def test_auto_fallback_only_for_mostly_unknown_views():
     assert set(out.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
     assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
     assert not any(np.isnan(v.depth).any() for v in apply_fallback(sc, "always").views)
+
+
+def test_auto_fallback_takes_the_flat_unknown_pixels_of_any_view():
+    """In a view mostly known, ``fallback="auto"`` gives the plane to the unknown pixels whose
+    photograph is flat (a plain wall stereo cannot match) and leaves the textured ones
+    unknown (stereo failures on a surface)."""
+    from vibr.geometry import apply_fallback
+    from vibr.geometry.proxy import FALLBACK_FLAT_STD, flat_pixels
+
+    rng = np.random.default_rng(1)
+    sc = make_scene("grid", 4, 40, 40)
+    v = sc.views[0]
+    img = rng.uniform(0.2, 0.8, v.image.shape).astype(np.float32)
+    img[:, :20] = 0.5  # the left half flat
+    z = v.depth.copy()
+    z[:8] = np.nan  # 20 % unknown, half of it flat
+    sc = sc.replace(views=[v.replace(image=img, depth=z), *sc.views[1:]])
+    flat = flat_pixels(img)
+    assert flat[:, :16].all() and not flat[:, 24:].any()  # the window reaches 3 px across the seam
+    out = apply_fallback(sc, "auto").views[0]
+    unknown = np.isnan(z)
+    np.testing.assert_array_equal(out.fallback, unknown & flat)
+    assert np.isfinite(out.depth[unknown & flat]).all() and np.isnan(out.depth[unknown & ~flat]).all()
+    np.testing.assert_array_equal(out.depth[~unknown], z[~unknown])  # known depth untouched
+    # a window's std just under / over the limit
+    ramp = np.zeros((9, 9, 3))
+    ramp[:, ::2] = 2 * FALLBACK_FLAT_STD * np.array([0.9, 1.1, 0.0])  # alternating columns: std ≈ value / 2
+    assert flat_pixels(ramp[..., :1])[4, 4]  # std ≈ 0.89 of the limit
+    assert not flat_pixels(ramp)[4, 4]  # the second channel's ≈ 1.09 decides
 
 
 def test_fast_acos_within_its_stated_error():

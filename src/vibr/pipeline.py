@@ -112,8 +112,9 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     fallback : {"auto", "always", "never"} or bool
         Give source pixels of unknown depth the fallback proxy
         (:func:`vibr.geometry.apply_fallback`): "auto" (default) in the views at least
-        :data:`vibr.geometry.proxy.FALLBACK_MIN_FRACTION` unknown, "always" (True) in every
-        view with unknown pixels, "never" (False).
+        :data:`vibr.geometry.proxy.FALLBACK_MIN_FRACTION` unknown and at the flat unknown
+        pixels of the others (:func:`vibr.geometry.proxy.flat_pixels`), "always" (True) at
+        every unknown pixel, "never" (False).
     cache_dir : path, None or False
         Estimated depth through the on-disk cache of :func:`vibr.depthcache.estimated_depth`
         (keyed by the sources, their images and cameras, ``estimate_kw`` and vibr's code):

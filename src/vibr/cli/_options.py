@@ -168,8 +168,9 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fallback", choices=FALLBACK_MODES, default="auto",
                    help="source pixels of unknown depth (a black backdrop, the sky) get a plane "
                         "behind the view's known depth with a large sigma_z instead of being dropped: "
-                        f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown (auto, the default), "
-                        "in every view (always), or never (docs/RENDERER.md \"Fallback proxy\")")
+                        f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown and, in the others, "
+                        "where the photograph is flat (auto, the default), at every unknown pixel (always), "
+                        "or never (docs/RENDERER.md \"Fallback proxy\")")
     add_cache_options(p)
 
 

@@ -18,7 +18,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
 
-__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "FALLBACK_MODES",
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "FALLBACK_MODES",
            "FALLBACK_MIN_FRACTION", "FALLBACK_FACTOR",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
@@ -195,15 +195,38 @@ FALLBACK_SIGMA_Z_REL = 0.25
 #: patches are stereo failures on the object, where the plane would be wrong (fountain): the
 #: fractions and what the proxy costs are in docs/RENDERER.md, "Fallback proxy".
 FALLBACK_MIN_FRACTION = 0.5
-#: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown), ``"always"`` (every view with
-#: unknown pixels), ``"never"``.
+#: ``fallback="auto"``, in every view: the unknown pixels whose photograph is flat, every
+#: channel's standard deviation over the ``(2·FLAT_RADIUS+1)²`` window below
+#: ``FALLBACK_FLAT_STD`` (intensities in [0, 1]; the depth benchmarks' limit of a textured
+#: window, docs/DEPTH.md). Stereo cannot match them (a plain wall, the sky), and a plane
+#: there costs little colour whatever its depth; an unknown *textured* pixel is a stereo
+#: failure on a surface, where the plane would be wrong (docs/RENDERER.md, "Fallback proxy").
+FALLBACK_FLAT_STD = 0.02
+FLAT_RADIUS = 3
+#: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown, and the flat unknown pixels of
+#: the others), ``"always"`` (every unknown pixel), ``"never"``.
 FALLBACK_MODES = ("auto", "always", "never")
+
+
+def flat_pixels(image, radius: int = FLAT_RADIUS, max_std: float = FALLBACK_FLAT_STD) -> np.ndarray:
+    """(H, W) bool: the pixels of ``image`` (H, W, C or H, W; [0, 1]) whose ``(2r+1)²``
+    window (clipped at the border) has every channel's standard deviation below ``max_std``:
+    ``max_c √(E_w[I_c²] − E_w[I_c]²) < max_std``."""
+    from scipy.ndimage import uniform_filter
+
+    img = np.asarray(image, np.float64)
+    if img.ndim == 2:
+        img = img[..., None]
+    size = (2 * int(radius) + 1, 2 * int(radius) + 1, 1)
+    m = uniform_filter(img, size, mode="nearest")
+    var = uniform_filter(img * img, size, mode="nearest") - m * m
+    return np.sqrt(np.maximum(var, 0.0)).max(axis=-1) < float(max_std)
 
 
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
-                   min_fraction: float = 0.0) -> Scene:
+                   min_fraction: float = 0.0, flat_std: float | None = None) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -220,15 +243,16 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     map, or ``default_sigma_rel`` · median known depth, the geometry stage's default, made
     explicit because the median would otherwise include the plane). A view with no known
     depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
-    largest ``D_k``. Views with less than ``min_fraction`` of their pixels unknown are left
-    as they are. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a
-    fallback sample wherever a known surface lands in the target, whatever their depths
+    largest ``D_k``. In views with less than ``min_fraction`` of their pixels unknown, only
+    the unknown pixels :func:`flat_pixels` finds flat at ``flat_std`` get the plane (none
+    when ``flat_std`` is None); the others stay unknown. The geometry stage
+    (:func:`vibr.geometry.compute_samples`) hides a fallback sample wherever a known surface lands in the target, whatever their depths
     (known geometry wins: a source facing the target has its plane in front of the object);
     other placements measured in docs/RENDERER.md.
 
     Returns the scene with each such view's ``fallback`` mask (:class:`vibr.scene.View`) set
-    to its unknown pixels, and ``meta["fallback"] = {name: {"depth": D_k, "fraction": f_k}}``
-    for the views that had unknown pixels (``f_k`` their fraction).
+    to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,
+    "fraction": f_k}}`` for the views that have such pixels (``f_k`` their fraction).
     """
     from .sampling import DEFAULT_SIGMA_Z_REL
 
@@ -245,11 +269,14 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         unknown = ~np.isfinite(z)
         if v.mask is not None:  # masked pixels stay out of the render (prepare_depth)
             unknown &= v.mask
-        if not unknown.any() or unknown.mean() < min_fraction:
+        if unknown.any() and unknown.mean() < min_fraction:
+            # a view mostly known: its unknown textured pixels are stereo failures on a surface
+            unknown &= flat_pixels(v.image, max_std=flat_std) if flat_std is not None else False
+        if not unknown.any():
             views.append(v)
             continue
         D = max(far.values()) if common else far.get(v.name, max(far.values()))
-        known = ~unknown
+        known = np.isfinite(z)
         if v.sigma_z is not None:
             s = np.broadcast_to(np.asarray(v.sigma_z, np.float32), z.shape).copy()
         else:
@@ -269,4 +296,6 @@ def apply_fallback(sources: Scene, mode="auto") -> Scene:
         raise VibrInputError(f"fallback must be one of {', '.join(FALLBACK_MODES)}, got {mode!r}")
     if mode == "never":
         return sources
-    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION if mode == "auto" else 0.0)
+    if mode == "always":
+        return fallback_depth(sources)
+    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD)
