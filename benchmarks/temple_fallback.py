@@ -7,7 +7,9 @@ covered (2-px border), and writes the figure reference | without | with.
     python benchmarks/temple_fallback.py --fountain     # also fountain 2/5/8 (scale 0.25, estimated)
 
 Each table row gives the views' unknown-depth fractions (min–max over the sources): what
-``fallback="auto"`` (vibr.geometry.proxy.FALLBACK_MIN_FRACTION) decides on.
+``fallback="auto"`` (vibr.geometry.proxy.FALLBACK_MIN_FRACTION) decides on per view; "with"
+is the plane at every unknown pixel (``"always"``). ``benchmarks/fallback_rule.py`` compares
+the rules, the flat pixels of ``"auto"`` included.
 """
 
 from __future__ import annotations

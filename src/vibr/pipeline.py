@@ -20,8 +20,10 @@ chosen geometry:
     the fallback proxy (:func:`vibr.geometry.fallback_depth`: a plane of their view just
     behind its farthest known depth, with a large sigma_z), so that they still take part
     where no known surface hides them: by default (``fallback="auto"``) in the views that
-    are mostly unknown (a backdrop: it wins on the temple ring), not where stereo missed a
-    few patches of the object (it loses on fountain); docs/RENDERER.md "Fallback proxy".
+    are mostly unknown (a backdrop: it wins on the temple ring) and, in the others, where
+    the photograph is flat (a plain wall or sky, which stereo cannot match), not where
+    stereo missed textured patches of the object (it loses on fountain); docs/RENDERER.md
+    "Fallback proxy".
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
     paper's coarsest proxy, with one depth uncertainty for every view (``max(0.02 D,

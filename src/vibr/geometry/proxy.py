@@ -190,10 +190,11 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
 FALLBACK_FACTOR = 1.03
 FALLBACK_PERCENTILE = 99.0
 FALLBACK_SIGMA_Z_REL = 0.25
-#: ``fallback="auto"``: the views of which at least this fraction has no depth get the proxy.
-#: A view that stereo leaves mostly unknown shows a backdrop (the temple ring); a few unknown
-#: patches are stereo failures on the object, where the plane would be wrong (fountain): the
-#: fractions and what the proxy costs are in docs/RENDERER.md, "Fallback proxy".
+#: ``fallback="auto"``: the views of which at least this fraction has no depth get the proxy
+#: at every unknown pixel. A view that stereo leaves mostly unknown shows a backdrop (the
+#: temple ring); in the others, unknown textured patches are stereo failures on the object,
+#: where the plane would be wrong (fountain): the fractions and what the proxy costs are in
+#: docs/RENDERER.md, "Fallback proxy".
 FALLBACK_MIN_FRACTION = 0.5
 #: ``fallback="auto"``, in every view: the unknown pixels whose photograph is flat, every
 #: channel's standard deviation over the ``(2·FLAT_RADIUS+1)²`` window below
