@@ -9,14 +9,15 @@ from the sources as ``vibr eval`` does for a scene without depth maps, under eac
 * ``never``: unknown pixels left out (push–pull fills what no sample covers);
 * ``views >= 50 %``: the plane in the views at least half unknown (the rule of
   ``fallback="auto"`` until 2026-11-28);
-* ``auto``: that, and in every other view the unknown pixels whose photograph is flat
-  (:func:`vibr.geometry.proxy.flat_pixels`, ``FALLBACK_FLAT_STD``), and the same with the
-  limit halved and doubled;
-* ``always``: every unknown pixel;
-* ``auto + local background`` (measured, not the library's): after ``auto``, each pixel still
-  unknown takes the farthest known depth within ``BG_RADIUS`` px of it (the background beside
-  a silhouette, as depth-image-based rendering fills disocclusions; Fehn 2004), with the
-  plane's relative sigma_z, as a fallback sample (known geometry still wins).
+* ``flat``: that, and in every other view the plane at the unknown pixels whose photograph is
+  flat (:func:`vibr.geometry.proxy.flat_pixels`, ``FALLBACK_FLAT_STD``; the rule of 18:35–19:20
+  UTC on 2026-11-28);
+* ``auto`` (since then): ``flat``, and each textured unknown pixel of those views takes the
+  farthest depth of its view within ``FALLBACK_BG_RADIUS`` px, the plane included (the
+  background beside a silhouette, as depth-image-based rendering fills disocclusions; Fehn
+  2004), with the plane's relative sigma_z, as a fallback sample (known geometry still wins);
+  and ``auto`` with the flat limit halved and doubled;
+* ``always``: the plane at every unknown pixel.
 
 Cases: the middle of 7 synthetic views of 320×256 (arc, free, hand-held layouts, seeds 0–3)
 from the 6 others; fountain-P11 at scale 0.25, views 0002 / 0005 / 0008 from the 10 others;
@@ -39,48 +40,23 @@ _REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(_REPO / "benchmarks"))
 
 
-BG_RADIUS = 7
-
-
-def local_background(src, radius: int = BG_RADIUS):
-    """``auto``, then the unknown pixels left take the farthest known depth within ``radius``
-    px (a (2r+1)² window), sigma_z ``FALLBACK_SIGMA_Z_REL`` times it, marked as fallback."""
-    from scipy.ndimage import maximum_filter
-
-    from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_SIGMA_Z_REL
-
-    out = apply_fallback(src, "auto")
-    views = []
-    for v in out.views:
-        z = np.asarray(v.depth, np.float32)
-        far = maximum_filter(np.where(np.isfinite(z), z, -np.inf), size=2 * radius + 1)
-        sel = ~np.isfinite(z) & np.isfinite(far)
-        if not sel.any():
-            views.append(v)
-            continue
-        s = np.broadcast_to(np.asarray(v.sigma_z, np.float32), z.shape).copy()
-        s[sel] = FALLBACK_SIGMA_Z_REL * far[sel]
-        fb = sel if v.fallback is None else v.fallback | sel
-        views.append(v.replace(depth=np.where(sel, far, z).astype(np.float32), sigma_z=s, fallback=fb))
-    return out.replace(views=views)
-
-
 def rules():
     """name → function(sources) → sources with the rule's fallback."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
+    from vibr.geometry.proxy import FALLBACK_BG_RADIUS, FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
+
+    def auto(flat_std, radius=FALLBACK_BG_RADIUS):
+        return lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION, flat_std=flat_std,
+                                        background_radius=radius)
 
     return {
         "never": lambda s: apply_fallback(s, "never"),
         "views >= 50 %": lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION),
+        "flat": auto(FALLBACK_FLAT_STD, 0),
         "auto": lambda s: apply_fallback(s, "auto"),
-        "auto, flat limit / 2": lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION,
-                                                         flat_std=FALLBACK_FLAT_STD / 2),
-        "auto, flat limit × 2": lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION,
-                                                         flat_std=FALLBACK_FLAT_STD * 2),
+        "auto, flat limit / 2": auto(FALLBACK_FLAT_STD / 2),
+        "auto, flat limit × 2": auto(FALLBACK_FLAT_STD * 2),
         "always": lambda s: apply_fallback(s, "always"),
-        "auto + local background": local_background,
     }
 
 
@@ -123,7 +99,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     R = rules()
     print("PSNR dB (all pixels, 2-px border), `gradient` / ULR; in brackets the share of source pixels "
-          "given the plane\n")
+          "given a fallback depth\n")
     print("| case | " + " | ".join(R) + " |")
     print("|---|" + "---|" * len(R))
     fam = {}

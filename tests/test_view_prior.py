@@ -175,8 +175,10 @@ def test_prepare_applies_the_fallback_when_asked():
         z[:4, :4] = np.nan
         views.append(v.replace(depth=z))
     sc = sc.replace(views=views)
-    src, _ = prepare(sc, 0, depth="gt")
-    assert all(np.isnan(v.depth).any() for v in src.views)  # auto: 6 % unknown is not a backdrop
+    src, _ = prepare(sc, 0, depth="gt", fallback="never")
+    assert all(np.isnan(v.depth).any() for v in src.views)
+    src, _ = prepare(sc, 0, depth="gt")  # auto: a small patch, flat (plane) or textured (local background)
+    assert not any(np.isnan(v.depth).any() for v in src.views)
     src, _ = prepare(sc, 0, depth="gt", fallback=True)
     assert not any(np.isnan(v.depth).any() for v in src.views)
     assert set(src.meta["fallback"]) == {v.name for v in src.views}
@@ -278,11 +280,19 @@ def test_cli_render_and_eval_take_the_fallback(tmp_path):
     assert js.exists()
 
 
-def test_auto_fallback_only_for_mostly_unknown_views():
+def _window_max(z, y, x, r):
+    """The largest finite value of ``z`` within ``r`` px of (y, x) (window clipped), NaN if none."""
+    w = z[max(0, y - r):y + r + 1, max(0, x - r):x + r + 1]
+    return np.nanmax(w) if np.isfinite(w).any() else np.nan
+
+
+def test_auto_fallback_plane_for_mostly_unknown_views():
     """``fallback="auto"``: a view at least FALLBACK_MIN_FRACTION unknown (a backdrop) gets the
-    plane, a view with a few unknown patches of texture keeps them; "never" leaves both."""
+    plane at every unknown pixel; in a view with a few unknown patches of texture, each takes
+    the farthest known depth within FALLBACK_BG_RADIUS px instead (the local background);
+    "never" leaves both, "always" gives both the plane."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_MIN_FRACTION
+    from vibr.geometry.proxy import FALLBACK_BG_RADIUS, FALLBACK_MIN_FRACTION
 
     rng = np.random.default_rng(0)
     sc = make_scene("grid", 4, 20, 20)
@@ -297,19 +307,47 @@ def test_auto_fallback_only_for_mostly_unknown_views():
     sc = sc.replace(views=views)
     out = apply_fallback(sc, "auto")
     for i, v in enumerate(out.views):
-        frac = np.isnan(sc.views[i].depth).mean()
-        assert (frac >= FALLBACK_MIN_FRACTION) == (not np.isnan(v.depth).any())
-    assert set(out.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
+        z0 = sc.views[i].depth
+        unknown = np.isnan(z0)
+        assert not np.isnan(v.depth).any()
+        np.testing.assert_array_equal(v.fallback, unknown)
+        np.testing.assert_array_equal(v.depth[~unknown], z0[~unknown])
+        if unknown.mean() >= FALLBACK_MIN_FRACTION:
+            assert np.all(v.depth[unknown] == np.float32(out.meta["fallback"][v.name]["depth"]))
+        else:
+            for y, x in zip(*np.nonzero(unknown)):
+                assert v.depth[y, x] == np.float32(_window_max(z0, y, x, FALLBACK_BG_RADIUS))
     assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
-    assert not any(np.isnan(v.depth).any() for v in apply_fallback(sc, "always").views)
+    always = apply_fallback(sc, "always")
+    for v in always.views:
+        unknown = np.isnan(sc[v.name].depth)
+        assert np.all(v.depth[unknown] == np.float32(always.meta["fallback"][v.name]["depth"]))
+
+
+def test_local_background_leaves_pixels_with_no_depth_near_them():
+    """The local background reaches ``background_radius`` px: an unknown textured pixel
+    farther than that from any depth stays unknown (and out of the render)."""
+    from vibr.geometry.proxy import fallback_depth
+
+    rng = np.random.default_rng(2)
+    sc = make_scene("grid", 4, 40, 40)
+    v = sc.views[0]
+    z = v.depth.copy()
+    z[:12] = np.nan  # 30 % unknown, all textured
+    img = rng.uniform(0.2, 0.8, v.image.shape).astype(np.float32)
+    sc = sc.replace(views=[v.replace(image=img, depth=z), *sc.views[1:]])
+    out = fallback_depth(sc, min_fraction=0.5, flat_std=0.02, background_radius=3).views[0]
+    assert np.isnan(out.depth[:9]).all() and np.isfinite(out.depth[9:]).all()
+    np.testing.assert_array_equal(out.fallback, np.isnan(z) & np.isfinite(out.depth))
+    np.testing.assert_array_equal(out.depth[9:12], np.stack([np.asarray(
+        [_window_max(z, y, x, 3) for x in range(40)], np.float32) for y in range(9, 12)]))
 
 
 def test_auto_fallback_takes_the_flat_unknown_pixels_of_any_view():
-    """In a view mostly known, ``fallback="auto"`` gives the plane to the unknown pixels whose
-    photograph is flat (a plain wall stereo cannot match) and leaves the textured ones
-    unknown (stereo failures on a surface)."""
-    from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_FLAT_STD, flat_pixels
+    """In a view mostly known, the unknown pixels whose photograph is flat (a plain wall
+    stereo cannot match) get the plane, and the textured ones do not (stereo failures on a
+    surface; without ``background_radius`` they stay unknown)."""
+    from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth, flat_pixels
 
     rng = np.random.default_rng(1)
     sc = make_scene("grid", 4, 40, 40)
@@ -321,7 +359,7 @@ def test_auto_fallback_takes_the_flat_unknown_pixels_of_any_view():
     sc = sc.replace(views=[v.replace(image=img, depth=z), *sc.views[1:]])
     flat = flat_pixels(img)
     assert flat[:, :16].all() and not flat[:, 24:].any()  # the window reaches 3 px across the seam
-    out = apply_fallback(sc, "auto").views[0]
+    out = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD).views[0]
     unknown = np.isnan(z)
     np.testing.assert_array_equal(out.fallback, unknown & flat)
     assert np.isfinite(out.depth[unknown & flat]).all() and np.isnan(out.depth[unknown & ~flat]).all()

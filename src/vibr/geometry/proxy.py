@@ -205,10 +205,12 @@ FALLBACK_MIN_FRACTION = 0.5
 FALLBACK_FLAT_STD = 0.02
 FLAT_RADIUS = 3
 #: ``fallback="auto"``: the unknown textured pixels of those views take the farthest depth of
-#: their view within this many pixels (docs/RENDERER.md, "Fallback proxy").
+#: their view within this many pixels, the plane included (docs/RENDERER.md, "Fallback
+#: proxy"): beside a silhouette that is the background the view sees there.
 FALLBACK_BG_RADIUS = 7
 #: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown, and the flat unknown pixels of
-#: the others), ``"always"`` (every unknown pixel), ``"never"``.
+#: the others, whose textured unknown pixels take the local background of
+#: FALLBACK_BG_RADIUS), ``"always"`` (the plane at every unknown pixel), ``"never"``.
 FALLBACK_MODES = ("auto", "always", "never")
 
 
