@@ -292,7 +292,7 @@ def test_auto_fallback_plane_for_mostly_unknown_views():
     the farthest known depth within FALLBACK_BG_RADIUS px instead (the local background);
     "never" leaves both, "always" gives both the plane."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_BG_RADIUS, FALLBACK_MIN_FRACTION
+    from vibr.geometry.proxy import FALLBACK_BG_RADIUS, FALLBACK_MIN_FRACTION, fallback_depth
 
     rng = np.random.default_rng(0)
     sc = make_scene("grid", 4, 20, 20)
@@ -318,6 +318,9 @@ def test_auto_fallback_plane_for_mostly_unknown_views():
             for y, x in zip(*np.nonzero(unknown)):
                 assert v.depth[y, x] == np.float32(_window_max(z0, y, x, FALLBACK_BG_RADIUS))
     assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
+    views_only = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION)  # neither flat pixels nor background
+    for i, v in enumerate(views_only.views):
+        assert (np.isnan(sc.views[i].depth).mean() >= FALLBACK_MIN_FRACTION) == (not np.isnan(v.depth).any())
     always = apply_fallback(sc, "always")
     for v in always.views:
         unknown = np.isnan(sc[v.name].depth)

@@ -283,8 +283,9 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         rest = np.zeros_like(unknown)
         if unknown.any() and unknown.mean() < min_fraction:
             # a view mostly known: its unknown textured pixels are stereo failures on a surface
-            rest = unknown & ~(flat_pixels(v.image, max_std=flat_std) if flat_std is not None else False)
-            unknown &= ~rest
+            flat = flat_pixels(v.image, max_std=flat_std) if flat_std is not None else np.zeros_like(unknown)
+            rest = unknown & ~flat
+            unknown &= flat
         if not unknown.any() and not (background_radius > 0 and rest.any()):
             views.append(v)
             continue
