@@ -9,14 +9,14 @@ from the sources as ``vibr eval`` does for a scene without depth maps, under eac
 * ``never``: unknown pixels left out (push–pull fills what no sample covers);
 * ``views >= 50 %``: the plane in the views at least half unknown (the rule of
   ``fallback="auto"`` until 2026-11-28);
-* ``flat``: that, and in every other view the plane at the unknown pixels whose photograph is
-  flat (:func:`vibr.geometry.proxy.flat_pixels`, ``FALLBACK_FLAT_STD``; the rule of 18:35–19:20
-  UTC on 2026-11-28);
-* ``auto`` (since then): ``flat``, and each textured unknown pixel of those views takes the
-  farthest depth of its view within ``FALLBACK_BG_RADIUS`` px, the plane included (the
-  background beside a silhouette, as depth-image-based rendering fills disocclusions; Fehn
-  2004), with the plane's relative sigma_z, as a fallback sample (known geometry still wins);
-  and ``auto`` with the flat limit halved and doubled;
+* ``auto``: that, and in every other view the plane at the unknown pixels whose photograph
+  is flat (:func:`vibr.geometry.proxy.flat_pixels`, ``FALLBACK_FLAT_STD``; since 2026-11-28),
+  and the same with the flat limit halved and doubled;
+* ``auto + local background`` (measured, not the default): ``auto``, and each textured unknown
+  pixel of those views takes the farthest depth of its view within ``BG_RADIUS`` px, the plane
+  included (the background beside a silhouette, as depth-image-based rendering fills
+  disocclusions; Fehn 2004), with the plane's relative sigma_z, as a fallback sample
+  (``fallback_depth(..., background_radius=BG_RADIUS)``);
 * ``always``: the plane at every unknown pixel.
 
 Cases: the middle of 7 synthetic views of 320×256 (arc, free, hand-held layouts, seeds 0–3)
@@ -40,20 +40,23 @@ _REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(_REPO / "benchmarks"))
 
 
+BG_RADIUS = 7
+
+
 def rules():
     """name → function(sources) → sources with the rule's fallback."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_BG_RADIUS, FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
+    from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
 
-    def auto(flat_std, radius=FALLBACK_BG_RADIUS):
+    def auto(flat_std, radius=0):
         return lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION, flat_std=flat_std,
                                         background_radius=radius)
 
     return {
         "never": lambda s: apply_fallback(s, "never"),
         "views >= 50 %": lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION),
-        "flat": auto(FALLBACK_FLAT_STD, 0),
         "auto": lambda s: apply_fallback(s, "auto"),
+        "auto + local background": auto(FALLBACK_FLAT_STD, BG_RADIUS),
         "auto, flat limit / 2": auto(FALLBACK_FLAT_STD / 2),
         "auto, flat limit × 2": auto(FALLBACK_FLAT_STD * 2),
         "always": lambda s: apply_fallback(s, "always"),

@@ -177,8 +177,8 @@ def test_prepare_applies_the_fallback_when_asked():
     sc = sc.replace(views=views)
     src, _ = prepare(sc, 0, depth="gt", fallback="never")
     assert all(np.isnan(v.depth).any() for v in src.views)
-    src, _ = prepare(sc, 0, depth="gt")  # auto: a small patch, flat (plane) or textured (local background)
-    assert not any(np.isnan(v.depth).any() for v in src.views)
+    src, _ = prepare(sc, 0, depth="gt")  # auto: 6 % unknown, textured, is not a backdrop
+    assert all(np.isnan(v.depth).any() for v in src.views)
     src, _ = prepare(sc, 0, depth="gt", fallback=True)
     assert not any(np.isnan(v.depth).any() for v in src.views)
     assert set(src.meta["fallback"]) == {v.name for v in src.views}
@@ -288,11 +288,11 @@ def _window_max(z, y, x, r):
 
 def test_auto_fallback_plane_for_mostly_unknown_views():
     """``fallback="auto"``: a view at least FALLBACK_MIN_FRACTION unknown (a backdrop) gets the
-    plane at every unknown pixel; in a view with a few unknown patches of texture, each takes
-    the farthest known depth within FALLBACK_BG_RADIUS px instead (the local background);
-    "never" leaves both, "always" gives both the plane."""
+    plane at every unknown pixel; a view with a few unknown patches of texture keeps them, or
+    with ``background_radius`` r each takes the farthest known depth within r px (the local
+    background); "never" leaves both, "always" gives both the plane."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_BG_RADIUS, FALLBACK_MIN_FRACTION, fallback_depth
+    from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
 
     rng = np.random.default_rng(0)
     sc = make_scene("grid", 4, 20, 20)
@@ -306,21 +306,23 @@ def test_auto_fallback_plane_for_mostly_unknown_views():
         views.append(v.replace(depth=z, image=img))
     sc = sc.replace(views=views)
     out = apply_fallback(sc, "auto")
-    for i, v in enumerate(out.views):
+    bg = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD, background_radius=7)
+    for i, (v, b) in enumerate(zip(out.views, bg.views)):
         z0 = sc.views[i].depth
         unknown = np.isnan(z0)
-        assert not np.isnan(v.depth).any()
-        np.testing.assert_array_equal(v.fallback, unknown)
         np.testing.assert_array_equal(v.depth[~unknown], z0[~unknown])
+        np.testing.assert_array_equal(b.fallback, unknown)
         if unknown.mean() >= FALLBACK_MIN_FRACTION:
             assert np.all(v.depth[unknown] == np.float32(out.meta["fallback"][v.name]["depth"]))
+            np.testing.assert_array_equal(b.depth, v.depth)
         else:
+            assert np.isnan(v.depth[unknown]).all() and v.fallback is None
             for y, x in zip(*np.nonzero(unknown)):
-                assert v.depth[y, x] == np.float32(_window_max(z0, y, x, FALLBACK_BG_RADIUS))
-    assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
+                assert b.depth[y, x] == np.float32(_window_max(z0, y, x, 7))
+    assert set(out.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
     views_only = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION)  # neither flat pixels nor background
-    for i, v in enumerate(views_only.views):
-        assert (np.isnan(sc.views[i].depth).mean() >= FALLBACK_MIN_FRACTION) == (not np.isnan(v.depth).any())
+    assert all(np.array_equal(a.depth, b.depth, equal_nan=True) for a, b in zip(views_only.views, out.views))
+    assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
     always = apply_fallback(sc, "always")
     for v in always.views:
         unknown = np.isnan(sc[v.name].depth)

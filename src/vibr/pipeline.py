@@ -21,10 +21,9 @@ chosen geometry:
     behind its farthest known depth, with a large sigma_z), so that they still take part
     where no known surface hides them: by default (``fallback="auto"``) in the views that
     are mostly unknown (a backdrop: it wins on the temple ring) and, in the others, where
-    the photograph is flat (a plain wall or sky, which stereo cannot match); there the
-    textured unknown pixels (stereo failures on a surface, where a plane behind everything
-    loses on fountain) take the farthest depth of their view within a few pixels instead
-    (the background beside a silhouette); docs/RENDERER.md "Fallback proxy".
+    the photograph is flat (a plain wall or sky, which stereo cannot match), not where
+    stereo missed textured patches of the object (it loses on fountain); docs/RENDERER.md
+    "Fallback proxy".
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
     paper's coarsest proxy, with one depth uncertainty for every view (``max(0.02 D,
@@ -116,9 +115,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Give source pixels of unknown depth the fallback proxy
         (:func:`vibr.geometry.apply_fallback`): "auto" (default) in the views at least
         :data:`vibr.geometry.proxy.FALLBACK_MIN_FRACTION` unknown and at the flat unknown
-        pixels of the others (:func:`vibr.geometry.proxy.flat_pixels`), their textured
-        unknown pixels taking the local background
-        (:data:`vibr.geometry.proxy.FALLBACK_BG_RADIUS`), "always" (True) the plane at
+        pixels of the others (:func:`vibr.geometry.proxy.flat_pixels`), "always" (True) at
         every unknown pixel, "never" (False).
     cache_dir : path, None or False
         Estimated depth through the on-disk cache of :func:`vibr.depthcache.estimated_depth`

@@ -169,8 +169,7 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                    help="source pixels of unknown depth (a black backdrop, the sky) get a plane "
                         "behind the view's known depth with a large sigma_z instead of being dropped: "
                         f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown and, in the others, "
-                        "where the photograph is flat, the textured unknown pixels taking the farthest depth "
-                        "near them (auto, the default), at every unknown pixel (always), "
+                        "where the photograph is flat (auto, the default), at every unknown pixel (always), "
                         "or never (docs/RENDERER.md \"Fallback proxy\")")
     add_cache_options(p)
 

@@ -204,13 +204,10 @@ FALLBACK_MIN_FRACTION = 0.5
 #: failure on a surface, where the plane would be wrong (docs/RENDERER.md, "Fallback proxy").
 FALLBACK_FLAT_STD = 0.02
 FLAT_RADIUS = 3
-#: ``fallback="auto"``: the unknown textured pixels of those views take the farthest depth of
-#: their view within this many pixels, the plane included (docs/RENDERER.md, "Fallback
-#: proxy"): beside a silhouette that is the background the view sees there.
-FALLBACK_BG_RADIUS = 7
 #: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown, and the flat unknown pixels of
-#: the others, whose textured unknown pixels take the local background of
-#: FALLBACK_BG_RADIUS), ``"always"`` (the plane at every unknown pixel), ``"never"``.
+#: the others), ``"always"`` (every unknown pixel), ``"never"``. ``fallback_depth``'s
+#: ``background_radius`` (the local background for the textured ones) is measured, not a
+#: default (docs/RENDERER.md, "Fallback proxy").
 FALLBACK_MODES = ("auto", "always", "never")
 
 
@@ -330,5 +327,4 @@ def apply_fallback(sources: Scene, mode="auto") -> Scene:
         return sources
     if mode == "always":
         return fallback_depth(sources)
-    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD,
-                          background_radius=FALLBACK_BG_RADIUS)
+    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD)
