@@ -73,6 +73,7 @@ def calibration(z_est, sigma, z_true, mask=None, border: int = 15) -> dict:
 def cotton_cases(strides):
     """(name, estimator, estimated view, true depth) of cotton's centre from its 8 neighbours at each stride."""
     from bench_depth import _centre_disparity_model, data_dir
+    from paper_tables import cotton_neighbours
 
     from vibr.io import load_scene, read_pfm
     from vibr.stereo import estimate_depth
@@ -80,14 +81,9 @@ def cotton_cases(strides):
     root = data_dir() / "hci2016_cotton"
     scene = load_scene(root)
     gt = np.asarray(read_pfm(root / "gt_disp_lowres.pfm"), np.float64)
-    ref = scene.index("input_Cam040")
-    pos = {scene.index(k): v for k, v in scene.meta["grid_pos"].items()}
-    r0, c0 = pos[ref]
+    centre = "input_Cam040"
     for s in strides:
-        block = [ref] + [i for i, (r, c) in pos.items()
-                         if max(abs(r - r0), abs(c - c0)) == s and (r - r0) % s == 0 and (c - c0) % s == 0]
-        sub = scene.subset([scene.views[i].name for i in block])
-        centre = scene.views[ref].name
+        sub = scene.subset([centre, *cotton_neighbours(scene, s)])
         est = estimate_depth(sub, views=[centre])
         a, b = _centre_disparity_model(sub, centre)
         with np.errstate(divide="ignore", invalid="ignore"):
