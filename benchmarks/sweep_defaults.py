@@ -195,7 +195,6 @@ def _sources(cache, case):
             sc = sc.replace(views=[v.replace(depth=None, sigma_z=None) for v in sc.views])
         return prepare(sc, 3, n_views=case["n"])
     if case["kind"] == "nogeo":
-        from vibr.depthcache import scene_with_depth
         from vibr.synthetic import make_scene
 
         sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=case["seed"])

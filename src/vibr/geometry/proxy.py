@@ -19,7 +19,7 @@ from ..errors import VibrInputError
 from ..scene import Scene, View
 
 __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "FALLBACK_MODES",
-           "FALLBACK_MIN_FRACTION", "FALLBACK_FACTOR",
+           "FALLBACK_MIN_FRACTION", "FALLBACK_FLAT_STD", "FALLBACK_FACTOR",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
 #: Default planar-proxy uncertainty: ``sigma_z = max(PROXY_SIGMA_Z_REL · D,
@@ -253,10 +253,10 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     farthest depth of their view within r px (the plane included, a (2r+1)² window: the
     background beside a silhouette, as depth-image-based rendering fills disocclusions,
     Fehn 2004), with ``sigma_z = sigma_rel`` times it, and only those with none stay
-    unknown. The geometry stage
-    (:func:`vibr.geometry.compute_samples`) hides a fallback sample wherever a known surface lands in the target, whatever their depths
-    (known geometry wins: a source facing the target has its plane in front of the object);
-    other placements measured in docs/RENDERER.md.
+    unknown. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
+    sample wherever a known surface lands in the target, whatever their depths (known
+    geometry wins: a source facing the target has its plane in front of the object); other
+    placements measured in docs/RENDERER.md.
 
     Returns the scene with each such view's ``fallback`` mask (:class:`vibr.scene.View`) set
     to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,
