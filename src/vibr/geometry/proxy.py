@@ -213,17 +213,22 @@ FALLBACK_MODES = ("auto", "always", "never")
 
 def flat_pixels(image, radius: int = FLAT_RADIUS, max_std: float = FALLBACK_FLAT_STD) -> np.ndarray:
     """(H, W) bool: the pixels of ``image`` (H, W, C or H, W; [0, 1]) whose ``(2r+1)²``
-    window (clipped at the border) has every channel's standard deviation below ``max_std``:
+    window (the border extended by its nearest pixels) has every channel's standard
+    deviation below ``max_std``:
     ``max_c √(E_w[I_c²] − E_w[I_c]²) < max_std``."""
     from scipy.ndimage import uniform_filter
 
-    img = np.asarray(image, np.float64)
+    img = np.asarray(image)
     if img.ndim == 2:
         img = img[..., None]
-    size = (2 * int(radius) + 1, 2 * int(radius) + 1, 1)
-    m = uniform_filter(img, size, mode="nearest")
-    var = uniform_filter(img * img, size, mode="nearest") - m * m
-    return np.sqrt(np.maximum(var, 0.0)).max(axis=-1) < float(max_std)
+    size = 2 * int(radius) + 1
+    worst = np.zeros(img.shape[:2])
+    for c in range(img.shape[2]):  # a channel at a time: a large view's temporaries stay a few planes
+        ch = img[..., c].astype(np.float64)
+        m = uniform_filter(ch, size, mode="nearest")
+        var = uniform_filter(ch * ch, size, mode="nearest") - m * m
+        np.maximum(worst, np.sqrt(np.maximum(var, 0.0)), out=worst)
+    return worst < float(max_std)
 
 
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
