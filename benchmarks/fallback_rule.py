@@ -16,7 +16,7 @@ from the sources as ``vibr eval`` does for a scene without depth maps, under eac
   pixel of those views takes the farthest depth of its view within ``BG_RADIUS`` px, the plane
   included (the background beside a silhouette, as depth-image-based rendering fills
   disocclusions; Fehn 2004), with the plane's relative sigma_z, as a fallback sample
-  (``fallback_depth(..., background_radius=BG_RADIUS)``);
+  (:func:`local_background`);
 * ``always``: the plane at every unknown pixel.
 
 Cases: the middle of 7 synthetic views of 320×256 (arc, free, hand-held layouts, seeds 0–3)
@@ -43,20 +43,44 @@ sys.path.insert(0, str(_REPO / "benchmarks"))
 BG_RADIUS = 7
 
 
+def local_background(src, radius: int = BG_RADIUS):
+    """``fallback="auto"``, then each unknown pixel left takes the largest depth of its view
+    within ``radius`` px (a (2r+1)² window, the border extended by its nearest pixels; the
+    plane included), sigma_z ``FALLBACK_SIGMA_Z_REL`` times it, marked as fallback."""
+    from scipy.ndimage import maximum_filter
+
+    from vibr.geometry import apply_fallback
+    from vibr.geometry.proxy import FALLBACK_SIGMA_Z_REL
+
+    out = apply_fallback(src, "auto")
+    views = []
+    for v in out.views:
+        z = np.asarray(v.depth, np.float32)
+        far = maximum_filter(np.where(np.isfinite(z), z, -np.inf), size=2 * radius + 1, mode="nearest")
+        bg = ~np.isfinite(z) & np.isfinite(far)
+        if not bg.any():
+            views.append(v)
+            continue
+        s = np.broadcast_to(np.asarray(v.sigma_z, np.float32), z.shape).copy()
+        s[bg] = FALLBACK_SIGMA_Z_REL * far[bg]
+        fb = bg if v.fallback is None else v.fallback | bg
+        views.append(v.replace(depth=np.where(bg, far, z).astype(np.float32), sigma_z=s, fallback=fb))
+    return out.replace(views=views)
+
+
 def rules():
     """name → function(sources) → sources with the rule's fallback."""
     from vibr.geometry import apply_fallback
     from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
 
-    def auto(flat_std, radius=0):
-        return lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION, flat_std=flat_std,
-                                        background_radius=radius)
+    def auto(flat_std):
+        return lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION, flat_std=flat_std)
 
     return {
         "never": lambda s: apply_fallback(s, "never"),
         "views >= 50 %": lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION),
         "auto": lambda s: apply_fallback(s, "auto"),
-        "auto + local background": auto(FALLBACK_FLAT_STD, BG_RADIUS),
+        "auto + local background": local_background,
         "auto, flat limit / 2": auto(FALLBACK_FLAT_STD / 2),
         "auto, flat limit × 2": auto(FALLBACK_FLAT_STD * 2),
         "always": lambda s: apply_fallback(s, "always"),

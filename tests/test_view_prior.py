@@ -280,19 +280,12 @@ def test_cli_render_and_eval_take_the_fallback(tmp_path):
     assert js.exists()
 
 
-def _window_max(z, y, x, r):
-    """The largest finite value of ``z`` within ``r`` px of (y, x) (window clipped), NaN if none."""
-    w = z[max(0, y - r):y + r + 1, max(0, x - r):x + r + 1]
-    return np.nanmax(w) if np.isfinite(w).any() else np.nan
-
-
 def test_auto_fallback_plane_for_mostly_unknown_views():
     """``fallback="auto"``: a view at least FALLBACK_MIN_FRACTION unknown (a backdrop) gets the
-    plane at every unknown pixel; a view with a few unknown patches of texture keeps them, or
-    with ``background_radius`` r each takes the farthest known depth within r px (the local
-    background); "never" leaves both, "always" gives both the plane."""
+    plane at every unknown pixel; a view with a few unknown patches of texture keeps them;
+    "never" leaves both, "always" gives both the plane."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
+    from vibr.geometry.proxy import FALLBACK_MIN_FRACTION, fallback_depth
 
     rng = np.random.default_rng(0)
     sc = make_scene("grid", 4, 20, 20)
@@ -306,19 +299,15 @@ def test_auto_fallback_plane_for_mostly_unknown_views():
         views.append(v.replace(depth=z, image=img))
     sc = sc.replace(views=views)
     out = apply_fallback(sc, "auto")
-    bg = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD, background_radius=7)
-    for i, (v, b) in enumerate(zip(out.views, bg.views)):
+    for i, v in enumerate(out.views):
         z0 = sc.views[i].depth
         unknown = np.isnan(z0)
         np.testing.assert_array_equal(v.depth[~unknown], z0[~unknown])
-        np.testing.assert_array_equal(b.fallback, unknown)
         if unknown.mean() >= FALLBACK_MIN_FRACTION:
+            np.testing.assert_array_equal(v.fallback, unknown)
             assert np.all(v.depth[unknown] == np.float32(out.meta["fallback"][v.name]["depth"]))
-            np.testing.assert_array_equal(b.depth, v.depth)
         else:
             assert np.isnan(v.depth[unknown]).all() and v.fallback is None
-            for y, x in zip(*np.nonzero(unknown)):
-                assert b.depth[y, x] == np.float32(_window_max(z0, y, x, 7))
     assert set(out.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
     views_only = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION)  # neither flat pixels nor background
     assert all(np.array_equal(a.depth, b.depth, equal_nan=True) for a, b in zip(views_only.views, out.views))
@@ -329,29 +318,10 @@ def test_auto_fallback_plane_for_mostly_unknown_views():
         assert np.all(v.depth[unknown] == np.float32(always.meta["fallback"][v.name]["depth"]))
 
 
-def test_local_background_leaves_pixels_with_no_depth_near_them():
-    """The local background reaches ``background_radius`` px: an unknown textured pixel
-    farther than that from any depth stays unknown (and out of the render)."""
-    from vibr.geometry.proxy import fallback_depth
-
-    rng = np.random.default_rng(2)
-    sc = make_scene("grid", 4, 40, 40)
-    v = sc.views[0]
-    z = v.depth.copy()
-    z[:12] = np.nan  # 30 % unknown, all textured
-    img = rng.uniform(0.2, 0.8, v.image.shape).astype(np.float32)
-    sc = sc.replace(views=[v.replace(image=img, depth=z), *sc.views[1:]])
-    out = fallback_depth(sc, min_fraction=0.5, flat_std=0.02, background_radius=3).views[0]
-    assert np.isnan(out.depth[:9]).all() and np.isfinite(out.depth[9:]).all()
-    np.testing.assert_array_equal(out.fallback, np.isnan(z) & np.isfinite(out.depth))
-    np.testing.assert_array_equal(out.depth[9:12], np.stack([np.asarray(
-        [_window_max(z, y, x, 3) for x in range(40)], np.float32) for y in range(9, 12)]))
-
-
 def test_auto_fallback_takes_the_flat_unknown_pixels_of_any_view():
     """In a view mostly known, the unknown pixels whose photograph is flat (a plain wall
     stereo cannot match) get the plane, and the textured ones do not (stereo failures on a
-    surface; without ``background_radius`` they stay unknown)."""
+    surface: they stay unknown)."""
     from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth, flat_pixels
 
     rng = np.random.default_rng(1)

@@ -205,9 +205,7 @@ FALLBACK_MIN_FRACTION = 0.5
 FALLBACK_FLAT_STD = 0.02
 FLAT_RADIUS = 3
 #: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown, and the flat unknown pixels of
-#: the others), ``"always"`` (every unknown pixel), ``"never"``. ``fallback_depth``'s
-#: ``background_radius`` (the local background for the textured ones) is measured, not a
-#: default (docs/RENDERER.md, "Fallback proxy").
+#: the others), ``"always"`` (every unknown pixel), ``"never"``.
 FALLBACK_MODES = ("auto", "always", "never")
 
 
@@ -234,8 +232,7 @@ def flat_pixels(image, radius: int = FLAT_RADIUS, max_std: float = FALLBACK_FLAT
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
-                   min_fraction: float = 0.0, flat_std: float | None = None,
-                   background_radius: int = 0) -> Scene:
+                   min_fraction: float = 0.0, flat_std: float | None = None) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -254,11 +251,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
     largest ``D_k``. In views with less than ``min_fraction`` of their pixels unknown, only
     the unknown pixels :func:`flat_pixels` finds flat at ``flat_std`` get the plane (none
-    when ``flat_std`` is None); with ``background_radius`` r > 0 the others take the
-    farthest depth of their view within r px (the plane included, a (2r+1)² window: the
-    background beside a silhouette, as depth-image-based rendering fills disocclusions,
-    Fehn 2004), with ``sigma_z = sigma_rel`` times it, and only those with none stay
-    unknown. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
+    when ``flat_std`` is None); the others stay unknown. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
     sample wherever a known surface lands in the target, whatever their depths (known
     geometry wins: a source facing the target has its plane in front of the object); other
     placements measured in docs/RENDERER.md.
@@ -282,13 +275,11 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         unknown = ~np.isfinite(z)
         if v.mask is not None:  # masked pixels stay out of the render (prepare_depth)
             unknown &= v.mask
-        rest = np.zeros_like(unknown)
         if unknown.any() and unknown.mean() < min_fraction:
             # a view mostly known: its unknown textured pixels are stereo failures on a surface
             flat = flat_pixels(v.image, max_std=flat_std) if flat_std is not None else np.zeros_like(unknown)
-            rest = unknown & ~flat
-            unknown &= flat
-        if not unknown.any() and not (background_radius > 0 and rest.any()):
+            unknown = unknown & flat
+        if not unknown.any():
             views.append(v)
             continue
         D = max(far.values()) if common else far.get(v.name, max(far.values()))
@@ -298,27 +289,9 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         else:
             s = np.full(z.shape, dsr * float(np.median(z[known])) if known.any() else 0.0, np.float32)
         s[unknown] = sigma_rel * D
-        z = np.where(unknown, np.float32(D), z)
-        if background_radius > 0 and rest.any():
-            z, bg = _local_background(z, rest, int(background_radius))
-            s[bg] = sigma_rel * z[bg]
-            unknown |= bg
-        if not unknown.any():
-            views.append(v)
-            continue
-        views.append(v.replace(depth=z, sigma_z=s, fallback=unknown))
+        views.append(v.replace(depth=np.where(unknown, np.float32(D), z), sigma_z=s, fallback=unknown))
         info[v.name] = {"depth": D, "fraction": float(unknown.mean())}
     return sources.replace(views=views, meta=dict(sources.meta, fallback=info))
-
-
-def _local_background(z, where, radius: int):
-    """``z`` with the pixels of ``where`` given the largest finite depth within ``radius`` px
-    (those with none left as they are), and the mask of the pixels so filled."""
-    from scipy.ndimage import maximum_filter
-
-    far = maximum_filter(np.where(np.isfinite(z), z, -np.inf), size=2 * radius + 1, mode="nearest")
-    bg = where & np.isfinite(far)
-    return np.where(bg, far, z).astype(np.float32), bg
 
 
 def apply_fallback(sources: Scene, mode="auto") -> Scene:
