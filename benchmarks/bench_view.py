@@ -22,6 +22,7 @@ time is taken when the rendered image has been encoded and queued to the client
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
     python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic] [--numba-threads default]
+                                    [--client chromium|remote]
     python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu | --browser-timeline | --ab-arena
                                            (A/B comparisons, alternating in one process)
 """
@@ -30,8 +31,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -90,7 +93,100 @@ def _viewer_page(scene, points: str, on_load=None):
         v.stop()
 
 
-def synthetic(updates: int, points: str = "while moving", browser_nice: int | None = None) -> dict:
+class _RemoteClient:
+    """A viser client in a child process that draws nothing here: it sends the viewport
+    cameras it is given (viser's ``ViewerCameraMessage``, as a browser sends when its user
+    moves) and reads whatever the server sends."""
+
+    def __init__(self, viewer, size=(800, 800)):
+        self.viewer, self.size = viewer, size
+        self.proc = subprocess.Popen([sys.executable, __file__, "--_remote-client", str(viewer.options.port)],
+                                     stdin=subprocess.PIPE, text=True)
+
+    def move(self, camera) -> None:
+        from vibr.viewer.convert import viser_pose_from_camera
+
+        wxyz, pos, fov, _ = viser_pose_from_camera(camera)
+        pos = pos - self.viewer.origin
+        look = pos + camera.R[2]
+        msg = {"wxyz": [float(x) for x in wxyz], "position": [float(x) for x in pos], "fov": float(fov),
+               "near": 0.01, "far": 1000.0, "image_width": self.size[0], "image_height": self.size[1],
+               "look_at": [float(x) for x in look], "up_direction": [float(x) for x in self.viewer.up]}
+        self.proc.stdin.write(json.dumps(msg) + "\n")
+        self.proc.stdin.flush()
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(timeout=30)
+
+
+def _remote_client_main(port: int) -> None:
+    """The child of :class:`_RemoteClient`: one websocket to the viewer; each stdin line a
+    camera to send; every message received is read and dropped."""
+    import asyncio
+    import threading
+
+    import msgspec
+    import viser
+    from viser import _messages
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import ConnectionClosed
+
+    async def run():
+        async with connect(f"ws://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"],
+                           max_size=None) as ws:
+            loop = asyncio.get_running_loop()
+            lines = asyncio.Queue()
+
+            def read_stdin():
+                for line in sys.stdin:
+                    loop.call_soon_threadsafe(lines.put_nowait, line)
+                loop.call_soon_threadsafe(lines.put_nowait, None)
+
+            async def drain():
+                try:
+                    async for _ in ws:
+                        pass
+                except ConnectionClosed:
+                    pass
+
+            threading.Thread(target=read_stdin, daemon=True).start()
+            reader = asyncio.create_task(drain())
+            while (line := await lines.get()) is not None:
+                d = json.loads(line)
+                d = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+                await ws.send(msgspec.msgpack.encode(_messages.ViewerCameraMessage(**d).as_serializable_dict()))
+            reader.cancel()
+
+    asyncio.run(run())
+
+
+@contextlib.contextmanager
+def _viewer_remote(scene, points: str):
+    """As :func:`_viewer_page`, with a :class:`_RemoteClient` in place of the browser."""
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer.browser import free_port
+
+    v = Viewer(scene, ViewerOptions(port=free_port(), points=points,
+                                    settings=ViewSettings(n_views=8, full_long_side=768)))
+    v.start()
+    rc = _RemoteClient(v)
+    try:
+        deadline = time.monotonic() + 60
+        first = None
+        # viser counts a client from its first camera message, then adds the viewer's callbacks
+        while first is None and time.monotonic() < deadline:
+            rc.move(scene.views[0].camera)
+            first = v.wait_for_image(kind="full", timeout=5)
+        assert first is not None, "no first image"
+        yield v, rc, first
+    finally:
+        rc.close()
+        v.stop()
+
+
+def synthetic(updates: int, points: str = "while moving", browser_nice: int | None = None,
+              client: str = "chromium") -> dict:
     from vibr.synthetic import make_scene
 
     t0 = time.perf_counter()
@@ -100,11 +196,18 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
                for k in range(updates + 1)]  # the first one warms up
     prev, prev_render, full, full_render = [], [], [], []
     renice = None if browser_nice is None else (lambda: _renice_children(browser_nice))
-    with _viewer_page(scene, points, on_load=renice) as (viewer, first):
-        client = next(iter(viewer.clients().values()))
+    if client == "remote":
+        page = _viewer_remote(scene, points)
+    else:
+        page = _viewer_page(scene, points, on_load=renice)
+    with page as opened:
+        viewer, first = opened[0], opened[-1]
+        move = (opened[1].move if client == "remote"
+                else functools.partial(viewer.move_client, next(iter(viewer.clients().values()))))
         seq = first.seq
+        ru0 = resource.getrusage(resource.RUSAGE_SELF)
         for k, cam in enumerate(targets):
-            viewer.move_client(client, cam)
+            move(cam)
             p = viewer.wait_for_image(kind="preview", after_seq=seq, timeout=120)
             f = viewer.wait_for_image(kind="full", after_seq=seq, timeout=120)
             assert p is not None and f is not None, "no image for an update"
@@ -122,6 +225,11 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
                   f"(render {p.render_seconds:.2f} s), "
                   f"full {f.camera.width}x{f.camera.height} {f.seconds:.2f} s "
                   f"(render {f.render_seconds:.2f} s)", flush=True)
+        ru1 = resource.getrusage(resource.RUSAGE_SELF)
+    n = len(targets)
+    print(f"viewer process per update: user {(ru1.ru_utime - ru0.ru_utime) / n:.2f} s, system "
+          f"{(ru1.ru_stime - ru0.ru_stime) / n:.2f} s, minor page faults {(ru1.ru_minflt - ru0.ru_minflt) / n:.0f}",
+          flush=True)
     return {"preview": prev, "preview_render": prev_render, "full": full, "full_render": full_render}
 
 
@@ -575,6 +683,11 @@ def main(argv=None) -> int:
                     help="the viewer's point-cloud mode (vibr.viewer.POINT_MODES; default 'while moving', "
                          "vibr view's): 'never' shows the server's latency without the browser "
                          "drawing 300 000 points in software on the same cores")
+    ap.add_argument("--client", choices=("chromium", "remote"), default="chromium",
+                    help="what moves the camera: headless Chromium on this machine (default; it draws the "
+                         "page in software on the same cores) or a client that draws nothing here "
+                         "(a browser on another machine)")
+    ap.add_argument("--_remote-client", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--skip-fountain", action="store_true")
     ap.add_argument("--skip-synthetic", action="store_true")
     ap.add_argument("--data", default=os.environ.get("VIBR_DATA", str(_REPO.parent / "shared" / "data")))
@@ -601,6 +714,9 @@ def main(argv=None) -> int:
     from vibr._malloc import tune_malloc
 
     tune_malloc()  # as `vibr view` does (VIBR_MALLOC=default: glibc's own settings)
+    if a._remote_client:
+        _remote_client_main(a._remote_client)
+        return 0
     if a.browser_timeline:
         browser_timeline()
         return 0
@@ -638,8 +754,8 @@ def main(argv=None) -> int:
           flush=True)
     rows = []
     if not a.skip_synthetic:
-        s = synthetic(a.updates, a.points, a.browser_nice)
-        print(f"point cloud: {a.points}; browser nice: {a.browser_nice}", flush=True)
+        s = synthetic(a.updates, a.points, a.browser_nice, a.client)
+        print(f"client: {a.client}; point cloud: {a.points}; browser nice: {a.browser_nice}", flush=True)
         rows += [("synthetic 768², 8 sources: preview (256²), update → sent", _stats(s["preview"]), "≤ 0.3 s"),
                  ("  the preview's render itself (vibr.render + source choice)", _stats(s["preview_render"]), ""),
                  ("synthetic 768², 8 sources: full (768²), update → sent", _stats(s["full"]), "≤ 1.5 s"),

@@ -6,8 +6,10 @@ to at most 32 MiB as blocks are freed) with a fresh ``mmap``, and unmaps it agai
 ``free``: every page of every such array is then faulted in and zeroed by the kernel, once
 per use. Frame after frame of a fly-through this is the same work again. Keeping those
 blocks in the heap (mmap threshold 256 MiB) and not returning the heap's free top to the
-kernel below 512 MiB (trim threshold) lets the next frame reuse the pages (measured with
-``benchmarks/bench_malloc.py``: docs/PERFORMANCE.md).
+kernel below 2 GiB (trim threshold) lets the next frame reuse the pages (measured with
+``benchmarks/bench_malloc.py``: docs/PERFORMANCE.md). The trim threshold was 512 MiB until
+2026-11-28: a viewer's 768² render frees about 600 MiB at the top of the heap, which glibc
+then gave back and the next render faulted in again (docs/VIEWER.md, "The heap's top").
 
 Those settings hold for glibc's main heap only. A thread other than the main one (the
 viewer's render worker) gets an arena of its own, whose heaps are at most 64 MiB: a larger
@@ -42,8 +44,10 @@ _M_MMAP_THRESHOLD = -3
 _M_ARENA_MAX = -8
 #: blocks below this come from the heap (bytes)
 MMAP_THRESHOLD = 256 * 2 ** 20
-#: free memory at the top of the heap kept below this (bytes)
-TRIM_THRESHOLD = 512 * 2 ** 20
+#: free memory at the top of the heap kept below this (bytes): the largest value glibc's
+#: ``mallopt`` takes (a C int), so that a process rendering view after view keeps the pages
+#: of its working set (about 600 MiB above the rest of the heap in a viewer's 768² render)
+TRIM_THRESHOLD = 2 ** 31 - 1
 #: malloc arenas: one, so that every thread allocates from the heap the thresholds govern
 ARENA_MAX = 1
 _USER_VARS = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES")
@@ -79,5 +83,5 @@ def tune_malloc() -> bool:
         return False
     _done = bool(ok)
     logger.debug("malloc: mmap threshold %d MiB, trim threshold %d MiB, arenas %s: %s", MMAP_THRESHOLD >> 20,
-                 TRIM_THRESHOLD >> 20, os.environ.get("MALLOC_ARENA_MAX", ARENA_MAX), "set" if ok else "refused")
+                 (TRIM_THRESHOLD + 1) >> 20, os.environ.get("MALLOC_ARENA_MAX", ARENA_MAX), "set" if ok else "refused")
     return _done
