@@ -63,6 +63,16 @@ def _midway(a, b):
     return Camera.from_centre(a.K, R, 0.5 * (a.centre + b.centre), a.width, a.height)
 
 
+def _viewer(scene, points: str):
+    """The benchmark's viewer of ``scene``: 8 sources, full size 768, point-cloud mode
+    ``points``, on a free port (not started)."""
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer.browser import free_port
+
+    return Viewer(scene, ViewerOptions(port=free_port(), points=points,
+                                       settings=ViewSettings(n_views=8, full_long_side=768)))
+
+
 @contextlib.contextmanager
 def _viewer_page(scene, points: str, on_load=None):
     """A viewer of ``scene`` (8 sources, full size 768, point-cloud mode ``points``) shown
@@ -70,11 +80,9 @@ def _viewer_page(scene, points: str, on_load=None):
     first image; closes both. ``on_load()`` runs once the page has loaded."""
     from playwright.sync_api import sync_playwright
 
-    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
-    from vibr.viewer.browser import free_port, launch_chromium
+    from vibr.viewer.browser import launch_chromium
 
-    v = Viewer(scene, ViewerOptions(port=free_port(), points=points,
-                                    settings=ViewSettings(n_views=8, full_long_side=768)))
+    v = _viewer(scene, points)
     url = v.start()
     try:
         with sync_playwright() as pw:
@@ -164,11 +172,7 @@ def _remote_client_main(port: int) -> None:
 @contextlib.contextmanager
 def _viewer_remote(scene, points: str):
     """As :func:`_viewer_page`, with a :class:`_RemoteClient` in place of the browser."""
-    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
-    from vibr.viewer.browser import free_port
-
-    v = Viewer(scene, ViewerOptions(port=free_port(), points=points,
-                                    settings=ViewSettings(n_views=8, full_long_side=768)))
+    v = _viewer(scene, points)
     v.start()
     rc = _RemoteClient(v)
     try:
@@ -201,9 +205,12 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
     else:
         page = _viewer_page(scene, points, on_load=renice)
     with page as opened:
-        viewer, first = opened[0], opened[-1]
-        move = (opened[1].move if client == "remote"
-                else functools.partial(viewer.move_client, next(iter(viewer.clients().values()))))
+        if client == "remote":
+            viewer, rc, first = opened
+            move = rc.move
+        else:
+            viewer, first = opened
+            move = functools.partial(viewer.move_client, next(iter(viewer.clients().values())))
         seq = first.seq
         ru0 = resource.getrusage(resource.RUSAGE_SELF)
         for k, cam in enumerate(targets):
