@@ -281,7 +281,9 @@ class Viewer:
         size = scene_scale(self.scene, P.astype(np.float64) + self.origin)
         self._scale = size
         if len(P):
-            self._points = sc.add_point_cloud("/points", P, C, point_size=size * 0.004,
+            # 0.002 of the scene's size: a browser without a GPU rasterises every point of the frames
+            # it draws after a move, which overlap the full render (docs/VIEWER.md, "The heap's top")
+            self._points = sc.add_point_cloud("/points", P, C, point_size=size * 0.002,
                                               point_shape="square", point_shading="flat",
                                               precision="float32")
         else:
