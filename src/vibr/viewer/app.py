@@ -37,6 +37,10 @@ __all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "POINT_MODES",
 #: ``settle_s``, when the full-size render starts: the render is then seen whole, and a
 #: browser drawing the points without a GPU leaves the server's cores to it), always, never.
 POINT_MODES = ("while moving", "always", "never")
+#: The side of a drawn point, as a fraction of the scene's size (:func:`.geometry.scene_scale`):
+#: 0.004 until 2026-11-28; a browser without a GPU rasterises every point of the frames it
+#: draws after a move, which overlap the full render (docs/VIEWER.md, "The heap's top")
+POINT_SIDE = 0.002
 
 _SOURCE_COLOUR = (255, 96, 0)
 _FRUSTUM_COLOUR = (60, 60, 60)
@@ -281,9 +285,7 @@ class Viewer:
         size = scene_scale(self.scene, P.astype(np.float64) + self.origin)
         self._scale = size
         if len(P):
-            # 0.002 of the scene's size: a browser without a GPU rasterises every point of the frames
-            # it draws after a move, which overlap the full render (docs/VIEWER.md, "The heap's top")
-            self._points = sc.add_point_cloud("/points", P, C, point_size=size * 0.002,
+            self._points = sc.add_point_cloud("/points", P, C, point_size=size * POINT_SIDE,
                                               point_shape="square", point_shading="flat",
                                               precision="float32")
         else:
