@@ -11,7 +11,8 @@ time is taken when the rendered image has been encoded and queued to the client
    between view 0 and another view), the preview (long side 256) latency and the full-size
    (768²) latency. The full-size latency includes the ``settle_s`` = 0.3 s wait for a still
    camera and the preview rendered before it, as a user experiences it; the render time of
-   the full image alone is given too.
+   the full image alone is given too, and the CPU the client's processes took per update
+   (Chromium's by process kind: its GPU process draws the page in software here).
 2. **fountain at scale 0.25** (``../shared/data/strecha_fountain-P11``, 11 views of
    768×512, no depth maps): the time from loading the scene to the first full view sent,
    as ``vibr view --cache-dir CACHE`` does it, cold (photographs decoded and resized,
@@ -22,7 +23,7 @@ time is taken when the rendered image has been encoded and queued to the client
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
     python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic] [--numba-threads default]
-                                    [--client chromium|remote]
+                                    [--client chromium|remote] [--max-points N]
     python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu | --browser-timeline | --ab-arena
                                            (A/B comparisons, alternating in one process)
 """
@@ -63,13 +64,18 @@ def _midway(a, b):
     return Camera.from_centre(a.K, R, 0.5 * (a.centre + b.centre), a.width, a.height)
 
 
+#: points in the benchmark viewer's cloud (``--max-points``; None: the viewer's default)
+MAX_POINTS: int | None = None
+
+
 def _viewer(scene, points: str):
     """The benchmark's viewer of ``scene``: 8 sources, full size 768, point-cloud mode
-    ``points``, on a free port (not started)."""
+    ``points``, :data:`MAX_POINTS` points, on a free port (not started)."""
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings
     from vibr.viewer.browser import free_port
 
-    return Viewer(scene, ViewerOptions(port=free_port(), points=points,
+    more = {} if MAX_POINTS is None else {"max_points": MAX_POINTS}
+    return Viewer(scene, ViewerOptions(port=free_port(), points=points, **more,
                                        settings=ViewSettings(n_views=8, full_long_side=768)))
 
 
@@ -189,6 +195,24 @@ def _viewer_remote(scene, points: str):
         v.stop()
 
 
+def _children_cpu() -> dict:
+    """CPU seconds of this process's children by kind (Chromium's ``--type=`` of each
+    process: gpu-process, renderer, ...; ``browser`` for Chromium's main process, else the
+    process name), summed over the processes of each kind."""
+    import psutil
+
+    out: dict = {}
+    for p in psutil.Process().children(recursive=True):
+        try:
+            cmd, c = p.cmdline(), p.cpu_times()
+        except psutil.Error:
+            continue
+        kind = next((a.split("=", 1)[1] for a in cmd if a.startswith("--type=")), None)
+        kind = kind or ("browser" if "chrom" in p.name() else p.name())
+        out[kind] = out.get(kind, 0.0) + c.user + c.system
+    return out
+
+
 def synthetic(updates: int, points: str = "while moving", browser_nice: int | None = None,
               client: str = "chromium") -> dict:
     from vibr.synthetic import make_scene
@@ -213,11 +237,16 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
             move = functools.partial(viewer.move_client, next(iter(viewer.clients().values())))
         seq = first.seq
         ru0 = resource.getrusage(resource.RUSAGE_SELF)
+        others = []  # CPU seconds of the client's processes from the move to the full image, by kind
         for k, cam in enumerate(targets):
+            c0 = _children_cpu()
             move(cam)
             p = viewer.wait_for_image(kind="preview", after_seq=seq, timeout=120)
             f = viewer.wait_for_image(kind="full", after_seq=seq, timeout=120)
             assert p is not None and f is not None, "no image for an update"
+            c1 = _children_cpu()
+            if k > 0:
+                others.append({kind: c1[kind] - c0.get(kind, 0.0) for kind in c1})
             # settle: the browser's echoes of one move are several updates
             time.sleep(0.5)
             last = viewer.wait_for_image(kind="full", after_seq=f.seq, timeout=0.1)
@@ -237,6 +266,9 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
     print(f"viewer process per update: user {(ru1.ru_utime - ru0.ru_utime) / n:.2f} s, system "
           f"{(ru1.ru_stime - ru0.ru_stime) / n:.2f} s, minor page faults {(ru1.ru_minflt - ru0.ru_minflt) / n:.0f}",
           flush=True)
+    kinds = sorted({kind for o in others for kind in o}, key=lambda kd: -np.median([o.get(kd, 0.0) for o in others]))
+    print(f"client ({client}) CPU per update, move → full image sent, medians: "
+          + ", ".join(f"{kd} {np.median([o.get(kd, 0.0) for o in others]):.2f} s" for kd in kinds), flush=True)
     return {"preview": prev, "preview_render": prev_render, "full": full, "full_render": full_render}
 
 
@@ -690,6 +722,8 @@ def main(argv=None) -> int:
                     help="the viewer's point-cloud mode (vibr.viewer.POINT_MODES; default 'while moving', "
                          "vibr view's): 'never' shows the server's latency without the browser "
                          "drawing 300 000 points in software on the same cores")
+    ap.add_argument("--max-points", type=int, metavar="N",
+                    help="points in the viewer's cloud (default: the viewer's, vibr.viewer.ViewerOptions)")
     ap.add_argument("--client", choices=("chromium", "remote"), default="chromium",
                     help="what moves the camera: headless Chromium on this machine (default; it draws the "
                          "page in software on the same cores) or a client that draws nothing here "
@@ -714,6 +748,8 @@ def main(argv=None) -> int:
                     help="'viewer' (default): two numba threads per core waiting passively, as `vibr view` "
                          "sets them (vibr._threads); 'default': numba's one per core, libgomp's spin wait")
     a = ap.parse_args(argv)
+    global MAX_POINTS
+    MAX_POINTS = a.max_points
     if a.numba_threads == "viewer":  # before vibr imports numba, as `vibr view` does
         from vibr._threads import oversubscribe_render_threads
 
@@ -762,7 +798,7 @@ def main(argv=None) -> int:
     rows = []
     if not a.skip_synthetic:
         s = synthetic(a.updates, a.points, a.browser_nice, a.client)
-        print(f"client: {a.client}; point cloud: {a.points}; browser nice: {a.browser_nice}", flush=True)
+        print(f"client: {a.client}; point cloud: {a.points}, {a.max_points or 'default'} points; browser nice: {a.browser_nice}", flush=True)
         rows += [("synthetic 768², 8 sources: preview (256²), update → sent", _stats(s["preview"]), "≤ 0.3 s"),
                  ("  the preview's render itself (vibr.render + source choice)", _stats(s["preview_render"]), ""),
                  ("synthetic 768², 8 sources: full (768²), update → sent", _stats(s["full"]), "≤ 1.5 s"),
