@@ -42,8 +42,11 @@ def register(sub) -> None:
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.5 (default 1)")
     add_method_option(p)
     p.add_argument("--views", type=int, default=8, metavar="K", help="initial number of source views (default 8)")
-    p.add_argument("--max-points", type=int, default=300_000, help="points in the point cloud (default 300000)")
-    from ..viewer.app import POINT_MODES
+    from ..viewer.app import POINT_MODES, ViewerOptions
+
+    p.add_argument("--max-points", type=int, default=ViewerOptions.max_points,
+                   help=f"points in the point cloud (default {ViewerOptions.max_points}; a browser that draws "
+                        "without a GPU spends most of a frame on them: fewer make its moves smoother)")
 
     p.add_argument("--points", choices=POINT_MODES, default=POINT_MODES[0],
                    help=f"when the point cloud is drawn over the render (default '{POINT_MODES[0]}': hidden "
