@@ -549,7 +549,9 @@ def browser_cpu(seconds: float = 10.0) -> None:
     software on this machine: viser redraws on demand and once a second) while nothing is
     rendered: the share of the 2 cores the viewer's renders do not get while the browser
     runs on the same machine. The synthetic 768² scene of the latency measurement (its
-    point cloud: 300 000 points), for each point-cloud mode."""
+    point cloud: the viewer's 300 000 points, or ``--max-points``), for each point-cloud
+    mode. The page is drawn once a second: the cores it takes are the CPU seconds a frame
+    costs."""
     import psutil
 
     from vibr.synthetic import make_scene
@@ -559,14 +561,7 @@ def browser_cpu(seconds: float = 10.0) -> None:
     me = psutil.Process()
 
     def children_cpu():
-        t = 0.0
-        for p in me.children(recursive=True):
-            try:
-                c = p.cpu_times()
-                t += c.user + c.system
-            except psutil.Error:
-                pass
-        return t
+        return sum(_children_cpu().values())
 
     for mode in POINT_MODES:
         with _viewer_page(scene, mode):
@@ -798,7 +793,7 @@ def main(argv=None) -> int:
     rows = []
     if not a.skip_synthetic:
         s = synthetic(a.updates, a.points, a.browser_nice, a.client)
-        print(f"client: {a.client}; point cloud: {a.points}, {a.max_points or 'default'} points; browser nice: {a.browser_nice}", flush=True)
+        print(f"client: {a.client}; point cloud: {a.points}, {'default' if a.max_points is None else a.max_points} points; browser nice: {a.browser_nice}", flush=True)
         rows += [("synthetic 768², 8 sources: preview (256²), update → sent", _stats(s["preview"]), "≤ 0.3 s"),
                  ("  the preview's render itself (vibr.render + source choice)", _stats(s["preview_render"]), ""),
                  ("synthetic 768², 8 sources: full (768²), update → sent", _stats(s["full"]), "≤ 1.5 s"),
