@@ -177,7 +177,8 @@ def _remote_client_main(port: int) -> None:
 
 @contextlib.contextmanager
 def _viewer_remote(scene, points: str):
-    """As :func:`_viewer_page`, with a :class:`_RemoteClient` in place of the browser."""
+    """As :func:`_viewer_page`, with a :class:`_RemoteClient` in place of the browser; yields
+    the viewer, its first image and the client's ``move(camera)``."""
     v = _viewer(scene, points)
     v.start()
     rc = _RemoteClient(v)
@@ -189,7 +190,7 @@ def _viewer_remote(scene, points: str):
             rc.move(scene.views[0].camera)
             first = v.wait_for_image(kind="full", timeout=5)
         assert first is not None, "no first image"
-        yield v, rc, first
+        yield v, first, rc.move
     finally:
         rc.close()
         v.stop()
@@ -224,17 +225,10 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
                for k in range(updates + 1)]  # the first one warms up
     prev, prev_render, full, full_render = [], [], [], []
     renice = None if browser_nice is None else (lambda: _renice_children(browser_nice))
-    if client == "remote":
-        page = _viewer_remote(scene, points)
-    else:
-        page = _viewer_page(scene, points, on_load=renice)
-    with page as opened:
-        if client == "remote":
-            viewer, rc, first = opened
-            move = rc.move
-        else:
-            viewer, first = opened
-            move = functools.partial(viewer.move_client, next(iter(viewer.clients().values())))
+    page = _viewer_remote(scene, points) if client == "remote" else _viewer_page(scene, points, on_load=renice)
+    with page as (viewer, first, *mover):
+        # the remote client moves itself; the browser's camera is moved through the server
+        move = mover[0] if mover else functools.partial(viewer.move_client, next(iter(viewer.clients().values())))
         seq = first.seq
         ru0 = resource.getrusage(resource.RUSAGE_SELF)
         others = []  # CPU seconds of the client's processes from the move to the full image, by kind
