@@ -366,9 +366,10 @@ def test_identical_camera_echo_is_not_a_new_request(tiny_scene):
 
 @pytest.mark.parametrize("mode", ["while moving", "always", "never"])
 def test_point_cloud_shown_while_the_camera_moves(tiny_scene, monkeypatch, mode):
-    """Default "while moving": the points appear with a camera move and go when the camera
-    has settled and the full-size render starts (the render is then seen whole); one
-    visibility message per change; "always" / "never" do not follow the camera."""
+    """Default "while moving": the points appear with a camera move and go with the preview
+    of a camera no newer update replaced (a stale preview leaves them), or when the
+    full-size render starts; one visibility message per change; "always" / "never" do not
+    follow the camera."""
     from types import SimpleNamespace
 
     from vibr.viewer import app
@@ -388,7 +389,9 @@ def test_point_cloud_shown_while_the_camera_moves(tiny_scene, monkeypatch, mode)
     v.gui = {"points": SimpleNamespace(value=mode), "status": SimpleNamespace(content=""),
              "show_sources": SimpleNamespace(value=False)}
     v._set_visible("points")
-    v._workers[7] = SimpleNamespace(submit=lambda payload, t_update=None: 1, is_stale=lambda req: False)
+    newest = {"seq": 2}
+    v._workers[7] = SimpleNamespace(submit=lambda payload, t_update=None: 1,
+                                    is_stale=lambda req: req.seq != newest["seq"])
     v._hide_frustums_at = lambda pos: None
     client = SimpleNamespace(client_id=7, flush=lambda: None)
     wxyz, pos, fov, aspect = app.viser_pose_from_camera(tiny_scene.views[0].camera)
@@ -396,10 +399,20 @@ def test_point_cloud_shown_while_the_camera_moves(tiny_scene, monkeypatch, mode)
     v._on_camera(cam)
     v._on_camera(SimpleNamespace(**dict(vars(cam), position=tuple(np.add(pos, 1e-3)))))
     moving = v._points_shown
-    v._render_for(client, Request(1, 0.0, (app.CameraState.of(cam), v.settings)), "full")
+    preview = app.ViewSettings(full_long_side=32, preview_long_side=16)
+    state = app.CameraState.of(cam)
+    v._render_for(client, Request(1, 0.0, (state, preview)), "preview")  # a newer camera came
+    after_stale = v._points_shown
+    v._render_for(client, Request(2, 0.0, (state, preview)), "preview")
+    after_preview = v._points_shown
+    v._on_camera(SimpleNamespace(**dict(vars(cam), position=tuple(np.add(pos, 2e-3)))))
+    newest["seq"] = 3
+    moving_again = v._points_shown
+    v._render_for(client, Request(3, 0.0, (state, v.settings)), "full")  # no preview first
     still = v._points_shown
-    want = {"while moving": (False, True, False), "always": (True, True, True), "never": (False, False, False)}[mode]
-    assert (changes[0], moving, still) == want
+    want = {"while moving": (False, True, True, False, True, False), "always": (True,) * 6,
+            "never": (False,) * 6}[mode]
+    assert (changes[0], moving, after_stale, after_preview, moving_again, still) == want
     assert all(a != b for a, b in zip(changes, changes[1:]))  # a message only when it changes
     assert v.sent[7][-1].kind == "full"
     with pytest.raises(VibrInputError, match="points"):

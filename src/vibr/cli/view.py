@@ -50,7 +50,7 @@ def register(sub) -> None:
 
     p.add_argument("--points", choices=POINT_MODES, default=POINT_MODES[0],
                    help=f"when the point cloud is drawn over the render (default '{POINT_MODES[0]}': hidden "
-                        "once the camera is still and the full-size render starts)")
+                        "once the camera has stopped and the preview of where it stopped is shown)")
     add_cache_options(p)
     p.add_argument("--path-out", default=None, help="file 'export path' writes (default camera_path.json)")
     add_quiet(p)

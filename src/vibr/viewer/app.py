@@ -33,9 +33,10 @@ logger = logging.getLogger(__name__)
 __all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "POINT_MODES", "check_port_free", "encode_png",
            "send_background"]
 
-#: When the point cloud is drawn: while the camera moves (hidden once it has been still for
-#: ``settle_s``, when the full-size render starts: the render is then seen whole, and a
-#: browser drawing the points without a GPU leaves the server's cores to it), always, never.
+#: When the point cloud is drawn: while the camera moves (hidden once the preview of the
+#: camera's resting place is shown, or when the full-size render starts if no preview came
+#: first: the render is then seen whole, and a browser drawing the points without a GPU
+#: leaves the server's cores to it), always, never.
 POINT_MODES = ("while moving", "always", "never")
 #: The side of a drawn point, as a fraction of the scene's size (:func:`.geometry.scene_scale`):
 #: 0.004 until 2026-11-28; a browser without a GPU rasterises every point of the frames it
@@ -388,6 +389,12 @@ class Viewer:
             for name, h in self._frustums.items():
                 h.visible = on and name not in self._hidden
 
+    def _at_rest(self, client) -> None:
+        """The client's camera has stopped: the points go in "while moving" mode."""
+        with self._lock:
+            self._moving.discard(client.client_id)
+        self._set_visible("points")
+
     def _hide_frustums_at(self, centre) -> None:
         """Hide the frustums the viewport sits in (their thumbnail would fill the view)."""
         C = np.asarray(centre, dtype=np.float64)
@@ -523,9 +530,7 @@ class Viewer:
             return  # the full render follows; a preview as large would only delay it
         cam = st.camera(long_side, self.origin)
         if kind == "full":  # the camera has been still for settle_s
-            with self._lock:
-                self._moving.discard(client.client_id)
-            self._set_visible("points")
+            self._at_rest(client)
         worker = self._workers.get(client.client_id)
         stale = (lambda: worker.is_stale(req)) if worker is not None else None
         try:
@@ -542,6 +547,11 @@ class Viewer:
             return
         img, what = shown_image(out)
         send_background(client, img, kind)
+        if kind == "preview" and stale is not None and not stale():
+            # no newer camera: hide the points with this image rather than when the full render
+            # starts, so that the frames the browser draws for it fall before that render
+            # (docs/VIEWER.md, "Points hidden with the preview")
+            self._at_rest(client)
         client.flush()
         dt = time.perf_counter() - req.t_update
         rec = SentImage(img, cam, kind, req.seq, out.sources, dt, out.seconds)
