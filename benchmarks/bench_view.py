@@ -12,7 +12,10 @@ time is taken when the rendered image has been encoded and queued to the client
    (768²) latency. The full-size latency includes the ``settle_s`` = 0.3 s wait for a still
    camera and the preview rendered before it, as a user experiences it; the render time of
    the full image alone is given too, and the CPU the client's processes took per update
-   (Chromium's by process kind: its GPU process draws the page in software here).
+   (Chromium's by process kind: its GPU process draws the page in software here). With
+   ``--drag N`` each update is a drag of N moves 33 ms apart ending at the target, timed
+   from its last camera update, with the camera updates, abandoned renders and point
+   show/hide messages it caused and the preview of its last camera.
 2. **fountain at scale 0.25** (``../shared/data/strecha_fountain-P11``, 11 views of
    768×512, no depth maps): the time from loading the scene to the first full view sent,
    as ``vibr view --cache-dir CACHE`` does it, cold (photographs decoded and resized,
@@ -23,7 +26,7 @@ time is taken when the rendered image has been encoded and queued to the client
 Medians with min and max; the machine is shared and noisy (say so when reporting).
 
     python benchmarks/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic] [--numba-threads default]
-                                    [--client chromium|remote] [--max-points N]
+                                    [--client chromium|remote] [--max-points N] [--drag N]
     python benchmarks/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu | --browser-timeline | --ab-arena
                                            (A/B comparisons, alternating in one process)
 """
@@ -53,15 +56,16 @@ def _stats(xs) -> str:
     return f"{np.median(xs):6.2f} s  (min {xs.min():.2f}, max {xs.max():.2f}, n={len(xs)})"
 
 
-def _midway(a, b):
-    """The camera halfway between two cameras (centre and rotation, same intrinsics)."""
+def _midway(a, b, t: float = 0.5):
+    """The camera a fraction ``t`` of the way from ``a`` to ``b`` (centre and rotation, same
+    intrinsics; halfway by default)."""
     from scipy.spatial.transform import Rotation, Slerp
 
     from vibr.camera import Camera
 
     rots = Rotation.from_matrix(np.array([a.R, b.R]))
-    R = Slerp([0, 1], rots)(0.5).as_matrix()
-    return Camera.from_centre(a.K, R, 0.5 * (a.centre + b.centre), a.width, a.height)
+    R = Slerp([0, 1], rots)(t).as_matrix()
+    return Camera.from_centre(a.K, R, (1 - t) * a.centre + t * b.centre, a.width, a.height)
 
 
 #: points in the benchmark viewer's cloud (``--max-points``; None: the viewer's default)
@@ -214,8 +218,35 @@ def _children_cpu() -> dict:
     return out
 
 
+def _count_visibility(viewer) -> list:
+    """A one-element list counting the point cloud's show/hide messages from now on (the
+    viewer's handle wrapped; the messages still go out)."""
+    count = [0]
+    handle = viewer._points
+
+    class Counted:
+        def __setattr__(self, name, value):
+            if name == "visible":
+                count[0] += 1
+            setattr(handle, name, value)
+
+        def __getattr__(self, name):
+            return getattr(handle, name)
+
+    if handle is not None:
+        viewer._points = Counted()
+    return count
+
+
+#: seconds between the camera moves of a drag (``--drag``): a pointer reported at 30 Hz
+DRAG_STEP_S = 1 / 30
+
+
 def synthetic(updates: int, points: str = "while moving", browser_nice: int | None = None,
-              client: str = "chromium") -> dict:
+              client: str = "chromium", drag: int = 1) -> dict:
+    """Each update moves the camera to a new target: at once, or with ``drag`` > 1 in that many
+    moves :data:`DRAG_STEP_S` apart from the previous target (the full view is then timed from
+    the last move, and the points' state is sampled before each later move of the drag)."""
     from vibr.synthetic import make_scene
 
     t0 = time.perf_counter()
@@ -232,9 +263,19 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
         seq = first.seq
         ru0 = resource.getrusage(resource.RUSAGE_SELF)
         others = []  # CPU seconds of the client's processes from the move to the full image, by kind
+        at, hidden, sampled = scene.views[0].camera, 0, 0
+        toggles = _count_visibility(viewer)
+        cid, worker = next(iter(viewer._workers.items()))
         for k, cam in enumerate(targets):
-            c0 = _children_cpu()
+            c0, t0, r0, a0 = _children_cpu(), toggles[0], worker.submitted, viewer.abandoned
+            for j in range(1, drag):
+                move(_midway(at, cam, j / drag))
+                time.sleep(DRAG_STEP_S)
+                if k > 0:  # the points should stay up until the drag stops
+                    sampled += 1
+                    hidden += viewer._points_shown is False
             move(cam)
+            at = cam
             p = viewer.wait_for_image(kind="preview", after_seq=seq, timeout=120)
             f = viewer.wait_for_image(kind="full", after_seq=seq, timeout=120)
             assert p is not None and f is not None, "no image for an update"
@@ -251,10 +292,17 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
             prev_render.append(p.render_seconds)
             full.append(f.seconds)
             full_render.append(f.render_seconds)
+            # the preview of the request the full image answers (a drag's last camera)
+            pf = [im for im in viewer.sent[cid] if im.kind == "preview" and im.seq == f.seq] \
+                if drag > 1 else []
+            more = (f"; {worker.submitted - r0} camera updates, {viewer.abandoned - a0} renders abandoned, "
+                    f"{toggles[0] - t0} point show/hide messages"
+                    + (f", the last camera's preview {pf[0].seconds:.2f} s" if pf else ", no preview of the last camera")
+                    if drag > 1 else "")
             print(f"  update {k}: preview {p.camera.width}x{p.camera.height} {p.seconds:.2f} s "
                   f"(render {p.render_seconds:.2f} s), "
                   f"full {f.camera.width}x{f.camera.height} {f.seconds:.2f} s "
-                  f"(render {f.render_seconds:.2f} s)", flush=True)
+                  f"(render {f.render_seconds:.2f} s){more}", flush=True)
         ru1 = resource.getrusage(resource.RUSAGE_SELF)
     n = len(targets)
     print(f"viewer process per update: user {(ru1.ru_utime - ru0.ru_utime) / n:.2f} s, system "
@@ -263,6 +311,9 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
     kinds = sorted({kind for o in others for kind in o}, key=lambda kd: -np.median([o.get(kd, 0.0) for o in others]))
     print(f"client ({client}) CPU per update, move → full image sent, medians: "
           + ", ".join(f"{kd} {np.median([o.get(kd, 0.0) for o in others]):.2f} s" for kd in kinds), flush=True)
+    if drag > 1:
+        print(f"drags of {drag} moves {DRAG_STEP_S * 1000:.0f} ms apart: points hidden at {hidden} of the "
+              f"{sampled} moves after a drag's first (point-cloud mode {points!r})", flush=True)
     return {"preview": prev, "preview_render": prev_render, "full": full, "full_render": full_render}
 
 
@@ -713,6 +764,9 @@ def main(argv=None) -> int:
                          "drawing 300 000 points in software on the same cores")
     ap.add_argument("--max-points", type=int, metavar="N",
                     help="points in the viewer's cloud (default: the viewer's, vibr.viewer.ViewerOptions)")
+    ap.add_argument("--drag", type=int, default=1, metavar="N",
+                    help="each update a drag of N camera moves, 33 ms apart, ending at the target (default 1: "
+                         "a jump); the times are from the last move, the preview's from whichever came first")
     ap.add_argument("--client", choices=("chromium", "remote"), default="chromium",
                     help="what moves the camera: headless Chromium on this machine (default; it draws the "
                          "page in software on the same cores) or a client that draws nothing here "
@@ -786,7 +840,7 @@ def main(argv=None) -> int:
           flush=True)
     rows = []
     if not a.skip_synthetic:
-        s = synthetic(a.updates, a.points, a.browser_nice, a.client)
+        s = synthetic(a.updates, a.points, a.browser_nice, a.client, a.drag)
         print(f"client: {a.client}; point cloud: {a.points}, {'default' if a.max_points is None else a.max_points} points; browser nice: {a.browser_nice}", flush=True)
         rows += [("synthetic 768², 8 sources: preview (256²), update → sent", _stats(s["preview"]), "≤ 0.3 s"),
                  ("  the preview's render itself (vibr.render + source choice)", _stats(s["preview_render"]), ""),

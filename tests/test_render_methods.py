@@ -196,3 +196,30 @@ def test_cli_refuses_a_parameter_the_methods_ignore(tmp_path, capsys, cmd, extra
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("method", ["gradient", "ulr"])
+def test_render_stops_between_its_stages(method):
+    """``stop`` is polled between the geometry's stages (z-buffer, visibility, fields) and,
+    for a solved method, between the solve's stages before its first FISTA iteration and
+    after each iteration; True raises RenderStopped at once (a stale viewer render stops in
+    a fraction of a render)."""
+    from vibr.render import RenderStopped, render
+    from vibr.synthetic import make_scene
+
+    scene = make_scene("grid", n_views=5, width=48, height=40, seed=1)
+    src, cam = scene.subset([0, 1, 3, 4]), scene.views[2].camera
+    its, polls = [], []
+    res = render(src, cam, method, callback=lambda *a: its.append(1), stop=lambda: polls.append(len(its)) or False)
+    assert res.image.shape == (40, 48, 3)
+    if method == "ulr":
+        assert polls == [0, 0, 0]  # z-buffer, visibility, fields; the blend is one stage
+    else:  # and the view prior, the coverage, the first weights
+        assert polls.count(0) >= 6 and len(its) > 0
+        assert polls[polls.count(0):] == sorted(polls[polls.count(0):]) and len(polls) >= polls.count(0) + len(its)
+    for n in range(1, polls.count(0) + 1):  # told to stop at the n-th poll: no iteration ran
+        its.clear()
+        with pytest.raises(RenderStopped):
+            render(src, cam, method, callback=lambda *a: its.append(1),
+                   stop=lambda calls=[]: calls.append(1) or len(calls) >= n)
+        assert its == []

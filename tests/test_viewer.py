@@ -288,16 +288,19 @@ def test_view_cli_serves_and_stops(tiny_scene, tmp_path, host):
     c.close()
 
 
-def test_stale_render_is_abandoned(tiny_scene):
+@pytest.mark.parametrize("polls", [1, 2, 3, 4, 5, 6])
+def test_stale_render_is_abandoned(tiny_scene, polls):
+    """The request is checked before the render, after its geometry and between the solve's
+    stages (before its first iteration): whichever poll says stop, the render stops there."""
+    from vibr.render import RenderStopped
     from vibr.viewer import ViewRenderer
-    from vibr.viewer.renderer import RenderAbandoned
 
     r = ViewRenderer(tiny_scene)
     cam = tiny_scene.views[0].camera
     calls = []
-    with pytest.raises(RenderAbandoned):
-        r.render(cam, ViewSettings(n_views=3), should_stop=lambda: calls.append(1) or len(calls) > 1)
-    assert len(calls) == 2  # checked before starting, then stopped at the first solver iteration
+    with pytest.raises(RenderStopped):
+        r.render(cam, ViewSettings(n_views=3), should_stop=lambda: calls.append(1) or len(calls) >= polls)
+    assert len(calls) == polls
     out = r.render(cam, ViewSettings(n_views=3), should_stop=lambda: False)
     assert out.image.shape == (48, 64, 3) and len(out.sources) == 3
 

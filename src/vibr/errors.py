@@ -1,8 +1,10 @@
-"""Errors raised on bad input.
+"""Errors raised on bad input, and the one a render raises when told to stop.
 
 Every problem with user data (a missing file, an unreadable image, bad depth, a
 malformed camera) raises :class:`VibrInputError`, whose message is one line naming
 the file and the problem. The CLI prints that line and exits with status 2.
+:class:`RenderStopped` is not an error of the input: a render whose ``stop()`` returned
+True (:func:`vibr.render.render`) ends with it.
 """
 
 from __future__ import annotations
@@ -27,6 +29,17 @@ class OutputFailed(VibrInputError, OSError):
     """An output that could not be written: the disk is full, the folder read-only or not
     ours (the message names the file and the system's reason). Also an :class:`OSError`,
     so that writers of optional files (the caches) that skip a failed write still do."""
+
+
+class RenderStopped(Exception):
+    """A render ended early because its ``stop()`` said so (:func:`vibr.render.render`'s
+    ``stop``: a viewer whose camera has moved on)."""
+
+
+def check_stop(stop) -> None:
+    """Raise :class:`RenderStopped` when ``stop`` (a callable or None) returns True."""
+    if stop is not None and stop():
+        raise RenderStopped()
 
 
 def require_file(path: str | os.PathLike) -> str:

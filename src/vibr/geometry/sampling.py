@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..camera import Camera
-from ..errors import VibrInputError
+from ..errors import VibrInputError, check_stop
 from ..scene import Scene, View
 from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_row
 from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
@@ -200,7 +200,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
                     edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
                     sigma_z_default: float | None = None, splat_mode: str = "affine",
                     return_zbuffer: bool = False, prepared: dict | None = None,
-                    grad_scheme: str | None = None, keep=(), grad_model: str | None = None) -> Samples:
+                    grad_scheme: str | None = None, keep=(), grad_model: str | None = None,
+                    stop=None) -> Samples:
     """Visible warped source samples for a target camera (paper §5).
 
     Parameters
@@ -244,6 +245,9 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         Optional fields to compute (:data:`OPTIONAL_FIELDS`): ``"jac"`` (the footprint PSF
         reads it; :func:`vibr.render.methods.sample_fields` says what a render needs),
         ``"src_xy"``; the others are None.
+    stop : callable, optional
+        Polled after the z-buffer and after the visibility test; True raises
+        :class:`vibr.errors.RenderStopped` (:func:`vibr.render.render`'s ``stop``).
 
     Returns
     -------
@@ -258,16 +262,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     VibrInputError
         A source without depth, or no source sample landing in the target.
     """
-    grad_scheme = DEFAULT_GRAD_SCHEME if grad_scheme is None else grad_scheme
-    grad_model = DEFAULT_GRAD_MODEL if grad_model is None else grad_model
-    if grad_model not in GRAD_MODELS:
-        raise VibrInputError(f"grad_model must be one of {GRAD_MODELS}, got {grad_model!r}")
-    keep = (keep,) if isinstance(keep, str) else tuple(keep)
-    if set(keep) - set(OPTIONAL_FIELDS):
-        raise VibrInputError(f"keep: unknown field(s) {sorted(set(keep) - set(OPTIONAL_FIELDS))} "
-                             f"(choose from {', '.join(OPTIONAL_FIELDS)})")
-    if grad_scheme not in GRAD_SCHEMES:
-        raise VibrInputError(f"grad_scheme must be one of {GRAD_SCHEMES}, got {grad_scheme!r}")
+    grad_scheme, grad_model, keep = _checked_fields(grad_scheme, grad_model, keep)
     cam = target.camera if isinstance(target, View) else target
     if not isinstance(cam, Camera):
         raise VibrInputError("target must be a Camera or a View", None)
@@ -284,6 +279,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
             # known geometry wins: a fallback sample only shows where no known surface lands
             zproxy = _target_zbuffer(proxy, cam.shape, max_quad_px, splat_mode)
             zproxy[np.isfinite(zbuf)] = -np.inf
+    check_stop(stop)
     with _Timer(times, cpu, "visibility"):
         states, counts = _visibility(known, zbuf, vis_threshold)
         if proxy:
@@ -291,6 +287,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
             states += st
             for name, c in cnt.items():
                 counts[name].update({"fallback visible": c["visible"], "fallback hidden": c["occluded"]})
+    check_stop(stop)
     with _Timer(times, cpu, "assembly"):
         out = _gather_samples(known + proxy, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme, keep,
                               grad_model)
@@ -311,6 +308,21 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     if return_zbuffer:
         out.meta["zbuffer"] = zbuf
     return out
+
+
+def _checked_fields(grad_scheme, grad_model, keep):
+    """``compute_samples``' field options, defaults filled and checked (a one-line error)."""
+    grad_scheme = DEFAULT_GRAD_SCHEME if grad_scheme is None else grad_scheme
+    grad_model = DEFAULT_GRAD_MODEL if grad_model is None else grad_model
+    if grad_model not in GRAD_MODELS:
+        raise VibrInputError(f"grad_model must be one of {GRAD_MODELS}, got {grad_model!r}")
+    keep = (keep,) if isinstance(keep, str) else tuple(keep)
+    if set(keep) - set(OPTIONAL_FIELDS):
+        raise VibrInputError(f"keep: unknown field(s) {sorted(set(keep) - set(OPTIONAL_FIELDS))} "
+                             f"(choose from {', '.join(OPTIONAL_FIELDS)})")
+    if grad_scheme not in GRAD_SCHEMES:
+        raise VibrInputError(f"grad_scheme must be one of {GRAD_SCHEMES}, got {grad_scheme!r}")
+    return grad_scheme, grad_model, keep
 
 
 class _Timer:

@@ -6,6 +6,7 @@ method registry (:mod:`vibr.render.methods`) and :func:`render`.
 
 from .api import RenderResult, SharedGeometry, fine_grid, grid_params, render, render_samples, shared_geometry
 from .methods import DEFAULTS, METHODS
+from ..errors import RenderStopped
 
 __all__ = ["render", "render_samples", "fine_grid", "grid_params", "shared_geometry", "SharedGeometry",
-           "RenderResult", "METHODS", "DEFAULTS"]
+           "RenderResult", "RenderStopped", "METHODS", "DEFAULTS"]

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera
-from ..errors import VibrInputError
+from ..errors import VibrInputError, check_stop
 from ..geometry.resolution import ResolutionPlan
 from ..geometry.samples import Samples
 from ..scene import Scene, View
@@ -23,7 +23,7 @@ logger = logging.getLogger(__name__)
 
 def render_samples(samples: Samples, method="gradient", *, source_centres=None,
                    target_centre=None, callback=None, progress_bar: bool = False,
-                   verbose: bool = False, uncertainty: bool = False, **params) -> RenderResult:
+                   verbose: bool = False, uncertainty: bool = False, stop=None, **params) -> RenderResult:
     """Render from precomputed :class:`~vibr.geometry.Samples` (see :func:`render` for the
     parameters) with the registered method (:mod:`vibr.render.methods`).
     ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr and the view prior
@@ -41,7 +41,8 @@ def render_samples(samples: Samples, method="gradient", *, source_centres=None,
     if target_centre is None:
         target_centre = samples.meta.get("target_centre")
     return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
-                    callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty)
+                    callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty,
+                    stop=stop)
 
 
 def _resolve_auto(src: Scene, cam: Camera, m, params: dict) -> dict:
@@ -169,9 +170,9 @@ def shared_geometry(sources: Scene, target: View | Camera, renders=(("gradient",
     return SharedGeometry(src, grid, samples, plan, cam)
 
 
-def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):
+def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample, stop=None):
     """The geometry stage of :func:`render`: ``(sources, samples, plan)``, the samples on
-    :func:`fine_grid`'s grid."""
+    :func:`fine_grid`'s grid (``stop`` polled between its stages)."""
     from ..geometry import compute_samples
     from ..validate import check_render_memory
     from .methods import with_sample_fields
@@ -181,13 +182,13 @@ def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample):
     src, grid, gkw["prepared"], plan = fine_grid(src, cam, supersample, gkw.get("prepared"), [(m, params)])
     check_render_memory([v.camera.shape for v in src.views], grid.shape, cam.source,  # before allocating
                         keep=gkw["keep"], output_shape=cam.shape)
-    return src, compute_samples(src, grid, **gkw), plan
+    return src, compute_samples(src, grid, stop=stop, **gkw), plan
 
 
 def render(sources: Scene, target: View | Camera, method="gradient", *,
            samples: Samples | None = None, callback=None, progress_bar: bool = False,
            verbose: bool = False, geometry_kw: dict | None = None, uncertainty: bool = False,
-           supersample="auto", **params) -> RenderResult:
+           supersample="auto", stop=None, **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
     Minimises (docs/METHOD.md §5, paper eq. energy_final)
@@ -214,6 +215,12 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         Skip the geometry stage (the sources are then used as given).
     callback : callable, optional
         ``callback(outer, k, energy, (E_color, E_grad, TV))`` per FISTA iteration.
+    stop : callable, optional
+        ``stop()`` is polled between the geometry's stages (z-buffer, visibility, sample
+        fields), between the solve's (view prior, coverage, weights) and after each FISTA
+        iteration; when it returns True the render raises
+        :class:`RenderStopped` (a viewer whose camera has moved on stops in a fraction of
+        a render rather than after its first iteration).
     progress_bar : bool
         A bar over the outer passes (:func:`vibr.progress.progress`: on a terminal only).
     verbose : bool
@@ -264,14 +271,15 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     t0 = time.perf_counter()
     src, plan = sources, None
     if samples is None:
-        src, samples, plan = _fine_samples(sources, target, cam, m, params, geometry_kw, supersample)
+        src, samples, plan = _fine_samples(sources, target, cam, m, params, geometry_kw, supersample, stop)
     elif isinstance(target, View) and target.name in sources.names:
         src = sources.replace(views=[v for v in sources.views if v.name != target.name])
     t_geo = time.perf_counter() - t0
+    check_stop(stop)
     params = grid_params(m, _resolve_auto(src, cam, m, params), plan)
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
-                         verbose=verbose, uncertainty=uncertainty, **params)
+                         verbose=verbose, uncertainty=uncertainty, stop=stop, **params)
     res = res.on_target(plan, cam.shape)
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all

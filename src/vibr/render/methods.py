@@ -171,7 +171,7 @@ class Method:
         return (() if self.gradient else grad) + (() if self.geometric else ("sigma_z", "z_corr"))
 
     def render(self, samples, p: dict, *, source_centres=None, target_centre=None, callback=None,
-               progress_bar: bool = False, verbose: bool = False, uncertainty=False):
+               progress_bar: bool = False, verbose: bool = False, uncertainty=False, stop=None):
         """Render from :class:`~vibr.geometry.Samples` with filled parameters ``p``
         (:func:`method_params`); returns a :class:`~vibr.render.RenderResult` (with its
         ``uncertainty`` map when asked, :mod:`vibr.render.uncertainty`)."""
@@ -180,7 +180,7 @@ class Method:
 
             return solve_variational(samples, p, self, callback=callback, progress_bar=progress_bar,
                                      verbose=verbose, uncertainty=uncertainty,
-                                     centres=(source_centres, target_centre))
+                                     centres=(source_centres, target_centre), stop=stop)
         return _render_ulr(self, samples, p, source_centres, target_centre, uncertainty)
 
 

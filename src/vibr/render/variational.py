@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import VibrInputError
+from ..errors import VibrInputError, check_stop
 from ..geometry.samples import Samples
 from .weights import coverage_blend, gradient_consistency, robust_factor, view_prior, weighted_normal
 from .operators import DEFAULT_GRAD_SCHEME, Splat
@@ -259,12 +259,13 @@ def _outer_line(name, o, n_outer, res) -> str:
 
 
 def solve_variational(samples: Samples, p: dict, method, *, callback=None, progress_bar: bool = False,
-                      verbose: bool = False, uncertainty=False, centres=(None, None)) -> RenderResult:
+                      verbose: bool = False, uncertainty=False, centres=(None, None), stop=None) -> RenderResult:
     """Render from ``samples`` with a variational ``method`` (a
     :class:`vibr.render.methods.Method` with ``solve``): weights, initial image, then
     ``n_outer`` passes of (re-weight, assemble, FISTA). See :func:`vibr.render.render`.
     ``centres`` = (source centres (V, 3), target centre (3,)) for the view prior
-    (``p["view_k"]`` > 0)."""
+    (``p["view_k"]`` > 0); ``stop`` is polled between those stages and after each FISTA
+    iteration (:func:`vibr.errors.check_stop`)."""
     t_all = time.perf_counter()
     times = {"weights": 0.0, "init": 0.0, "assembly": 0.0, "solve": 0.0}
     s = float(p["scale"])
@@ -274,6 +275,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     sp = make_splat(samples, p["psf"] == "footprint")
     times["assembly"] += time.perf_counter() - t0
     prior = _view_prior(samples, p, centres, times, sp)
+    check_stop(stop)
     t0 = time.perf_counter()
     cov = splat_coverage(samples, p, footprint=p["psf"] == "footprint", gradient=gamma > 0, blend_factor=prior,
                          splat=sp)
@@ -281,6 +283,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     times["assembly"] += time.perf_counter() - t0
     rho = sample_density(cov.acc, cov.coverage, p["normalise"])
     rho_c = colour_density(rho, prior, p["normalise"])
+    check_stop(stop)
     need_w = p["grad_weighting"] == "W" or bool(uncertainty)
     colour_term = _ColourTerm(samples, p, sp, rho_c, method.geometric, times, need_w, prior)
 
@@ -325,6 +328,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
             A, b, c, Wk = colour_term(u_w.transpose(1, 2, 0))
         elif o == 0:
             A, b, c, Wk = colour_term(None)  # deformation only
+        check_stop(stop)
         t0 = time.perf_counter()
         model = make_model(A, b, c, Wk)
         times["assembly"] += time.perf_counter() - t0
@@ -334,6 +338,7 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
         def cb(k, e, tr, _o=o):
             if callback is not None:
                 callback(_o, k, e, tr)
+            check_stop(stop)
 
         # a pass before the last only supplies the image the weights are re-estimated from
         tol = p["tol"] if o == n_outer - 1 or p.get("tol_outer") is None else p["tol_outer"]

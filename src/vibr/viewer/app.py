@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera
-from ..errors import VibrInputError
+from ..errors import RenderStopped, VibrInputError
 from ..render.methods import METHODS
 from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
 from .geometry import display_origin, frustum_size, point_cloud, scene_scale, thumbnail, world_up
-from .renderer import SHOW, RenderAbandoned, ViewRenderer, ViewSettings
+from .renderer import SHOW, ViewRenderer, ViewSettings
 from .worker import LatestRequestWorker, Request
 
 logger = logging.getLogger(__name__)
@@ -535,7 +535,7 @@ class Viewer:
         stale = (lambda: worker.is_stale(req)) if worker is not None else None
         try:
             out = self.renderer.render(cam, settings, should_stop=stale, preview=kind == "preview")
-        except RenderAbandoned:
+        except RenderStopped:
             self.abandoned += 1
             return  # the camera moved on: the newer request is rendered next
         except VibrInputError as exc:  # a camera turned away from the scene: said in the panel

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..camera import Camera
+from ..errors import check_stop
 from ..render import render
 from ..render.methods import DEFAULTS, METHODS, method_params
 from ..scene import Scene
@@ -23,7 +24,7 @@ from .geometry import points_in_view
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "RenderAbandoned", "scaled_scene", "scene_with_depth",
+__all__ = ["ViewSettings", "ViewImage", "ViewRenderer", "scaled_scene", "scene_with_depth",
            "SHOW"]
 
 
@@ -41,10 +42,6 @@ PREVIEW_OUTER = 1
 #: What the viewer shows of a render (:attr:`ViewSettings.show`).
 SHOW = {"image": "the rendered view",
         "sigma": "where it can be trusted: each pixel's standard deviation, viridis from 0 (dark) up"}
-
-
-class RenderAbandoned(Exception):
-    """A render stopped early because its request became stale."""
 
 
 @dataclass(frozen=True)
@@ -184,9 +181,10 @@ class ViewRenderer:
         """Render ``camera`` with ``settings`` (its size is the camera's); a ``preview`` in at
         most :data:`PREVIEW_OUTER` outer passes.
 
-        ``should_stop()``, when given, is polled after every solver iteration; when it
-        returns True the render is abandoned by raising :class:`RenderAbandoned` (a newer
-        camera arrived: finishing would only delay its image)."""
+        ``should_stop()``, when given, is polled between the render's stages and after every
+        solver iteration (:func:`vibr.render.render`'s ``stop``); when it returns True the
+        render is abandoned by raising :class:`vibr.render.RenderStopped` (a newer camera
+        arrived: finishing would only delay its image)."""
         import numba
 
         with self._lock:
@@ -200,21 +198,15 @@ class ViewRenderer:
 
     def _render(self, camera: Camera, settings: ViewSettings, should_stop, preview: bool = False) -> ViewImage:
         t0 = time.perf_counter()
-        if should_stop is not None and should_stop():
-            raise RenderAbandoned()
+        check_stop(should_stop)
         idx = self.sources_for(camera, settings.n_views)
         scene = self.scene_for(camera)
         src = scene.subset(idx)
         prepared = self.prepared_for(scene, idx)
-        cb = None
-        if should_stop is not None:
-            def cb(*_):
-                if should_stop():
-                    raise RenderAbandoned()
         passes = {}
         if preview and method_params(settings.method)["n_outer"] > PREVIEW_OUTER:
             passes["n_outer"] = PREVIEW_OUTER
-        res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, callback=cb,
+        res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, stop=should_stop,
                      geometry_kw={"prepared": prepared}, uncertainty=settings.show == "sigma", **passes)
         dt = time.perf_counter() - t0
         return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times), res.iterations,
