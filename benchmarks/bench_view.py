@@ -246,7 +246,7 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
               client: str = "chromium", drag: int = 1) -> dict:
     """Each update moves the camera to a new target: at once, or with ``drag`` > 1 in that many
     moves :data:`DRAG_STEP_S` apart from the previous target (the full view is then timed from
-    the last move, and the points' state is sampled before each later move of the drag)."""
+    the last camera update the viewer got)."""
     from vibr.synthetic import make_scene
 
     t0 = time.perf_counter()
@@ -263,7 +263,7 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
         seq = first.seq
         ru0 = resource.getrusage(resource.RUSAGE_SELF)
         others = []  # CPU seconds of the client's processes from the move to the full image, by kind
-        at, hidden, sampled = scene.views[0].camera, 0, 0
+        at = scene.views[0].camera
         toggles = _count_visibility(viewer)
         cid, worker = next(iter(viewer._workers.items()))
         for k, cam in enumerate(targets):
@@ -271,9 +271,6 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
             for j in range(1, drag):
                 move(_midway(at, cam, j / drag))
                 time.sleep(DRAG_STEP_S)
-                if k > 0:  # the points should stay up until the drag stops
-                    sampled += 1
-                    hidden += viewer._points_shown is False
             move(cam)
             at = cam
             p = viewer.wait_for_image(kind="preview", after_seq=seq, timeout=120)
@@ -311,9 +308,6 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
     kinds = sorted({kind for o in others for kind in o}, key=lambda kd: -np.median([o.get(kd, 0.0) for o in others]))
     print(f"client ({client}) CPU per update, move → full image sent, medians: "
           + ", ".join(f"{kd} {np.median([o.get(kd, 0.0) for o in others]):.2f} s" for kd in kinds), flush=True)
-    if drag > 1:
-        print(f"drags of {drag} moves {DRAG_STEP_S * 1000:.0f} ms apart: points hidden at {hidden} of the "
-              f"{sampled} moves after a drag's first (point-cloud mode {points!r})", flush=True)
     return {"preview": prev, "preview_render": prev_render, "full": full, "full_render": full_render}
 
 
