@@ -219,7 +219,8 @@ def test_render_stops_between_its_stages(method):
         assert polls[polls.count(0):] == sorted(polls[polls.count(0):]) and len(polls) >= polls.count(0) + len(its)
     for n in range(1, polls.count(0) + 1):  # told to stop at the n-th poll: no iteration ran
         its.clear()
+        calls = []
         with pytest.raises(RenderStopped):
             render(src, cam, method, callback=lambda *a: its.append(1),
-                   stop=lambda calls=[]: calls.append(1) or len(calls) >= n)
-        assert its == []
+                   stop=lambda: calls.append(1) or len(calls) >= n)
+        assert its == [] and len(calls) == n
