@@ -407,20 +407,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             _check_photo_sides(files, sizes, opt.scale, photos_dir)
             _check_work_space(work, sizes, opt, own_work)
         img_dir, db, sparse, undist = _clean_work(work)
-        t0 = time.perf_counter()
-        logger.info(f"calibrate [1/5] resizing {len(files)} photos by {opt.scale:g}")
-        sizes = _downscale_photos(files, img_dir, opt.scale)
-        lenses = _lens_keys(files)
-        if opt.single_camera and len(set(sizes)) > 1:
-            # One shared camera needs one image size: photos of several sizes get one each.
-            logger.info(f"calibrate: photos have {len(set(sizes))} different sizes: one camera per photo")
-            opt = replace(opt, single_camera=False)
-        elif opt.single_camera and len(set(lenses)) > 1:
-            # a zoom, or a second camera of the same resolution: one focal length would be wrong
-            logger.info(f"calibrate: the photos' EXIF names {len(set(lenses))} cameras or focal lengths: "
-                        "one camera per photo")
-            opt = replace(opt, single_camera=False)
-        times["resize"] = time.perf_counter() - t0
+        sizes, opt = _resized_photos(files, img_dir, opt, times)
         names = [f"{f.stem}.png" for f in files]
         stem = {f"{f.stem}.png": f.name for f in files}
         with _colmap_log_level(opt.verbose):
@@ -433,24 +420,8 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
             recs, choice = _mapping_or_one_centre(one, db, img_dir, sparse, len(files), opt, times)
             taken = choice is not None and choice.one_centre
             best_key, rec, registered, unregistered = _kept_model(recs, names, stem, photos_dir, opt)
-            pp_note = "refined in mapping" if opt.refine_principal_point else "fixed at the image centre"
-            if taken:
-                pp_note = "fixed at the image centre (turned on the spot)"
-            elif opt.refine_principal_point is None:
-                t0 = time.perf_counter()
-                rec, pp_note = _refine_principal_point(rec, opt.num_threads)
-                times["principal_point"] = time.perf_counter() - t0
-            logger.info(f"calibrate: principal point {pp_note}")
-            pycolmap.logging.minloglevel = 0 if opt.verbose else 2
-            model_dir = sparse / str(best_key)
-            model_dir.mkdir(parents=True, exist_ok=True)
-            rec.write(model_dir)  # the kept model (incremental_mapping also wrote it)
-            t0 = time.perf_counter()
-            logger.info(f"calibrate [5/5] undistorting {len(registered)} images to PINHOLE")
-            pycolmap.undistort_images(undist, model_dir, img_dir, output_type="COLMAP",
-                                      num_threads=opt.num_threads)
-            times["undistort"] = time.perf_counter() - t0
-            urec = pycolmap.Reconstruction(undist / "sparse")
+            rec, pp_note = _principal_point(rec, opt, taken, times)
+            urec = _undistorted(rec, sparse / str(best_key), img_dir, undist, len(registered), opt, times)
         report = CalibrationReport(
             registered=[stem[n] for n in registered],
             unregistered=[stem[n] for n in unregistered],
@@ -471,6 +442,55 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
     finally:
         if own_work:
             shutil.rmtree(work, ignore_errors=True)
+
+
+def _resized_photos(files: list[Path], img_dir: Path, opt: CalibrateOptions, times: dict):
+    """Step 1/5: the photos resized by ``opt.scale`` into ``img_dir``; their sizes, and
+    ``opt`` with one camera per photo where one shared camera would be wrong."""
+    t0 = time.perf_counter()
+    logger.info(f"calibrate [1/5] resizing {len(files)} photos by {opt.scale:g}")
+    sizes = _downscale_photos(files, img_dir, opt.scale)
+    lenses = _lens_keys(files)
+    if opt.single_camera and len(set(sizes)) > 1:
+        # One shared camera needs one image size: photos of several sizes get one each.
+        logger.info(f"calibrate: photos have {len(set(sizes))} different sizes: one camera per photo")
+        opt = replace(opt, single_camera=False)
+    elif opt.single_camera and len(set(lenses)) > 1:
+        # a zoom, or a second camera of the same resolution: one focal length would be wrong
+        logger.info(f"calibrate: the photos' EXIF names {len(set(lenses))} cameras or focal lengths: "
+                    "one camera per photo")
+        opt = replace(opt, single_camera=False)
+    times["resize"] = time.perf_counter() - t0
+    return sizes, opt
+
+
+def _principal_point(rec, opt: CalibrateOptions, turned_on_the_spot: bool, times: dict):
+    """The kept model with its principal point refined when ``opt`` leaves it to vibr, and
+    a note of what was done with it."""
+    pp_note = "refined in mapping" if opt.refine_principal_point else "fixed at the image centre"
+    if turned_on_the_spot:
+        pp_note = "fixed at the image centre (turned on the spot)"
+    elif opt.refine_principal_point is None:
+        t0 = time.perf_counter()
+        rec, pp_note = _refine_principal_point(rec, opt.num_threads)
+        times["principal_point"] = time.perf_counter() - t0
+    logger.info(f"calibrate: principal point {pp_note}")
+    return rec, pp_note
+
+
+def _undistorted(rec, model_dir: Path, img_dir: Path, undist: Path, n_registered: int, opt: CalibrateOptions,
+                 times: dict):
+    """Step 5/5: the kept model written to ``model_dir`` and its images undistorted to
+    PINHOLE in ``undist``; the undistorted reconstruction."""
+    pycolmap = import_pycolmap()
+    pycolmap.logging.minloglevel = 0 if opt.verbose else 2
+    model_dir.mkdir(parents=True, exist_ok=True)
+    rec.write(model_dir)  # the kept model (incremental_mapping also wrote it)
+    t0 = time.perf_counter()
+    logger.info(f"calibrate [5/5] undistorting {n_registered} images to PINHOLE")
+    pycolmap.undistort_images(undist, model_dir, img_dir, output_type="COLMAP", num_threads=opt.num_threads)
+    times["undistort"] = time.perf_counter() - t0
+    return pycolmap.Reconstruction(undist / "sparse")
 
 
 def _check_options(opt: CalibrateOptions, n_photos: int | None, photos_dir: Path) -> CalibrateOptions:

@@ -7,7 +7,8 @@
     view_density      rho_c counted in views (lam_density's divisor)
     initial_image     the W-weighted blend of the samples, holes filled by push–pull
     fill_holes        the solved image's holes filled by push–pull of its covered pixels
-    assemble_model    the quadratic model of one outer pass (colour and gradient stencils)
+    _Problem          what the outer passes share (splat, densities, terms), and the
+                      quadratic model of one pass (colour and gradient stencils)
     solve_variational the outer passes: re-estimate the weights from u, assemble, FISTA
 
 Which of these a method uses (gradient term, re-weighting, geometric uncertainty) is
@@ -258,6 +259,142 @@ def _outer_line(name, o, n_outer, res) -> str:
             f"TV {res.terms[-1][2]:.4g}), {res.time_s:.2f} s")
 
 
+class _Problem:
+    """What every outer pass of one render shares (docs/METHOD.md §3-7): the splat ``B`` and
+    its coverage, the densities rho and rho_c, the colour and gradient terms, the TV prox and
+    the model's constants. :meth:`model` assembles one pass's energy from the colour term's
+    stencils."""
+
+    def __init__(self, samples: Samples, p: dict, method, centres, times: dict, stop, keep_weights: bool):
+        self.p, self.times = p, times
+        # sources coarser than the grid: their gradients weigh less (methods: grid_source_size)
+        self.gamma = p["gamma"] / max(1.0, p["grid_source_size"]) ** 2 if method.gradient else 0.0
+        footprint = p["psf"] == "footprint"
+        t0 = time.perf_counter()
+        sp = make_splat(samples, footprint)
+        times["assembly"] += time.perf_counter() - t0
+        prior = _view_prior(samples, p, centres, times, sp)
+        check_stop(stop)
+        t0 = time.perf_counter()
+        self.cov = splat_coverage(samples, p, footprint=footprint, gradient=self.gamma > 0, blend_factor=prior,
+                                  splat=sp)
+        self.sp = self.cov.splat
+        times["assembly"] += time.perf_counter() - t0
+        self.rho = sample_density(self.cov.acc, self.cov.coverage, p["normalise"])
+        self.rho_c = colour_density(self.rho, prior, p["normalise"])
+        check_stop(stop)
+        self.colour_term = _ColourTerm(samples, p, self.sp, self.rho_c, method.geometric, times, keep_weights, prior)
+        # D of the target side = the D the geometry stage applied to the sources
+        self.grad_scheme = samples.meta.get("grad_scheme", DEFAULT_GRAD_SCHEME)
+        self.tv_w = tv_weight_map(self.cov.acc, p["tv_weighting"])
+        # on a grid k times finer than the target (supersampling), lam / k: the k × k average
+        # smooths too (docs/RENDERER.md, "Sources finer than the target")
+        self.lam_eff = p["lam"] / p["grid_factor"] * (p["lam_density"] / view_density(self.rho_c, samples)
+                                                     if p.get("lam_density") else 1.0)
+        self.grad_term = _GradientTerm(self.cov, p, self.rho) if self.gamma > 0 else None
+
+    def initial_image(self) -> np.ndarray:
+        """The deformation-weighted blend (u unknown yet), push–pull filled, (H, W, 3); the
+        blend's sums are dropped after it."""
+        t0 = time.perf_counter()
+        init = initial_image(self.cov)
+        self.cov.wsum = self.cov.bw = None
+        self.times["init"] = time.perf_counter() - t0
+        return init
+
+    def model(self, A, b, c, Wk) -> QuadraticModel:
+        """The energy of one pass from the colour term's stencils and weights ``Wk`` (the
+        gradient term's stencils read them with grad_weighting W)."""
+        p, s = self.p, float(self.p["scale"])
+        Ag, bg, cg = self.grad_term.stencils(Wk) if self.grad_term is not None else (None, None, 0.0)
+        return QuadraticModel(A, b, float(c), Ag, bg, float(cg), p["alpha"], self.gamma, self.lam_eff / s, s,
+                              p["coupled_tv"], self.grad_scheme, self.tv_w)
+
+
+@dataclass
+class _Passes:
+    """What the outer passes leave: the image, the energies, and the last pass's weights
+    (``Wk``) with the estimate they were computed from (``u_w``; None: not re-weighted)."""
+
+    u: np.ndarray
+    energy: list
+    terms: list
+    outer: list
+    n_iter: int = 0
+    n_power: int = 0
+    model: QuadraticModel | None = None
+    Wk: np.ndarray | None = None
+    u_w: np.ndarray | None = None
+
+
+def _outer_passes(prob: _Problem, method, u, *, callback, progress_bar, verbose, stop) -> _Passes:
+    """``n_outer`` passes of (re-weight from u, assemble, FISTA) from the initial image ``u``
+    (3, H, W)."""
+    p, times = prob.p, prob.times
+    n_outer = max(1, int(p["n_outer"]))
+    out = _Passes(u, [], [], [])
+    prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=prob.tv_w)
+    power_state: dict = {}
+    passes = range(n_outer)
+    if progress_bar:
+        from ..progress import progress
+
+        passes = progress(passes, desc=f"render {method.name}")
+    A = b = c = None
+    for o in passes:
+        if method.reweight or (o == 0 and p["robust"] != "none"):
+            # savsr keeps its weights, but a robust loss reweights them once from the blend
+            out.model = A = b = None  # the previous pass's stencils go before the new ones come
+            out.u_w = out.u  # the estimate the weights come from (fista copies it)
+            A, b, c, out.Wk = prob.colour_term(out.u_w.transpose(1, 2, 0))
+        elif o == 0:
+            A, b, c, out.Wk = prob.colour_term(None)  # deformation only
+        check_stop(stop)
+        t0 = time.perf_counter()
+        out.model = prob.model(A, b, c, out.Wk)
+        times["assembly"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        out.outer.append(len(out.energy))
+
+        def cb(k, e, tr, _o=o):
+            if callback is not None:
+                callback(_o, k, e, tr)
+            check_stop(stop)
+
+        # a pass before the last only supplies the image the weights are re-estimated from
+        tol = p["tol"] if o == n_outer - 1 or p.get("tol_outer") is None else p["tol_outer"]
+        res = fista(out.model, out.u, max_iter=p["max_iter"], tol=tol, min_iter=p["min_iter"],
+                    tv_iter=p["tv_iter"], precond=p["precond"], d_floor=p["d_floor"], prox=prox,
+                    callback=cb, power_state=power_state)
+        times["solve"] += time.perf_counter() - t0
+        out.u = res.u
+        out.n_iter += res.n_iter
+        out.n_power += res.n_power
+        out.energy += res.energy
+        out.terms += res.terms
+        logger.log(logging.INFO if verbose else logging.DEBUG, "%s", _outer_line(method.name, o, n_outer, res))
+    return out
+
+
+def _uncertainty(prob: _Problem, method, samples: Samples, run: _Passes, terms):
+    """Issue 28: the Jacobi diag(H⁻¹) of the last pass's model + the sources' spread
+    (:func:`vibr.render.uncertainty.variational_sigma`); timed into ``times["uncertainty"]``."""
+    from .uncertainty import variational_sigma
+
+    t0 = time.perf_counter()
+    model, Wk = run.model, run.Wk
+    if prob.colour_term.z_corr > 0 and method.reweight and Wk is not None:
+        # σ from the independent errors' weights: the shared-error weights count a first-order
+        # cancellation as certainty (docs/RENDERER.md, "Depth errors the views share")
+        run.model = model = None
+        A, b, c, Wk = prob.colour_term(run.u_w.transpose(1, 2, 0), z_corr=0.0)
+        model = prob.model(A, b, c, Wk)
+    sig = variational_sigma(model, prob.sp, Wk, samples.colour, run.u, prob.cov.coverage, scale=float(prob.p["scale"]),
+                            density=prob.rho_c, grad_density=prob.rho, terms=terms, view=samples.view)
+    prob.times["uncertainty"] = time.perf_counter() - t0
+    return sig
+
+
 def solve_variational(samples: Samples, p: dict, method, *, callback=None, progress_bar: bool = False,
                       verbose: bool = False, uncertainty=False, centres=(None, None), stop=None) -> RenderResult:
     """Render from ``samples`` with a variational ``method`` (a
@@ -268,108 +405,18 @@ def solve_variational(samples: Samples, p: dict, method, *, callback=None, progr
     iteration (:func:`vibr.errors.check_stop`)."""
     t_all = time.perf_counter()
     times = {"weights": 0.0, "init": 0.0, "assembly": 0.0, "solve": 0.0}
-    s = float(p["scale"])
-    # sources coarser than the grid: their gradients weigh less (methods: grid_source_size)
-    gamma = p["gamma"] / max(1.0, p["grid_source_size"]) ** 2 if method.gradient else 0.0
-    t0 = time.perf_counter()
-    sp = make_splat(samples, p["psf"] == "footprint")
-    times["assembly"] += time.perf_counter() - t0
-    prior = _view_prior(samples, p, centres, times, sp)
-    check_stop(stop)
-    t0 = time.perf_counter()
-    cov = splat_coverage(samples, p, footprint=p["psf"] == "footprint", gradient=gamma > 0, blend_factor=prior,
-                         splat=sp)
-    sp = cov.splat
-    times["assembly"] += time.perf_counter() - t0
-    rho = sample_density(cov.acc, cov.coverage, p["normalise"])
-    rho_c = colour_density(rho, prior, p["normalise"])
-    check_stop(stop)
     need_w = p["grad_weighting"] == "W" or bool(uncertainty)
-    colour_term = _ColourTerm(samples, p, sp, rho_c, method.geometric, times, need_w, prior)
-
-    # initial image: the deformation-weighted blend (u unknown yet) + push-pull
-    t0 = time.perf_counter()
-    init = initial_image(cov)
-    cov.wsum = cov.bw = None
+    prob = _Problem(samples, p, method, centres, times, stop, need_w)
+    init = prob.initial_image()
     u = np.ascontiguousarray(init.transpose(2, 0, 1))  # planar (3, H, W) from here on
-    times["init"] = time.perf_counter() - t0
-
-    # D of the target side = the D the geometry stage applied to the sources
-    grad_scheme = samples.meta.get("grad_scheme", DEFAULT_GRAD_SCHEME)
-    n_outer = max(1, int(p["n_outer"]))
-    energy, terms, outer = [], [], []
-    tv_w = tv_weight_map(cov.acc, p["tv_weighting"])
-    # on a grid k times finer than the target (supersampling), lam / k: the k × k average
-    # smooths too (docs/RENDERER.md, "Sources finer than the target")
-    lam_eff = p["lam"] / p["grid_factor"] * (p["lam_density"] / view_density(rho_c, samples)
-                                            if p.get("lam_density") else 1.0)
-    prox = TVProx(u.shape, p["coupled_tv"], p["tv_iter"], weight=tv_w)
-    grad_term = _GradientTerm(cov, p, rho) if gamma > 0 else None
-
-    def make_model(A, b, c, Wk):
-        """The energy of one pass from the colour term's stencils and weights ``Wk`` (the
-        gradient term's stencils read them with grad_weighting W)."""
-        Ag, bg, cg = grad_term.stencils(Wk) if grad_term is not None else (None, None, 0.0)
-        return QuadraticModel(A, b, float(c), Ag, bg, float(cg), p["alpha"], gamma, lam_eff / s, s, p["coupled_tv"],
-                              grad_scheme, tv_w)
-
-    power_state: dict = {}
-    n_iter = n_power = 0
-    passes = range(n_outer)
-    if progress_bar:
-        from ..progress import progress
-
-        passes = progress(passes, desc=f"render {method.name}")
-    for o in passes:
-        if method.reweight or (o == 0 and p["robust"] != "none"):
-            # savsr keeps its weights, but a robust loss reweights them once from the blend
-            model = A = b = None  # the previous pass's stencils go before the new ones come
-            u_w = u  # the estimate the weights come from (fista copies it)
-            A, b, c, Wk = colour_term(u_w.transpose(1, 2, 0))
-        elif o == 0:
-            A, b, c, Wk = colour_term(None)  # deformation only
-        check_stop(stop)
-        t0 = time.perf_counter()
-        model = make_model(A, b, c, Wk)
-        times["assembly"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        outer.append(len(energy))
-
-        def cb(k, e, tr, _o=o):
-            if callback is not None:
-                callback(_o, k, e, tr)
-            check_stop(stop)
-
-        # a pass before the last only supplies the image the weights are re-estimated from
-        tol = p["tol"] if o == n_outer - 1 or p.get("tol_outer") is None else p["tol_outer"]
-        res = fista(model, u, max_iter=p["max_iter"], tol=tol, min_iter=p["min_iter"],
-                    tv_iter=p["tv_iter"], precond=p["precond"], d_floor=p["d_floor"], prox=prox,
-                    callback=cb, power_state=power_state)
-        times["solve"] += time.perf_counter() - t0
-        u = res.u
-        n_iter += res.n_iter
-        n_power += res.n_power
-        energy += res.energy
-        terms += res.terms
-        logger.log(logging.INFO if verbose else logging.DEBUG, "%s", _outer_line(method.name, o, n_outer, res))
-    sig = None
-    if uncertainty:  # issue 28: Jacobi diag(H⁻¹) of the last pass's model + spread of the sources
-        from .uncertainty import variational_sigma
-
-        t0 = time.perf_counter()
-        if colour_term.z_corr > 0 and method.reweight and Wk is not None:
-            # σ from the independent errors' weights: the shared-error weights count a first-order
-            # cancellation as certainty (docs/RENDERER.md, "Depth errors the views share")
-            A, b, c, Wk = colour_term(u_w.transpose(1, 2, 0), z_corr=0.0)
-            model = make_model(A, b, c, Wk)
-        sig = variational_sigma(model, sp, Wk, samples.colour, u, cov.coverage, scale=s, density=rho_c,
-                                grad_density=rho,
-                                terms=uncertainty, view=samples.view)
-        times["uncertainty"] = time.perf_counter() - t0
-    img = np.ascontiguousarray(np.clip(u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
+    run = _outer_passes(prob, method, u, callback=callback, progress_bar=progress_bar, verbose=verbose, stop=stop)
+    sig = _uncertainty(prob, method, samples, run, uncertainty) if uncertainty else None
+    img = np.ascontiguousarray(np.clip(run.u, 0, 1).transpose(1, 2, 0), dtype=np.float32)
     if p["hole_fill"] == "push-pull":
-        img = fill_holes(img, cov.coverage)
+        img = fill_holes(img, prob.cov.coverage)
     times["total"] = time.perf_counter() - t_all
-    p = dict(p, density=rho, colour_density=rho_c, psf_shrunk=sp.shrunk_fraction, psf_degenerate=sp.n_degenerate / max(sp.n, 1))
-    return RenderResult(img, cov.coverage, energy, terms, outer, times, method.name, p, len(samples),
-                        init=init, iterations=n_iter, power_iterations=n_power, uncertainty=sig)
+    sp = prob.sp
+    p = dict(p, density=prob.rho, colour_density=prob.rho_c, psf_shrunk=sp.shrunk_fraction,
+             psf_degenerate=sp.n_degenerate / max(sp.n, 1))
+    return RenderResult(img, prob.cov.coverage, run.energy, run.terms, run.outer, times, method.name, p, len(samples),
+                        init=init, iterations=run.n_iter, power_iterations=run.n_power, uncertainty=sig)
