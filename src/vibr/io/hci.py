@@ -172,38 +172,10 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
 
     cfg_path = root / "parameters.cfg"
     cfg = _read_cfg(cfg_path) if cfg_path.is_file() else None
-    if cfg is not None:
-        rows, cols = cfg["rows"], cfg["cols"]
-        if grid is not None and tuple(grid) != (rows, cols):
-            raise VibrInputError(f"grid {tuple(grid)} contradicts num_cams_y/x = {(rows, cols)}", cfg_path)
-    elif grid is not None:
-        rows, cols = (int(g) for g in grid)
-    else:
-        rows = cols = math.isqrt(max(files) + 1 - 1) + 1  # ceil(sqrt(max index + 1))
-    if max(files) >= rows * cols:
-        bad = files[max(files)]
-        raise VibrInputError(f"view index {max(files)} is outside the {rows}x{cols} grid", bad)
+    rows, cols = _grid_shape(root, files, cfg, cfg_path, grid)
     rc, cc = rows // 2, cols // 2
     centre_idx = rc * cols + cc
-    has_gt = (root / "gt_disp_lowres.pfm").is_file() or (root / "gt_depth_lowres.pfm").is_file()
-    if cfg is None and grid is None and has_gt and centre_idx not in files:
-        raise VibrInputError(
-            f"the ground truth belongs to the centre view, but input_Cam{centre_idx:03d} (centre of the "
-            f"{rows}x{cols} grid inferred from the largest view index) is missing: give the grid shape "
-            "(load_scene(..., grid=(rows, cols))) or add parameters.cfg", root)
-
-    # Every view of a grid must have the same size (the model is one sensor shifted).
-    sizes = {i: image_size(p) for i, p in files.items()}
-    ref_i = centre_idx if centre_idx in sizes else min(sizes)
-    W, H = sizes[ref_i]
-    for i, s in sizes.items():
-        if s != (W, H):
-            raise VibrInputError(
-                f"light-field views must all have the same size: this one is {s[0]}x{s[1]}, "
-                f"{files[ref_i].name} is {W}x{H}", files[i])
-    if cfg is not None and (cfg["res_x"], cfg["res_y"]) != (W, H):
-        raise VibrInputError(
-            f"parameters.cfg says {cfg['res_x']}x{cfg['res_y']} but the views are {W}x{H}", cfg_path)
+    W, H = _common_size(files, centre_idx, cfg, cfg_path)
 
     disp_path, depth_path = root / "gt_disp_lowres.pfm", root / "gt_depth_lowres.pfm"
     disp, depth_gt = _read_ground_truth(disp_path, depth_path, H, W)
@@ -245,3 +217,45 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
     meta["missing_views"] = {f"input_Cam{i:03d}": grid_camera(i, None).scaled(scale).to_dict()
                              for i in range(rows * cols) if i not in files}
     return Scene(vs, name=root.name, root=root, grid=(rows, cols), meta=meta)
+
+
+def _grid_shape(root: Path, files: dict, cfg, cfg_path: Path, grid) -> tuple[int, int]:
+    """(rows, cols) of the light field: parameters.cfg's, else ``grid``, else the smallest
+    square holding the largest view index (refused where that leaves the ground truth's
+    centre view ambiguous)."""
+    if cfg is not None:
+        rows, cols = cfg["rows"], cfg["cols"]
+        if grid is not None and tuple(grid) != (rows, cols):
+            raise VibrInputError(f"grid {tuple(grid)} contradicts num_cams_y/x = {(rows, cols)}", cfg_path)
+    elif grid is not None:
+        rows, cols = (int(g) for g in grid)
+    else:
+        rows = cols = math.isqrt(max(files) + 1 - 1) + 1  # ceil(sqrt(max index + 1))
+    if max(files) >= rows * cols:
+        bad = files[max(files)]
+        raise VibrInputError(f"view index {max(files)} is outside the {rows}x{cols} grid", bad)
+    centre_idx = (rows // 2) * cols + cols // 2
+    has_gt = (root / "gt_disp_lowres.pfm").is_file() or (root / "gt_depth_lowres.pfm").is_file()
+    if cfg is None and grid is None and has_gt and centre_idx not in files:
+        raise VibrInputError(
+            f"the ground truth belongs to the centre view, but input_Cam{centre_idx:03d} (centre of the "
+            f"{rows}x{cols} grid inferred from the largest view index) is missing: give the grid shape "
+            "(load_scene(..., grid=(rows, cols))) or add parameters.cfg", root)
+    return rows, cols
+
+
+def _common_size(files: dict, centre_idx: int, cfg, cfg_path: Path) -> tuple[int, int]:
+    """(W, H) of every view: a grid's views must share one size (the model is one sensor
+    shifted), and parameters.cfg's when it gives one."""
+    sizes = {i: image_size(p) for i, p in files.items()}
+    ref_i = centre_idx if centre_idx in sizes else min(sizes)
+    W, H = sizes[ref_i]
+    for i, s in sizes.items():
+        if s != (W, H):
+            raise VibrInputError(
+                f"light-field views must all have the same size: this one is {s[0]}x{s[1]}, "
+                f"{files[ref_i].name} is {W}x{H}", files[i])
+    if cfg is not None and (cfg["res_x"], cfg["res_y"]) != (W, H):
+        raise VibrInputError(
+            f"parameters.cfg says {cfg['res_x']}x{cfg['res_y']} but the views are {W}x{H}", cfg_path)
+    return W, H

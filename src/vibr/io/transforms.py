@@ -311,21 +311,7 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
     if not isinstance(meta, dict) or not isinstance(meta.get("frames"), list) or not meta["frames"]:
         raise VibrInputError("transforms.json must be an object with a non-empty 'frames' list", src)
     base = tf.parent
-    entries, grid_pos = [], {}
-    default_names = _frame_names(meta["frames"])
-    for i, fr in enumerate(meta["frames"]):
-        if not isinstance(fr, dict):
-            raise VibrInputError(f"frame {i} is not a JSON object", src)
-        if "file_path" not in fr:
-            raise VibrInputError(f"frame {i} is missing key 'file_path'", src)
-        img = _resolve(base, fr["file_path"], "file_path", src, i, allow_outside)
-        name = fr.get("vibr_name", default_names[i])
-        if not isinstance(name, str) or not name.strip():
-            raise VibrInputError(f"frame {i}: vibr_name must be a non-empty string", src)
-        e = {"name": name, "path": img, "frame": fr, "i": i}
-        if "vibr_grid_pos" in fr:
-            grid_pos[name] = _ints(fr["vibr_grid_pos"], 2, f"frame {i}: vibr_grid_pos", src)
-        entries.append(e)
+    entries, grid_pos = _read_frames(meta["frames"], base, src, allow_outside)
     entries = select_entries(entries, views, base)
     scaled = []
     for e in entries:
@@ -340,27 +326,7 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         if dist is not None:
             e["distortion"] = dist
         file_shape = cam.shape if dist is None else (dist.height, dist.width)  # depth and sigma_z files
-        dp = _get(fr, {}, "depth_file_path")
-        if dp is not None:
-            dpath = _resolve(base, dp, "depth_file_path", src, i, allow_outside)
-            fac = _get(fr, meta, "depth_unit_scale_factor")
-            fac = None if fac is None else _number(fac, f"frame {i}: depth_unit_scale_factor", src, positive=True)
-            e["depth"] = fit_depth(read_depth(dpath, fac), file_shape, dpath, f"frame {i}'s image")
-        mp = fr.get("mask_path")
-        if mp is not None:
-            mpath = _resolve(base, mp, "mask_path", src, i, allow_outside)
-            e["mask"] = read_mask(mpath, file_shape, f"frame {i}'s image")
-        sz = _get(fr, meta, "sigma_z")
-        szp = fr.get("sigma_z_file_path")
-        if szp is not None:
-            spath = _resolve(base, szp, "sigma_z_file_path", src, i, allow_outside)
-            s = fit_depth(read_depth(spath, 1.0), file_shape, spath, f"frame {i}'s image")  # finite, >= 0
-            e["sigma_z"] = np.nan_to_num(s, nan=0.0)
-        elif sz is not None:
-            sz = _number(sz, f"frame {i}: sigma_z", src)
-            if not sz >= 0:
-                raise VibrInputError(f"frame {i}: sigma_z must be finite and >= 0, got {sz}", src)
-            e["sigma_z"] = sz
+        e.update(_frame_maps(fr, meta, i, file_shape, base, src, allow_outside))
     if scaled:  # a scaled camera object in 3-D software: the rays' lines are the same
         logger.warning(f"{src}: the rotations of {len(scaled)} of {len(entries)} frames carry a uniform scale "
                        f"({min(scaled):.4g}..{max(scaled):.4g}); vibr uses their rotation, as the scale "
@@ -387,6 +353,55 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
     name = meta.get("vibr_name", base.name)
     name = name if isinstance(name, str) and name else base.name
     return Scene(vs, name=name, root=base, grid=grid, points=points, meta=smeta)
+
+
+def _read_frames(frames: list, base: Path, src: str, allow_outside: bool) -> tuple[list, dict]:
+    """One entry per frame (name, image path, the frame's JSON, its index) and the grid
+    positions frames give (``vibr_grid_pos``); the frames' keys checked."""
+    entries, grid_pos = [], {}
+    default_names = _frame_names(frames)
+    for i, fr in enumerate(frames):
+        if not isinstance(fr, dict):
+            raise VibrInputError(f"frame {i} is not a JSON object", src)
+        if "file_path" not in fr:
+            raise VibrInputError(f"frame {i} is missing key 'file_path'", src)
+        img = _resolve(base, fr["file_path"], "file_path", src, i, allow_outside)
+        name = fr.get("vibr_name", default_names[i])
+        if not isinstance(name, str) or not name.strip():
+            raise VibrInputError(f"frame {i}: vibr_name must be a non-empty string", src)
+        if "vibr_grid_pos" in fr:
+            grid_pos[name] = _ints(fr["vibr_grid_pos"], 2, f"frame {i}: vibr_grid_pos", src)
+        entries.append({"name": name, "path": img, "frame": fr, "i": i})
+    return entries, grid_pos
+
+
+def _frame_maps(fr: dict, meta: dict, i: int, file_shape, base: Path, src: str, allow_outside: bool) -> dict:
+    """Frame ``i``'s per-pixel files and values: ``depth`` (``depth_file_path`` in the
+    frame's ``depth_unit_scale_factor``), ``mask`` (``mask_path``), ``sigma_z`` (a
+    ``sigma_z_file_path`` map or a number), each of ``file_shape``."""
+    out = {}
+    dp = _get(fr, {}, "depth_file_path")
+    if dp is not None:
+        dpath = _resolve(base, dp, "depth_file_path", src, i, allow_outside)
+        fac = _get(fr, meta, "depth_unit_scale_factor")
+        fac = None if fac is None else _number(fac, f"frame {i}: depth_unit_scale_factor", src, positive=True)
+        out["depth"] = fit_depth(read_depth(dpath, fac), file_shape, dpath, f"frame {i}'s image")
+    mp = fr.get("mask_path")
+    if mp is not None:
+        mpath = _resolve(base, mp, "mask_path", src, i, allow_outside)
+        out["mask"] = read_mask(mpath, file_shape, f"frame {i}'s image")
+    sz = _get(fr, meta, "sigma_z")
+    szp = fr.get("sigma_z_file_path")
+    if szp is not None:
+        spath = _resolve(base, szp, "sigma_z_file_path", src, i, allow_outside)
+        s = fit_depth(read_depth(spath, 1.0), file_shape, spath, f"frame {i}'s image")  # finite, >= 0
+        out["sigma_z"] = np.nan_to_num(s, nan=0.0)
+    elif sz is not None:
+        sz = _number(sz, f"frame {i}: sigma_z", src)
+        if not sz >= 0:
+            raise VibrInputError(f"frame {i}: sigma_z must be finite and >= 0, got {sz}", src)
+        out["sigma_z"] = sz
+    return out
 
 
 # ----------------------------------------------------------------------------- writing
@@ -453,44 +468,22 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
 
     from ..progress import progress
 
-    from .outputs import check_not_input, check_replaceable, replace_folder, write_marker
+    from .outputs import replace_folder, write_marker
 
     out = Path(out_dir).absolute()
-    if in_place:  # the scene is in memory; check_replaceable below guards its folder
-        if scene.root is None or Path(scene.root).resolve() != out.resolve():
-            raise VibrInputError("an in-place update must write to the scene's own folder", out)
-    else:
-        check_not_input(out, [scene.root] + [v.path for v in scene.views])
-    if out.exists() and not overwrite:
-        raise OutputExists("output folder already exists", out)
-    if out.exists() and not out.is_dir():
-        raise VibrInputError("output path exists and is not a folder", out)
-    if out.exists():
-        check_replaceable(out)  # before the work, and again at the swap
-    for v in scene.views:
-        if v.image is None:
-            raise VibrInputError(f"view {v.name} has no image to save", v.path)
+    _check_save(scene, out, overwrite, in_place)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(temporary_folder(out.parent, out.name))
     except OSError as exc:
         raise write_failed(exc, out) from exc
     try:
-        files, used = [], set()
-        for v in scene.views:
-            fn = _safe_name(v.name)
-            while fn.lower() in used:
-                fn += "_"
-            used.add(fn.lower())
-            files.append(fn)
-        (tmp / "images").mkdir()
-        if any(v.depth is not None for v in scene.views):
-            (tmp / "depth").mkdir()
-        if any(v.sigma_z is not None and np.ndim(v.sigma_z) == 2 for v in scene.views):
-            (tmp / "sigma_z").mkdir()
-        if any(v.mask is not None for v in scene.views):
-            (tmp / "masks").mkdir()
-
+        files = _unique_stems(scene)
+        for sub, needed in (("images", True), ("depth", any(v.depth is not None for v in scene.views)),
+                            ("sigma_z", any(v.sigma_z is not None and np.ndim(v.sigma_z) == 2 for v in scene.views)),
+                            ("masks", any(v.mask is not None for v in scene.views))):
+            if needed:
+                (tmp / sub).mkdir()
         frames = _frame_entries(scene, files)
 
         def write_one(args):
@@ -507,18 +500,7 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
             list(progress(ex.map(write_one, zip(scene.views, files)), desc="writing views",
                           total=len(files), unit="view"))
 
-        doc = {"camera_model": "OPENCV", "vibr_name": scene.name}
-        same = all(frames[0][k] == f[k] for f in frames for k in ("fl_x", "fl_y", "cx", "cy", "w", "h"))
-        if same:
-            doc.update({k: frames[0][k] for k in ("fl_x", "fl_y", "cx", "cy", "w", "h")})
-        if scene.grid is not None:
-            doc["vibr_grid"] = [int(scene.grid[0]), int(scene.grid[1])]
-        if scene.meta.get("capture") == "video":
-            doc["vibr_capture"] = "video"
-        if scene.points is not None and len(scene.points):
-            write_ply_points(tmp / "sparse_pc.ply", scene.points)
-            doc["ply_file_path"] = "sparse_pc.ply"
-        doc["frames"] = frames
+        doc = _transforms_doc(scene, frames, tmp)
         with open(tmp / "transforms.json", "w", encoding="utf-8") as f:
             json.dump(doc, f, indent=2)
             f.write("\n")
@@ -533,3 +515,55 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
             raise write_failed(exc, out) from exc
         raise
     return out
+
+
+def _check_save(scene: Scene, out: Path, overwrite: bool, in_place: bool) -> None:
+    """Refuse a save to ``out`` before any work: into the scene's own files (unless an
+    in-place update), over an output vibr did not write or without ``overwrite``, or of a
+    view without an image."""
+    from .outputs import check_not_input, check_replaceable
+
+    if in_place:  # the scene is in memory; check_replaceable below guards its folder
+        if scene.root is None or Path(scene.root).resolve() != out.resolve():
+            raise VibrInputError("an in-place update must write to the scene's own folder", out)
+    else:
+        check_not_input(out, [scene.root] + [v.path for v in scene.views])
+    if out.exists() and not overwrite:
+        raise OutputExists("output folder already exists", out)
+    if out.exists() and not out.is_dir():
+        raise VibrInputError("output path exists and is not a folder", out)
+    if out.exists():
+        check_replaceable(out)  # before the work, and again at the swap
+    for v in scene.views:
+        if v.image is None:
+            raise VibrInputError(f"view {v.name} has no image to save", v.path)
+
+
+def _unique_stems(scene: Scene) -> list[str]:
+    """A file stem per view: its name made safe for a file system, unique regardless of case."""
+    files, used = [], set()
+    for v in scene.views:
+        fn = _safe_name(v.name)
+        while fn.lower() in used:
+            fn += "_"
+        used.add(fn.lower())
+        files.append(fn)
+    return files
+
+
+def _transforms_doc(scene: Scene, frames: list, tmp: Path) -> dict:
+    """The transforms.json document: shared intrinsics when every frame has the same, the
+    grid, the capture, the sparse points (written to ``tmp``) and the frames."""
+    doc = {"camera_model": "OPENCV", "vibr_name": scene.name}
+    keys = ("fl_x", "fl_y", "cx", "cy", "w", "h")
+    if all(frames[0][k] == f[k] for f in frames for k in keys):
+        doc.update({k: frames[0][k] for k in keys})
+    if scene.grid is not None:
+        doc["vibr_grid"] = [int(scene.grid[0]), int(scene.grid[1])]
+    if scene.meta.get("capture") == "video":
+        doc["vibr_capture"] = "video"
+    if scene.points is not None and len(scene.points):
+        write_ply_points(tmp / "sparse_pc.ply", scene.points)
+        doc["ply_file_path"] = "sparse_pc.ply"
+    doc["frames"] = frames
+    return doc
