@@ -743,9 +743,19 @@ def test_estimate_depth_options_and_unknown_keywords():
     with pytest.raises(TypeError, match="stepp"):
         estimate_depth(s, views=[0], lightfield={"stepp": 0.05})
     g = make_scene("grid", n_views=9, width=32, height=32, seed=0)
-    with pytest.raises(TypeError):
-        lightfield_depth(g, 4, [v.camera for v in g.views], lambda i: g.views[i].image, list(range(9)),
-                         stepp=0.05)
+    args = (g, 4, [v.camera for v in g.views], lambda i: g.views[i].image, list(range(9)))
+    with pytest.raises(TypeError, match="stepp"):
+        lightfield_depth(*args, stepp=0.05)
+    # lightfield_depth's options as a LightFieldOptions or as keywords over it: the same depth
+    from vibr.stereo import LightFieldOptions
+
+    za = lightfield_depth(*args, refine="sweep", pm_iter=1)[0]
+    zb = lightfield_depth(*args, options=LightFieldOptions(refine="sweep", pm_iter=1))[0]
+    zc = lightfield_depth(*args, options=LightFieldOptions(refine="st"), refine="sweep", pm_iter=1)[0]
+    zd = lightfield_depth(*args, refine="st")[0]
+    np.testing.assert_array_equal(za, zb)
+    np.testing.assert_array_equal(za, zc)
+    assert not np.array_equal(np.nan_to_num(za), np.nan_to_num(zd))
 
 
 def test_views_side_by_side_bit_identical_to_serial(monkeypatch):

@@ -23,7 +23,6 @@ scale=...)``) and call with ``scale=1``.
 
 from __future__ import annotations
 
-import inspect
 import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -427,10 +426,10 @@ class DepthOptions:
         Upper bound on the number of planes per view.
     radius : int, optional
         ZNCC window half-size (default 3 for MVS; light fields: see
-        :func:`~vibr.stereo.lightfield.lightfield_depth`).
+        :class:`~vibr.stereo.lightfield.LightFieldOptions`).
     n_best : int, optional
         Views averaged per pixel and plane, the lowest costs (default half of the
-        partners; light fields: see :func:`~vibr.stereo.lightfield.lightfield_depth`).
+        partners; light fields: see :class:`~vibr.stereo.lightfield.LightFieldOptions`).
     max_cost : float
         Aggregated ``1 − ZNCC`` above which a pixel is unknown.
     eps : float
@@ -463,7 +462,7 @@ class DepthOptions:
         coarse iterations the full-size ones start from the upsampled slopes alone and
         leave out the joint random perturbation. 1: the sweep at full size. Light fields:
         the same, except that the coarse iterations are the first of the ``refine_iter``
-        (at least one stays at full size; ``lightfield_depth``'s ``pm_coarse_scale``).
+        (at least one stays at full size; ``LightFieldOptions.pm_coarse_scale``).
     coarse_iter : int
         Slanted-plane refinement iterations at ``sweep_scale`` before the upsampling
         (ignored when ``sweep_scale`` is 1): a plane refined at the coarse level lands more
@@ -476,7 +475,7 @@ class DepthOptions:
         ``stats["kept"]`` stays the fraction kept by the check; ``stats["filled"]`` is the
         fraction filled.
     lightfield : dict
-        Further keyword arguments of :func:`~vibr.stereo.lightfield.lightfield_depth`
+        Further fields of :class:`~vibr.stereo.lightfield.LightFieldOptions`
         (``step``, ``max_views``, ``refine``, ``tv_lambda``, ...); checked by
         :func:`depth_options`. The light-field method also uses ``depth_range``,
         ``radius``, ``n_best``, ``max_cost``, ``mem_bytes``, ``refine_iter``,
@@ -511,19 +510,18 @@ class DepthOptions:
 
 
 def _lightfield_keywords() -> frozenset[str]:
-    """Keyword arguments of ``lightfield_depth`` a caller may set through
+    """Fields of :class:`~vibr.stereo.lightfield.LightFieldOptions` a caller may set through
     ``DepthOptions.lightfield`` (the others come from the DepthOptions fields)."""
-    from .lightfield import lightfield_depth
+    from .lightfield import LightFieldOptions
 
-    own = {"depth_range", "radius", "max_cost", "mem_bytes", "n_best", "return_disparity"}
-    params = inspect.signature(lightfield_depth).parameters.values()
-    return frozenset(p.name for p in params if p.kind is p.KEYWORD_ONLY and p.name not in own)
+    own = {"depth_range", "radius", "max_cost", "mem_bytes", "n_best"}
+    return frozenset(f.name for f in fields(LightFieldOptions) if f.name not in own)
 
 
 def depth_options(options: DepthOptions | None = None, /, **kw) -> DepthOptions:
     """``options`` (default :class:`DepthOptions`) with ``kw`` applied: a field of
-    DepthOptions by name, or a keyword of
-    :func:`~vibr.stereo.lightfield.lightfield_depth` (added to ``lightfield``). Any other
+    DepthOptions by name, or a field of
+    :class:`~vibr.stereo.lightfield.LightFieldOptions` (added to ``lightfield``). Any other
     name raises ``TypeError`` (a misspelt option is an error, not a default)."""
     opt = DepthOptions() if options is None else options
     names = {f.name for f in fields(DepthOptions)}
@@ -570,7 +568,7 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
         consistency check and the rest run here). With ``checkpoint`` the workers keep their
         results there as they finish: on a cluster, a folder they share resumes.
     **kw : fields of :class:`DepthOptions` (``scale=0.5``, ``fill_segments=True``, ...) or
-        keywords of :func:`~vibr.stereo.lightfield.lightfield_depth` (``step=0.05``), applied
+        fields of :class:`~vibr.stereo.lightfield.LightFieldOptions` (``step=0.05``), applied
         over ``options`` (:func:`depth_options`); any other name raises ``TypeError``.
 
     Returns
@@ -667,7 +665,7 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
         raise VibrInputError(f"sweep_scale must be in (0, 1], got {opt.sweep_scale}", scene.root)
     if int(opt.coarse_iter) != opt.coarse_iter or opt.coarse_iter < 0:
         raise VibrInputError(f"coarse_iter must be an integer >= 0, got {opt.coarse_iter}", scene.root)
-    r = opt.lightfield.get("pm_radius")  # lightfield_depth's refinement window half-size
+    r = opt.lightfield.get("pm_radius")  # LightFieldOptions.pm_radius: the refinement's window
     if r is not None and (int(r) != r or r < 1):
         raise VibrInputError(f"pm_radius must be an integer >= 1, got {r}", scene.root)
     method = depth_method(scene, opt.method)
@@ -723,7 +721,7 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
         lf = dict(opt.lightfield)
         lf.setdefault("pm_iter", opt.refine_iter)
         # one coarse level for both methods (for light fields its iterations are part of
-        # refine_iter: lightfield_depth's pm_coarse_iter)
+        # refine_iter: LightFieldOptions.pm_coarse_iter)
         lf.setdefault("pm_coarse_scale", opt.sweep_scale)
         lf.setdefault("pm_coarse_iter", int(opt.coarse_iter))
         if opt.median_radius is not None:

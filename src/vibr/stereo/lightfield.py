@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import gaussian_filter, sobel
@@ -116,55 +117,103 @@ def epi_disparity(stack: np.ndarray, offsets: np.ndarray, axis: str = "x", *,
     return d, coh
 
 
+@dataclass(frozen=True)
+class LightFieldOptions:
+    """How :func:`lightfield_depth` estimates a grid view's depth (every field has a
+    default; the measurements behind them: docs/DEPTH.md, "Defaults of estimate_depth").
+
+    Attributes
+    ----------
+    depth_range : (near, far), optional
+        Orthogonal depth range of the sweep in scene units; default from the local estimate
+        (``margin_px``, ``st_max_disp``).
+    refine : "st" | "sweep" | "sweep+tv"
+        The local estimate only, the plane sweep, or the sweep then the TV-L1 (default).
+    max_views : int
+        At most this many neighbours in the sweep: the nearest in grid distance, preferring
+        the reference's row, column and diagonals (the star of the grid).
+    radius : int, optional
+        ZNCC window half-size of the sweep. Default 3 (7×7) with up to 8 views, 2 (5×5)
+        with more: the matching noise falls with window area × views, and a smaller window
+        fattens depth edges less.
+    step : float, optional
+        Disparity step between planes, in px per grid step. Default: planes
+        :data:`PARALLAX_STEP` px of parallax apart on the nearest view swept, whatever the
+        spacing of the views (:func:`_plane_step`).
+    n_best : int, optional
+        Views whose costs are averaged per pixel and plane (the lowest ones), in the sweep
+        and the refinement. Default: a quarter of the views, at least 2: next to an
+        occlusion edge only the views along the edge (a quarter of the star) match cleanly.
+    max_cost, eps, mem_bytes : float
+        Aggregated ``1 − ZNCC`` above which a pixel is unknown; the ZNCC regulariser
+        (intensity std, images in [0, 1]); the memory bound of the sweep's working set.
+    st_min_coherence : float
+        Coherence above which a local estimate is trusted (range, "st" mode).
+    margin_px : float
+        Disparity margin added around the local estimate's range.
+    st_max_disp : float
+        When the local estimate's disparities exceed this (px per step), the sweep's range
+        comes from :func:`vibr.stereo.api.default_depth_range` instead.
+    tv_lambda, tv_iter : float, int
+        Data weight and iterations of the TV-L1 refinement.
+    pm_iter, pm_views, pm_stride : int
+        Iterations of the slanted-plane refinement of the sweep
+        (:func:`vibr.stereo.planesweep.refine_planes`, 0: none), the number of grid
+        neighbours it uses (default: the sweep's; else the first of them, the nearest star
+        views) and the sampling step of its window (default 1, dense: the grid's small
+        baselines need a dense window and all the sweep's views).
+    pm_radius : int, optional
+        Window half-size of the refinement (default: the sweep's ``radius``; 2 is faster,
+        docs/DEPTH.md, "The depth alone at full size").
+    pm_sigma_c, pm_sigma_s : float
+        Grey-level and spatial scales of the refinement's adaptive-support weights on the
+        colour image; tighter than the MVS defaults (0.05, the radius), since the dense
+        window has samples next to the centre to weigh.
+    pm_coarse_scale, pm_coarse_iter : float, int
+        Coarse to fine (default :data:`COARSE_SCALE`; 1: none), :func:`_sweep_planes`.
+    median_radius : int
+        Half-size of the planes' joint weighted median
+        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none, renders lose).
+    """
+
+    depth_range: tuple[float, float] | None = None
+    refine: str = "sweep+tv"
+    max_views: int = 32
+    radius: int | None = None
+    step: float | None = None
+    n_best: int | None = None
+    max_cost: float = 0.6
+    eps: float = 0.001
+    mem_bytes: float = 2e9
+    st_min_coherence: float = 0.7
+    margin_px: float = 0.3
+    st_max_disp: float = 2.5
+    tv_lambda: float = 2.0
+    tv_iter: int = 200
+    pm_iter: int = 2
+    pm_views: int | None = None
+    pm_stride: int = 1
+    pm_radius: int | None = None
+    pm_sigma_c: float = 0.03
+    pm_sigma_s: float = 2.0
+    pm_coarse_scale: float = COARSE_SCALE
+    pm_coarse_iter: int = 1
+    median_radius: int = 0
+
+
 def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: list[int], *,
-                     depth_range=None, radius: int | None = None, max_cost: float = 0.6,
-                     mem_bytes: float = 2e9, max_views: int = 32, step: float | None = None,
-                     refine: str = "sweep+tv", tv_lambda: float = 2.0, tv_iter: int = 200,
-                     st_min_coherence: float = 0.7, margin_px: float = 0.3,
-                     return_disparity: bool = False, eps: float = 0.001,
-                     st_max_disp: float = 2.5, pm_iter: int = 2, pm_views: int | None = None,
-                     pm_stride: int = 1, n_best: int | None = None, pm_sigma_c: float = 0.03,
-                     pm_sigma_s: float = 2.0, median_radius: int = 0, pm_coarse_scale: float = COARSE_SCALE,
-                     pm_coarse_iter: int = 1, pm_radius: int | None = None):
+                     options: LightFieldOptions | None = None, return_disparity: bool = False, **kw):
     """Depth and sigma_z for grid view ``ref`` from the other (non-excluded) grid views.
 
     Parameters
     ----------
     cams : cameras at the working scale; ``img(i)`` returns view i's image at that scale.
     inputs : indices usable as inputs (``ref`` itself is the reference).
-    max_views : at most this many neighbours in the sweep: the nearest in grid distance,
-        preferring the reference's row, column and diagonals (the star of the grid).
-    radius : ZNCC window half-size of the sweep. Default 3 (7×7) with up to 8 views, 2
-        (5×5) with more: the matching noise falls with window area × views, and a smaller
-        window fattens depth edges less.
-    pm_radius : window half-size of the slanted-plane refinement (default: the sweep's
-        ``radius``; 2 is faster, measured in docs/DEPTH.md, "The depth alone at full size").
-    step : disparity step between planes, in px per grid step. Default: planes
-        :data:`PARALLAX_STEP` px of parallax apart on the nearest view swept, whatever the
-        spacing of the views (:func:`_plane_step`).
-    refine : "st" (local estimate only), "sweep" or "sweep+tv".
-    tv_lambda, tv_iter : data weight and iterations of the TV-L1 refinement.
-    st_min_coherence : coherence above which a local estimate is trusted (range, st mode).
-    margin_px : disparity margin added around the local estimate's range.
-    st_max_disp : when the local estimate's disparities exceed this (px per step), the
-        sweep's range comes from :func:`vibr.stereo.api.default_depth_range` instead.
-    pm_iter, pm_views, pm_stride : iterations of the slanted-plane refinement of the sweep
-        (:func:`vibr.stereo.planesweep.refine_planes`, 0: none), the number of grid
-        neighbours it uses (default: the sweep's; else the first of them, the nearest star
-        views) and the sampling step of its window (default 1, dense: the grid's small
-        baselines need a dense window and all the sweep's views).
-    pm_sigma_c, pm_sigma_s : grey-level and spatial scales of the refinement's
-        adaptive-support weights on the colour image; tighter than the MVS defaults
-        (0.05, the radius), since the dense window has samples next to the centre to weigh.
-    pm_coarse_scale, pm_coarse_iter : coarse to fine (default :data:`COARSE_SCALE`; 1: none),
-        :func:`_sweep_planes`.
-    median_radius : half-size of the planes' joint weighted median
-        (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none, renders lose).
-    n_best : views whose costs are averaged per pixel and plane (the lowest ones), in the
-        sweep and the refinement. Default: a quarter of the views, at least 2: next to an
-        occlusion edge only the views along the edge (a quarter of the star) match cleanly.
-
-    The measurements behind these defaults: docs/DEPTH.md, "Defaults of estimate_depth".
+    options : LightFieldOptions, optional
+        How to estimate; ``kw`` (its fields, e.g. ``refine="st"``) applies over it. Any
+        other keyword raises ``TypeError``.
+    return_disparity : bool
+        Also return the disparity map.
 
     Returns
     -------
@@ -172,10 +221,10 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     ``return_disparity``, the disparity map (H,W) float64 as a fourth element.
     """
     t0 = time.perf_counter()
+    o = replace(options or LightFieldOptions(), **kw)
     pos = grid_positions(scene)
     if ref not in pos:
         raise VibrInputError(f"view {scene.views[ref].name} is not on the light-field grid", scene.root)
-    r0, c0 = pos[ref]
     others = [j for j in inputs if j != ref and j in pos]
     if not others:
         raise VibrInputError("light-field depth needs at least one other grid view", scene.root)
@@ -186,48 +235,27 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
 
     grey = {ref: to_grey(img(ref))}
     best_d, best_c = _local_estimate(ref, others, pos, img, grey)
-    st_conf = best_c >= st_min_coherence
-    stats = {"method": "lightfield", "refine": refine, "st_coherent": float(st_conf.mean())}
-    # sigma of the local estimate: 0.05 px at full coherence, growing as coherence drops
-    sig_d_st = 0.05 / np.maximum(best_c, 0.05)
-    if refine == "st":
+    st_conf = best_c >= o.st_min_coherence
+    stats = {"method": "lightfield", "refine": o.refine, "st_coherent": float(st_conf.mean())}
+    if o.refine == "st":
         disp = best_d
         w = d_to_w(disp)
         ok = st_conf & (w > 0)
         z = np.where(ok, 1.0 / np.where(w > 0, w, 1.0), np.nan)
-        sigma = z * z * sig_d_st / abs(b)
+        # sigma of the local estimate: 0.05 px at full coherence, growing as coherence drops
+        sigma = z * z * (0.05 / np.maximum(best_c, 0.05)) / abs(b)
     else:
-        dr = _sweep_range(scene, ref, cams, img, others, pos, best_d, st_conf, d_to_w, depth_range,
-                          st_max_disp, margin_px, stats)
-        dspan = abs(b) * (1.0 / dr[0] - 1.0 / dr[1])
-        nb = _star_neighbours(others, pos, r0, c0)[:max_views]
-        step, D = _plane_step(dspan, step, [pos[k] for k in nb], (r0, c0))
-        if n_best is None:
-            # Occlusions: next to a depth edge only the views whose baseline runs along the
-            # edge match cleanly, one of the star's 4 directions, a quarter of its views
-            n_best = max(2, len(nb) // 4)
-        if radius is None:
-            # the ZNCC noise falls with the samples compared, window area × views: with more
-            # than one ring of views a 5×5 window suffices and fattens depth edges less
-            radius = 3 if len(nb) <= 8 else 2
-        n_best = max(1, min(int(n_best), len(nb)))
-        res = _sweep_planes(img, cams, ref, nb, dr, desc=f"light-field sweep {scene.views[ref].name}",
-                            n_planes=D, radius=radius, n_best=n_best, max_cost=max_cost,
-                            mem_bytes=mem_bytes, eps=eps, pm_iter=pm_iter, pm_views=pm_views,
-                            pm_radius=pm_radius, pm_stride=pm_stride, pm_sigma_c=pm_sigma_c, pm_sigma_s=pm_sigma_s,
-                            median_radius=median_radius, coarse=(float(pm_coarse_scale), int(pm_coarse_iter)))
+        dr = _sweep_range(scene, ref, cams, img, others, pos, best_d, st_conf, d_to_w, o.depth_range,
+                          o.st_max_disp, o.margin_px, stats)
+        res, conf = _swept(scene, ref, cams, img, others, pos, dr, abs(b) * (1.0 / dr[0] - 1.0 / dr[1]), o, stats)
         disp = -(a + b * res.inv_depth)
-        conf = res.confident
-        stats.update({"depth_range": dr, "n_planes": D, "step": step, "n_views": len(nb), "n_best": n_best,
-                      "pm_iter": int(pm_iter),
-                      "confident": float(conf.mean()), "sweep_s": res.meta["time_s"]})
         sigma_d = res.sigma_z / np.maximum(res.depth, 1e-12) ** 2 * abs(b)
-        if refine == "sweep+tv":
-            disp = _tv_refine(grey[ref], disp, conf, sigma_d, tv_lambda, tv_iter)
+        if o.refine == "sweep+tv":
+            disp = _tv_refine(grey[ref], disp, conf, sigma_d, o.tv_lambda, o.tv_iter)
         w = d_to_w(disp)
         z = np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0), np.nan)
         sigma = z * z * sigma_d / abs(b)
-        if refine == "sweep":
+        if o.refine == "sweep":
             z = np.where(conf, z, np.nan)
     stats["kept"] = float(np.isfinite(z).mean())
     stats["time_s"] = time.perf_counter() - t0
@@ -235,6 +263,36 @@ def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: li
     if return_disparity:
         out = out + (np.asarray(disp, np.float64),)
     return out
+
+
+def _swept(scene, ref, cams, img, others, pos, dr, dspan, o: LightFieldOptions, stats):
+    """The plane sweep of ``ref`` over its star neighbours in the depth range ``dr``
+    (``dspan`` px of disparity per grid step), refined (:func:`_sweep_planes`); the
+    result and its confident pixels, the sweep's settings into ``stats``."""
+    r0, c0 = pos[ref]
+    nb = _star_neighbours(others, pos, r0, c0)[:o.max_views]
+    step, D = _plane_step(dspan, o.step, [pos[k] for k in nb], (r0, c0))
+    n_best, radius = o.n_best, o.radius
+    if n_best is None:
+        # Occlusions: next to a depth edge only the views whose baseline runs along the
+        # edge match cleanly, one of the star's 4 directions, a quarter of its views
+        n_best = max(2, len(nb) // 4)
+    if radius is None:
+        # the ZNCC noise falls with the samples compared, window area × views: with more
+        # than one ring of views a 5×5 window suffices and fattens depth edges less
+        radius = 3 if len(nb) <= 8 else 2
+    n_best = max(1, min(int(n_best), len(nb)))
+    res = _sweep_planes(img, cams, ref, nb, dr, desc=f"light-field sweep {scene.views[ref].name}",
+                        n_planes=D, radius=radius, n_best=n_best, max_cost=o.max_cost,
+                        mem_bytes=o.mem_bytes, eps=o.eps, pm_iter=o.pm_iter, pm_views=o.pm_views,
+                        pm_radius=o.pm_radius, pm_stride=o.pm_stride, pm_sigma_c=o.pm_sigma_c,
+                        pm_sigma_s=o.pm_sigma_s, median_radius=o.median_radius,
+                        coarse=(float(o.pm_coarse_scale), int(o.pm_coarse_iter)))
+    conf = res.confident
+    stats.update({"depth_range": dr, "n_planes": D, "step": step, "n_views": len(nb), "n_best": n_best,
+                  "pm_iter": int(o.pm_iter),
+                  "confident": float(conf.mean()), "sweep_s": res.meta["time_s"]})
+    return res, conf
 
 
 def _grid_disparity_model(cams: list[Camera], ref: int, others: list[int], pos: dict) -> tuple[float, float]:
