@@ -282,12 +282,8 @@ def _swept(scene, ref, cams, img, others, pos, dr, dspan, o: LightFieldOptions, 
         # than one ring of views a 5×5 window suffices and fattens depth edges less
         radius = 3 if len(nb) <= 8 else 2
     n_best = max(1, min(int(n_best), len(nb)))
-    res = _sweep_planes(img, cams, ref, nb, dr, desc=f"light-field sweep {scene.views[ref].name}",
-                        n_planes=D, radius=radius, n_best=n_best, max_cost=o.max_cost,
-                        mem_bytes=o.mem_bytes, eps=o.eps, pm_iter=o.pm_iter, pm_views=o.pm_views,
-                        pm_radius=o.pm_radius, pm_stride=o.pm_stride, pm_sigma_c=o.pm_sigma_c,
-                        pm_sigma_s=o.pm_sigma_s, median_radius=o.median_radius,
-                        coarse=(float(o.pm_coarse_scale), int(o.pm_coarse_iter)))
+    res = _sweep_planes(img, cams, ref, nb, dr, o, desc=f"light-field sweep {scene.views[ref].name}",
+                        n_planes=D, radius=radius, n_best=n_best)
     conf = res.confident
     stats.update({"depth_range": dr, "n_planes": D, "step": step, "n_views": len(nb), "n_best": n_best,
                   "pm_iter": int(o.pm_iter),
@@ -382,32 +378,31 @@ def _small(img, k: int, camera: Camera) -> np.ndarray:
     return _resized(img(k), camera)
 
 
-def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max_cost, mem_bytes,
-                  eps, pm_iter, pm_views, pm_stride, pm_sigma_c, pm_sigma_s, median_radius, pm_radius=None,
-                  coarse=(1.0, 0)):
+def _sweep_planes(img, cams, ref, nb, dr, o: LightFieldOptions, *, desc, n_planes, radius, n_best):
     """The fine plane sweep of ``ref`` over the grid views ``nb``, its slanted-plane
-    refinement over the first ``pm_views`` of them and the optional weighted median.
+    refinement over the first ``o.pm_views`` of them and the optional weighted median
+    (``n_planes``, ``radius``, ``n_best``: the sweep's, resolved from ``o``).
 
-    ``coarse`` = (scale, iterations): with scale < 1 the sweep runs on the images resized
-    by it, with planes the same parallax apart at that size (fewer), then the first
-    ``min(iterations, pm_iter − 1)`` of the ``pm_iter`` refinement iterations at that size,
-    the others at full size from the upsampled planes, without the fronto-parallel start
+    ``(o.pm_coarse_scale, o.pm_coarse_iter)`` = (scale, iterations): with scale < 1 the sweep
+    runs on the images resized by it, with planes the same parallax apart at that size
+    (fewer), then the first ``min(iterations, pm_iter − 1)`` of the ``o.pm_iter`` refinement
+    iterations at that size, the others at full size from the upsampled planes, without the fronto-parallel start
     and with a random search of the depth alone once a coarse iteration was made (the
     normals were refined at the coarse level); the refinement's window has half-size
-    ``pm_radius`` (default: ``radius``). The MVS method's
+    ``o.pm_radius`` (default: ``radius``). The MVS method's
     ``sweep_scale`` and ``coarse_iter`` (:func:`vibr.stereo.api.estimate_depth`), except
     that there the coarse iterations come on top of ``refine_iter``."""
     cam = cams[ref]
-    nbr = nb if pm_views is None else nb[: max(1, int(pm_views))]
-    scale, coarse_iter = coarse
+    nbr = nb if o.pm_views is None else nb[: max(1, int(o.pm_views))]
+    scale, coarse_iter, pm_iter = float(o.pm_coarse_scale), int(o.pm_coarse_iter), o.pm_iter
     mask = getattr(img, "mask", None)  # the photographs' masks: a masked sample does not match
 
     def masks(views, cs=None):
         return None if mask is None else [mask(k, None if cs is None else cs[k]) for k in views]
 
-    refine_kw = dict(n_best=min(n_best, len(nbr)), eps=eps, max_cost=max_cost,
-                     radius=radius if pm_radius is None else pm_radius, stride=pm_stride,
-                     sigma_c=pm_sigma_c, sigma_s=pm_sigma_s)
+    refine_kw = dict(n_best=min(n_best, len(nbr)), eps=o.eps, max_cost=o.max_cost,
+                     radius=radius if o.pm_radius is None else o.pm_radius, stride=o.pm_stride,
+                     sigma_c=o.pm_sigma_c, sigma_s=o.pm_sigma_s)
     coarse_done = False
     if pm_iter > 0 and scale < 1.0:
         # pm_iter iterations in all: the coarse ones first, at least one at full size
@@ -419,7 +414,7 @@ def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max
         # disparities shrink with the images: planes the same parallax apart are fewer
         res = plane_sweep(_small(img, ref, cs[ref]), cs[ref], [_small(img, k, cs[k]) for k in nb],
                           [cs[k] for k in nb], dr, n_planes=max(16, int(np.ceil(n_planes * scale))),
-                          radius=radius, n_best=n_best, max_cost=max_cost, mem_bytes=mem_bytes, eps=eps,
+                          radius=radius, n_best=n_best, max_cost=o.max_cost, mem_bytes=o.mem_bytes, eps=o.eps,
                           desc=desc, src_masks=masks(nb, cs))
         if coarse_iter > 0:
             res = refine_planes(_small(img, ref, cs[ref]), cs[ref], [_small(img, k, cs[k]) for k in nbr],
@@ -430,13 +425,13 @@ def _sweep_planes(img, cams, ref, nb, dr, *, desc, n_planes, radius, n_best, max
     else:
         res = plane_sweep(img(ref), cam, [img(k) for k in nb], [cams[k] for k in nb], dr,
                           n_planes=n_planes, radius=radius, n_best=n_best,
-                          max_cost=max_cost, mem_bytes=mem_bytes, eps=eps, desc=desc, src_masks=masks(nb))
+                          max_cost=o.max_cost, mem_bytes=o.mem_bytes, eps=o.eps, desc=desc, src_masks=masks(nb))
     if pm_iter > 0:
         res = refine_planes(img(ref), cam, [img(k) for k in nbr], [cams[k] for k in nbr], res,
                             n_iter=pm_iter, fronto_init=not coarse_done, joint_perturbation=not coarse_done,
                             normal_perturbation=not coarse_done, src_masks=masks(nbr), **refine_kw)
-    if median_radius:
-        res = median_planes(img(ref), res, radius=median_radius)
+    if o.median_radius:
+        res = median_planes(img(ref), res, radius=o.median_radius)
     return res
 
 
