@@ -3,6 +3,7 @@
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -1089,3 +1090,28 @@ def test_smooth_keys_property():
         assert all(np.all((s.centre >= lo) & (s.centre <= hi)) for s in sm)
 
     check()
+
+
+def test_render_path_options_and_keywords(tmp_path):
+    """render_path's options as a FlyOptions or as keywords over it give the same frames; a
+    misspelt option is a TypeError, not a default."""
+    from vibr.flythrough import FlyOptions, render_path
+    from vibr.io import read_image
+    from vibr.path import interpolate
+    from vibr.synthetic import make_scene
+
+    s = make_scene("grid", n_views=9, width=48, height=40, seed=0)
+    p = interpolate(s, views=["view_003", "view_004"], n_frames=2)
+    common = dict(cache_dir=False, executor=None, progress=False)
+    a = render_path(s, p, tmp_path / "a", method="ulr", n_views=3, **common)
+    b = render_path(s, p, tmp_path / "b", options=FlyOptions(method="ulr", n_views=3, **common))
+    c = render_path(s, p, tmp_path / "c", options=FlyOptions(method="gradient", n_views=8), method="ulr", n_views=3,
+                    **common)
+    assert a.rendered == b.rendered == c.rendered == 2
+    pngs = sorted(f for f in os.listdir(tmp_path / "a") if f.endswith(".png"))
+    assert len(pngs) == 2
+    for f in pngs:
+        np.testing.assert_array_equal(read_image(tmp_path / "a" / f), read_image(tmp_path / "b" / f))
+        np.testing.assert_array_equal(read_image(tmp_path / "a" / f), read_image(tmp_path / "c" / f))
+    with pytest.raises(TypeError, match="n_veiws"):
+        render_path(s, p, tmp_path / "d", n_veiws=3, **common)

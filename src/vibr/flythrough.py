@@ -40,7 +40,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +52,7 @@ from .scene import Scene
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FrameContext", "FlyResult", "render_path", "render_frame", "view_weights", "auto_executor",
+__all__ = ["FrameContext", "FlyOptions", "FlyResult", "render_path", "render_frame", "view_weights", "auto_executor",
            "frame_name", "sigma_name", "check_path_sees_scene", "write_sigma_video"]
 
 FRAME_PATTERN = "frame_{:05d}.png"
@@ -408,12 +408,68 @@ def _check_frame_memory(scene: Scene, cams, n_views, source, supersample="auto")
                         way_out="make the path with smaller frames (vibr path --size WxH)")
 
 
-def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_views: int | None = 8,
-                params: dict | None = None, overwrite: bool = False, executor="auto",
-                depth: str = "auto", estimate_kw: dict | None = None, cache_dir=None,
-                exclude=(), frames_dir=None, crf: int = 18, fps: float | None = None,
-                blend: float = 0.25, geometry_kw: dict | None = None, progress: bool = True,
-                check_scene: bool = True, uncertainty=None, supersample="auto") -> FlyResult:
+@dataclass(frozen=True)
+class FlyOptions:
+    """How :func:`render_path` renders a camera path (every field has a default).
+
+    Attributes
+    ----------
+    method, params : str, dict
+        The render method and its parameters (:func:`vibr.render.render`).
+    n_views : int or None
+        K best sources per frame (soft weights, module docstring); None: all.
+    blend : float
+        Width of the weight transition (relative to the penalty threshold).
+    geometry_kw : dict
+        Arguments of :func:`vibr.geometry.compute_samples`.
+    supersample : "auto" or int
+        Frames coarser than the photographs are rendered on a finer grid and averaged back
+        (:func:`vibr.render.render`'s ``supersample``; the factor is in each frame's record).
+    depth, estimate_kw, cache_dir, exclude
+        The sources' depth: see :func:`vibr.depthcache.scene_with_depth`.
+    frames_dir : path, optional
+        Where the frames go with a video output (default ``OUT_frames/`` beside it).
+    crf, fps : int, float
+        Video quality and frame rate (default the path's).
+    overwrite : bool
+        Render frames already written again (default: skip them: resumable).
+    uncertainty : path, optional
+        A video (same formats as ``out``) of each frame's σ map (:mod:`vibr.render.uncertainty`,
+        grey levels of 255, colour-mapped on one scale for the whole path with its scale
+        bar: :func:`write_sigma_video`); the maps stay in the frames folder as
+        ``sigma_NNNNN.npz``.
+    executor : "auto", None, "processes:N", int or a Dask address
+        Passed to :func:`vibr.executor.run_tasks`; None: serial, here. "auto" (default):
+        frames on :func:`vibr.executor.auto_workers` local processes (serial for a short
+        path or small frames, :func:`auto_executor`). A depth estimate runs there too when
+        the engine is named (not on "auto").
+    progress : bool
+        A bar per frame (on a terminal, :func:`vibr.progress.progress`).
+    check_scene : bool
+        Refuse a path whose cameras see none of the scene (:func:`check_path_sees_scene`).
+    """
+
+    method: str = "gradient"
+    params: dict | None = None
+    n_views: int | None = 8
+    blend: float = 0.25
+    geometry_kw: dict | None = None
+    supersample: object = "auto"
+    depth: str = "auto"
+    estimate_kw: dict | None = None
+    cache_dir: object = None
+    exclude: tuple = ()
+    frames_dir: object = None
+    crf: int = 18
+    fps: float | None = None
+    overwrite: bool = False
+    uncertainty: object = None
+    executor: object = "auto"
+    progress: bool = True
+    check_scene: bool = True
+
+
+def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = None, **kw) -> FlyResult:
     """Render every camera of ``camera_path`` from ``scene`` to numbered PNGs and a video.
 
     Parameters
@@ -424,86 +480,74 @@ def render_path(scene: Scene, camera_path, out, *, method: str = "gradient", n_v
         a video (``*.mp4``, or another of :data:`vibr.io.video.VIDEO_FORMATS`; frames in
         ``frames_dir``, default ``OUT_frames/`` beside it) or a folder
         (the frames only).
-    method, params : the render method and its parameters (:func:`vibr.render.render`).
-    n_views : int or None
-        K best sources per frame (soft weights, module docstring); None: all.
-    overwrite : bool
-        Render frames already written again (default: skip them: resumable).
-    executor : "auto", None, "processes:N", int or a Dask address
-        Passed to :func:`vibr.executor.run_tasks`; None: serial, here. "auto" (default):
-        frames on :func:`vibr.executor.auto_workers` local processes (serial for a short
-        path or small frames, :func:`auto_executor`). A depth estimate runs there too when
-        the engine is named (not on "auto").
-    depth, estimate_kw, cache_dir, exclude : see :func:`vibr.depthcache.scene_with_depth`.
-    crf, fps : video quality and frame rate (default the path's).
-    blend : width of the weight transition (relative to the penalty threshold).
-    progress : a bar per frame (on a terminal, :func:`vibr.progress.progress`).
-    uncertainty : path, optional
-        A video (same formats as ``out``) of each frame's σ map (:mod:`vibr.render.uncertainty`,
-        grey levels of 255, colour-mapped on one scale for the whole path with its scale
-        bar: :func:`write_sigma_video`); the maps stay in the frames folder as
-        ``sigma_NNNNN.npz``.
-    supersample : "auto" or int
-        Frames coarser than the photographs are rendered on a finer grid and averaged back
-        (:func:`vibr.render.render`'s ``supersample``; the factor is in each frame's record).
+    options : FlyOptions, optional
+        How to render; ``kw`` (its fields, e.g. ``n_views=4``) applies over it. Any other
+        keyword raises ``TypeError``.
     """
     from .depthcache import scene_with_depth
     from .geometry.resolution import check_supersample
-    from .render.methods import METHODS
 
     t_start = time.perf_counter()
-    supersample = check_supersample(supersample)
-    if method not in METHODS:
-        raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(METHODS)})")
-    if n_views is not None and n_views < 1:
-        raise VibrInputError(f"n_views must be at least 1, got {n_views}")
-    out = Path(out)
-    fdir, video = _frames_dir_for(out, frames_dir)
-    from .io.outputs import check_not_input
-
-    # frames among the photographs would become views of an image-folder scene (Strecha)
-    check_not_input(fdir, [v.path for v in scene.views if v.path] + ([scene.root] if scene.root else []))
-    fps = camera_path.fps if fps is None else fps
-    from .io.video import VIDEO_FORMATS, check_video_options, is_video
-
-    if uncertainty is not None and not is_video(uncertainty):
-        raise VibrInputError(f"the σ output of a path is a video ({', '.join(VIDEO_FORMATS)})", os.fspath(uncertainty))
-    for v in (video, uncertainty):
-        if v is not None:
-            check_video_options(v, fps=fps, crf=crf)  # before any frame is rendered
-    if uncertainty is not None and video is not None and Path(uncertainty).resolve() == video.resolve():
-        raise VibrInputError("the σ video must not be the frames' video", uncertainty)
+    o = replace(options or FlyOptions(), **kw)
+    o = replace(o, supersample=check_supersample(o.supersample))
+    fdir, video, fps = _checked_outputs(scene, camera_path, out, o)
     cams = list(camera_path.cameras)
-    if check_scene:
+    if o.check_scene:
         check_path_sees_scene(scene, cams, camera_path.meta.get("file"))
-    _check_frame_memory(scene, cams, n_views, camera_path.meta.get("file"), supersample)
+    _check_frame_memory(scene, cams, o.n_views, camera_path.meta.get("file"), o.supersample)
     t0 = time.perf_counter()
     # depth, when estimated, for the views the frames may use, on the engine the caller
     # named (on "auto" here: on one machine the sweeps' kernels already use every core)
-    sources = scene_with_depth(scene, depth=depth, estimate_kw=estimate_kw, cache_dir=cache_dir,
-                               exclude=exclude, executor=None if executor == "auto" else executor,
-                               views=views_for_path(scene, cams, n_views, exclude))
+    sources = scene_with_depth(scene, depth=o.depth, estimate_kw=o.estimate_kw, cache_dir=o.cache_dir,
+                               exclude=o.exclude, executor=None if o.executor == "auto" else o.executor,
+                               views=views_for_path(scene, cams, o.n_views, o.exclude))
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
-    ctx = FrameContext(sources, cams, str(fdir), method, dict(params or {}), n_views, blend,
-                       overwrite, dict(geometry_kw or {}), uncertainty=uncertainty is not None,
-                       supersample=supersample)
+    ctx = FrameContext(sources, cams, str(fdir), o.method, dict(o.params or {}), o.n_views, o.blend,
+                       o.overwrite, dict(o.geometry_kw or {}), uncertainty=o.uncertainty is not None,
+                       supersample=o.supersample)
     prepare_sources(ctx)
     t_first = time.perf_counter() - t_start
     t0 = time.perf_counter()
-    frames, engine = _run_frames(ctx, len(cams), executor, progress)
+    frames, engine = _run_frames(ctx, len(cams), o.executor, o.progress)
     t_frames = time.perf_counter() - t0
     _check_frames_rendered(frames, fdir, camera_path.meta.get("file"))
     rendered = sum(not f["skipped"] for f in frames)
     res = FlyResult(len(cams), rendered, len(cams) - rendered, str(fdir), None,
                     depth_source=sources.meta.get("depth_source", ""), frames=frames, engine=engine)
     t0 = time.perf_counter()
-    _write_videos(res, fdir, len(cams), video, uncertainty, fps, crf)
+    _write_videos(res, fdir, len(cams), video, o.uncertainty, fps, o.crf)
     t_video = time.perf_counter() - t0
     res.times = {"depth": t_depth, "to_first_frame": t_first, "frames": t_frames, "video": t_video,
                  "total": time.perf_counter() - t_start,
                  "depth_source_time": sources.meta.get("depth_time_s", t_depth)}
     return res
+
+
+def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
+    """The frames folder, the video (None: frames only) and the frame rate of a path's
+    outputs, every option checked before any frame is rendered."""
+    from .io.outputs import check_not_input
+    from .io.video import VIDEO_FORMATS, check_video_options, is_video
+    from .render.methods import METHODS
+
+    if o.method not in METHODS:
+        raise VibrInputError(f"unknown method {o.method!r} (choose from {', '.join(METHODS)})")
+    if o.n_views is not None and o.n_views < 1:
+        raise VibrInputError(f"n_views must be at least 1, got {o.n_views}")
+    fdir, video = _frames_dir_for(Path(out), o.frames_dir)
+    # frames among the photographs would become views of an image-folder scene (Strecha)
+    check_not_input(fdir, [v.path for v in scene.views if v.path] + ([scene.root] if scene.root else []))
+    fps = camera_path.fps if o.fps is None else o.fps
+    sigma = o.uncertainty
+    if sigma is not None and not is_video(sigma):
+        raise VibrInputError(f"the σ output of a path is a video ({', '.join(VIDEO_FORMATS)})", os.fspath(sigma))
+    for v in (video, sigma):
+        if v is not None:
+            check_video_options(v, fps=fps, crf=o.crf)  # before any frame is rendered
+    if sigma is not None and video is not None and Path(sigma).resolve() == video.resolve():
+        raise VibrInputError("the σ video must not be the frames' video", sigma)
+    return fdir, video, fps
 
 
 def _write_videos(res: FlyResult, fdir: Path, n: int, video, uncertainty, fps: float, crf: int) -> None:
