@@ -269,3 +269,21 @@ def test_evaluation_writes_nothing_figures_are_separate(scene, tmp_path):
     assert ev.images["ulr"].shape == ev.reference.shape and ev.mask.shape == ev.reference.shape[:2]
     info = write_evaluation_figures(ev, tmp_path / "figs")
     assert info["columns"] == ["reference", "ulr"] and (tmp_path / "figs" / "view_004_gt_compare.png").is_file()
+
+
+def test_run_evaluation_options_and_keywords(scene):
+    """run_evaluation's options as an EvalOptions or as keywords over it: the same report
+    (timings aside); a misspelt option is a TypeError, not a default."""
+    from vibr.evaluate import EvalOptions, Setting, run_evaluation
+
+    settings = [Setting("ulr"), Setting("gradient")]
+    a = run_evaluation(scene, "view_004", settings, depth="gt", border=3, use_lpips=False)
+    b = run_evaluation(scene, "view_004", settings, options=EvalOptions(depth="gt", border=3, use_lpips=False))
+    c = run_evaluation(scene, "view_004", settings, options=EvalOptions(depth="gt", border=0, mask="all"),
+                       border=3, mask="reconstructed", use_lpips=False)
+    for ev in (b, c):
+        assert ev.report["border"] == 3 and ev.report["mask"] == "reconstructed"
+        assert [r["psnr"] for r in ev.report["results"]] == [r["psnr"] for r in a.report["results"]]
+        np.testing.assert_array_equal(ev.images["gradient"], a.images["gradient"])
+    with pytest.raises(TypeError, match="boarder"):
+        run_evaluation(scene, "view_004", settings, depth="gt", boarder=3)

@@ -15,7 +15,7 @@ import json
 import logging
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -90,14 +90,63 @@ def evaluate(scene: Scene, target: int | str, settings: Sequence[Setting], **kw)
     return run_evaluation(scene, target, settings, **kw).report
 
 
+@dataclass(frozen=True)
+class EvalOptions:
+    """How :func:`run_evaluation` prepares, renders and measures a held-out view (every
+    field has a default).
+
+    Attributes
+    ----------
+    sources, depth, depth_files, n_views, estimate_kw, fallback, cache_dir
+        The sources and their depth (:func:`vibr.pipeline.prepare`); ``cache_dir`` False
+        (default): no cache of estimated depth.
+    mask : {"reconstructed", "all"}
+        Measure on the pixels every setting reconstructs (default) or on all of them (a
+        view's own mask applies in both).
+    border : int
+        Pixels left out along the image's edges (:data:`vibr.metrics.METRIC_BORDER`).
+    intensity_scale : float, optional
+        The intensity scale the render parameters refer to (render's ``scale``; default the
+        renderer's, 255). A setting's own ``scale`` parameter overrides it.
+    render_kw : dict, optional
+        Extra render parameters for every setting (a setting's params win).
+    geometry_kw : dict, optional
+        Arguments of :func:`vibr.geometry.compute_samples`.
+    use_lpips : bool
+        Also LPIPS, when the ``lpips`` package works here.
+    view_split : int, optional
+        Also measure each setting separately on the evaluated pixels seen by at most
+        ``view_split`` source views and on those seen by more (:func:`view_counts`): entry
+        ``regions`` = {"few": {...}, "many": {...}} with psnr, dssim and the pixel fraction.
+    uncertainty : bool
+        Render with ``uncertainty=True`` and add entry ``uncertainty`` = {ause, spearman,
+        fractions, curve, oracle, rmse} (:func:`vibr.metrics.uncertainty_metrics`, the same
+        pixels as the other metrics; plot: :func:`vibr.uncertainty_figures.write_sparsification_figure`).
+    supersample : "auto" or int
+        The grid every setting renders on, as :func:`vibr.render.render` chooses it (a
+        held-out view at its sources' resolution: the target's own).
+    """
+
+    sources: Sequence[int | str] | None = None
+    depth: str = "auto"
+    depth_files: object = None
+    n_views: int | str | None = None
+    estimate_kw: dict | None = None
+    fallback: str | bool = "auto"
+    cache_dir: object = False
+    mask: str = "reconstructed"
+    border: int = METRIC_BORDER
+    intensity_scale: float | None = None
+    render_kw: dict | None = None
+    geometry_kw: dict | None = None
+    use_lpips: bool = True
+    view_split: int | None = None
+    uncertainty: bool = False
+    supersample: object = "auto"
+
+
 def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting], *,
-                   sources: Sequence[int | str] | None = None, depth: str = "auto",
-                   depth_files=None, n_views: int | str | None = None, mask: str = "reconstructed",
-                   border: int = METRIC_BORDER, estimate_kw: dict | None = None,
-                   render_kw: dict | None = None, intensity_scale: float | None = None,
-                   geometry_kw: dict | None = None, use_lpips: bool = True,
-                   view_split: int | None = None, uncertainty: bool = False,
-                   fallback: str | bool = "auto", cache_dir=False, supersample="auto") -> Evaluation:
+                   options: EvalOptions | None = None, **kw) -> Evaluation:
     """Render the held-out ``target`` with each setting and measure it.
 
     The geometry is computed once: the sources get their depth (:func:`vibr.pipeline.prepare`;
@@ -108,30 +157,8 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     only; ``depth_seconds`` and ``samples_seconds`` are reported once. Nothing is written:
     figures are :func:`vibr.figures.write_evaluation_figures`'s job.
 
-    Parameters
-    ----------
-    intensity_scale : float, optional
-        The intensity scale the render parameters refer to (render's ``scale``; default the
-        renderer's, 255). A setting's own ``scale`` parameter overrides it.
-    render_kw : dict, optional
-        Extra render parameters for every setting (a setting's params win).
-    geometry_kw : dict, optional
-        Arguments of :func:`vibr.geometry.compute_samples`.
-    view_split : int, optional
-        Also measure each setting separately on the evaluated pixels seen by at most
-        ``view_split`` source views and on those seen by more (:func:`view_counts`): entry
-        ``regions`` = {"few": {...}, "many": {...}} with psnr, dssim and the pixel fraction.
-    uncertainty : bool
-        Render with ``uncertainty=True`` and add entry ``uncertainty`` = {ause, spearman,
-        fractions, curve, oracle, rmse} (:func:`vibr.metrics.uncertainty_metrics`, the same
-        pixels as the other metrics; plot: :func:`vibr.uncertainty_figures.write_sparsification_figure`).
-    fallback : {"auto", "always", "never"}
-        The fallback proxy for source pixels of unknown depth (:func:`vibr.pipeline.prepare`).
-    cache_dir : path, None or False
-        The cache of estimated depth (:func:`vibr.pipeline.prepare`); False (default): none.
-    supersample : "auto" or int
-        The grid every setting renders on, as :func:`vibr.render.render` chooses it (a
-        held-out view at its sources' resolution: the target's own).
+    ``options`` (:class:`EvalOptions`) says how; ``kw`` (its fields, e.g. ``depth="gt"``)
+    applies over it. Any other keyword raises ``TypeError``.
 
     Returns an :class:`Evaluation` whose ``report`` is JSON-serialisable: ``scene``,
     ``target``, ``sources``, ``scale`` (the image scale the scene was loaded at),
@@ -143,43 +170,28 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     from .pipeline import prepare
     from .render import shared_geometry
 
-    settings, intensity_scale = _checked_settings(settings, mask, intensity_scale)
-    check_measurable(scene.views[scene.index(target)].camera.shape, border, scene.root)
+    o = replace(options or EvalOptions(), **kw)
+    settings, intensity_scale = _checked_settings(settings, o.mask, o.intensity_scale)
+    check_measurable(scene.views[scene.index(target)].camera.shape, o.border, scene.root)
     t0 = time.perf_counter()
-    src, tview = prepare(scene, target, sources=sources, depth=depth, depth_files=depth_files,
-                         n_views=n_views, estimate_kw=estimate_kw, fallback=fallback, cache_dir=cache_dir)
+    src, tview = prepare(scene, target, sources=o.sources, depth=o.depth, depth_files=o.depth_files,
+                         n_views=o.n_views, estimate_kw=o.estimate_kw, fallback=o.fallback, cache_dir=o.cache_dir)
     t_depth = time.perf_counter() - t0
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)
     t0 = time.perf_counter()
-    geo = shared_geometry(src, tview, [(s.method, {**(render_kw or {}), **s.params}) for s in settings],
-                          geometry_kw=geometry_kw, supersample=supersample)
+    geo = shared_geometry(src, tview, [(s.method, {**(o.render_kw or {}), **s.params}) for s in settings],
+                          geometry_kw=o.geometry_kw, supersample=o.supersample)
     src, samples = geo.sources, geo.samples
     t_samples = time.perf_counter() - t0
-    logger.info(f"eval: {tview.name} from {len(src)} views, depth={depth} ({t_depth:.1f} s), "
+    logger.info(f"eval: {tview.name} from {len(src)} views, depth={o.depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
-    rows = _render_settings(geo, tview, settings, intensity_scale, render_kw, depth, uncertainty)
+    rows = _render_settings(geo, tview, settings, intensity_scale, o.render_kw, o.depth, o.uncertainty)
     cover = np.ones(tview.shape, bool) if tview.mask is None else tview.mask.copy()
-    if mask == "reconstructed":
+    if o.mask == "reconstructed":
         for _, res, _ in rows:
             cover &= np.asarray(res.coverage, bool)
-    m = cover if mask == "reconstructed" or tview.mask is not None else None
-    lp = _lpips_fn() if use_lpips else None
-    counts = view_counts(samples) if view_split is not None else None
-    results = []
-    for s, res, dt in rows:
-        entry = _measure(s, res, dt, tview.image, m, border, depth, intensity_scale)
-        if lp is not None:
-            entry["lpips"] = lp(res.image, tview.image)
-        if uncertainty:  # issue 28
-            from .metrics import uncertainty_metrics
-
-            entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
-                                                       border=border)
-        if view_split is not None:
-            base = cover
-            entry["regions"] = _region_metrics(res.image, tview.image, base, counts, view_split, border)
-        results.append(entry)
+    results = _measure_rows(rows, tview, cover, samples, intensity_scale, o)
     report = {
         "scene": scene.name,
         "scene_path": str(scene.root) if scene.root else None,
@@ -188,9 +200,9 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         "scale": float(scene.meta.get("scale", 1.0)),
         "intensity_scale": intensity_scale,
         "size": [int(tview.shape[1]), int(tview.shape[0])],
-        "depth": depth,
-        "mask": mask,
-        "border": border,
+        "depth": o.depth,
+        "mask": o.mask,
+        "border": o.border,
         "evaluated_fraction": float(cover.mean()),
         "n_samples": int(len(samples)),
         "depth_seconds": round(t_depth, 3),
@@ -199,10 +211,32 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
         "machine": machine_info(),
         "results": results,
     }
-    _add_context(report, src, depth, estimate_kw, view_split)
+    _add_context(report, src, o.depth, o.estimate_kw, o.view_split)
     return Evaluation(report=report, reference=tview.image,
                       images={s.label: res.image for s, res, _ in rows}, mask=cover,
-                      prefix=f"{tview.name}_{depth}")
+                      prefix=f"{tview.name}_{o.depth}")
+
+
+def _measure_rows(rows, tview, cover, samples, intensity_scale, o: EvalOptions) -> list[dict]:
+    """One report entry per rendered setting: its metrics on the evaluated pixels
+    (``cover``), with LPIPS, the uncertainty's and the per-region metrics when asked."""
+    m = cover if o.mask == "reconstructed" or tview.mask is not None else None
+    lp = _lpips_fn() if o.use_lpips else None
+    counts = view_counts(samples) if o.view_split is not None else None
+    results = []
+    for s, res, dt in rows:
+        entry = _measure(s, res, dt, tview.image, m, o.border, o.depth, intensity_scale)
+        if lp is not None:
+            entry["lpips"] = lp(res.image, tview.image)
+        if o.uncertainty:  # issue 28
+            from .metrics import uncertainty_metrics
+
+            entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
+                                                       border=o.border)
+        if o.view_split is not None:
+            entry["regions"] = _region_metrics(res.image, tview.image, cover, counts, o.view_split, o.border)
+        results.append(entry)
+    return results
 
 
 def _checked_settings(settings, mask: str, intensity_scale):
