@@ -261,3 +261,25 @@ def test_georeferenced_coordinates_render_as_at_the_origin():
         assert src.meta["depth_source"] == "estimated"
         psnr.append(render(src, t, "gradient").metrics["psnr"])
     assert psnr[0] > 28.0 and abs(psnr[1] - psnr[0]) < 0.05, psnr
+
+
+def test_compute_samples_options_and_keywords():
+    """compute_samples' options as a SampleOptions or as keywords over it: the same samples,
+    field by field; a misspelt option is a TypeError, not a default."""
+    from vibr.geometry import SampleOptions
+    from vibr.synthetic import make_scene
+
+    s = make_scene("grid", n_views=9, width=40, height=32, seed=0)
+    src, tgt = s.split(4)
+    a = compute_samples(src, tgt, vis_threshold=0.05, keep=("jac",), grad_scheme="central")
+    b = compute_samples(src, tgt, options=SampleOptions(vis_threshold=0.05, keep=("jac",), grad_scheme="central"))
+    c = compute_samples(src, tgt, options=SampleOptions(vis_threshold=0.5), vis_threshold=0.05, keep=("jac",),
+                        grad_scheme="central")
+    d = compute_samples(src, tgt)
+    for other in (b, c):
+        assert len(other) == len(a) and other.meta["vis_threshold"] == 0.05
+        for f in ("xy", "colour", "grad", "inv_det", "view", "jac"):
+            np.testing.assert_array_equal(getattr(other, f), getattr(a, f))
+    assert d.jac is None and d.meta["grad_scheme"] != "central"
+    with pytest.raises(TypeError, match="vis_treshold"):
+        compute_samples(src, tgt, vis_treshold=0.05)

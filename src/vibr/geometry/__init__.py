@@ -3,7 +3,7 @@ visibility → :class:`Samples` (what the renderer consumes).
 
 Main entry points
 -----------------
-compute_samples(sources, target, *, vis_threshold=0.02, ...) -> Samples
+compute_samples(sources, target, *, options=SampleOptions(...), **kw) -> Samples
 ensure_source_depth(scene) -> Scene        (depth transfer to views without depth)
 planar_proxy(sources, target_camera, depth=None, sigma_z=None) -> Scene
 
@@ -14,7 +14,7 @@ Modules: ``depth`` (radial/disparity → orthogonal depth, slopes, bilateral hol
 
 from .depth import (depth_derivatives, disparity_to_depth, fill_depth_holes, radial_to_orthogonal,
                     radial_to_orthogonal_derivatives)
-from .sampling import compute_samples, prepare_depth
+from .sampling import SampleOptions, compute_samples, prepare_depth
 from .proxy import (FALLBACK_MODES, apply_fallback, fallback_depth, planar_proxy, plane_depth,
                     sphere_proxy)
 from .samples import Samples
@@ -23,7 +23,7 @@ from .visibility import new_zbuffers, reduce_zbuffers, splat_mesh, splat_zbuffer
 from .warp import warp_constants, warp_points, warp_view
 
 __all__ = [
-    "Samples", "compute_samples", "prepare_depth", "ensure_source_depth", "transfer_depth",
+    "Samples", "compute_samples", "SampleOptions", "prepare_depth", "ensure_source_depth", "transfer_depth",
     "planar_proxy", "plane_depth", "sphere_proxy", "fallback_depth", "apply_fallback", "FALLBACK_MODES", "depth_derivatives", "disparity_to_depth", "fill_depth_holes",
     "radial_to_orthogonal", "radial_to_orthogonal_derivatives", "warp_constants", "warp_points",
     "warp_view", "new_zbuffers", "splat_zbuffer", "splat_mesh", "reduce_zbuffers", "visibility_mask",

@@ -17,6 +17,7 @@ Steps (paper §5, docs/METHOD.md §2), per source view k:
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit, prange
@@ -32,7 +33,7 @@ from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, ne
                          reduce_zbuffers, splat_zbuffer, visibility_mask)
 from .warp import DEFAULT_MAX_INV_DET, _project_one, _warp_one, warp_constants
 
-__all__ = ["compute_samples", "prepare_depth", "DEFAULT_SIGMA_Z_REL", "OPTIONAL_FIELDS"]
+__all__ = ["compute_samples", "SampleOptions", "prepare_depth", "DEFAULT_SIGMA_Z_REL", "OPTIONAL_FIELDS"]
 
 #: Sample fields no default render reads, computed only when asked for (``keep``): the
 #: warp's Jacobian (the footprint PSF) and the source pixel (diagnostics, tests); 16 + 8 of
@@ -195,23 +196,12 @@ def _view_sigma(view: View, z: np.ndarray, sigma_z_default):
     return DEFAULT_SIGMA_Z_REL * float(med)
 
 
-def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VIS_THRESHOLD,
-                    fill_holes: bool = False, max_inv_det: float = DEFAULT_MAX_INV_DET,
-                    edge_rel: float = DEFAULT_EDGE_REL, max_quad_px: int = DEFAULT_MAX_QUAD_PX,
-                    sigma_z_default: float | None = None, splat_mode: str = "affine",
-                    return_zbuffer: bool = False, prepared: dict | None = None,
-                    grad_scheme: str | None = None, keep=(), grad_model: str | None = None,
-                    stop=None) -> Samples:
-    """Visible warped source samples for a target camera (paper §5).
+@dataclass(frozen=True)
+class SampleOptions:
+    """How :func:`compute_samples` warps the sources (every field has a default).
 
-    Parameters
+    Attributes
     ----------
-    sources : Scene
-        Source views; every one must have a depth map (NaN pixels are skipped, or filled
-        first when ``fill_holes``) — use :func:`vibr.geometry.ensure_source_depth` for
-        views without depth.
-    target : Camera or View
-        What to render (a View's camera is used).
     vis_threshold : float
         Relative depth tolerance of the visibility test (``w ≤ (1 + thr) z_u``), see
         :mod:`vibr.geometry.visibility` (measurements there); default 0.02.
@@ -228,12 +218,6 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         How quads are rasterised into the z-buffer (:func:`splat_zbuffer`).
     sigma_z_default : float, optional
         sigma_z (scene units) for views without one; default ``0.01 · median depth``.
-    return_zbuffer : bool
-        Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``.
-    prepared : dict, optional
-        ``view name → (z, z_x, z_y)`` from :func:`prepare_depth` with the same
-        ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
-        callers rendering many targets (:mod:`vibr.flythrough`).
     grad_scheme : {"forward", "central"}, optional
         Discretisation of the sources' ``∇v`` (:data:`vibr.geometry.gradient.GRAD_SCHEMES`;
         default :data:`vibr.geometry.gradient.DEFAULT_GRAD_SCHEME`), recorded in
@@ -245,6 +229,41 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
         Optional fields to compute (:data:`OPTIONAL_FIELDS`): ``"jac"`` (the footprint PSF
         reads it; :func:`vibr.render.methods.sample_fields` says what a render needs),
         ``"src_xy"``; the others are None.
+    """
+
+    vis_threshold: float = DEFAULT_VIS_THRESHOLD
+    fill_holes: bool = False
+    max_inv_det: float = DEFAULT_MAX_INV_DET
+    edge_rel: float = DEFAULT_EDGE_REL
+    max_quad_px: int = DEFAULT_MAX_QUAD_PX
+    splat_mode: str = "affine"
+    sigma_z_default: float | None = None
+    grad_scheme: str | None = None
+    grad_model: str | None = None
+    keep: tuple = ()
+
+
+def compute_samples(sources: Scene, target, *, options: SampleOptions | None = None,
+                    prepared: dict | None = None, return_zbuffer: bool = False, stop=None, **kw) -> Samples:
+    """Visible warped source samples for a target camera (paper §5).
+
+    Parameters
+    ----------
+    sources : Scene
+        Source views; every one must have a depth map (NaN pixels are skipped, or filled
+        first when ``options.fill_holes``) — use :func:`vibr.geometry.ensure_source_depth`
+        for views without depth.
+    target : Camera or View
+        What to render (a View's camera is used).
+    options : SampleOptions, optional
+        How to warp; ``kw`` (its fields, e.g. ``keep=("jac",)``) applies over it. Any other
+        keyword raises ``TypeError``.
+    prepared : dict, optional
+        ``view name → (z, z_x, z_y)`` from :func:`prepare_depth` with the same
+        ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
+        callers rendering many targets (:mod:`vibr.flythrough`).
+    return_zbuffer : bool
+        Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``.
     stop : callable, optional
         Polled after the z-buffer and after the visibility test; True raises
         :class:`vibr.errors.RenderStopped` (:func:`vibr.render.render`'s ``stop``).
@@ -262,7 +281,8 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     VibrInputError
         A source without depth, or no source sample landing in the target.
     """
-    grad_scheme, grad_model, keep = _checked_fields(grad_scheme, grad_model, keep)
+    o = replace(options or SampleOptions(), **kw)
+    grad_scheme, grad_model, keep = _checked_fields(o.grad_scheme, o.grad_model, o.keep)
     cam = target.camera if isinstance(target, View) else target
     if not isinstance(cam, Camera):
         raise VibrInputError("target must be a Camera or a View", None)
@@ -272,24 +292,24 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
-        known, proxy = _split_fallback(_prepare_views(sources, cam, fill_holes, edge_rel, prepared), edge_rel)
+        known, proxy = _split_fallback(_prepare_views(sources, cam, o.fill_holes, o.edge_rel, prepared), o.edge_rel)
     with _Timer(times, cpu, "zbuffer"):
-        zbuf = _target_zbuffer(known, cam.shape, max_quad_px, splat_mode)
+        zbuf = _target_zbuffer(known, cam.shape, o.max_quad_px, o.splat_mode)
         if proxy:
             # known geometry wins: a fallback sample only shows where no known surface lands
-            zproxy = _target_zbuffer(proxy, cam.shape, max_quad_px, splat_mode)
+            zproxy = _target_zbuffer(proxy, cam.shape, o.max_quad_px, o.splat_mode)
             zproxy[np.isfinite(zbuf)] = -np.inf
     check_stop(stop)
     with _Timer(times, cpu, "visibility"):
-        states, counts = _visibility(known, zbuf, vis_threshold)
+        states, counts = _visibility(known, zbuf, o.vis_threshold)
         if proxy:
-            st, cnt = _visibility(proxy, zproxy, vis_threshold)
+            st, cnt = _visibility(proxy, zproxy, o.vis_threshold)
             states += st
             for name, c in cnt.items():
                 counts[name].update({"fallback visible": c["visible"], "fallback hidden": c["occluded"]})
     check_stop(stop)
     with _Timer(times, cpu, "assembly"):
-        out = _gather_samples(known + proxy, states, cam.shape, max_inv_det, sigma_z_default, grad_scheme, keep,
+        out = _gather_samples(known + proxy, states, cam.shape, o.max_inv_det, o.sigma_z_default, grad_scheme, keep,
                               grad_model)
         del known, proxy, states
     if len(out) == 0:
@@ -297,7 +317,7 @@ def compute_samples(sources: Scene, target, *, vis_threshold: float = DEFAULT_VI
     out.meta["counts"] = counts
     out.meta["times"] = times
     out.meta["cpu_times"] = cpu
-    out.meta["vis_threshold"] = float(vis_threshold)
+    out.meta["vis_threshold"] = float(o.vis_threshold)
     out.meta["grad_scheme"] = grad_scheme
     out.meta["grad_model"] = grad_model
     # one proxy for every view: its depth error at a target pixel is the views' shared one
