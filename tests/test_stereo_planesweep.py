@@ -945,3 +945,23 @@ def test_a_masked_source_is_a_view_that_does_not_see():
                         n_planes=96, radius=3, n_best=2)
         err[name] = np.mean((np.abs(r.depth - gt) / gt)[inner] < 0.01)
     assert err["masked"] > err["not masked"] + 0.05, err
+
+
+def test_refine_planes_options_and_keywords():
+    """refine_planes' options as a RefineOptions or as keywords over it: the same planes;
+    a misspelt option is a TypeError, not a default."""
+    from vibr.stereo import RefineOptions
+    from vibr.stereo.planesweep import refine_planes
+
+    ref, cams, views, res, n, d = _slanted_setup(8)
+    args = (views[0][0], ref, [v[0] for v in views[1:]], cams[1:], res)
+    a = refine_planes(*args, n_iter=1, radius=2, seed=3)
+    b = refine_planes(*args, options=RefineOptions(n_iter=1, radius=2, seed=3))
+    c = refine_planes(*args, options=RefineOptions(n_iter=3, radius=2), n_iter=1, seed=3)
+    e = refine_planes(*args, n_iter=1, radius=2, seed=4)
+    for other in (b, c):
+        np.testing.assert_array_equal(other.inv_depth, a.inv_depth)
+        np.testing.assert_array_equal(other.cost, a.cost)
+    assert not np.array_equal(e.inv_depth, a.inv_depth)
+    with pytest.raises(TypeError, match="n_iters"):
+        refine_planes(*args, n_iters=1)

@@ -16,7 +16,7 @@ For light fields with fronto-parallel, parallel cameras this sweep is exact as w
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -204,14 +204,54 @@ def window_offsets(radius: int, stride: int) -> np.ndarray:
     return np.ascontiguousarray(np.c_[dy.ravel(), dx.ravel()].astype(np.int64))
 
 
+@dataclass(frozen=True)
+class RefineOptions:
+    """How :func:`refine_planes` refines a sweep's planes (every field has a default; what
+    each does: :func:`refine_planes`).
+
+    Attributes
+    ----------
+    n_iter : int
+        PatchMatch iterations.
+    radius, stride : int
+        The matching window, ``(2·radius+1)²`` sampled every ``stride`` pixels.
+    sigma_c, sigma_s : float
+        Grey-level and spatial scales of the window's adaptive-support weights
+        (``sigma_s`` None: ``radius``).
+    n_best : int, optional
+        Views averaged per pixel (the lowest costs; default half of them).
+    eps, max_cost : float
+        The ZNCC regulariser; the aggregated ``1 − ZNCC`` above which a pixel is not confident.
+    dn : float
+        Initial size of the normals' random perturbation.
+    seed : int
+        Seed of the random search.
+    single_view_penalty : float or None
+        Added to the best view's cost where that alone replaces the mean (None: never).
+    fronto_init, joint_perturbation, normal_perturbation : bool
+        The fronto-parallel start, the joint depth-and-normal perturbation and the normal
+        perturbations of the random search.
+    """
+
+    n_iter: int = 2
+    radius: int = 3
+    stride: int = 2
+    sigma_c: float = 0.05
+    sigma_s: float | None = None
+    n_best: int | None = None
+    eps: float = 0.002
+    max_cost: float = 0.6
+    dn: float = 1.0
+    seed: int = 0
+    single_view_penalty: float | None = 0.1
+    fronto_init: bool = True
+    joint_perturbation: bool = True
+    normal_perturbation: bool = True
+
+
 def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np.ndarray],
-                  src_cameras: list[Camera], init: SweepResult, *, n_iter: int = 2,
-                  radius: int = 3, stride: int = 2, sigma_c: float = 0.05,
-                  sigma_s: float | None = None,
-                  n_best: int | None = None, eps: float = 0.002, max_cost: float = 0.6,
-                  dn: float = 1.0, seed: int = 0, single_view_penalty: float = 0.1,
-                  fronto_init: bool = True, joint_perturbation: bool = True,
-                  normal_perturbation: bool = True, src_masks=None) -> SweepResult:
+                  src_cameras: list[Camera], init: SweepResult, *, options: RefineOptions | None = None,
+                  src_masks=None, **kw) -> SweepResult:
     """Sub-plane, slanted refinement of a plane-sweep result (PatchMatch, continuous).
 
     The sweep is winner-take-all over fronto-parallel planes: its depth is quantised (the
@@ -244,7 +284,9 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     full-size iterations after the coarse level).
 
     ``src_masks``: the sources' masks, as in :func:`plane_sweep` (a view whose window
-    centre lands on a masked pixel is left out of that cost).
+    centre lands on a masked pixel is left out of that cost). The other parameters are the
+    fields of ``options`` (:class:`RefineOptions`), to which ``kw`` (its fields by name)
+    applies.
 
     ``normal_perturbation``: whether the random search tries the normal alone and a random
     normal. Without it (and without the joint perturbation) the random search only moves
@@ -259,20 +301,21 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     at its ends); ``sigma_z`` keeps the sweep's inverse-depth width at the new depth.
     """
     t0 = time.perf_counter()
+    o = replace(options or RefineOptions(), **kw)
     H, W = ref_camera.shape
     I = to_grey(ref_image).astype(np.float64)
     nv = len(src_images)
-    n_best = max(1, nv // 2) if n_best is None else max(1, min(int(n_best), nv))
-    lam1 = -1.0 if single_view_penalty is None else float(single_view_penalty)
+    n_best = max(1, nv // 2) if o.n_best is None else max(1, min(int(o.n_best), nv))
+    lam1 = -1.0 if o.single_view_penalty is None else float(o.single_view_penalty)
     srcs, sizes = _stack_greys(src_images)
     valid = _stack_masks(src_masks, srcs)
     A, b = plane_homographies(ref_camera, list(src_cameras))
-    offs = window_offsets(int(radius), int(stride))
+    offs = window_offsets(int(o.radius), int(o.stride))
     guide = np.asarray(ref_image, np.float32)
     guide = np.ascontiguousarray(guide if guide.ndim == 3 else guide[..., None])
-    wts, wI, sdI = kern.support_weights(I, offs, float(sigma_c),
-                                        float(sigma_s or max(radius, 1)), guide)
-    eps2 = float(eps) ** 2
+    wts, wI, sdI = kern.support_weights(I, offs, float(o.sigma_c),
+                                        float(o.sigma_s or max(o.radius, 1)), guide)
+    eps2 = float(o.eps) ** 2
     winv = init.winv
     step = abs(winv[1] - winv[0]) if len(winv) > 1 else 0.05 * winv[0]
     wmin, wmax = float(winv.min()), float(winv.max())
@@ -280,25 +323,25 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     zero = np.zeros((H, W))
     gy, gx = np.gradient(w)
     cost = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, gx, gy, lam1)
-    if fronto_init:
+    if o.fronto_init:
         c0 = kern.plane_costs(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, zero, zero, lam1)
         fronto = c0 <= cost
         gx = np.where(fronto, 0.0, gx)
         gy = np.where(fronto, 0.0, gy)
         cost = np.where(fronto, c0, cost)
     n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, gx, gy,
-                           cost, int(n_iter), 2.0 * step, float(dn), np.linalg.inv(ref_camera.K),
-                           wmin, wmax, int(seed), lam1, r_first=0 if joint_perturbation else 1,
-                           r_last=4 if normal_perturbation else 2)
+                           cost, int(o.n_iter), 2.0 * step, float(o.dn), np.linalg.inv(ref_camera.K),
+                           wmin, wmax, int(o.seed), lam1, r_first=0 if o.joint_perturbation else 1,
+                           r_last=4 if o.normal_perturbation else 2)
     z = 1.0 / w
     sigma_w = init.sigma_z.astype(np.float64) / np.asarray(init.depth, np.float64) ** 2
     sigma_z = (z * z * sigma_w).astype(np.float32)
     _, sd_box = kern.box_mean_std(I, int(init.meta.get("radius", 3)), eps2)
-    textured = sd_box > 2.0 * eps
+    textured = sd_box > 2.0 * o.eps
     inside = (w > wmin + 0.5 * step) & (w < wmax - 0.5 * step)
-    confident = textured & (cost <= max_cost) & inside
+    confident = textured & (cost <= o.max_cost) & inside
     meta = dict(init.meta)
-    meta.update({"refine_s": time.perf_counter() - t0, "refine_iter": int(n_iter),
+    meta.update({"refine_s": time.perf_counter() - t0, "refine_iter": int(o.n_iter),
                  "refine_evals": int(n_eval),
                  "plane_gradient": (gx, gy),
                  "time_s": init.meta.get("time_s", 0.0) + time.perf_counter() - t0})
