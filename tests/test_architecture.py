@@ -118,6 +118,25 @@ def long_functions(limit: int = MAX_FUNCTION_LINES) -> list[str]:
     return out
 
 
+#: The most keyword options a public function of the library may take before they belong in
+#: an options dataclass (docs/ARCHITECTURE.md; compiled kernels, which take arrays, aside).
+MAX_OPTIONS = 11
+
+
+def many_options(limit: int = MAX_OPTIONS) -> list[str]:
+    out = []
+    for path, _ in _modules():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if not isinstance(node, ast.FunctionDef) or node.name.startswith("_"):
+                continue
+            if any("jit" in ast.unparse(d) for d in node.decorator_list):
+                continue
+            n = len(node.args.kwonlyargs) + len(node.args.defaults)
+            if n > limit:
+                out.append(f"{path.relative_to(SRC.parent)}:{node.lineno}: {node.name} takes {n} options")
+    return out
+
+
 def test_import_rules():
     bad = import_violations()
     assert not bad, "imports across the rules of docs/ARCHITECTURE.md:\n" + "\n".join(bad)
@@ -133,9 +152,14 @@ def test_no_function_over_120_lines():
     assert not bad, f"functions over {MAX_FUNCTION_LINES} lines (split into named steps):\n" + "\n".join(bad)
 
 
+def test_no_public_function_with_more_than_11_options():
+    bad = many_options()
+    assert not bad, f"more than {MAX_OPTIONS} keyword options (take an options dataclass):\n" + "\n".join(bad)
+
+
 def test_the_checks_can_fail(tmp_path, monkeypatch):
     """Each rule catches a planted violation: a function-level import of vibr.render in
-    geometry, a print in the library, a long function."""
+    geometry, a print in the library, a long function, a function of many options."""
     import sys
 
     pkg = tmp_path / "vibr"
@@ -145,8 +169,10 @@ def test_the_checks_can_fail(tmp_path, monkeypatch):
     (pkg / "render" / "__init__.py").write_text("")
     (pkg / "geometry" / "__init__.py").write_text("")
     body = "\n".join(f"    x{i} = {i}" for i in range(MAX_FUNCTION_LINES))
+    opts = ", ".join(f"o{i}=0" for i in range(MAX_OPTIONS + 1))
     (pkg / "geometry" / "bad.py").write_text(
-        "def f():\n    from ..render import api\n    print('x')\n" + body + "\n")
+        "def f():\n    from ..render import api\n    print('x')\n" + body + "\n"
+        f"def g(a, *, {opts}):\n    pass\n")
     (pkg / "render" / "api.py").write_text("")
     mod = sys.modules[__name__]
     monkeypatch.setattr(mod, "SRC", tmp_path)
@@ -154,6 +180,7 @@ def test_the_checks_can_fail(tmp_path, monkeypatch):
     assert any("geometry must not import render" in v for v in import_violations())
     assert any("print(" in v for v in print_calls())
     assert any("f is" in v for v in long_functions())
+    assert any("g takes 12 options" in v for v in many_options())
 
 
 def test_doc_references_resolve():
