@@ -756,6 +756,10 @@ def test_estimate_depth_options_and_unknown_keywords():
     np.testing.assert_array_equal(za, zb)
     np.testing.assert_array_equal(za, zc)
     assert not np.array_equal(np.nan_to_num(za), np.nan_to_num(zd))
+    with pytest.raises(VibrInputError, match="sweep\\+tvv"):
+        lightfield_depth(*args, refine="sweep+tvv")
+    with pytest.raises(VibrInputError, match="sweep\\+tvv"):
+        estimate_depth(g, views=[4], refine="sweep+tvv")
 
 
 def test_views_side_by_side_bit_identical_to_serial(monkeypatch):

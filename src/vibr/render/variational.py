@@ -261,8 +261,8 @@ def _outer_line(name, o, n_outer, res) -> str:
 
 class _Problem:
     """What every outer pass of one render shares (docs/METHOD.md §3-7): the splat ``B`` and
-    its coverage, the densities rho and rho_c, the colour and gradient terms, the TV prox and
-    the model's constants. :meth:`model` assembles one pass's energy from the colour term's
+    its coverage, the densities rho and rho_c, the colour and gradient terms, the TV weights
+    and the model's constants. :meth:`model` assembles one pass's energy from the colour term's
     stencils."""
 
     def __init__(self, samples: Samples, p: dict, method, centres, times: dict, stop, keep_weights: bool):

@@ -669,6 +669,10 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
     if r is not None and (int(r) != r or r < 1):
         raise VibrInputError(f"pm_radius must be an integer >= 1, got {r}", scene.root)
     method = depth_method(scene, opt.method)
+    if method == "lightfield":
+        from .lightfield import LightFieldOptions
+
+        LightFieldOptions(**opt.lightfield)  # its checks, before any view is estimated
     if opt.depth_range is not None:
         dr = (float(opt.depth_range[0]), float(opt.depth_range[1]))
         if not 0 < dr[0] < dr[1]:

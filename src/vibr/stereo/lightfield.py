@@ -45,6 +45,11 @@ from .planesweep import median_planes, plane_sweep, refine_planes, to_grey
 PARALLAX_STEP = 0.1
 
 
+#: What :func:`lightfield_depth` does after the local estimate (``LightFieldOptions.refine``):
+#: nothing, the plane sweep, or the sweep and the TV-L1.
+REFINE_MODES = ("st", "sweep", "sweep+tv")
+
+
 #: Image scale of the light-field estimate's coarse level (sweep and first refinement
 #: iteration; :func:`lightfield_depth`'s ``pm_coarse_scale``): measured in docs/DEPTH.md
 #: ("Coarse to fine").
@@ -199,6 +204,10 @@ class LightFieldOptions:
     pm_coarse_scale: float = COARSE_SCALE
     pm_coarse_iter: int = 1
     median_radius: int = 0
+
+    def __post_init__(self):
+        if self.refine not in REFINE_MODES:
+            raise VibrInputError(f"light-field refine must be one of {', '.join(REFINE_MODES)}, got {self.refine!r}")
 
 
 def lightfield_depth(scene: Scene, ref: int, cams: list[Camera], img, inputs: list[int], *,
