@@ -386,11 +386,12 @@ def _uncertainty(prob: _Problem, method, samples: Samples, run: _Passes, terms):
     if prob.colour_term.z_corr > 0 and method.reweight and Wk is not None:
         # σ from the independent errors' weights: the shared-error weights count a first-order
         # cancellation as certainty (docs/RENDERER.md, "Depth errors the views share")
-        run.model = model = None
+        run.model = model = None  # the last pass's stencils go before these come, as between passes
         A, b, c, Wk = prob.colour_term(run.u_w.transpose(1, 2, 0), z_corr=0.0)
         model = prob.model(A, b, c, Wk)
-    sig = variational_sigma(model, prob.sp, Wk, samples.colour, run.u, prob.cov.coverage, scale=float(prob.p["scale"]),
-                            density=prob.rho_c, grad_density=prob.rho, terms=terms, view=samples.view)
+    sig = variational_sigma(model, prob.sp, Wk, samples.colour, run.u, prob.cov.coverage,
+                            scale=float(prob.p["scale"]), density=prob.rho_c, grad_density=prob.rho, terms=terms,
+                            view=samples.view)
     prob.times["uncertainty"] = time.perf_counter() - t0
     return sig
 
