@@ -171,6 +171,29 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int):
     """``(camera, distortion, s)``: the frame's camera; for a distorted one its
     :class:`Distortion` (the camera is then the pinhole its image is undistorted onto at
     load), else None; the uniform scale its transform_matrix's rotation carried (1: none)."""
+    model, dk = _frame_lens(frame, meta, src, i)
+    w, h = _frame_size(frame, meta, img_path, src, i)
+    fx, fy = _frame_focal(frame, meta, w, h, src, i)
+    fi = f"frame {i}:"
+    cx = _number(_get(frame, meta, "cx", w / 2.0), f"{fi} cx", src)
+    cy = _number(_get(frame, meta, "cy", h / 2.0), f"{fi} cy", src)
+    skew = _number(frame.get("vibr_skew", 0.0), f"{fi} vibr_skew", src)
+    dist = from_nerfstudio(model, fx, fy, cx, cy, dk, w, h, f"{src} frame {i}")
+    if dist is not None:
+        check_lens(dist, f"{src} frame {i}")
+    if dist is not None and skew:
+        raise VibrInputError(f"{fi} vibr_skew with lens distortion is not supported", src)
+    K = np.array([[fx, skew, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+    if dist is not None:
+        K, w, h = pinhole(dist)
+    M = _frame_pose(frame, src, i)
+    R_gl, s = as_scaled_rotation(M[:3, :3], src, f"frame {i} transform_matrix rotation")
+    R_c2w = R_gl @ _GL_TO_CV
+    return Camera.from_centre(K, R_c2w.T, M[:3, 3], w, h, source=f"{src} frame {i}"), dist, s
+
+
+def _frame_lens(frame: dict, meta: dict, src: str, i: int):
+    """``(camera_model, distortion coefficients)`` of a frame (its own keys over the file's)."""
     model = str(_get(frame, meta, "camera_model", "OPENCV"))[:40].upper()
     if model not in _PERSPECTIVE_MODELS + NERFSTUDIO_FISHEYE:
         raise VibrInputError(f"frame {i}: camera_model {model} is not one vibr reads (it reads "
@@ -181,6 +204,11 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int):
         if isinstance(v, (list, dict, str, bool)):
             raise VibrInputError(f"frame {i}: distortion {k} must be a number, got {v!r}", src)
         dk[k] = 0.0 if v is None else _number(v, f"frame {i}: {k}", src)
+    return model, dk
+
+
+def _frame_size(frame: dict, meta: dict, img_path: Path, src: str, i: int):
+    """``(w, h)`` of a frame: its keys, else the image file's header."""
     w, h = _get(frame, meta, "w"), _get(frame, meta, "h")
     if w is None or h is None:
         w, h = image_size(img_path)
@@ -188,7 +216,13 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int):
     w, h = _number(w, f"{fi} w", src, positive=True), _number(h, f"{fi} h", src, positive=True)
     if w != int(w) or h != int(h) or max(w, h) > 1e6:
         raise VibrInputError(f"{fi} image size {w:g}x{h:g} must be whole numbers of at most 10^6 pixels", src)
-    w, h = int(w), int(h)
+    return int(w), int(h)
+
+
+def _frame_focal(frame: dict, meta: dict, w: int, h: int, src: str, i: int):
+    """``(fx, fy)`` in pixels: ``fl_x``/``fl_y``, else from ``camera_angle_x``/``_y``
+    (``f = w / (2 tan(angle / 2))``); fy defaults to fx."""
+    fi = f"frame {i}:"
     fx, fy = _get(frame, meta, "fl_x"), _get(frame, meta, "fl_y")
     if fx is None:
         ax = _get(frame, meta, "camera_angle_x")
@@ -206,18 +240,12 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int):
             if not ay < math.pi:
                 raise VibrInputError(f"{fi} camera_angle_y must be in (0, pi) radians, got {ay}", src)
         fy = fx if ay is None else 0.5 * h / math.tan(0.5 * ay)
-    fy = _number(fy, f"{fi} fl_y", src, positive=True)
-    cx = _number(_get(frame, meta, "cx", w / 2.0), f"{fi} cx", src)
-    cy = _number(_get(frame, meta, "cy", h / 2.0), f"{fi} cy", src)
-    skew = _number(frame.get("vibr_skew", 0.0), f"{fi} vibr_skew", src)
-    dist = from_nerfstudio(model, fx, fy, cx, cy, dk, w, h, f"{src} frame {i}")
-    if dist is not None:
-        check_lens(dist, f"{src} frame {i}")
-    if dist is not None and skew:
-        raise VibrInputError(f"{fi} vibr_skew with lens distortion is not supported", src)
-    K = np.array([[fx, skew, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
-    if dist is not None:
-        K, w, h = pinhole(dist)
+    return fx, _number(fy, f"{fi} fl_y", src, positive=True)
+
+
+def _frame_pose(frame: dict, src: str, i: int):
+    """The frame's checked ``transform_matrix`` (4×4 or 3×4, camera to world, OpenGL axes)."""
+    fi = f"frame {i}:"
     if "transform_matrix" not in frame:
         raise VibrInputError(f"frame {i} is missing key 'transform_matrix'", src)
     try:
@@ -230,9 +258,7 @@ def _frame_camera(frame: dict, meta: dict, img_path: Path, src: str, i: int):
         raise VibrInputError(f"frame {i}: transform_matrix must be 4x4, got shape {M.shape}", src)
     if M.shape == (4, 4) and not np.allclose(M[3], [0, 0, 0, 1]):
         raise VibrInputError(f"frame {i}: transform_matrix last row must be 0 0 0 1", src)
-    R_gl, s = as_scaled_rotation(M[:3, :3], src, f"frame {i} transform_matrix rotation")
-    R_c2w = R_gl @ _GL_TO_CV
-    return Camera.from_centre(K, R_c2w.T, M[:3, 3], w, h, source=f"{src} frame {i}"), dist, s
+    return M
 
 
 def _resolve(base: Path, rel: str, what: str, src: str, i: int, allow_outside: bool = False) -> Path:
