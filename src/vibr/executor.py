@@ -360,16 +360,8 @@ def _environ(**values):
 
 def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
     from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
 
-    n = min(int(n), len(tasks))  # a process more than the tasks would only start and wait
-    threads = threads_per_worker(n)
-    cores = available_cores()
-    if n > cores:
-        logger.warning("%s: %d processes on %d cores: they take turns on the cores, and each holds "
-                       "its own copy of the scene in memory (one process per core is the most that pays)",
-                       desc, n, cores)
-    logger.info("%s: %d tasks on %d processes (%d numba threads each)", desc, len(tasks), n, threads)
+    n, threads = _process_plan(n, len(tasks), desc)
     results: list = [None] * len(tasks)
     attempts = [0] * len(tasks)
     pending = list(range(len(tasks)))
@@ -391,22 +383,11 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
                     try:
                         results[i] = f.result()
                         bar.update(1)
-                        continue
                     except VibrInputError:
                         raise
-                    except BrokenProcessPool as exc:
-                        err = exc
-                        why = ("its worker process died; in a script, code that starts workers "
-                               "must be under `if __name__ == '__main__':`")
                     except Exception as exc:  # noqa: BLE001 - any task failure is retried
-                        err = exc
-                        why = f"{type(exc).__name__}: {exc}"
-                    attempts[i] += 1
-                    if attempts[i] > retries:
-                        raise RuntimeError(f"{desc}: task {i} failed {attempts[i]} times ({why})") from err
-                    logger.warning("%s: task %d failed (%s); retrying (attempt %d of %d)",
-                                   desc, i, why, attempts[i] + 1, retries + 1)
-                    pending.append(i)
+                        _count_failure(exc, i, attempts, retries, desc)
+                        pending.append(i)
                 if pending and getattr(pool, "_broken", False):
                     pool.shutdown(wait=True, cancel_futures=True)
                     pool = None
@@ -420,6 +401,37 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
             if pool is not None:
                 pool.shutdown(wait=True, cancel_futures=True)
     return results
+
+
+def _process_plan(n: int, n_tasks: int, desc: str):
+    """``(processes, numba threads each)`` for ``n`` processes asked and ``n_tasks`` tasks; a
+    warning when the processes outnumber the cores."""
+    n = min(int(n), n_tasks)  # a process more than the tasks would only start and wait
+    threads = threads_per_worker(n)
+    cores = available_cores()
+    if n > cores:
+        logger.warning("%s: %d processes on %d cores: they take turns on the cores, and each holds "
+                       "its own copy of the scene in memory (one process per core is the most that pays)",
+                       desc, n, cores)
+    logger.info("%s: %d tasks on %d processes (%d numba threads each)", desc, n_tasks, n, threads)
+    return n, threads
+
+
+def _count_failure(exc: Exception, i: int, attempts: list, retries: int, desc: str) -> None:
+    """Count a failure of task ``i``; raise ``RuntimeError`` (from ``exc``) once it has
+    failed ``retries + 1`` times, else log that it is retried."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    if isinstance(exc, BrokenProcessPool):
+        why = ("its worker process died; in a script, code that starts workers "
+               "must be under `if __name__ == '__main__':`")
+    else:
+        why = f"{type(exc).__name__}: {exc}"
+    attempts[i] += 1
+    if attempts[i] > retries:
+        raise RuntimeError(f"{desc}: task {i} failed {attempts[i]} times ({why})") from exc
+    logger.warning("%s: task %d failed (%s); retrying (attempt %d of %d)",
+                   desc, i, why, attempts[i] + 1, retries + 1)
 
 
 def _stop_pool(pool, grace_s: float = 5.0) -> None:
