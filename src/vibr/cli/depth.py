@@ -104,64 +104,72 @@ def _refuse_mvs_options(args, scene) -> None:
 
 
 def run(args) -> int:
-    from ..errors import VibrInputError
-    from ..io import load_scene, save_scene
     import shutil
 
+    from ..io import load_scene, save_scene
     from ..io.checkpoint import resume_folder
-    from ..io.outputs import check_not_input, check_output, check_replaceable
     from ..stereo import estimate_depth
-
     from ..validate import check_depth_params
 
-    check_depth_params(scale=args.depth_scale, depth_range=args.depth_range,
-                       **{k: v for k, v in (("n_neighbours", args.neighbours), ("step_px", args.step_px),
-                                            ("max_planes", args.max_planes), ("refine_iter", args.refine_iter),
-                                            ("median_radius", args.median_radius),
-                                            ("sweep_scale", args.sweep_scale), ("coarse_iter", args.coarse_iter))
-                          if v is not None})  # before loading the scene
+    opt = _depth_options(args)
+    check_depth_params(scale=args.depth_scale, depth_range=args.depth_range, **opt)  # before loading the scene
     executor = executor_from_args(args)  # a bad scheduler fails before the work
-    src = Path(args.scene)
-    in_place = args.out is None
-    if in_place:
-        tj = src if src.name == "transforms.json" else src / "transforms.json"
-        if not tj.is_file():
-            raise VibrInputError("give -o OUT: only a transforms.json scene is updated in place", src)
-        if args.scale != 1.0:
-            raise VibrInputError("--scale needs -o OUT (an in-place update keeps the scene's size)", src)
-        out = tj.parent
-        check_output(out, "dir", overwrite=True, what="SCENE")
-        try:  # an in-place update replaces only a folder vibr wrote
-            check_replaceable(out)
-        except VibrInputError as exc:
-            raise VibrInputError(f"not updated in place ({exc.problem}); give -o OUT", out) from None
-    else:
-        out = check_output(args.out, "dir", overwrite=args.overwrite, what="-o")
-        check_not_input(out, [args.scene])
-        if out.is_dir():
-            check_replaceable(out)
+    out, in_place = _output_folder(args)
     scene = load_scene(args.scene, scale=args.scale)
     _refuse_mvs_options(args, scene)
-    opt = {k: v for k, v in (("n_neighbours", args.neighbours),
-                             ("step_px", args.step_px), ("max_planes", args.max_planes),
-                             ("refine_iter", args.refine_iter),
-                             ("median_radius", args.median_radius),
-                             ("sweep_scale", args.sweep_scale),
-                             ("coarse_iter", args.coarse_iter)) if v is not None}
     est = estimate_depth(scene, views=args.views, scale=args.depth_scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=args.exclude or (),
                          consistency=not args.no_consistency, fill_segments=args.fill_segments,
                          checkpoint=resume_folder(out), executor=executor, **opt)  # a rerun after a kill resumes
-    info = est.meta["depth_estimation"]
     save_scene(est, out, overwrite=in_place or args.overwrite, in_place=in_place)
-    resumed = sum(bool(v.get("resumed")) for v in info["views"].values())
     shutil.rmtree(resume_folder(out), ignore_errors=True)  # the job is complete
+    print(_summary(out, est.meta["depth_estimation"]))
+    return 0
+
+
+def _depth_options(args) -> dict:
+    """The estimator's options given on the command line (the others keep their defaults)."""
+    return {k: v for k, v in (("n_neighbours", args.neighbours), ("step_px", args.step_px),
+                              ("max_planes", args.max_planes), ("refine_iter", args.refine_iter),
+                              ("median_radius", args.median_radius), ("sweep_scale", args.sweep_scale),
+                              ("coarse_iter", args.coarse_iter)) if v is not None}
+
+
+def _output_folder(args):
+    """``(out, in_place)``: ``-o OUT``, checked, or the scene's own folder when it is a
+    transforms.json scene vibr wrote (updated in place)."""
+    from ..errors import VibrInputError
+    from ..io.outputs import check_not_input, check_output, check_replaceable
+
+    src = Path(args.scene)
+    if args.out is not None:
+        out = check_output(args.out, "dir", overwrite=args.overwrite, what="-o")
+        check_not_input(out, [args.scene])
+        if out.is_dir():
+            check_replaceable(out)
+        return out, False
+    tj = src if src.name == "transforms.json" else src / "transforms.json"
+    if not tj.is_file():
+        raise VibrInputError("give -o OUT: only a transforms.json scene is updated in place", src)
+    if args.scale != 1.0:
+        raise VibrInputError("--scale needs -o OUT (an in-place update keeps the scene's size)", src)
+    out = tj.parent
+    check_output(out, "dir", overwrite=True, what="SCENE")
+    try:  # an in-place update replaces only a folder vibr wrote
+        check_replaceable(out)
+    except VibrInputError as exc:
+        raise VibrInputError(f"not updated in place ({exc.problem}); give -o OUT", out) from None
+    return out, True
+
+
+def _summary(out: Path, info: dict) -> str:
+    """The line printed when the depth is written: views, method, time, pixels kept."""
+    resumed = sum(bool(v.get("resumed")) for v in info["views"].values())
     tv = [v for v in info["views"].values() if v.get("role") == "target"]
     kept = [v["kept"] for v in tv]
     filled = sum(v.get("filled", 0.0) for v in tv)
-    print(f"wrote {out}/transforms.json: depth for {len(kept)} view(s) by {info['method']} "
-          f"in {info['time_s']:.1f} s, {100 * sum(kept) / max(1, len(kept)):.1f} % of pixels kept"
-          + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else "")
-          + (f" ({resumed} view(s) kept from an interrupted run)" if resumed else ""))
-    return 0
+    return (f"wrote {out}/transforms.json: depth for {len(kept)} view(s) by {info['method']} "
+            f"in {info['time_s']:.1f} s, {100 * sum(kept) / max(1, len(kept)):.1f} % of pixels kept"
+            + (f", {100 * filled / max(1, len(tv)):.1f} % filled from segment planes" if filled else "")
+            + (f" ({resumed} view(s) kept from an interrupted run)" if resumed else ""))
