@@ -85,8 +85,8 @@ def _add_path_options(p) -> None:
 
 def run(args) -> int:
     from ..errors import VibrInputError
-    from ..io import load_scene, read_camera_json, write_image
-    from ..pipeline import missing_view_camera, prepare
+    from ..io import load_scene, write_image
+    from ..pipeline import prepare
     from ..io.images import check_image_ext
     from ..io.outputs import check_not_scene_file, check_output
     from ..render import render
@@ -109,18 +109,7 @@ def run(args) -> int:
     scene = load_scene(args.scene, scale=args.scale)
     check_not_scene_file(args.output, scene, "-o")  # before the work, as every output check
     check_not_scene_file(args.uncertainty, scene, "--uncertainty")
-    tgt = args.target
-    if tgt.lower().endswith(".json") or (os.path.isfile(tgt) and not tgt.isdigit()):
-        target = read_camera_json(tgt)
-        if args.scale != 1.0:
-            target = target.scaled(args.scale)
-    elif missing_view_camera(scene, tgt) is not None:  # a light field's absent position: a novel view
-        target = tgt
-    else:
-        target = scene[tgt].name
-        if args.sources and target in [scene[s].name for s in args.sources]:
-            raise VibrInputError(f"target view {target} is also listed as a source", args.scene)
-    sources, target = prepare(scene, target, sources=args.sources, depth=args.depth,
+    sources, target = prepare(scene, _target(args, scene), sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views, fallback=args.fallback,
                               cache_dir=cache_dir_from_args(args))
     res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
@@ -131,17 +120,41 @@ def run(args) -> int:
 
         write_sigma(args.uncertainty, res.uncertainty)
         print(f"wrote {args.uncertainty}")
+    _report(args.method, res)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def _target(args, scene):
+    """The render's target: a camera file's camera (scaled with --scale), a light field's
+    absent grid position (by name), or a view of the scene (by name or index)."""
+    from ..errors import VibrInputError
+    from ..io import read_camera_json
+    from ..pipeline import missing_view_camera
+
+    tgt = args.target
+    if tgt.lower().endswith(".json") or (os.path.isfile(tgt) and not tgt.isdigit()):
+        target = read_camera_json(tgt)
+        return target.scaled(args.scale) if args.scale != 1.0 else target
+    if missing_view_camera(scene, tgt) is not None:  # a light field's absent position: a novel view
+        return tgt
+    target = scene[tgt].name
+    if args.sources and target in [scene[s].name for s in args.sources]:
+        raise VibrInputError(f"target view {target} is also listed as a source", args.scene)
+    return target
+
+
+def _report(method: str, res) -> None:
+    """The render's status line (the log) and its metrics when the target has a photograph."""
     t = res.times
     k, g = res.params.get("supersample", 1), res.params.get("coarsen", 1.0)
     grid = f" on a grid {k}x finer" if k > 1 else f" on a grid {g:.3g}x coarser, enlarged" if g > 1 else ""
-    logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {args.method} from "
+    logger.info(f"rendered {res.image.shape[1]}x{res.image.shape[0]} with {method} from "
                 f"{res.n_samples} samples{grid}, coverage {100 * res.coverage.mean():.1f} %, "
                 f"{t.get('total', 0):.2f} s (geometry {t.get('geometry', 0):.2f}, solve {t.get('solve', 0):.2f})")
     if res.metrics:
         print(f"PSNR {res.metrics['psnr']:.2f} dB  DSSIM {res.metrics['dssim']:.1f}  "
               f"(SSIM {res.metrics['ssim']:.4f}; {METRIC_RULE})".replace("nan", "n/a"))
-    print(f"wrote {args.output}")
-    return 0
 
 
 #: the fly-through's options (attribute, flag), refused with --target rather than ignored
