@@ -131,37 +131,14 @@ def _refuse_unused_estimate_options(args, scene, estimate_kw: dict) -> None:
 
 
 def run(args) -> int:
-    from ..evaluate import format_table, run_evaluation, settings_grid, write_report
-    from ..figures import write_evaluation_figures
+    from ..evaluate import format_table, run_evaluation, write_report
     from ..io import load_scene
+    from ..io.outputs import check_not_scene_file
 
-    from ..errors import VibrInputError
-
-    from ..io.outputs import check_not_scene_file, check_output
-
-    check_output(args.json, "file", what="--json")
-    if args.figures is not None:
-        check_output(args.figures, "dir", what="--figures")
-    check_depth_args(args)
-    _refuse_unused_grid(args)
-    settings = settings_grid(args.method, list(GAMMAS) if args.gamma is None else args.gamma, args.alpha, args.lam)
-    if args.intensity_scale is not None and not args.intensity_scale > 0:
-        raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
-    executor = executor_from_args(args)
-    from ..render.methods import method_params
-    from ..validate import check_depth_params
-
-    for st in settings:  # every setting checked before the work
-        method_params(st.method, **dict(st.params, scale=args.intensity_scale, psf=args.psf))
-    check_depth_params(**{k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
-                                            ("depth_range", args.depth_range)) if v is not None})
-    if args.border < 0:
-        raise VibrInputError(f"--border must be >= 0, got {args.border}")
+    settings, estimate_kw, executor = _checked_request(args)
     scene = load_scene(args.scene, scale=args.scale)
     check_not_scene_file(args.json, scene, "--json")
     scene.meta.setdefault("scale", args.scale)
-    estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
-                                     ("depth_range", args.depth_range)) if v is not None}
     _refuse_unused_estimate_options(args, scene, estimate_kw)
     if args.target.strip().lower() == "all" or "," in args.target:
         return _run_all(args, scene, settings, executor, estimate_kw)
@@ -175,16 +152,52 @@ def run(args) -> int:
                         render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
     report = ev.report
     if args.figures:
-        report["figures"] = write_evaluation_figures(ev, args.figures)
-        if args.uncertainty:
-            from ..uncertainty_figures import write_sparsification_figure
-
-            report["figures"]["sparsification"] = write_sparsification_figure(args.figures, report["results"],
-                                                                              prefix=ev.prefix)
+        report["figures"] = _write_figures(args, ev)
     write_report(report, args.json)
     print(format_table(report))
     print(f"wrote {args.json}")
     return 0
+
+
+def _checked_request(args):
+    """``(settings, estimate_kw, executor)``, every option checked before the scene is
+    loaded: the outputs, the depth options, each setting's parameters, the scheduler."""
+    from ..errors import VibrInputError
+    from ..evaluate import settings_grid
+    from ..io.outputs import check_output
+    from ..render.methods import method_params
+    from ..validate import check_depth_params
+
+    check_output(args.json, "file", what="--json")
+    if args.figures is not None:
+        check_output(args.figures, "dir", what="--figures")
+    check_depth_args(args)
+    _refuse_unused_grid(args)
+    settings = settings_grid(args.method, list(GAMMAS) if args.gamma is None else args.gamma, args.alpha, args.lam)
+    if args.intensity_scale is not None and not args.intensity_scale > 0:
+        raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
+    executor = executor_from_args(args)
+    for st in settings:
+        method_params(st.method, **dict(st.params, scale=args.intensity_scale, psf=args.psf))
+    estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
+                                     ("depth_range", args.depth_range)) if v is not None}
+    check_depth_params(**estimate_kw)
+    if args.border < 0:
+        raise VibrInputError(f"--border must be >= 0, got {args.border}")
+    return settings, estimate_kw, executor
+
+
+def _write_figures(args, ev) -> dict:
+    """The evaluation's figures in --figures (and the sparsification plot with --uncertainty)."""
+    from ..figures import write_evaluation_figures
+
+    figures = write_evaluation_figures(ev, args.figures)
+    if args.uncertainty:
+        from ..uncertainty_figures import write_sparsification_figure
+
+        figures["sparsification"] = write_sparsification_figure(args.figures, ev.report["results"],
+                                                                prefix=ev.prefix)
+    return figures
 
 
 def _run_all(args, scene, settings, executor, estimate_kw) -> int:
