@@ -108,10 +108,28 @@ def colmap_camera(cam, source):
 
 def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     """Load a COLMAP sparse model (+ images, + dense geometric depth maps when present)."""
-    pycolmap = import_pycolmap()
-
     from . import select_entries
 
+    rec, model, root = _read_reconstruction(path)
+    img_dirs = [d for d in (root / "images", model / "images", model.parent / "images") if d.is_dir()]
+    if not img_dirs:
+        raise VibrInputError("no images folder found beside the COLMAP model (expected root/images)", root)
+    entries = _image_entries(rec, model, img_dirs[0], root / "stereo" / "depth_maps")
+    entries = select_entries(entries, views, root)
+    n_depth = _attach_depth(entries)
+    undistorted = undistort_summary(entries)
+    vs = build_views(entries, scale, desc="reading images")
+    pts = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
+    return Scene(vs, name=root.name, root=root, points=pts if len(pts) else None,
+                 meta={"format": "COLMAP", "scale": scale, "model": str(model),
+                       "depth_source": "stereo/depth_maps/*.geometric.bin" if n_depth else None,
+                       **({"undistorted": undistorted} if undistorted else {})})
+
+
+def _read_reconstruction(path):
+    """``(reconstruction, model folder, scene root)``: the model found under ``path``,
+    checked before pycolmap reads it."""
+    pycolmap = import_pycolmap()
     found = find_colmap_model(path)
     if found is None:
         raise VibrInputError("no COLMAP model (cameras + images .bin/.txt) found", path)
@@ -124,31 +142,33 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     except Exception:  # what the check above does not cover; pycolmap's words are C++ internals
         raise VibrInputError("inconsistent COLMAP model: pycolmap cannot read it (records that "
                              "contradict each other)", model) from None
-    img_dirs = [d for d in (root / "images", model / "images", model.parent / "images") if d.is_dir()]
-    if not img_dirs:
-        raise VibrInputError("no images folder found beside the COLMAP model (expected root/images)", root)
-    img_dir = img_dirs[0]
-    depth_dir = root / "stereo" / "depth_maps"
+    return rec, model, root
+
+
+def _image_entries(rec, model: Path, img_dir: Path, depth_dir: Path) -> list:
+    """One loader entry per registered image, by name (as a folder lists them)."""
     entries = []
-    for iid in sorted(rec.images, key=lambda i: (rec.images[i].name, i)):  # by name, as a folder lists them
+    for iid in sorted(rec.images, key=lambda i: (rec.images[i].name, i)):
         im = rec.images[iid]
         if not im.has_pose:
             continue
         src = f"{model} image {im.name}"
-        cam = rec.cameras[im.camera_id]
-        K, w, h, dist = colmap_camera(cam, src)
+        K, w, h, dist = colmap_camera(rec.cameras[im.camera_id], src)
         T = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world
         R = as_rotation(T.rotation.matrix(), src)
         t = np.asarray(T.translation, dtype=np.float64)
-        camera = Camera(K, R, t, w, h, source=src)
-        e = {"name": Path(im.name).with_suffix("").as_posix(), "path": img_dir / im.name, "camera": camera,
-             "depth_path": depth_dir / f"{im.name}.geometric.bin"}
+        e = {"name": Path(im.name).with_suffix("").as_posix(), "path": img_dir / im.name,
+             "camera": Camera(K, R, t, w, h, source=src), "depth_path": depth_dir / f"{im.name}.geometric.bin"}
         if dist is not None:
             e["distortion"] = dist
         entries.append(e)
     if not entries:
         raise VibrInputError("the COLMAP model has no registered images", model)
-    entries = select_entries(entries, views, root)
+    return entries
+
+
+def _attach_depth(entries: list) -> int:
+    """Read each entry's dense depth map where COLMAP wrote one; the number read."""
     n_depth = 0
     for e in entries:
         dp = e.pop("depth_path")
@@ -158,10 +178,4 @@ def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
             shape = e["camera"].shape if d is None else (d.height, d.width)
             e["depth"] = fit_depth(read_depth(dp), shape, dp, f"image {e['name']}")
             n_depth += 1
-    undistorted = undistort_summary(entries)
-    vs = build_views(entries, scale, desc="reading images")
-    pts = np.array([p.xyz for p in rec.points3D.values()], dtype=np.float64).reshape(-1, 3)
-    return Scene(vs, name=root.name, root=root, points=pts if len(pts) else None,
-                 meta={"format": "COLMAP", "scale": scale, "model": str(model),
-                       "depth_source": "stereo/depth_maps/*.geometric.bin" if n_depth else None,
-                       **({"undistorted": undistorted} if undistorted else {})})
+    return n_depth
