@@ -209,3 +209,27 @@ def test_round_trip_fountain(fountain_dir, tmp_path):
     assert s.views[0].camera.shape == (256, 384)
     save_scene(s, tmp_path / "f")
     assert_same_scene(s, load_scene(tmp_path / "f"))
+
+
+def test_read_ply_points_formats_and_errors(tmp_path):
+    """Binary (both byte orders, extra properties) and ascii PLY vertices read back exactly;
+    a binary file cut short and ascii rows that are not numbers are one-line errors that say so."""
+    from vibr.io.transforms import read_ply_points, write_ply_points
+
+    pts = np.random.default_rng(3).normal(size=(50, 3))
+    write_ply_points(tmp_path / "le.ply", pts)
+    np.testing.assert_array_equal(read_ply_points(tmp_path / "le.ply"), pts)
+    head = "ply\nformat {}\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n" \
+           "property uchar red\nend_header\n"
+    rec = np.zeros(2, dtype=[("x", ">f4"), ("y", ">f4"), ("z", ">f4"), ("red", "u1")])
+    rec["x"], rec["y"], rec["z"], rec["red"] = [1, 4], [2, 5], [3, 6], [7, 8]
+    (tmp_path / "be.ply").write_bytes(head.format("binary_big_endian 1.0", 2).encode() + rec.tobytes())
+    np.testing.assert_array_equal(read_ply_points(tmp_path / "be.ply"), [[1, 2, 3], [4, 5, 6]])
+    (tmp_path / "a.ply").write_text(head.format("ascii 1.0", 2) + "1 2 3 9\n4 5 6 9\n")
+    np.testing.assert_array_equal(read_ply_points(tmp_path / "a.ply"), [[1, 2, 3], [4, 5, 6]])
+    (tmp_path / "cut.ply").write_bytes(head.format("binary_little_endian 1.0", 3).encode() + bytes(20))
+    with pytest.raises(VibrInputError, match="cut short: 3 vertices need 39 bytes, 20 follow"):
+        read_ply_points(tmp_path / "cut.ply")
+    (tmp_path / "bad.ply").write_text(head.format("ascii 1.0", 2) + "1 2 3 9\n4 x 6 9\n")
+    with pytest.raises(VibrInputError, match="malformed PLY vertex data"):
+        read_ply_points(tmp_path / "bad.ply")

@@ -98,8 +98,16 @@ def read_ply_points(path) -> np.ndarray:
     nl = data.find(b"\n", end) if end >= 0 else -1
     if not data.startswith(b"ply") or end < 0 or nl < 0:
         raise VibrInputError("not a PLY file (no 'ply' ... 'end_header' header)", p)
-    header = data[:end].decode("ascii", "replace").splitlines()
-    body = data[nl + 1:]
+    fmt, n, props = _ply_header(data[:end].decode("ascii", "replace").splitlines(), p)
+    cols = _ply_columns(data[nl + 1:], fmt, n, props, p)
+    pts = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
+    if not np.all(np.isfinite(pts)):
+        raise VibrInputError(f"PLY file has {int((~np.isfinite(pts).all(axis=1)).sum())} non-finite vertices", p)
+    return pts
+
+
+def _ply_header(header: list, p: str):
+    """``(format, vertex count, [(property, numpy type)])`` of a PLY header's lines, checked."""
     fmt, n, props, first, cur = None, None, [], None, None
     for ln in header:
         tok = ln.split()
@@ -127,28 +135,29 @@ def read_ply_points(path) -> np.ndarray:
         raise VibrInputError("PLY vertex properties are named twice", p)
     if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
         raise VibrInputError(f"unknown PLY format {fmt!r}", p)
+    return fmt, n, props
+
+
+def _ply_columns(body: bytes, fmt: str, n: int, props: list, p: str) -> dict:
+    """The first ``n`` vertices' properties by name, from the data after the header."""
+    names = [q[0] for q in props]
+    if fmt != "ascii":
+        order = "<" if fmt == "binary_little_endian" else ">"
+        dt = np.dtype([(nm, order + t) for nm, t in props])
+        if n * dt.itemsize > len(body):  # outside the try below: VibrInputError is a ValueError
+            raise VibrInputError(f"PLY file cut short: {n} vertices need {n * dt.itemsize} bytes, "
+                                 f"{len(body)} follow the header", p)
+        rec = np.frombuffer(body, dtype=dt, count=n)
+        return {nm: rec[nm] for nm in names}
     try:
-        if fmt == "ascii":
-            rows = body.decode("ascii").split("\n")
-            if len(rows) < n:
-                raise ValueError
-            arr = np.array([[float(v) for v in r.split()[: len(props)]] for r in rows[:n]], dtype=np.float64)
-            arr = arr.reshape(n, len(props))
-            cols = {nm: arr[:, i] for i, nm in enumerate(names)}
-        else:
-            order = "<" if fmt == "binary_little_endian" else ">"
-            dt = np.dtype([(nm, order + t) for nm, t in props])
-            if n * dt.itemsize > len(body):
-                raise VibrInputError(f"PLY file cut short: {n} vertices need {n * dt.itemsize} bytes, "
-                                     f"{len(body)} follow the header", p)
-            rec = np.frombuffer(body, dtype=dt, count=n)
-            cols = {nm: rec[nm] for nm in names}
+        rows = body.decode("ascii").split("\n")
+        if len(rows) < n:
+            raise ValueError
+        arr = np.array([[float(v) for v in r.split()[: len(props)]] for r in rows[:n]], dtype=np.float64)
+        arr = arr.reshape(n, len(props))
     except (ValueError, UnicodeDecodeError):
         raise VibrInputError("malformed PLY vertex data", p) from None
-    pts = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
-    if not np.all(np.isfinite(pts)):
-        raise VibrInputError(f"PLY file has {int((~np.isfinite(pts).all(axis=1)).sum())} non-finite vertices", p)
-    return pts
+    return {nm: arr[:, i] for i, nm in enumerate(names)}
 
 
 def write_ply_points(path, points: np.ndarray) -> None:
