@@ -142,13 +142,13 @@ def _output_folder(args):
     from ..errors import VibrInputError
     from ..io.outputs import check_not_input, check_output, check_replaceable
 
-    src = Path(args.scene)
     if args.out is not None:
         out = check_output(args.out, "dir", overwrite=args.overwrite, what="-o")
         check_not_input(out, [args.scene])
         if out.is_dir():
             check_replaceable(out)
         return out, False
+    src = Path(args.scene)
     tj = src if src.name == "transforms.json" else src / "transforms.json"
     if not tj.is_file():
         raise VibrInputError("give -o OUT: only a transforms.json scene is updated in place", src)
