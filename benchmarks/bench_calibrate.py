@@ -1,10 +1,10 @@
 """Calibration benchmark on Strecha fountain-P11 (issue 8).
 
-1. ``vibr.calibrate.calibrate`` on the scene's ``images/`` only (11 photos, 3072×2048),
+1. ``vibr.calib.colmap.calibrate`` on the scene's ``images/`` only (11 photos, 3072×2048),
    resized by ``--scale`` (default 0.5 → 1536×1024): registration count, per-stage times,
    and per-view rotation / centre errors after a similarity alignment to the ground-truth
    cameras (``gt_dense_cameras``, loaded by ``vibr.io.load_scene``), for both alignments
-   of :func:`vibr.calibrate.pose_errors` (fitted to the poses, and to the centres only).
+   of :func:`vibr.calib.colmap.pose_errors` (fitted to the poses, and to the centres only).
 2. ``--e2e``: the end-to-end path calibrate → ``vibr.stereo.estimate_depth`` →
    ``vibr.render.render`` of view ``--target`` (default 0005) from the others, next to the
    same with the ground-truth cameras; both at ``--e2e-scale`` of the 1536×1024 scenes.
@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     ap.add_argument("--e2e-only-calibrated", action="store_true", help="skip the ground-truth e2e path")
     args = ap.parse_args(argv)
 
-    from vibr.calibrate import calibrate, pose_errors
+    from vibr.calib.colmap import calibrate, pose_errors
     from vibr.io import load_scene
 
     fountain = Path(args.data) / "strecha_fountain-P11"

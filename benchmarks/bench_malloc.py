@@ -1,4 +1,4 @@
-"""glibc's default allocator settings against vibr's (:mod:`vibr._malloc`), alternating.
+"""glibc's default allocator settings against vibr's (:mod:`vibr._runtime.malloc`), alternating.
 
 Each round runs, in fresh processes and alternating the two settings (``VIBR_MALLOC=default``
 for glibc's own):

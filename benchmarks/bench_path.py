@@ -36,7 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 _DRIVER = r"""
 import sys, time, json
 t0 = time.perf_counter()
-import vibr.flythrough as F
+import vibr.paths.flythrough as F
 first = []
 _orig = F._run_frames  # wrapped, not render_frame: that one is pickled to worker processes
 def _rf(*a, **k):
@@ -149,7 +149,7 @@ def main():
 
     sys.path.insert(0, str(REPO / "src"))
     from vibr.io.video import read_video_info
-    from vibr.path import read_camera_path, write_camera_path
+    from vibr.paths.camera_path import read_camera_path, write_camera_path
 
     n, w, h, fps = read_video_info(v1)
     rows.append(("MP4 decoded back", f"{n} frames, {w}x{h}, {fps:g} fps"))
@@ -170,8 +170,8 @@ def main():
                  f"{med:.2f} / {ch.max():.2f} (max/median {ch.max() / med:.2f})"))
 
     # where the selected set changes (weights recomputed from the cached depth)
-    from vibr.depthcache import scene_with_depth
-    from vibr.flythrough import _source_points, view_weights
+    from vibr.stereo.cache import scene_with_depth
+    from vibr.paths.flythrough import _source_points, view_weights
     from vibr.io import load_scene
 
     sc = scene_with_depth(load_scene(scene, scale=a.scale), cache_dir=cache)
@@ -186,7 +186,7 @@ def main():
         rows.append(("change at the %d set changes: max (ratio to median)" % len(at),
                      f"{at_ch.max():.2f} ({at_ch.max() / med:.2f})"))
     if a.hard:
-        from vibr.flythrough import render_path
+        from vibr.paths.flythrough import render_path
 
         t0 = time.perf_counter()
         render_path(sc, p, out / "hard_frames", n_views=a.views, blend=0.0, overwrite=True,
@@ -213,10 +213,10 @@ def ab_prepared(scene_dir, cache, scale=0.25, views=8, n=6, frames=60):
     (alternating frames A/B, medians): `python3 -c 'import bench_path as b; b.ab_prepared(...)'`."""
     import tempfile
 
-    from vibr.depthcache import scene_with_depth
-    from vibr.flythrough import FrameContext, prepare_sources, render_frame
+    from vibr.stereo.cache import scene_with_depth
+    from vibr.paths.flythrough import FrameContext, prepare_sources, render_frame
     from vibr.io import load_scene
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
 
     sc = scene_with_depth(load_scene(scene_dir, scale=scale), cache_dir=cache)
     p = interpolate(sc, n_frames=frames)
@@ -239,13 +239,14 @@ def ab_prepared(scene_dir, cache, scale=0.25, views=8, n=6, frames=60):
 
 
 def breakdown(scene_dir, cache, scale=0.25, views=8, frames=60, step=6):
-    """Median stage times of :func:`vibr.flythrough.render_frame` over frames 1, 1+step, ..."""
+    """Median stage times of :func:`vibr.paths.flythrough.render_frame` over frames 1, 1+step, ..."""
     import tempfile
 
     sys.path.insert(0, str(REPO / "src"))
-    from vibr.depthcache import load_scene_cached, scene_with_depth
-    from vibr.flythrough import FrameContext, prepare_sources, render_frame
-    from vibr.path import interpolate
+    from vibr.pipeline import load_scene_cached
+    from vibr.stereo.cache import scene_with_depth
+    from vibr.paths.flythrough import FrameContext, prepare_sources, render_frame
+    from vibr.paths.camera_path import interpolate
 
     t0 = time.perf_counter()
     sc = scene_with_depth(load_scene_cached(scene_dir, scale=scale, cache_dir=cache), cache_dir=cache)

@@ -28,7 +28,7 @@ iterations that set the step size are counted as operator applications.
 
 Then a scaling table (``--scaling``): target sizes 256², 512², 768², 1536² from 8 sources,
 and 2, 4, 8, 16 source views (the k nearest of a 5×5 grid, chosen by
-:func:`vibr.selection.select_views`) at 512²; and a 100-view scene (10×10 grid) rendered
+:func:`vibr.geometry.selection.select_views`) at 512²; and a 100-view scene (10×10 grid) rendered
 from its k = 8 best views for the centre target against an 8-view scene (3×3 grid).
 
     python benchmarks/bench_render.py [--size 768] [--repeat 5] [--scaling] [--json out.json]
@@ -57,7 +57,7 @@ def _triad(a, b, c, s):
 def bandwidth(n_bytes: int = 128 * 2 ** 20, repeat: int = 7) -> float:
     """STREAM triad bandwidth in bytes/s (counts 2 reads + 1 write per element)."""
     n = n_bytes // 4
-    # one block above glibc's mmap threshold (vibr._malloc): mapped and unmapped again, so
+    # one block above glibc's mmap threshold (vibr._runtime.malloc): mapped and unmapped again, so
     # that the measurement leaves nothing in the heap the renders then use (peak memory)
     buf = np.ones(3 * n, np.float32)
     a, b, c = buf[:n], buf[n:2 * n], buf[2 * n:]
@@ -306,7 +306,7 @@ def main(argv=None):
     a = ap.parse_args(argv)
     import numba
 
-    from vibr._malloc import tune_malloc
+    from vibr._runtime.malloc import tune_malloc
 
     tune_malloc()  # as the vibr command does (VIBR_MALLOC=default: glibc's own settings)
 
@@ -379,7 +379,7 @@ def main(argv=None):
             rows.append({"size": size, "views": 8, **m})
             del sc, src, tg
         sc = grid_scene(5, 5, 512)
-        from vibr.selection import select_views
+        from vibr.geometry.selection import select_views
 
         src_all, tg = sc.split(centre_index(sc))
         for k in (2, 4, 8, 16):

@@ -13,7 +13,7 @@ to the first serial run's (exit status 1 otherwise).
     python3 benchmarks/bench_scaleout.py                      # 60 frames, 3 engines, 2 rounds
     python3 benchmarks/bench_scaleout.py --frames 4 --scale 0.125 --rounds 1   # a quick check
 
-Leave-one-out (--loo): `vibr.evaluate_all.evaluate_all` over --targets with each engine,
+Leave-one-out (--loo): `vibr.eval.leave_one_out.evaluate_all` over --targets with each engine,
 in this process; per-view reports must agree bit for bit.
 
     python3 benchmarks/bench_scaleout.py --loo                # synthetic 9-view grid
@@ -127,8 +127,8 @@ def bench_path(a) -> int:
 def bench_loo(a) -> int:
     """The leave-one-out comparison, in this process; returns the exit status."""
     sys.path.insert(0, str(REPO / "src"))
-    from vibr.evaluate import settings_grid
-    from vibr.evaluate_all import evaluate_all, resolve_targets, results_only
+    from vibr.eval.protocol import settings_grid
+    from vibr.eval.leave_one_out import evaluate_all, resolve_targets, results_only
     from vibr.io import load_scene, save_scene
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_scaleout_"))

@@ -361,7 +361,7 @@ def _startup_once(scene_dir: str, scale: float, cache_dir: str) -> None:
     t_proc = time.perf_counter()
     from playwright.sync_api import sync_playwright
 
-    from vibr.depthcache import load_scene_cached
+    from vibr.pipeline import load_scene_cached
     from vibr.viewer import Viewer, ViewerOptions, ViewSettings, scene_with_depth
     from vibr.viewer.browser import free_port, launch_chromium
 
@@ -695,7 +695,7 @@ def _arena_child() -> None:
     import resource
     import threading
 
-    from vibr._malloc import tune_malloc
+    from vibr._runtime.malloc import tune_malloc
     from vibr.synthetic import make_scene
     from vibr.viewer import ViewSettings
     from vibr.viewer.renderer import ViewRenderer
@@ -724,7 +724,7 @@ def _arena_child() -> None:
 
 def ab_arena(rounds: int = 3) -> None:
     """The viewer's renders on a thread: vibr's one malloc arena against glibc's per-thread
-    arenas (``MALLOC_ARENA_MAX=8``, which vibr._malloc keeps), alternating fresh processes."""
+    arenas (``MALLOC_ARENA_MAX=8``, which vibr._runtime.malloc keeps), alternating fresh processes."""
     rows = {"one arena (vibr)": [], "MALLOC_ARENA_MAX=8": []}
     print("| allocator | round | render s, median of 6 (min–max) | page faults / render | system CPU s / render |")
     print("|---|---|---|---|---|")
@@ -783,15 +783,15 @@ def main(argv=None) -> int:
     ap.add_argument("--_arena-child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--numba-threads", choices=("viewer", "default"), default="viewer",
                     help="'viewer' (default): two numba threads per core waiting passively, as `vibr view` "
-                         "sets them (vibr._threads); 'default': numba's one per core, libgomp's spin wait")
+                         "sets them (vibr._runtime.threads); 'default': numba's one per core, libgomp's spin wait")
     a = ap.parse_args(argv)
     global MAX_POINTS
     MAX_POINTS = a.max_points
     if a.numba_threads == "viewer":  # before vibr imports numba, as `vibr view` does
-        from vibr._threads import oversubscribe_render_threads
+        from vibr._runtime.threads import oversubscribe_render_threads
 
         oversubscribe_render_threads()
-    from vibr._malloc import tune_malloc
+    from vibr._runtime.malloc import tune_malloc
 
     tune_malloc()  # as `vibr view` does (VIBR_MALLOC=default: glibc's own settings)
     if a._remote_client:

@@ -42,7 +42,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--work", help="folder for the photos (default: a temporary one)")
     a = ap.parse_args(argv)
-    import vibr.calibrate as C
+    import vibr.calib.colmap as C
 
     folder = Path(a.work or tempfile.mkdtemp(prefix="vibr-zoom-"))
     folder.mkdir(parents=True, exist_ok=True)

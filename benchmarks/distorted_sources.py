@@ -111,7 +111,7 @@ def fountain(data) -> None:
 
     from scipy.ndimage import map_coordinates
 
-    from vibr.evaluate import Setting, evaluate
+    from vibr.eval.protocol import Setting, evaluate
     from vibr.io import load_scene
     from vibr.io.images import write_image
     from vibr.io.undistort import from_nerfstudio
@@ -176,7 +176,7 @@ def main(argv=None):
         return cost(args.photo)
     if args.fountain:
         return fountain(args.data)
-    from vibr.evaluate import Setting, evaluate
+    from vibr.eval.protocol import Setting, evaluate
     from vibr.io import load_scene
     from vibr.scene import Scene
     from vibr.synthetic import default_world, make_scene

@@ -91,9 +91,9 @@ def cases(size: int, seeds: int):
     """(family, name, sources without the fallback, target view)."""
     from bench_depth import data_dir
 
-    from vibr.depthcache import scene_with_depth
+    from vibr.stereo.cache import scene_with_depth
     from vibr.io import load_scene
-    from vibr.selection import select_views
+    from vibr.geometry.selection import select_views
     from vibr.synthetic import make_scene
 
     def est(src):

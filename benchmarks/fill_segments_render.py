@@ -3,7 +3,7 @@ segment completion (``estimate_depth(fill_segments=True)``, docs/DEPTH.md step 9
 the dense depth help the render?
 
 PSNR dB / DSSIM over the pixels both geometries' renders covered, 2-pixel border, as
-``vibr eval --depth estimated`` measures (``vibr.evaluate.run_evaluation``).
+``vibr eval --depth estimated`` measures (``vibr.eval.protocol.run_evaluation``).
 
     python benchmarks/fill_segments_render.py [--scale 0.25] [--target 0005]
 """
@@ -27,7 +27,7 @@ def main(argv=None):
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
     a = ap.parse_args(argv)
     from paper_tables import data_dir
-    from vibr.evaluate import Setting, run_evaluation
+    from vibr.eval.protocol import Setting, run_evaluation
     from vibr.io import load_scene
     from vibr.metrics import dssim, psnr
 

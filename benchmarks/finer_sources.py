@@ -24,7 +24,7 @@ render of that column (numba warm).
 
 ``--coarser``: the opposite, sources ``f`` times coarser than the target (a camera closer to
 the scene than the photographs, a video larger than them): the sources resized by ``1/f``
-(``vibr.io.images.scaled_scene``; temple and fountain loaded at ``1/f`` of the target's scale
+(``vibr.geometry.resample.scaled_scene``; temple and fountain loaded at ``1/f`` of the target's scale
 and their depth estimated there), the target at its own size against its own photograph,
 PSNR over all pixels (on the target's own grid most pixels receive no sample when ``f = 4``:
 its coverage is no common ground). Per method: *own grid* (``compute_samples`` +
@@ -91,7 +91,7 @@ def coarser_case(key, f):
     """``(name, sources, target)``: the sources ``f`` times coarser than the target."""
     from paper_tables import data_dir
     from vibr.io import load_scene
-    from vibr.io.images import scaled_scene
+    from vibr.geometry.resample import scaled_scene
     from vibr.pipeline import prepare
 
     if key in ("cotton", "synthetic"):

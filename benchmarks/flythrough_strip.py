@@ -3,7 +3,7 @@
     python3 benchmarks/flythrough_strip.py [-o docs/flythrough_strip.png] [--size 160] [--frames 6]
 
 Builds the scene of `vibr demo` (3x3 grid, exact depth), makes the 2 s orbit `vibr demo`
-renders (vibr.path.orbit), renders every 8th frame with vibr.flythrough.render_path and
+renders (vibr.paths.camera_path.orbit), renders every 8th frame with vibr.paths.flythrough.render_path and
 tiles them left to right. No dataset photograph is involved.
 """
 
@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from vibr.flythrough import render_path
+from vibr.paths.flythrough import render_path
 from vibr.io import read_image, write_image
-from vibr.path import CameraPath, orbit
+from vibr.paths.camera_path import CameraPath, orbit
 from vibr.synthetic import make_scene
 
 

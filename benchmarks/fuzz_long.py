@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     mem_budget = int(args.mem_budget_gb * (1 << 30))
     print(f"fuzz_long: {args.cases} cases per loader, budget {args.time_budget:g} s and "
           f"{args.mem_budget_gb:g} GB per case; camera_path.json loader "
-          f"{'included' if has_path else 'MISSING (vibr.path.read_camera_path not found)'}")
+          f"{'included' if has_path else 'MISSING (vibr.paths.camera_path.read_camera_path not found)'}")
     header = (f"{'loader':<13} {'cases':>6} {'loaded':>7} {'refused':>8} {'unexpected':>10} "
               f"{'>time':>6} {'>mem':>5} {'slowest s':>10} {'max mem MB':>11} {'wall s':>7}")
     print(header)

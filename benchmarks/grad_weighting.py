@@ -41,7 +41,7 @@ EXTRA = "temple 0005 all 15"
 
 
 def _temple5(cache):
-    from vibr.depthcache import scene_with_depth
+    from vibr.stereo.cache import scene_with_depth
     from vibr.geometry import apply_fallback
 
     rest, tv = cache.get("middlebury_templeSparseRing", 1.0).split("templeSR0005")

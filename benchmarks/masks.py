@@ -25,7 +25,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", default="192x144")
     args = ap.parse_args(argv)
-    from vibr.evaluate import Setting, evaluate
+    from vibr.eval.protocol import Setting, evaluate
     from vibr.synthetic import make_scene
 
     w, h = (int(x) for x in args.size.split("x"))

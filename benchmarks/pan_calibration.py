@@ -1,7 +1,7 @@
 """Videos turned on the spot, and videos that are not, through ``vibr calibrate``.
 
 Each case films the synthetic world (`vibr.synthetic`, ray-cast) as 60 frames of 320×240
-(``wide``: 180, ``full``: 72), H.264 at crf 18, and calibrates it with ``vibr.calibrate.calibrate(VIDEO, OUT,
+(``wide``: 180, ``full``: 72), H.264 at crf 18, and calibrates it with ``vibr.calib.colmap.calibrate(VIDEO, OUT,
 frames=N)``, N a third of the frames:
 
 * ``tripod``: turning 50° about one point (:func:`vibr.synthetic.pan_cameras`);
@@ -94,7 +94,7 @@ def _px(v) -> str:
 
 
 def run_case(case: str, work: Path, pan) -> dict:
-    from vibr.calibrate import calibrate
+    from vibr.calib.colmap import calibrate
     from vibr.cli import main
     from vibr.io.video import write_video
     from vibr.render.methods import DEFAULTS

@@ -19,7 +19,7 @@ unless ``--large-scale 0``, view 5 again at a larger image scale.
 All metrics: PSNR (dB) and DSSIM = 1e4·(1 − SSIM) (Gaussian window σ 1.5) over the pixels
 every setting reconstructed, 2-pixel border excluded. Depth is estimated once per
 (target, stride) and shared by all settings; the warped samples are computed once per
-geometry (``vibr.evaluate.run_evaluation``). Nothing is cached between runs.
+geometry (``vibr.eval.protocol.run_evaluation``). Nothing is cached between runs.
 
     python benchmarks/paper_tables.py --write-docs    # everything, writes docs/RESULTS.md
     python benchmarks/paper_tables.py --quick         # a small smoke run (writes no tracked file)
@@ -102,7 +102,7 @@ def cotton_neighbours(scene, s):
 
 # --------------------------------------------------------------------------------------------
 def cotton_settings():
-    from vibr.evaluate import Setting
+    from vibr.eval.protocol import Setting
 
     return ([Setting("ulr"), Setting("savsr", {"alpha": 1.0, "lam": 0.1}),
              Setting("bvs", {"alpha": 1.0, "lam": 0.1})]
@@ -139,7 +139,7 @@ def cotton_log(rep):
 
 
 def fountain_settings():
-    from vibr.evaluate import Setting
+    from vibr.eval.protocol import Setting
 
     out = [Setting("ulr")]
     for lam in (0.002, 0.003):
@@ -159,10 +159,10 @@ def fountain_settings():
 
 
 def evaluate_with_figures(scene, target, settings, figdir, labels, prefix, downscale, **kw) -> dict:
-    """``vibr.evaluate.run_evaluation``'s report, with the comparison figures of the settings
-    ``labels`` written to ``figdir`` (None: no figures) by ``vibr.figures``."""
-    from vibr.evaluate import run_evaluation
-    from vibr.figures import write_evaluation_figures
+    """``vibr.eval.protocol.run_evaluation``'s report, with the comparison figures of the settings
+    ``labels`` written to ``figdir`` (None: no figures) by ``vibr.eval.figures``."""
+    from vibr.eval.protocol import run_evaluation
+    from vibr.eval.figures import write_evaluation_figures
 
     ev = run_evaluation(scene, target, settings, **kw)
     if figdir:
@@ -222,7 +222,7 @@ class SceneCache:
 def run_case(cache, case):
     """One table case (a task of vibr.executor.run_tasks): evaluate, write the JSON report
     atomically, return it. A benchmark measures: existing reports are recomputed, not skipped."""
-    from vibr.evaluate import write_report
+    from vibr.eval.protocol import write_report
 
     t0 = time.perf_counter()
     if case["kind"] == "cotton":
@@ -553,7 +553,7 @@ def git_state() -> dict:
 
 def write_results(path, args, argv, cotton, fountain, large, t_total, started, load0, log_lines, env=None,
                   git=None, git_end=None, note=None):
-    from vibr.evaluate import machine_info
+    from vibr.eval.protocol import machine_info
 
     old = Path(path).read_text() if Path(path).exists() else ""
     # what follows the discussion (other sections, e.g. other scripts' <!-- NAME:begin --> blocks) is kept
@@ -756,7 +756,7 @@ def main(argv=None):
     if "fountain" not in skip:
         cases += fountain_cases(args.out, figdir, args.fountain_scale, targets)
     if args.large_scale and "large" not in skip:
-        from vibr.evaluate import Setting
+        from vibr.eval.protocol import Setting
 
         st = [Setting("ulr")] + [Setting("gradient", {"alpha": a, "gamma": g, "lam": l}) for a, g, l in PAPER_SETTINGS]
         cases += fountain_cases(args.out, figdir, args.large_scale, [args.large_target], settings=st,

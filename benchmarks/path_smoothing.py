@@ -4,7 +4,7 @@ A steady walk (:func:`vibr.synthetic.walk_cameras`: ``--keys`` keys 0.1 scene un
 second of a walking video would be) is shaken by a hand: every key's centre moved by
 N(0, ``--jitter``) per axis and its orientation turned by N(0, ``--deg``°) about each axis,
 ``--seeds`` draws. For each SIGMA the path through the shaken keys
-(:func:`vibr.path.interpolate`, ``order="given"``, 10 frames a key) is compared with the
+(:func:`vibr.paths.camera_path.interpolate`, ``order="given"``, 10 frames a key) is compared with the
 path through the steady keys: the RMS distance and angle between their frames, and the mean
 turn from one frame to the next (the steady path's: 0.1°).
 
@@ -37,7 +37,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sigmas", default="0,1,2,3")
     args = ap.parse_args(argv)
 
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
     from vibr.synthetic import walk_cameras
 
     sigmas = [float(s) for s in args.sigmas.split(",")]

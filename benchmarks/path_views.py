@@ -1,5 +1,5 @@
 """A fly-through of a scene without depth estimates depth only for the views its frames may
-use (``vibr.flythrough.views_for_path``; docs/FLYTHROUGH.md, "Depth for the views the path
+use (``vibr.paths.flythrough.views_for_path``; docs/FLYTHROUGH.md, "Depth for the views the path
 uses"): time and quality against estimating every view.
 
 The synthetic hand-held layout with ``--views`` views (no depth maps), a path interpolated
@@ -25,10 +25,10 @@ def main(argv=None):
     ap.add_argument("--size", default="256x192")
     ap.add_argument("--frames", type=int, default=8)
     args = ap.parse_args(argv)
-    import vibr.flythrough as fl
+    import vibr.paths.flythrough as fl
     from vibr.io import read_image
     from vibr.metrics import psnr
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
     from vibr.synthetic import default_world, make_scene, render_view
 
     w, h = (int(x) for x in args.size.split("x"))

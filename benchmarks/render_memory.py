@@ -1,4 +1,4 @@
-"""Memory of a render against vibr.validate.render_memory's estimate (docs/ERRORS.md), and
+"""Memory of a render against vibr.render.checks.render_memory's estimate (docs/ERRORS.md), and
 the 4K render of issue 25.
 
     python3 benchmarks/render_memory.py [SIZE]                 # synthetic grid, SIZE² from 8 views
@@ -22,7 +22,7 @@ import time
 
 from vibr.render import render
 from vibr.synthetic import make_scene
-from vibr.validate import render_memory
+from vibr.render.checks import render_memory
 
 
 def _rss() -> int:

@@ -20,7 +20,7 @@ def main(argv=None):
     ap.add_argument("--size", default="160x120")
     ap.add_argument("--pan-deg", type=float, default=24.0)
     args = ap.parse_args(argv)
-    from vibr.evaluate import Setting, evaluate
+    from vibr.eval.protocol import Setting, evaluate
     from vibr.synthetic import DEFAULT_SIGMA_Z, default_world, pan_cameras, render_view
     from vibr.scene import Scene, View
 

@@ -21,7 +21,7 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
   proxy where it is unknown).
 
 Estimated depth is computed from the sources only (the target never takes part) and cached
-on disk (``vibr.depthcache``, default ~/.cache/vibr): a second run is rendering only.
+on disk (``vibr.stereo.cache``, default ~/.cache/vibr): a second run is rendering only.
 
 Settings per case: ULR, BVS, ``gradient`` with TV "uniform" over gamma × lam =
 {0, 0.1, 0.25, 0.5, 1} × {0.1, 0.3}, with TV "samples" (spatially varying) at
@@ -34,7 +34,7 @@ gamma ∈ {0.1, 0.25, 0.5}, lam 0.1 and at gamma 0.1, lam 0.3; with ULR's view p
 scales 12 and 48 (every other setting: ``grad_consistency=0``, which leaves ``grad_coverage``
 no weight to scale); with the consistency weights, ``lam_density=3`` (lam against the data's
 sum) and ``hole_fill="push-pull"`` at gamma × lam = {0.2, 0.3} × {0.6, 0.8, 1} (D; every other
-setting: ``lam_density=0``, ``hole_fill="solve"``); and ``gamma="auto", lam="auto"`` (``vibr.autotune``:
+setting: ``lam_density=0``, ``hole_fill="solve"``); and ``gamma="auto", lam="auto"`` (``vibr.render.autotune``:
 leave-one-source-out on the sources, never the target image), whose tuning time is measured
 against the median full-size render time of the target over the case's gradient settings
 (same process, same minutes: the machine's load hits both alike).
@@ -178,9 +178,9 @@ def nogeo_cases():
 
 def _sources(cache, case):
     """(sources with depth, target View) of a case; estimated depth through the depth cache."""
-    from vibr.depthcache import scene_with_depth
+    from vibr.stereo.cache import scene_with_depth
     from vibr.pipeline import prepare
-    from vibr.selection import select_views
+    from vibr.geometry.selection import select_views
 
     if case["kind"] == "synthetic":
         from vibr.synthetic import make_scene
@@ -230,7 +230,7 @@ def _sources(cache, case):
 
 def run_case(cache, case):
     """Render one case with every setting and the auto weights; return its measurements."""
-    from vibr.autotune import tune
+    from vibr.render.autotune import tune
     from vibr.metrics import psnr
     from vibr.render import shared_geometry
     from vibr.render.methods import DEFAULTS
@@ -267,7 +267,7 @@ def run_case(cache, case):
             "default_at_run": {k: DEFAULTS[k] for k in ("gamma", "lam", "tv_weighting")},
             "seconds": round(time.perf_counter() - t0, 1), "commit": _commit()}
     if case.get("file"):  # each case as it completes: a partial run keeps what it measured
-        from vibr.evaluate import write_report
+        from vibr.eval.protocol import write_report
 
         write_report(rep, case["file"])
     return rep
@@ -311,7 +311,7 @@ def table(reps, chosen):
          "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*; few views (sparse) and no geometry "
          "(synthetic views, depth estimated): seed 0 *choose*, seed 1 *report*. "
          "Issue 23's targets below are over its own cases (not the few-view and no-geometry families). Estimated depth: from the "
-         "sources only, cached (`vibr.depthcache`).", "",
+         "sources only, cached (`vibr.stereo.cache`).", "",
          "| case | split | ULR | BVS | chosen | auto (γ, λ) | oracle (setting) | chosen − BVS | auto − oracle | tune / render |",
          "|---|---|---|---|---|---|---|---|---|---|"]
     f = lambda d: f"{d['all']:.2f} / {d['covered']:.2f}"  # noqa: E731

@@ -146,7 +146,7 @@ def run_case(case, data, scenes, log, cache=None):
 
 def plot_curves(rep, path):
     """Sparsification plot (numpy-drawn PNG): vibr's curve, both baselines and the oracle."""
-    from vibr.uncertainty_figures import sparsification_plot
+    from vibr.eval.sigma_figures import sparsification_plot
 
     rows = rep["rows"]
     curves = {"vibr σ": rows[f"vibr[{CHOSEN}]"]["curve"],
@@ -231,11 +231,11 @@ def planar_figure(path, size=256):
     error and σ (both in grey levels, the same colour scale)."""
     from PIL import Image, ImageDraw
 
-    from vibr.io.atomic import atomic_path
+    from vibr._runtime.atomic import atomic_path
     from vibr.metrics import pixel_error, uncertainty_metrics
     from vibr.render import render
     from vibr.synthetic import make_scene
-    from vibr.uncertainty_figures import _nice_ceiling, sigma_figure
+    from vibr.eval.sigma_figures import _nice_ceiling, sigma_figure
 
     from vibr.pipeline import prepare
 

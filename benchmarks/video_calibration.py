@@ -12,12 +12,12 @@ diagonal). The video is encoded as H.264 (crf 18) and calibrated twice, alternat
 
 and, once, the 11 photographs themselves at the same size (no blur, no video coding) as a
 folder with the same matcher: the floor. Each is compared with the ground-truth cameras of the photographs behind its frames
-(:func:`vibr.calibrate.pose_errors`, similarity fitted to the poses): registered frames,
+(:func:`vibr.calib.colmap.pose_errors`, similarity fitted to the poses): registered frames,
 sparse points, reprojection error, largest rotation and centre errors, time.
 
 ``--speed`` measures instead how fast a video is read: 240 frames of 1920×1080 (fountain's
 photographs at ×0.625, cropped, each shown for 22 frames with a 0–6 pixel shake), H.264 at
-crf 20, read with :func:`vibr.video_frames.extract_frames` keeping 60 (three runs).
+crf 20, read with :func:`vibr.calib.video_frames.extract_frames` keeping 60 (three runs).
 
     python benchmarks/video_calibration.py [--data ../shared/data] [--seeds 0,1,2] [--speed]
 """
@@ -69,7 +69,7 @@ def make_video(scene, path: Path, per_view: int, rng) -> list[int]:
 def calibrate_variant(name, video, scene, per_view, out: Path) -> dict:
     """Calibrate one variant; return its figures (``frames``: the frame numbers chosen,
     ``registered``: how many of them COLMAP placed)."""
-    from vibr.calibrate import pose_errors
+    from vibr.calib.colmap import pose_errors
     from vibr.errors import VibrInputError
 
     dst = out / f"calibrated_{name}"
@@ -97,8 +97,8 @@ def calibrate_variant(name, video, scene, per_view, out: Path) -> dict:
 def _calibrate(name, video, scene, per_view, out: Path, dst: Path):
     import imageio.v3 as iio
 
-    from vibr.calibrate import calibrate
-    from vibr.video_frames import extract_frames
+    from vibr.calib.colmap import calibrate
+    from vibr.calib.video_frames import extract_frames
 
     if name == "sharpest":
         return calibrate(video, dst, overwrite=True, frames=len(scene))
@@ -123,7 +123,7 @@ def reading_speed(data: Path, out: Path) -> int:
     """Time :func:`extract_frames` on a 1080p video (three runs)."""
     from vibr.io import load_scene
     from vibr.io.video import write_video
-    from vibr.video_frames import extract_frames
+    from vibr.calib.video_frames import extract_frames
 
     scene = load_scene(data / "strecha_fountain-P11", scale=0.625)  # 1920×1280
     frames = [scene.views[k // 22 % len(scene)].image[100 + k % 7:1180 + k % 7, :1920] for k in range(240)]

@@ -70,7 +70,7 @@ def shaky_video(path: Path, n: int, seed: int = 0, size=(320, 240)) -> list:
 
 def middle_frames(video: Path, n: int, out: Path) -> Path:
     """The middle frame of each of ``n`` stretches, as a folder of photos."""
-    from vibr.video_frames import extract_frames
+    from vibr.calib.video_frames import extract_frames
 
     every = extract_frames(video, out / "every", 10 ** 6)
     total = len(every.files)
@@ -87,12 +87,12 @@ def flythrough(scene_dir: Path, truth: list, smooth: float, out: Path) -> dict:
     """Path, render, comparison with the ray-cast truth."""
     import imageio.v3 as iio
 
-    from vibr.calibrate import align_cameras
+    from vibr.calib.colmap import align_cameras
     from vibr.camera import Camera
     from vibr.cli import main
     from vibr.io import load_scene
     from vibr.metrics import psnr
-    from vibr.path import read_camera_path
+    from vibr.paths.camera_path import read_camera_path
     from vibr.synthetic import default_world, render_view
 
     scene = load_scene(scene_dir)
@@ -127,7 +127,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="/tmp/vibr_video_flythrough")
     args = ap.parse_args(argv)
 
-    from vibr.calibrate import calibrate, pose_errors
+    from vibr.calib.colmap import calibrate, pose_errors
     from vibr.errors import VibrInputError
 
     logging.getLogger("vibr").setLevel(logging.WARNING)

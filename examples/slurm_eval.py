@@ -2,7 +2,7 @@
 
 Each SLURM job runs one Dask worker (``--cores`` cores, one task at a time, numba using all
 the job's cores); the scheduler runs here, on the login node or in a small job of its own.
-Every held-out view is one task (:func:`vibr.evaluate_all.evaluate_all` through
+Every held-out view is one task (:func:`vibr.eval.leave_one_out.evaluate_all` through
 :func:`vibr.executor.run_tasks`): a worker loads the scene once, evaluates its views and
 writes each view's report atomically beside ``--json``; a rerun skips the views already
 written, so a job killed by the wall-time limit loses only the views it was working on.
@@ -59,8 +59,8 @@ def slurm_cluster(args):
 def main(argv=None, cluster_factory=slurm_cluster) -> int:
     from distributed import Client
 
-    from vibr.evaluate import settings_grid, write_report
-    from vibr.evaluate_all import evaluate_all, format_all_table, resolve_targets
+    from vibr.eval.protocol import settings_grid, write_report
+    from vibr.eval.leave_one_out import evaluate_all, format_all_table, resolve_targets
     from vibr.io import load_scene
 
     args = parse_args(argv)

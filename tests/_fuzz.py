@@ -192,9 +192,9 @@ SEEDS = {s.name: s for s in [
 
 
 def add_camera_path_seed() -> bool:
-    """Add developer B's camera_path.json loader (vibr.path.read_camera_path) when present."""
+    """Add developer B's camera_path.json loader (vibr.paths.camera_path.read_camera_path) when present."""
     try:
-        from vibr.path import read_camera_path, write_camera_path  # noqa: F401
+        from vibr.paths.camera_path import read_camera_path, write_camera_path
     except ImportError:
         return False
 

@@ -27,7 +27,7 @@ def square_probe(ctx, task):
 def write_or_die(ctx, task):
     """Write ``out/TASK.txt`` atomically; the task ``victim`` kills its own worker process the
     first time it runs (marker file), as a crashing worker would."""
-    from vibr.io.atomic import atomic_path
+    from vibr._runtime.atomic import atomic_path
 
     folder = Path(ctx)
     out = folder / f"{task}.txt"
@@ -71,7 +71,7 @@ def print_render_digest():
     import numba
     import numpy as np
 
-    from vibr.evaluate import run_evaluation, settings_grid
+    from vibr.eval.protocol import run_evaluation, settings_grid
     from vibr.synthetic import make_scene
 
     scene = make_scene("grid", n_views=9, width=80, height=64, seed=5)
@@ -100,7 +100,7 @@ def write_and_hang(ctx, task):
     mid-write (the run then reruns the task, which completes)."""
     import time
 
-    from vibr.io.atomic import atomic_path
+    from vibr._runtime.atomic import atomic_path
 
     folder = Path(ctx)
     marker = folder / f"{task}.tmp"

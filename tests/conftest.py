@@ -13,7 +13,7 @@ import pytest
 
 _REPO = Path(__file__).resolve().parents[1]
 
-# The suite's own depth and scene cache (vibr.depthcache), inherited by the processes it
+# The suite's own depth and scene cache (vibr.stereo.cache), inherited by the processes it
 # starts: a run never reads the user's cache (maps another run left there) nor fills it.
 os.environ["VIBR_CACHE_DIR"] = tempfile.mkdtemp(prefix="vibr-test-cache-")
 atexit.register(shutil.rmtree, os.environ["VIBR_CACHE_DIR"], True)

@@ -1,4 +1,4 @@
-"""gamma="auto" / lam="auto" (vibr.autotune, issue 23): leave-one-source-out on the sources,
+"""gamma="auto" / lam="auto" (vibr.render.autotune, issue 23): leave-one-source-out on the sources,
 never the target's image; the right choice where the answer is clear."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vibr import autotune
+from vibr.render import autotune
 from vibr.errors import VibrInputError
 from vibr.render import render
 from vibr.synthetic import make_scene

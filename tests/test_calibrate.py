@@ -14,15 +14,8 @@ import pytest
 
 import pycolmap
 
-from vibr.calibrate import (  # noqa: E402
-    align_cameras,
-    calibrate,
-    calibrate_scene,
-    camera_from_colmap,
-    list_photos,
-    pose_errors,
-    similarity_align,
-)
+from vibr.calib.colmap import (align_cameras, calibrate, calibrate_scene, camera_from_colmap, list_photos,
+                               pose_errors, similarity_align)
 from vibr.camera import Camera  # noqa: E402
 from vibr.errors import VibrInputError  # noqa: E402
 
@@ -206,7 +199,7 @@ def test_missing_or_empty_folder(tmp_path):
 
     from _checks import messages_logged
 
-    with messages_logged("vibr.calibrate", logging.INFO) as seen:
+    with messages_logged("vibr.calib.colmap", logging.INFO) as seen:
         assert [p.name for p in list_photos(tmp_path)] == ["b.png", "c.webp"]
     assert any("clip.mp4 in the folder: not used" in m for m in seen), seen
     (tmp_path / "clip.mp4").unlink()
@@ -310,14 +303,14 @@ def test_calibrated_scene_runs_through_depth_estimation(calibrated):
 
 def test_importing_pycolmap_keeps_the_sigterm_handler():
     """pycolmap's glog replaces SIGTERM's handler on import (a stack trace, no cleanup);
-    vibr imports it through vibr._pycolmap, which gives the handler back: `vibr calibrate`
+    vibr imports it through vibr._runtime.pycolmap, which gives the handler back: `vibr calibrate`
     stopped by SIGTERM then exits 130 with its work folder removed."""
     import subprocess
     import sys
 
     code = ("import os, signal, time\n"
             "signal.signal(signal.SIGTERM, lambda *a: print('handler', flush=True))\n"
-            "from vibr._pycolmap import import_pycolmap\n"
+            "from vibr._runtime.pycolmap import import_pycolmap\n"
             "import_pycolmap()\n"
             "os.kill(os.getpid(), signal.SIGTERM)\n"
             "time.sleep(0.5)\n"
@@ -360,7 +353,7 @@ def test_photos_are_turned_upright_by_their_exif_orientation(tmp_path):
     to display): calibrate's copies, which COLMAP and the scene use, stand upright."""
     from PIL import Image
 
-    from vibr.calibrate import _downscale_photos
+    from vibr.calib.colmap import _downscale_photos
 
     a = np.zeros((40, 60, 3), np.uint8)
     a[:, :30] = 255  # stored landscape, its left half white
@@ -399,7 +392,7 @@ def test_a_zoom_gets_one_camera_per_photo(tmp_path):
     photos are those of benchmarks/calibrate_zoom.py."""
     import importlib.util
 
-    from vibr.calibrate import _lens_keys, calibrate_scene
+    from vibr.calib.colmap import _lens_keys, calibrate_scene
 
     spec = importlib.util.spec_from_file_location(
         "calibrate_zoom", Path(__file__).resolve().parents[1] / "benchmarks" / "calibrate_zoom.py")

@@ -12,10 +12,10 @@ import pytest
 from _checks import messages_logged
 from scipy import ndimage
 
-from vibr.calibrate import pose_errors
+from vibr.calib.colmap import pose_errors
 from vibr.errors import VibrInputError
 from vibr.io.video import open_video, write_video
-from vibr.video_frames import extract_frames, sharpness
+from vibr.calib.video_frames import extract_frames, sharpness
 
 
 def _texture(seed, h=120, w=160):
@@ -99,7 +99,7 @@ def test_bad_videos_are_refused_in_one_line(tmp_path, capsys):
     short = tmp_path / "short.mp4"
     write_video(short, [_texture(0)] * 2, fps=10)
     with pytest.raises(VibrInputError, match="the video has 2 frames, calibrate needs at least 3"):
-        from vibr.calibrate import calibrate_scene
+        from vibr.calib.colmap import calibrate_scene
         calibrate_scene(short)
     rc = main(["calibrate", str(short), str(tmp_path / "out"), "--frames", "1"])
     err = capsys.readouterr().err.strip()
@@ -152,7 +152,7 @@ def test_calibrate_a_video_of_a_walk(tmp_path, capsys):
 def test_a_path_through_a_videos_frames_keeps_their_time_order():
     """A walk out and back along two close lines: by proximity the path zigzags between
     them; the frames of a video (``meta["capture"]``) are taken in time order."""
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
     from vibr.scene import Scene, View
     from vibr.synthetic import walk_cameras
 
@@ -177,7 +177,7 @@ def test_a_video_cut_short_is_said(tmp_path):
     data = video.read_bytes()
     cut = tmp_path / "cut.mp4"
     cut.write_bytes(data[: len(data) // 2])  # faststart: the header, then the first half of the frames
-    with messages_logged("vibr.video_frames") as seen:
+    with messages_logged("vibr.calib.video_frames") as seen:
         kept = extract_frames(cut, tmp_path / "frames", 8)
     assert 8 <= kept.n_read < 40 and len(kept.files) == 8 and kept.total == kept.n_read
     assert kept.indices[-1] >= kept.n_read - kept.n_read // 8  # the last stretch ends where the video does
@@ -201,7 +201,7 @@ def test_no_room_for_the_frames_is_said_before_reading(tmp_path, monkeypatch):
 def test_the_choice_stays_near_the_middle_of_a_long_stretch(tmp_path):
     """Two stretches of 3 s at 10 fps: a sharp frame 1.25 s from its stretch's middle is not
     taken (the views would bunch up at one end), one 0.05 s from it is."""
-    from vibr.video_frames import REACH_S
+    from vibr.calib.video_frames import REACH_S
 
     frames = [_motion_blur(_texture(0), 5)] * 60
     frames = list(frames)

@@ -1,4 +1,4 @@
-"""``vibr.evaluate`` and ``vibr eval``: samples computed once, identical numbers to a direct
+"""``vibr.eval.protocol`` and ``vibr eval``: samples computed once, identical numbers to a direct
 render, the intensity scale reaching the renderer, the JSON report, unseen scene folders."""
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def scene_dir(tmp_path_factory, scene):
 
 def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monkeypatch):
     import vibr.geometry as geometry
-    from vibr.evaluate import Setting, evaluate
+    from vibr.eval.protocol import Setting, evaluate
     from vibr.metrics import psnr
     from vibr.pipeline import prepare
     from vibr.render import render
@@ -65,7 +65,7 @@ def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monke
 
 def test_intensity_scale_reaches_the_renderer(scene, monkeypatch):
     import vibr.render.api as vr  # evaluate renders through vibr.render.shared_geometry
-    from vibr.evaluate import Setting, evaluate
+    from vibr.eval.protocol import Setting, evaluate
 
     seen = []
     real = vr.render
@@ -203,7 +203,7 @@ def test_eval_on_a_middlebury_layout_folder(scene, tmp_path, capsys):
 
 
 def test_figures_downscale_and_crop_inside_mask(tmp_path):
-    from vibr.figures import downscale_image, most_different_window, write_figures
+    from vibr.eval.figures import downscale_image, most_different_window, write_figures
     from vibr.io import read_image
 
     rng = np.random.default_rng(0)
@@ -226,7 +226,7 @@ def test_figures_downscale_and_crop_inside_mask(tmp_path):
 
 
 def test_label_panel_writes_text_above_the_image():
-    from vibr.figures import label_panel
+    from vibr.eval.figures import label_panel
 
     img = np.zeros((10, 60, 3), np.float32)
     out = label_panel(img, "bvs")
@@ -258,9 +258,9 @@ def test_view_counts_closed_form():
 
 
 def test_evaluation_writes_nothing_figures_are_separate(scene, tmp_path):
-    """run_evaluation measures and returns the images; only vibr.figures writes files."""
-    from vibr.evaluate import Setting, evaluate, run_evaluation
-    from vibr.figures import write_evaluation_figures
+    """run_evaluation measures and returns the images; only vibr.eval.figures writes files."""
+    from vibr.eval.protocol import Setting, evaluate, run_evaluation
+    from vibr.eval.figures import write_evaluation_figures
 
     with pytest.raises(TypeError):
         evaluate(scene, "view_004", [Setting("ulr")], figures=tmp_path)
@@ -274,7 +274,7 @@ def test_evaluation_writes_nothing_figures_are_separate(scene, tmp_path):
 def test_run_evaluation_options_and_keywords(scene):
     """run_evaluation's options as an EvalOptions or as keywords over it: the same report
     (timings aside); a misspelt option is a TypeError, not a default."""
-    from vibr.evaluate import EvalOptions, Setting, run_evaluation
+    from vibr.eval.protocol import EvalOptions, Setting, run_evaluation
 
     settings = [Setting("ulr"), Setting("gradient")]
     a = run_evaluation(scene, "view_004", settings, depth="gt", border=3, use_lpips=False)

@@ -68,19 +68,19 @@ def test_auto_workers_is_one_inside_a_daemonic_process():
 def test_flythrough_auto_executor(tmp_path, monkeypatch):
     """render_path's "auto": processes for a long path of large frames, here for the rest."""
     import vibr.executor as E
-    from vibr.flythrough import FrameContext, auto_executor
+    from vibr.paths.flythrough import FrameContext, auto_executor
     from vibr.synthetic import make_scene
 
     scene = make_scene("grid", n_views=9, width=48, height=40, seed=1)
     cam = scene.views[0].camera.scaled(16.0)  # 768x640: a large frame
     ctx = FrameContext(scene, [cam] * 40, str(tmp_path))
     monkeypatch.setattr(E, "available_cores", lambda: 2)
-    monkeypatch.setattr("vibr.validate.available_memory", lambda: 16 * 2**30)
+    monkeypatch.setattr("vibr._runtime.memory.available_memory", lambda: 16 * 2**30)
     assert auto_executor(ctx, 40) == 2
     assert auto_executor(ctx, 15) is None
     small = FrameContext(scene, [scene.views[0].camera] * 40, str(tmp_path))
     assert auto_executor(small, 40) is None
-    monkeypatch.setattr("vibr.validate.available_memory", lambda: 2**20)
+    monkeypatch.setattr("vibr._runtime.memory.available_memory", lambda: 2**20)
     assert auto_executor(ctx, 40) is None
 
 
@@ -153,7 +153,7 @@ def test_two_local_clusters_at_once_share_no_port():
 
 def test_a_terminated_pool_worker_leaves_no_partial_file(tmp_path):
     """A broken pool terminates its other workers (SIGTERM) while they may be writing: the
-    worker removes its half-written file (vibr.io.atomic) and exits, instead of leaving a
+    worker removes its half-written file (vibr._runtime.atomic) and exits, instead of leaving a
     ``.part`` file behind (a race the killed-worker test below hit now and then); the run
     reruns the task and completes."""
     import signal
@@ -398,7 +398,7 @@ def test_eval_of_several_targets_holds_each_out_of_a_listed_pool(scene_dir, tmp_
 def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path, monkeypatch):
     """Serial (2 numba threads on 2 cores), --workers 2 and --dask local (1 thread each, other
     targets before this one in the same worker): the same JSON numbers bit for bit."""
-    from vibr.evaluate_all import results_only
+    from vibr.eval.leave_one_out import results_only
 
     serial = _eval_all(scene_dir, tmp_path / "serial.json")
     assert list(serial["per_view"]) == ["view_000", "view_008"]
@@ -431,7 +431,7 @@ def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path, 
     assert handed == [1] and partial["per_view"]["view_000"].get("skipped")
     assert results_only(partial) == results_only(serial)
     # ... but not with other code: the reports are then recomputed
-    import vibr.io.checkpoint as ckpt
+    import vibr._runtime.checkpoint as ckpt
 
     monkeypatch.setattr(ckpt, "code_fingerprint", lambda: "other code")
     other = _eval_all(scene_dir, tmp_path / "serial.json")

@@ -46,7 +46,7 @@ def _same_cameras(a, b, tol=1e-9):
 def test_opengl_camera_closed_form():
     """nerfstudio's camera at the origin with identity camera_to_world looks down -z with y
     up: a point 5 units in front projects to the centre, +x to the right, +y upwards."""
-    from vibr.path import c2w_opengl_from_camera, camera_from_c2w_opengl
+    from vibr.paths.camera_path import c2w_opengl_from_camera, camera_from_c2w_opengl
 
     W, H, fov = 80, 60, 50.0
     cam = camera_from_c2w_opengl(np.eye(4), fov, W, H)
@@ -61,7 +61,7 @@ def test_opengl_camera_closed_form():
 
 @pytest.mark.parametrize("kind", ["interpolate", "orbit", "spiral"])
 def test_round_trip_nerfstudio_schema(arc_scene, tmp_path, kind):
-    from vibr import path as P
+    from vibr.paths import camera_path as P
 
     p = getattr(P, kind)(arc_scene, n_frames=17)
     f = tmp_path / "p.json"
@@ -81,7 +81,7 @@ def test_dataparser_transforms_map_back(arc_scene, tmp_path):
     the scene's frame with --dataparser-transforms."""
     from scipy.spatial.transform import Rotation
 
-    from vibr import path as P
+    from vibr.paths import camera_path as P
 
     p = P.orbit(arc_scene, n_frames=5)
     T = np.hstack([Rotation.from_rotvec([0.9, -0.4, 1.2]).as_matrix(), [[5.0], [-8.0], [3.0]]])
@@ -98,7 +98,7 @@ def test_dataparser_transforms_map_back(arc_scene, tmp_path):
                              "seconds": 1.0, "fps": 5, "camera_path": frames}))
     (tmp_path / "dp.json").write_text(json.dumps({"transform": T.tolist(), "scale": s}))
     _same_cameras(p.cameras, P.read_camera_path(f, dataparser_transforms=tmp_path / "dp.json").cameras)
-    from vibr.flythrough import check_path_sees_scene
+    from vibr.paths.flythrough import check_path_sees_scene
 
     with pytest.raises(VibrInputError, match="nowhere near.*dataparser"):
         check_path_sees_scene(arc_scene, P.read_camera_path(f).cameras)
@@ -108,7 +108,7 @@ def _nerfstudio_normalised(cameras, T_saved, sf, A, applied_scale, tmp_path):
     """nerfstudio's data parser on poses saved in transforms.json: ``poses = T @ poses``,
     positions × sf; its dataparser_transforms.json holds ``T @ A`` and ``sf · applied_scale``
     (nerfstudio_dataparser.py). Returns the camera path file and that json."""
-    from vibr import path as P
+    from vibr.paths import camera_path as P
 
     frames = []
     for c in cameras:
@@ -133,7 +133,7 @@ def test_dataparser_transforms_with_applied_transform_and_scale(arc_scene, tmp_p
     nerfstudio assumes a fixed axis swap): the path maps back to the file's own frame."""
     from scipy.spatial.transform import Rotation
 
-    from vibr import path as P
+    from vibr.paths import camera_path as P
     from vibr.io.transforms import save_scene as save_scene_transforms
 
     scene_dir = tmp_path / "scene"
@@ -184,7 +184,7 @@ def test_dataparser_transforms_with_applied_transform_and_scale(arc_scene, tmp_p
 
 def test_scene_processing_transform_refuses_bad_values(tmp_path, arc_scene):
     from vibr.io.transforms import save_scene as save_scene_transforms
-    from vibr.path import scene_processing_transform
+    from vibr.paths.camera_path import scene_processing_transform
 
     assert scene_processing_transform(tmp_path) == (None, 1.0)  # not a transforms.json scene
     save_scene_transforms(arc_scene, tmp_path / "s")
@@ -208,7 +208,7 @@ def test_interpolate_is_c2_and_passes_through_the_keys(arc_scene):
     """C²: third differences shrink like h³ (second derivative continuous across the key
     cameras; a C¹ spline's would jump and leave third differences ~h²). The keys are on the
     curve, the first and last frames are the end cameras and no frame repeats."""
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
 
     ratios = []
     for n in (400, 800):
@@ -234,7 +234,7 @@ def test_interpolate_is_c2_and_passes_through_the_keys(arc_scene):
 
 
 def test_interpolate_order_and_views(arc_scene):
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
 
     names = arc_scene.names
     p = interpolate(arc_scene, [names[3], names[0], names[5], names[1]], order="proximity", n_frames=4)
@@ -269,7 +269,7 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     neighbour by proximity (templeSR0011, templeSR0001's) is left out with a warning."""
     from _checks import messages_logged
 
-    from vibr.path import interpolate, scene_centre
+    from vibr.paths.camera_path import interpolate, scene_centre
 
     scene = _temple_cameras(data_dir / "middlebury_templeSparseRing")
     X = scene_centre([v.camera for v in scene.views])
@@ -278,7 +278,7 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     def closest(p):
         return min(np.linalg.norm(c.centre - X) for c in p.cameras) / ring
 
-    with messages_logged("vibr.path") as seen:
+    with messages_logged("vibr.paths.camera_path") as seen:
         p = interpolate(scene, n_frames=200)
     assert any("templeSR0011.png (after templeSR0001.png) left out" in m for m in seen)
     assert len(p.meta["views"]) == 15 and closest(p) > 0.8
@@ -296,7 +296,7 @@ def test_interpolate_through_rolled_photographs_does_not_spin(data_dir):
     orientations spins by up to 180° between neighbours. The default turns each key by
     quarter turns to the ring's up: every frame upright within the cameras' 8° look down,
     the frame portrait (the photographs turned); "level" makes every key's horizon level."""
-    from vibr.path import interpolate, scene_up
+    from vibr.paths.camera_path import interpolate, scene_up
 
     scene = _temple_cameras(data_dir / "middlebury_templeSparseRing")
     up = scene_up([v.camera for v in scene.views])
@@ -321,7 +321,7 @@ def test_interpolate_snap_turns_a_rolled_key_back(arc_scene):
     """A view whose camera was turned by a quarter turn (a portrait photograph among
     landscape ones) makes, by default, the path of the scene without the turn; the
     cameras of an upright capture are not touched (the same path as roll="keep")."""
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
     from vibr.scene import Scene, View
 
     plain = interpolate(arc_scene, n_frames=30)
@@ -339,7 +339,7 @@ def test_interpolate_through_a_portrait_photograph_keeps_the_focal(arc_scene):
     """A portrait photograph among landscape ones, taken with the same lens (the same focal
     in pixels, the phone turned): the path keeps that focal; relative to each photograph's
     height it zoomed out by 4:3 at that key and back in (fy / H: 0.75 f there)."""
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
     from vibr.scene import Scene, View
 
     def portrait(c):
@@ -359,7 +359,7 @@ def test_scene_up_with_portrait_photographs_stored_sideways(layout):
     sideways, no EXIF turn applied): the scene's up is that of the upright capture — the
     plain mean of the −y axes leaned 27° with 2 of 6 rolled, 45° with 3 (where a quarter
     turn is a tie) — and a path through them is the upright capture's."""
-    from vibr.path import interpolate, scene_up
+    from vibr.paths.camera_path import interpolate, scene_up
     from vibr.scene import Scene, View
     from vibr.synthetic import make_scene
 
@@ -388,7 +388,7 @@ def test_interpolate_round_a_light_field_grid(data_dir):
     grid through its corners and the middles of its sides, closed (the video loops: its last
     frame leads to its first at the pace of the others), turning by at most 19° a frame."""
     from vibr.io import load_scene
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
 
     scene = load_scene(data_dir / "hci2016_cotton", scale=0.125)
     loop = interpolate(scene, n_frames=96)
@@ -404,7 +404,7 @@ def test_interpolate_round_a_light_field_grid(data_dir):
 def test_grid_loop_passes_over_missing_positions():
     """A light field with missing views: the loop takes the border views nearest to the
     corners and the middles of the sides; a grid of 2 rows has no loop (proximity order)."""
-    from vibr.path import grid_loop, interpolate
+    from vibr.paths.camera_path import grid_loop, interpolate
     from vibr.synthetic import make_scene
 
     s = make_scene("grid", width=32, height=32, grid=(5, 5), seed=0)
@@ -423,7 +423,7 @@ def test_grid_loop_passes_over_missing_positions():
 def test_interpolate_level_needs_an_up():
     """Cameras whose up directions cancel out (half of them upside down, side by side): the
     default keeps them; "level" says why it cannot."""
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
 
     K = Camera.intrinsics(50.0, 64, 48)
     cams = [Camera.look_at([x, 0, 0], [x, 0, 5], [0, -1 if i % 2 else 1, 0], K, 64, 48) for i, x in enumerate(range(4))]
@@ -440,7 +440,7 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
     of every frame, in front of the camera; an orbit stays at the cameras' mean distance.
     The frame is the photographs' turned upright: templeSparseRing's, rolled by 90°, portrait
     with the photographs' horizontal field of view as its vertical one."""
-    from vibr import path as P
+    from vibr.paths import camera_path as P
     from vibr.camera import axes_meeting_point
 
     scene = _fountain_cameras(data_dir / "strecha_fountain-P11") if which == "fountain" \
@@ -603,7 +603,7 @@ def test_frame_at_held_out_view_matches_render_target(grid_dir, tmp_path, capsys
     `vibr render --target view_004` renders: same PSNR (within 0.05 dB)."""
     from vibr.cli import main
     from vibr.io import load_scene, read_image
-    from vibr.path import write_camera_path
+    from vibr.paths.camera_path import write_camera_path
 
     scene = load_scene(grid_dir)
     write_camera_path(tmp_path / "p.json", [scene["view_004"].camera], fps=1.0)
@@ -627,7 +627,7 @@ def test_a_frame_that_sees_nothing_stops_with_one_line(grid_dir, tmp_path, capsy
     from vibr.camera import Camera
     from vibr.cli import main
     from vibr.io import load_scene
-    from vibr.path import write_camera_path
+    from vibr.paths.camera_path import write_camera_path
 
     scene = load_scene(grid_dir)
     c = scene["view_004"].camera
@@ -688,9 +688,9 @@ def test_path_uncertainty_video_on_one_scale(grid_dir, tmp_path, capsys):
     import imageio.v3 as iio
 
     from vibr.cli import main
-    from vibr.flythrough import sigma_name
+    from vibr.paths.flythrough import sigma_name
     from vibr.io.video import read_video_info
-    from vibr.uncertainty_figures import sigma_figure
+    from vibr.eval.sigma_figures import sigma_figure
 
     pj = tmp_path / "o.json"
     assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "6", "--size", "48x32", "-q"]) == 0
@@ -727,8 +727,8 @@ def test_sigma_video_has_one_scale_for_all_frames(tmp_path):
     own, so that a colour means the same σ in every frame; NaN (no value) as the top."""
     import imageio.v3 as iio
 
-    from vibr.flythrough import _write_sigma_frame, write_sigma_video
-    from vibr.uncertainty_figures import sigma_figure
+    from vibr.paths.flythrough import _write_sigma_frame, write_sigma_video
+    from vibr.eval.sigma_figures import sigma_figure
 
     ramp = np.linspace(0, 1, 64 * 48).reshape(48, 64)
     maps = [ramp * 1.0, ramp * 5.0, ramp * 20.0]
@@ -809,9 +809,9 @@ def test_view_weights_soft_and_continuous(arc_scene):
     """Far from a rank swap the K best have weight 1 and the others 0 (select_views' set);
     along a path the weights change continuously (no jump larger than the path's step
     warrants)."""
-    from vibr.flythrough import _source_points, view_weights
-    from vibr.path import interpolate
-    from vibr.selection import select_views
+    from vibr.paths.flythrough import _source_points, view_weights
+    from vibr.paths.camera_path import interpolate
+    from vibr.geometry.selection import select_views
 
     pts = _source_points(arc_scene)
     p = interpolate(arc_scene, n_frames=200, width=32, height=24)
@@ -827,7 +827,7 @@ def test_depth_cache_estimates_once(tmp_path, monkeypatch):
     """Without depth, the first call estimates and writes the cache; the second loads it
     (estimate_depth not called) and gives the same maps."""
     import vibr.stereo as stereo
-    from vibr.depthcache import scene_with_depth
+    from vibr.stereo.cache import scene_with_depth
     from vibr.synthetic import make_scene
 
     from vibr.scene import Scene
@@ -919,8 +919,8 @@ def test_video_extension_must_be_known(tmp_path):
 def test_depth_only_for_the_views_the_path_uses(tmp_path):
     """A scene of many views without depth: the fly-through estimates depth for the views
     its frames may use (each frame's 2·n_views best, ranked before depth), not for all."""
-    from vibr.flythrough import render_path, views_for_path
-    from vibr.path import interpolate
+    from vibr.paths.flythrough import render_path, views_for_path
+    from vibr.paths.camera_path import interpolate
     from vibr.synthetic import make_scene
 
     s = make_scene("handheld", n_views=16, width=64, height=48, seed=2)
@@ -931,7 +931,7 @@ def test_depth_only_for_the_views_the_path_uses(tmp_path):
     assert need is not None and {"view_003", "view_004"} <= set(need) and len(need) < 16
     r = render_path(s, p, tmp_path / "f", n_views=2, cache_dir=tmp_path / "cache", executor=None, progress=False)
     assert r.rendered == 3
-    from vibr.depthcache import scene_with_depth  # the cache render_path filled: the path's views only
+    from vibr.stereo.cache import scene_with_depth
 
     got = scene_with_depth(s, cache_dir=tmp_path / "cache", views=need)
     assert got.meta["depth_source"] == "cache" and got.names == need
@@ -948,7 +948,7 @@ def test_orient_keys_property():
     from hypothesis import strategies as st
     from scipy.spatial.transform import Rotation
 
-    from vibr.path import orient_keys
+    from vibr.paths.camera_path import orient_keys
 
     unit = st.lists(st.floats(-1, 1, allow_nan=False), min_size=3, max_size=3).filter(
         lambda v: np.linalg.norm(v) > 0.1)
@@ -992,7 +992,7 @@ def _rms_off(cams, ref):
 
 
 def test_smooth_keys_keeps_a_steady_walk_and_calms_a_shaken_one():
-    from vibr.path import smooth_keys
+    from vibr.paths.camera_path import smooth_keys
 
     steady, shaken = _walk()
     same = smooth_keys(steady, 2.0)
@@ -1017,7 +1017,7 @@ def test_smooth_keys_keeps_a_steady_walk_and_calms_a_shaken_one():
 def test_interpolate_smooth_through_a_shaken_walk():
     """``interpolate(smooth=...)``: the path of a shaken walk is nearer the steady one and
     turns less from frame to frame; 0 leaves the path through the cameras unchanged."""
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
     from vibr.scene import Scene, View
 
     steady, shaken = _walk()
@@ -1065,7 +1065,7 @@ def test_smooth_keys_property():
     from hypothesis import strategies as st
     from scipy.spatial.transform import Rotation
 
-    from vibr.path import smooth_keys
+    from vibr.paths.camera_path import smooth_keys
 
     vec = st.lists(st.floats(-1, 1, allow_nan=False), min_size=3, max_size=3)
     K = Camera.intrinsics(100, 160, 120)
@@ -1095,9 +1095,9 @@ def test_smooth_keys_property():
 def test_render_path_options_and_keywords(tmp_path):
     """render_path's options as a FlyOptions or as keywords over it give the same frames; a
     misspelt option is a TypeError, not a default."""
-    from vibr.flythrough import FlyOptions, render_path
+    from vibr.paths.flythrough import FlyOptions, render_path
     from vibr.io import read_image
-    from vibr.path import interpolate
+    from vibr.paths.camera_path import interpolate
     from vibr.synthetic import make_scene
 
     s = make_scene("grid", n_views=9, width=48, height=40, seed=0)

@@ -162,7 +162,7 @@ def test_fields_of_views_of_two_sizes(threads):
     from vibr.geometry.depth import depth_derivatives
     from vibr.geometry.gradient import grad_image
     from vibr.geometry.warp import warp_view
-    from vibr.io.images import scaled_scene
+    from vibr.geometry.resample import scaled_scene
     from vibr.synthetic import make_scene
 
     sc = make_scene("free", n_views=5, width=48, height=40, seed=1)
@@ -215,7 +215,7 @@ def test_optional_fields_are_computed_only_when_kept():
         np.testing.assert_array_equal(getattr(lean, f), getattr(full, f))
     assert lean.select(lean.view == 0).jac is None
     assert sample_fields("gradient") == () and sample_fields("gradient", psf="footprint") == ("jac",)
-    from vibr.flythrough import FrameContext  # a fly-through's frames keep what their method reads
+    from vibr.paths.flythrough import FrameContext
 
     assert FrameContext(sc, [], "x", params={"psf": "footprint"}).geometry_kw["keep"] == ("jac",)
     assert FrameContext(sc, [], "x", geometry_kw={"keep": ("src_xy",)}).geometry_kw["keep"] == ("src_xy",)

@@ -10,7 +10,9 @@ from vibr.errors import VibrInputError
 from vibr.io import (read_camera_json, read_depth, read_image, read_pfm, write_camera_json, write_depth,
                      write_image, write_pfm)
 from vibr.io.depthfiles import read_colmap_bin, write_colmap_bin
-from vibr.io.images import decode_png16, image_bits, png_bit_depth, quantise16, resize_depth
+from vibr.geometry.resample import quantise16
+from vibr.io.images import decode_png16, image_bits, png_bit_depth
+from vibr.geometry.resample import resize_depth
 
 
 def _depth(h=5, w=7, seed=0):
@@ -169,7 +171,7 @@ def test_camera_json_round_trip_and_errors(tmp_path):
 
 @pytest.mark.parametrize("s", [0.25, 0.3, 0.5])
 def test_resize_image_maps_pixel_centres_like_camera_scaled(s):
-    from vibr.io.images import resize_image
+    from vibr.geometry.resample import resize_image
 
     H, W = 64, 128
     y, x = np.mgrid[0:H, 0:W].astype(np.float32)
@@ -189,7 +191,7 @@ def test_resize_image_maps_pixel_centres_like_camera_scaled(s):
 def test_atomic_output_has_the_usual_file_mode(tmp_path):
     import os
 
-    from vibr.io.atomic import atomic_path
+    from vibr._runtime.atomic import atomic_path
 
     umask = os.umask(0o022)
     try:

@@ -11,7 +11,7 @@ import pytest
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
 from vibr.io import load_scene, save_scene
-from vibr.io.images import quantise16
+from vibr.geometry.resample import quantise16
 from vibr.scene import Scene, View
 
 
@@ -151,7 +151,7 @@ def test_transforms_rotation_with_a_uniform_scale(tmp_path):
     with pytest.raises(VibrInputError, match="nor one with a uniform scale"):
         load_scene(tmp_path / "s")
     # a camera path's camera_to_world (vibr render --path) reads the same way
-    from vibr.path import camera_from_c2w_opengl
+    from vibr.paths.camera_path import camera_from_c2w_opengl
 
     c2w = np.array(json.loads((tmp_path / "s" / "transforms.json").read_text())["frames"][1]["transform_matrix"])
     a = camera_from_c2w_opengl(c2w, 50.0, 32, 24)

@@ -1,4 +1,4 @@
-"""vibr's glibc malloc settings (vibr._malloc): large blocks come from the heap, and the
+"""vibr's glibc malloc settings (vibr._runtime.malloc): large blocks come from the heap, and the
 opt-outs leave glibc's defaults. Each case runs in a fresh interpreter (process-global)."""
 
 import os
@@ -15,7 +15,7 @@ pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ve
 _MALLINFO = r"""
 import ctypes, json, threading
 import numpy as np
-from vibr._malloc import tune_malloc
+from vibr._runtime.malloc import tune_malloc
 
 class MI(ctypes.Structure):
     _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd",

@@ -68,7 +68,7 @@ def test_masked_pixels_hide_nothing(grid):
 
 def test_held_out_view_is_measured_on_its_mask(grid):
     """The red block in the held-out photograph is not an error of the render."""
-    from vibr.evaluate import Setting, evaluate
+    from vibr.eval.protocol import Setting, evaluate
 
     for masked, expect in ((True, lambda p: p > 35), (False, lambda p: p < 20)):
         sc = _with_intruder(grid, "view_004", masked=masked)
@@ -90,7 +90,7 @@ def test_masks_round_trip_through_transforms_json(grid, tmp_path):
     half = load_scene(tmp_path / "s", scale=0.5)["view_003"].mask
     assert half.shape == (36, 48) and not half[5:25, 10:30].any() and half[30:, :].all()
     # a resized pixel over any masked pixel is masked: no masked colour leaks in
-    from vibr.io.images import resize_mask
+    from vibr.geometry.resample import resize_mask
 
     m = np.ones((72, 96), bool)
     m[11, 21] = False
@@ -124,7 +124,7 @@ def test_point_cloud_leaves_masked_pixels_out(grid):
 def test_a_fly_through_frame_is_not_reused_across_masks(grid):
     """A resumed fly-through reuses a frame only when its key matches: a mask added to a
     source photograph changes every frame."""
-    from vibr.flythrough import FrameContext, job_key
+    from vibr.paths.flythrough import FrameContext, job_key
 
     def key(scene):
         return job_key(FrameContext(sources=scene, cameras=[grid["view_004"].camera], frames_dir=None))

@@ -1,4 +1,4 @@
-"""Photographs turned on the spot (:mod:`vibr.pan_calibration`): the rotation-only model's
+"""Photographs turned on the spot (:mod:`vibr.calib.pan`): the rotation-only model's
 Jacobian, its fit, the starting values it is fitted from, the tracks, the choice against
 COLMAP's mapper, and ``vibr calibrate`` on a video panned from one place."""
 
@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 pycolmap = pytest.importorskip("pycolmap")
 
-import vibr.pan_calibration as pc  # noqa: E402
+import vibr.calib.pan as pc  # noqa: E402
 
 W, H, F = 320, 240, 300.0
 
@@ -246,7 +246,7 @@ def test_pan_yes_and_no_are_obeyed(tmp_path):
 def test_a_failed_fit_leaves_the_mapper_to_it(tmp_path, monkeypatch):
     """A numerical failure of the one-centre fit is a warning, not the end of the
     calibration: COLMAP's mapper calibrates the walk as before."""
-    import vibr.calibrate as cal
+    import vibr.calib.colmap as cal
     import vibr.synthetic as syn
     from _checks import messages_logged
 
@@ -259,7 +259,7 @@ def test_a_failed_fit_leaves_the_mapper_to_it(tmp_path, monkeypatch):
     truth = syn.make_scene("arc", n_views=12, width=W, height=H, seed=0)
     video = tmp_path / "walk.mp4"
     write_video(video, [v.image for v in truth.views], fps=8, crf=12)
-    with messages_logged("vibr.calibrate") as said:
+    with messages_logged("vibr.calib.colmap") as said:
         scene, _ = cal.calibrate_scene(video, frames=6)
     assert len(scene) == 6 and scene.meta["calibration"]["turned_on_the_spot"] is False
     assert any("fit of one centre for every photo failed (Singular matrix)" in m for m in said)

@@ -124,7 +124,7 @@ def test_negative_view_index_is_an_error():
 def test_render_memory_refused_before_allocating(monkeypatch):
     from vibr.render import render
     from vibr.synthetic import make_scene
-    from vibr.validate import render_memory
+    from vibr.render.checks import render_memory
 
     s = make_scene("grid", n_views=4, width=32, height=32, seed=0)
     c = s[0].camera
@@ -237,7 +237,7 @@ def test_depth_killed_midway_resumes(tmp_path, capsys, monkeypatch):
     others, reads back nothing damaged, and writes the same maps as an uninterrupted run."""
     import vibr.stereo.api as sapi
     from vibr.cli import main
-    from vibr.io.checkpoint import resume_folder
+    from vibr._runtime.checkpoint import resume_folder
     from vibr.synthetic import make_scene
 
     s = make_scene("free", n_views=4, width=40, height=32, seed=2)
@@ -271,12 +271,12 @@ def test_depth_killed_midway_resumes(tmp_path, capsys, monkeypatch):
 
 
 def test_depth_cache_killed_midway_resumes(tmp_path, monkeypatch):
-    """The depth a fly-through, eval or the viewer estimates (vibr.depthcache) resumes as
+    """The depth a fly-through, eval or the viewer estimates (vibr.stereo.cache) resumes as
     `vibr depth` does: killed in its second view, the rerun keeps the first, writes the same
     maps as an uninterrupted run, and removes its checkpoint folder once the cache is written."""
     import vibr.stereo.api as sapi
-    from vibr.depthcache import scene_with_depth
-    from vibr.io.checkpoint import resume_folder
+    from vibr.stereo.cache import scene_with_depth
+    from vibr._runtime.checkpoint import resume_folder
     from vibr.scene import Scene
     from vibr.synthetic import make_scene
 
@@ -324,7 +324,7 @@ def test_eval_and_render_estimate_depth_once_through_the_cache(tmp_path, capsys,
     code fingerprint) does not take the maps."""
     import json
 
-    import vibr.depthcache as dc
+    import vibr.stereo.cache as dc
     from vibr.cli import main
     from vibr.synthetic import make_scene
 
@@ -360,7 +360,7 @@ def test_a_cache_folder_that_cannot_be_written(tmp_path, capsys):
     """--cache-dir that is, or lies under, a file: one line, exit 2, before any work. A
     checkpoint folder that cannot be made (a read-only cache) only costs the resumption."""
     from vibr.cli import main
-    from vibr.io.checkpoint import ViewCheckpoint
+    from vibr._runtime.checkpoint import ViewCheckpoint
     from vibr.synthetic import make_scene
 
     s = make_scene("free", n_views=3, width=40, height=32, seed=2)
@@ -385,7 +385,7 @@ def test_the_cache_keeps_under_its_bound_least_recently_used_first(tmp_path, mon
     as a use; the entry just written is never removed; other files are left alone."""
     import os
 
-    import vibr.depthcache as dc
+    import vibr.stereo.cache as dc
 
     names = ["depth-a.npz", "depth-b.npz", "scene-c.pkl", "depth-d.npz"]
     for k, n in enumerate(names):

@@ -134,7 +134,7 @@ def test_atomic_path_registers_its_temporary_file_before_creating_it(tmp_path, m
     import contextlib
     import os
 
-    import vibr.io.atomic as atomic
+    import vibr._runtime.atomic as atomic
 
     seen = []
     real_close = os.close

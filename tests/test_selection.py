@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vibr import Camera, Scene, View
-from vibr.selection import rank_views, select_views
+from vibr.geometry.selection import rank_views, select_views
 
 
 def _grid_scene(n=5, z=10.0, size=32):
@@ -113,7 +113,7 @@ def test_prepare_estimates_depth_for_the_best_views_only(monkeypatch):
     import vibr.stereo
     from vibr.errors import VibrInputError
     from vibr.pipeline import ALL_VIEWS, ESTIMATED_SOURCES, prepare
-    from vibr.selection import select_views
+    from vibr.geometry.selection import select_views
 
     estimated = []
     monkeypatch.setattr(vibr.stereo, "estimate_depth", lambda src, **kw: estimated.append(len(src)) or src)

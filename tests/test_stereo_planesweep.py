@@ -122,7 +122,7 @@ def test_select_neighbours_nearest_first():
 
 
 def test_frustum_coverage_closed_form():
-    from vibr.stereo.api import frustum_coverage
+    from vibr.stereo.partners import frustum_coverage
 
     # a camera translated by b along x with the same K and R sees the reference pixel x
     # at depth z at x − f b / z: the sample is seen iff that lands inside the image
@@ -145,7 +145,7 @@ def test_frustum_coverage_closed_form():
 
 
 def test_complete_coverage_adds_the_view_that_sees_the_missing_side():
-    from vibr.stereo.api import complete_coverage, frustum_coverage
+    from vibr.stereo.partners import complete_coverage, frustum_coverage
 
     K = Camera.intrinsics(100.0, 64, 48)
     xs = (0.0, 1.0, 1.5, -2.0)  # reference, nearest, second nearest (same side), far other side
@@ -222,7 +222,7 @@ def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):
     range must contain the depth where the ring's axes meet."""
     from vibr.camera import axes_meeting_point
     from vibr.io import load_scene
-    from vibr.stereo.api import default_depth_range, select_neighbours
+    from vibr.stereo.partners import default_depth_range, select_neighbours
 
     sc = load_scene(temple_dir, scale=0.5)
     cams = [v.camera for v in sc.views]
@@ -366,7 +366,7 @@ def test_refine_planes_slanted_plane_within_1pct():
 def test_upsample_sweep_is_exact_for_an_affine_inverse_depth():
     """Bilinear upsampling reproduces an inverse depth affine in the low-resolution pixel,
     at the resized pixel positions x_lo = s (x + ½) − ½ (interior; the border is clamped)."""
-    from vibr.stereo.api import upsample_sweep
+    from vibr.stereo.partners import upsample_sweep
     from vibr.stereo.planesweep import SweepResult
 
     ref, _ = _cams()
@@ -398,7 +398,7 @@ def test_half_size_sweep_then_refinement_within_1pct(coarse_iter, lean):
     pixels within 1 %; also with the leaner full-size random search of the MVS method
     (no joint perturbation) and of the light-field method (the depth alone), each with
     fewer cost evaluations."""
-    from vibr.stereo.api import _resized, upsample_sweep
+    from vibr.stereo.partners import _resized, upsample_sweep
     from vibr.stereo.planesweep import refine_planes
 
     ref, cams, views, _, n, d = _slanted_setup(8)
@@ -869,7 +869,7 @@ def test_near_plane_closed_form_and_any_unit_of_length():
     cameras: there the estimate kept 0.4 % of the pixels (41 % in metres). The same scene in
     any unit of length now gives the same maps, scaled."""
     from vibr.camera import Camera
-    from vibr.stereo.api import _near_inverse_depth
+    from vibr.stereo.partners import _near_inverse_depth
     from vibr.synthetic import make_scene
 
     K = Camera.intrinsics(100.0, 64, 48)

@@ -183,9 +183,9 @@ def test_flythrough_frame_at_half_size_matches_render(grid, tmp_path):
     """A fly-through frame at half the photographs' size is supersampled as `vibr render`
     renders it: the same image within a grey level (the frame is 8-bit); the frame's record
     says so, and the job's key (resumed frames) depends on the factor."""
-    from vibr.flythrough import FrameContext, job_key, render_path
+    from vibr.paths.flythrough import FrameContext, job_key, render_path
     from vibr.io import read_image
-    from vibr.path import CameraPath
+    from vibr.paths.camera_path import CameraPath
     from vibr.render import render
 
     src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
@@ -231,7 +231,7 @@ def test_cli_path_says_when_frames_are_supersampled(tmp_path, capsys):
     one; at the photographs' size it says nothing."""
     from vibr.cli import main
     from vibr.io import load_scene, save_scene
-    from vibr.path import write_camera_path
+    from vibr.paths.camera_path import write_camera_path
     from vibr.synthetic import make_scene
 
     save_scene(make_scene("grid", n_views=9, width=64, height=64, seed=1), tmp_path / "s")
@@ -375,7 +375,7 @@ def test_spline_enlargement_equals_scipys_spline():
     away from the border (where the two extend the image differently)."""
     from scipy import ndimage as ndi
 
-    from vibr.io.images import resize_image
+    from vibr.geometry.resample import resize_image
 
     rng = np.random.default_rng(0)
     img = ndi.gaussian_filter(rng.random((30, 41, 3)), (1.5, 1.5, 0)).astype(np.float32)

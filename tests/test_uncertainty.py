@@ -171,7 +171,7 @@ def test_sigma_scale_leaves_the_holes_out():
     third of this map, also stored as float16) would otherwise make it 0–100 and put the
     rest, 0–10, in the bottom tenth of the colours."""
     from vibr.render.uncertainty import hole_sigma
-    from vibr.uncertainty_figures import sigma_scale
+    from vibr.eval.sigma_figures import sigma_scale
 
     m = np.linspace(0.0, 9.9, 3000)
     m[:1000] = np.float16(hole_sigma())

@@ -150,7 +150,7 @@ def test_fallback_mask_follows_its_depth_map():
     assert v.replace(sigma_z=0.1).fallback is v.fallback
     assert v.replace(depth=sc.views[0].depth).fallback is None
     # the viewer's reduced sources keep it, resized as their depth is
-    from vibr.io.images import resize_depth, scaled_scene
+    from vibr.geometry.resample import resize_depth, scaled_scene
 
     half = scaled_scene(sc.replace(views=[v]), 0.5).views[0]
     np.testing.assert_array_equal(half.fallback, resize_depth(v.fallback, half.shape))

@@ -167,7 +167,7 @@ def test_georeferenced_scene_is_drawn_relative_to_its_centre(tiny_scene):
 
 
 def test_exported_path_renders_with_vibr_render(tiny_scene, tmp_path):
-    import vibr.path as path_mod
+    import vibr.paths.camera_path as path_mod
     from vibr.io import save_scene
 
     scene_dir = tmp_path / "scene"
@@ -274,10 +274,10 @@ def test_view_cli_serves_and_stops(tiny_scene, tmp_path, host):
             assert resp.status == 200 and b"<html" in resp.read().lower()
         p.send_signal(signal.SIGINT)
         assert p.wait(timeout=20) == 0
-        from vibr._threads import cores
+        from vibr._runtime.threads import cores
 
         err = p.stderr.read()
-        assert f"renders on {2 * cores()} numba threads" in err  # vibr._threads
+        assert f"renders on {2 * cores()} numba threads" in err  # vibr._runtime.threads
         assert ("listening on 0.0.0.0: anyone who reaches this machine" in err) == (host == "0.0.0.0")
     finally:
         if p.poll() is None:
@@ -425,7 +425,7 @@ def test_point_cloud_shown_while_the_camera_moves(tiny_scene, monkeypatch, mode)
 # ------------------------------------------------------------------ render threads
 _THREADS_PROBE = r"""
 import json, os, threading
-from vibr._threads import cores, oversubscribe_render_threads
+from vibr._runtime.threads import cores, oversubscribe_render_threads
 if os.environ.get("PROBE_LAUNCH_FIRST"):
     import numba  # imported before the call: too late
 n = oversubscribe_render_threads()
@@ -460,7 +460,7 @@ def _threads_probe(**env_changes):
 
 
 def test_viewer_process_renders_on_two_threads_per_core():
-    """``vibr view``'s setting (vibr._threads): numba starts two threads per core that
+    """``vibr view``'s setting (vibr._runtime.threads): numba starts two threads per core that
     wait passively, a render on the viewer's worker thread runs on all of them, and its
     image is the one-thread render's, bit for bit."""
     d = _threads_probe()
@@ -541,7 +541,7 @@ def test_the_viewer_shows_where_the_render_can_be_trusted(tiny_scene, monkeypatc
     from types import SimpleNamespace
 
     from vibr.render import render
-    from vibr.uncertainty_figures import colourise, sigma_scale
+    from vibr.eval.sigma_figures import colourise, sigma_scale
     from vibr.viewer import app
     from vibr.viewer.renderer import ViewRenderer
     from vibr.viewer.worker import Request
@@ -578,7 +578,7 @@ def test_a_click_on_a_rolled_photograph_moves_there_upright(data_dir):
     from types import SimpleNamespace
 
     from vibr.io import load_scene
-    from vibr.path import scene_up
+    from vibr.paths.camera_path import scene_up
     from vibr.viewer.convert import camera_from_viser
 
     scene = load_scene(data_dir / "middlebury_templeSparseRing", views=[0, 3, 6, 9, 12, 14])

@@ -9,6 +9,8 @@ True (:func:`vibr.render.render`) ends with it.
 
 from __future__ import annotations
 
+import math
+import numbers
 import os
 
 
@@ -50,3 +52,29 @@ def require_file(path: str | os.PathLike) -> str:
     if not os.path.isfile(p):
         raise VibrInputError("not a regular file", p)
     return p
+
+
+# ------------------------------------------------------------------ value checks
+def check_real(name: str, v, *, lo: float | None = None, lo_open: bool = False, hi: float | None = None,
+          none_ok: bool = False) -> None:
+    if v is None and none_ok:
+        return
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        raise VibrInputError(f"{name} must be a number, got {v!r}")
+    x = float(v)
+    if not math.isfinite(x):
+        raise VibrInputError(f"{name} must be finite, got {x}")
+    if lo is not None and (x <= lo if lo_open else x < lo):
+        raise VibrInputError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {x:g}")
+    if hi is not None and x > hi:
+        raise VibrInputError(f"{name} must be <= {hi:g}, got {x:g}")
+
+
+def check_int(name: str, v, *, lo: int, none_ok: bool = False) -> None:
+    if v is None and none_ok:
+        return
+    if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(float(v)) or int(v) != v:
+        raise VibrInputError(f"{name} must be an integer, got {v!r}")
+    if v < lo:
+        raise VibrInputError(f"{name} must be >= {lo}, got {int(v)}")
+

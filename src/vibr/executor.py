@@ -25,7 +25,7 @@ The task contract (what makes the engines interchangeable):
   result, the *context* (typically the loaded scene), is ``fn``'s first argument. On Dask
   the setup arguments are scattered to every worker once and the context is cached in the
   worker process, so a task ships only its own small description.
-* A task writes its own result files, atomically (:func:`vibr.io.atomic.atomic_path`), and
+* A task writes its own result files, atomically (:func:`vibr._runtime.atomic.atomic_path`), and
   returns a small summary (a dict of numbers, a file name): a lost worker then loses no
   finished result, and the driver never holds the images.
 * A task whose output already exists (and was made with the same settings) returns at once:
@@ -57,7 +57,7 @@ import time
 import uuid
 from typing import Any, Callable, Sequence
 
-from ._malloc import tune_malloc
+from ._runtime.malloc import tune_malloc
 from .errors import VibrInputError
 from .progress import progress
 
@@ -109,11 +109,11 @@ def auto_workers(n_tasks: int, task_pixels: int, worker_bytes: int, *, cores: in
         Target pixels of one task (a frame's width × height).
     worker_bytes : int
         Peak memory of one worker: its context plus one render
-        (:func:`vibr.validate.render_memory`).
+        (:func:`vibr.render.checks.render_memory`).
     cores, memory : int, optional
-        Default :func:`available_cores` and :func:`vibr.validate.available_memory`.
+        Default :func:`available_cores` and :func:`vibr._runtime.memory.available_memory`.
     """
-    from .validate import available_memory
+    from ._runtime.memory import available_memory
 
     cores = available_cores() if cores is None else int(cores)
     if cores < 2 or task_pixels < AUTO_MIN_TASK_PIXELS or multiprocessing.current_process().daemon:
@@ -288,10 +288,10 @@ _PROCESS_CONTEXT: Any = None
 
 def _on_sigterm(signum, frame) -> None:
     """A pool whose worker died terminates the others (SIGTERM): their half-written outputs
-    (:func:`vibr.io.atomic.atomic_path`) are removed before the process ends. Through
+    (:func:`vibr._runtime.atomic.atomic_path`) are removed before the process ends. Through
     ``os._exit``: an exception raised here would be caught as the running task's error and
     leave the process alive, for the pool to wait on."""
-    from .io.atomic import remove_partial
+    from ._runtime.atomic import remove_partial
 
     remove_partial()
     os._exit(128 + signum)
@@ -329,7 +329,7 @@ def _pickled(obj):
 
 def _prepare_worker() -> None:
     """No progress bars or status lines from workers (warnings only): the driver's bar counts
-    their tasks. The allocator as in the ``vibr`` command (:mod:`vibr._malloc`)."""
+    their tasks. The allocator as in the ``vibr`` command (:mod:`vibr._runtime.malloc`)."""
     logging.getLogger("vibr").setLevel(logging.WARNING)
     tune_malloc()
 

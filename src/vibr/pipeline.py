@@ -4,7 +4,7 @@ This is the one preparation step shared by ``vibr render``, ``vibr eval`` and th
 (for convenience :func:`vibr.render.render` holds out the target and transfers depth itself,
 as ``depth="gt"`` does, when given sources that are not ready): pick the
 target (a held-out view or a bare camera), pick the source views (all others, a given list,
-or the k best by :mod:`vibr.selection`), and give every source a depth map according to the
+or the k best by :mod:`vibr.geometry.selection`), and give every source a depth map according to the
 chosen geometry:
 
 ``gt``
@@ -42,6 +42,7 @@ chosen geometry:
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 from pathlib import Path
@@ -50,13 +51,17 @@ from typing import Sequence
 from .camera import Camera
 from .errors import VibrInputError
 from .scene import Scene, View
+from ._runtime.atomic import atomic_path
+from ._runtime.checkpoint import code_fingerprint
+from .io import load_scene
+from .stereo.cache import CACHE_VERSION, default_cache_dir, mark_used, prune_cache
 
 __all__ = ["ALL_VIEWS", "DEPTH_MODES", "ESTIMATED_SOURCES", "PLANAR_SOURCES", "prepare"]
 
 logger = logging.getLogger(__name__)
 
 #: When depth is estimated and neither ``sources`` nor ``n_views`` is given, a target is
-#: rendered from this many best views (:mod:`vibr.selection`): each source costs one depth
+#: rendered from this many best views (:mod:`vibr.geometry.selection`): each source costs one depth
 #: estimate, and a 9×9 light field's 80 cost ten minutes and gain nothing over the 16 best
 #: (docs/PERFORMANCE.md, "Many views and estimated depth"). Known depth keeps every view.
 ESTIMATED_SOURCES = 16
@@ -104,7 +109,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     depth_files : path, optional
         Folder of depth files, for ``depth="files"``.
     n_views : int or "all", optional
-        Keep only this many source views, the best for the target (:mod:`vibr.selection`)
+        Keep only this many source views, the best for the target (:mod:`vibr.geometry.selection`)
         among ``sources`` when given (until 2026-11-26 a list of sources ignored it).
         Default: every view, but the :data:`ESTIMATED_SOURCES` best when the depth is
         estimated and the :data:`PLANAR_SOURCES` best with the planar proxy, when
@@ -118,7 +123,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         pixels of the others (:func:`vibr.geometry.proxy.flat_pixels`), "always" (True) at
         every unknown pixel, "never" (False).
     cache_dir : path, None or False
-        Estimated depth through the on-disk cache of :func:`vibr.depthcache.estimated_depth`
+        Estimated depth through the on-disk cache of :func:`vibr.stereo.cache.estimated_depth`
         (keyed by the sources, their images and cameras, ``estimate_kw`` and vibr's code):
         a folder, None for the default one, False (default) for none.
 
@@ -140,7 +145,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     if depth == "gt":
         src = _gt_depth(scene, src, ti)
     elif depth == "estimated":
-        from .depthcache import estimated_depth
+        from .stereo.cache import estimated_depth
 
         if len(src) < 2:  # the target takes no part in its sources' depth
             raise VibrInputError("depth is estimated from the sources alone and one source is too few: "
@@ -197,8 +202,8 @@ def missing_view_camera(scene: Scene, name) -> Camera | None:
 
 def _hold_out(scene: Scene, target, sources, n_views):
     """(sources, target View or Camera, target index or None): the target held out, the
-    sources listed or the ``n_views`` best (:func:`vibr.selection.select_views`)."""
-    from .selection import select_views
+    sources listed or the ``n_views`` best (:func:`vibr.geometry.selection.select_views`)."""
+    from .geometry.selection import select_views
 
     absent = missing_view_camera(scene, target)
     if absent is not None:
@@ -273,4 +278,68 @@ def _files_depth(src: Scene, depth_files) -> Scene:
         logger.info("depth files of another size than their views (--scale, or depth computed at another "
                     "resolution) resized to them, nearest neighbour: %s", ", ".join(resized))
     return src.replace(views=views)
+
+
+# ------------------------------------------------------------------ the loaded-scene cache
+def _folder_fingerprint(root: Path, h, max_files: int = 20000) -> None:
+    """Feed the names, sizes and modification times of the files under ``root`` (hidden
+    ones and the cache's own files skipped) into hash ``h``."""
+    n = 0
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+        for f in sorted(filenames):
+            if f.startswith("."):
+                continue
+            st = os.stat(os.path.join(dirpath, f))
+            h.update(f"{os.path.relpath(os.path.join(dirpath, f), root)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
+            n += 1
+            if n > max_files:
+                raise OSError("too many files to fingerprint")
+
+
+def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
+    """:func:`vibr.io.load_scene` through an on-disk cache of the loaded (resized) scene.
+
+    Decoding and resizing full-size photographs (fountain: 11 JPEGs of 3072×2048) takes
+    seconds; a second fly-through of the same scene at the same scale loads the resized
+    views instead (``scene-KEY.pkl``, KEY a SHA-256 of the folder, the names, sizes and
+    modification times of its files, the scale and vibr's code). The file is a pickle written by vibr
+    in the user's own cache folder (:func:`default_cache_dir`); ``cache_dir=False``
+    disables it.
+    """
+    import pickle
+
+    root = Path(path)
+    if cache_dir is False:
+        return load_scene(path, scale=scale)
+    h = hashlib.sha256()
+    # vibr's code in the key: a loader that changed (undistortion, masks) loads afresh
+    h.update(f"vibr-scene-cache v{CACHE_VERSION} code {code_fingerprint()}|{os.path.abspath(root)}|"
+             f"{float(scale)!r}|".encode())
+    try:
+        _folder_fingerprint(root if root.is_dir() else root.parent, h)
+    except OSError:
+        return load_scene(path, scale=scale)
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    cpath = folder / f"scene-{h.hexdigest()[:32]}.pkl"
+    if cpath.is_file():
+        try:
+            with open(cpath, "rb") as f:
+                scene = pickle.load(f)
+            if isinstance(scene, Scene):
+                mark_used(cpath)
+                logger.info("scene loaded from the cache %s", cpath)
+                return scene
+        except Exception as exc:  # noqa: BLE001 - a bad cache entry is only a slower load
+            logger.warning("ignoring unreadable scene cache %s (%s)", cpath, exc)
+    scene = load_scene(path, scale=scale)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with atomic_path(cpath) as tmp:
+            with open(tmp, "wb") as f:
+                pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
+        prune_cache(folder, keep=[cpath])
+    except OSError as exc:
+        logger.warning("could not write the scene cache %s (%s)", cpath, getattr(exc, "problem", exc))
+    return scene
 

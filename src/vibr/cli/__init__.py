@@ -17,8 +17,8 @@ import sys
 import threading
 
 from .. import __version__
-from .._malloc import tune_malloc
-from .._threads import oversubscribe_render_threads
+from .._runtime.malloc import tune_malloc
+from .._runtime.threads import oversubscribe_render_threads
 from ..errors import VibrInputError
 from ..progress import configure_logging
 
@@ -152,7 +152,7 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"vibr {args.command}: interrupted", file=sys.stderr)
         return 130
-    except OSError as exc:  # a write outside vibr.io.atomic: the machine's state, not a bug
+    except OSError as exc:  # a write outside vibr._runtime.atomic: the machine's state, not a bug
         if exc.errno not in _MACHINE_ERRNOS:
             raise
         where = f"{exc.filename}: " if exc.filename else ""

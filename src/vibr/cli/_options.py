@@ -7,7 +7,7 @@ import argparse
 
 from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES, PLANAR_SOURCES
 from ..metrics import METRIC_BORDER
-from ..autotune import AUTO, GAMMA_GRID, LAM_GRID
+from ..render.autotune import AUTO, GAMMA_GRID, LAM_GRID
 from ..render.methods import DEFAULTS, METHODS, PRESETS, PSFS, REGISTRY
 
 #: How ``vibr render`` and ``vibr eval`` measure (one rule: vibr.metrics.view_metrics).
@@ -28,7 +28,7 @@ def method_default(key) -> str:
 
 
 def _weight(text: str):
-    """A non-negative number, or "auto" (:mod:`vibr.autotune`)."""
+    """A non-negative number, or "auto" (:mod:`vibr.render.autotune`)."""
     if text.strip().lower() == AUTO:
         return AUTO
     try:
@@ -176,7 +176,7 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
 
 def add_cache_options(p: argparse.ArgumentParser) -> None:
     """``--cache-dir`` and ``--no-cache``: the on-disk cache of estimated depth and resized
-    views (vibr.depthcache), one for every command that uses it."""
+    views (vibr.stereo.cache), one for every command that uses it."""
     p.add_argument("--cache-dir", metavar="DIR",
                    help="cache of estimated depth and of resized views: a rerun on the same sources loads "
                         "them instead of estimating again (default $VIBR_CACHE_DIR or ~/.cache/vibr)")

@@ -6,10 +6,10 @@ from __future__ import annotations
 import argparse
 import shlex
 
-from ..calibrate import CAMERA_MODELS, MATCHERS
+from ..calib.colmap import CAMERA_MODELS, MATCHERS
 from ..errors import VibrInputError
 from ..io.video import VIDEO_INPUTS, is_video_input
-from ..video_frames import DEFAULT_FRAMES
+from ..calib.video_frames import DEFAULT_FRAMES
 from . import add_quiet, count
 
 _EPILOG = """\
@@ -76,7 +76,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..calibrate import calibrate
+    from ..calib.colmap import calibrate
     from ..io.outputs import check_output
     from . import verbosity
 

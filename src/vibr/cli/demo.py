@@ -95,8 +95,8 @@ def _demo_video(scene, args) -> None:
     import tempfile
 
     from ..errors import VibrInputError
-    from ..flythrough import render_path
-    from ..path import orbit
+    from ..paths.flythrough import render_path
+    from ..paths.camera_path import orbit
 
     from ..io.video import VIDEO_FORMATS, is_video
 

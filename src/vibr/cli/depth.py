@@ -107,9 +107,9 @@ def run(args) -> int:
     import shutil
 
     from ..io import load_scene, save_scene
-    from ..io.checkpoint import resume_folder
+    from .._runtime.checkpoint import resume_folder
     from ..stereo import estimate_depth
-    from ..validate import check_depth_params
+    from ..stereo.checks import check_depth_params
 
     opt = _depth_options(args)
     check_depth_params(scale=args.depth_scale, depth_range=args.depth_range, **opt)  # before loading the scene

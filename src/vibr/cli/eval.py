@@ -7,7 +7,7 @@ import logging
 
 from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS
-from ..evaluate import GAMMAS
+from ..eval.protocol import GAMMAS
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
@@ -131,7 +131,7 @@ def _refuse_unused_estimate_options(args, scene, estimate_kw: dict) -> None:
 
 
 def run(args) -> int:
-    from ..evaluate import format_table, run_evaluation, write_report
+    from ..eval.protocol import format_table, run_evaluation, write_report
     from ..io import load_scene
     from ..io.outputs import check_not_scene_file
 
@@ -163,10 +163,10 @@ def _checked_request(args):
     """``(settings, estimate_kw, executor)``, every option checked before the scene is
     loaded: the outputs, the depth options, each setting's parameters, the scheduler."""
     from ..errors import VibrInputError
-    from ..evaluate import settings_grid
+    from ..eval.protocol import settings_grid
     from ..io.outputs import check_output
     from ..render.methods import method_params
-    from ..validate import check_depth_params
+    from ..stereo.checks import check_depth_params
 
     check_output(args.json, "file", what="--json")
     if args.figures is not None:
@@ -189,11 +189,11 @@ def _checked_request(args):
 
 def _write_figures(args, ev) -> dict:
     """The evaluation's figures in --figures (and the sparsification plot with --uncertainty)."""
-    from ..figures import write_evaluation_figures
+    from ..eval.figures import write_evaluation_figures
 
     figures = write_evaluation_figures(ev, args.figures)
     if args.uncertainty:
-        from ..uncertainty_figures import write_sparsification_figure
+        from ..eval.sigma_figures import write_sparsification_figure
 
         figures["sparsification"] = write_sparsification_figure(args.figures, ev.report["results"],
                                                                 prefix=ev.prefix)
@@ -201,11 +201,11 @@ def _write_figures(args, ev) -> dict:
 
 
 def _run_all(args, scene, settings, executor, estimate_kw) -> int:
-    """``--target all`` / a comma list: one leave-one-out task per view (vibr.evaluate_all)."""
+    """``--target all`` / a comma list: one leave-one-out task per view (vibr.eval.leave_one_out)."""
     from pathlib import Path
 
-    from ..evaluate import write_report
-    from ..evaluate_all import evaluate_all, format_all_table, resolve_targets
+    from ..eval.protocol import write_report
+    from ..eval.leave_one_out import evaluate_all, format_all_table, resolve_targets
 
     targets = resolve_targets(scene, args.target)
     # every target has sources of its own, each estimate is used once, and the per-view

@@ -111,12 +111,12 @@ def _calibration_lines(scene) -> list:
 
 
 def _pose_lines(scene) -> list:
-    """Photographs taken rolled (the quarter turns a path gives them, vibr.path.orient_keys)
+    """Photographs taken rolled (the quarter turns a path gives them, vibr.paths.camera_path.orient_keys)
     and views with the same pose as another (a path leaves them out)."""
     import numpy as np
 
     from ..errors import VibrInputError
-    from ..path import orient_keys, scene_up, turns_text
+    from ..paths.camera_path import orient_keys, scene_up, turns_text
 
     cams = [v.camera for v in scene.views]
     if len(cams) < 2:

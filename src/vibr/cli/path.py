@@ -41,7 +41,7 @@ def _size(s):
 
 
 def register(sub) -> None:
-    from ..path import PATH_KINDS, ROLL_MODES
+    from ..paths.camera_path import PATH_KINDS, ROLL_MODES
 
     p = sub.add_parser("path", help="make a camera path (nerfstudio camera_path.json) for a fly-through",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -76,9 +76,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from .. import path as P
+    from ..paths import camera_path as P
     from ..errors import VibrInputError
-    from ..depthcache import load_scene_cached
+    from ..pipeline import load_scene_cached
 
     if not args.output.lower().endswith(".json"):
         raise VibrInputError("the camera path file must end in .json", args.output)

@@ -63,7 +63,7 @@ def register(sub) -> None:
 
 
 def _add_path_options(p) -> None:
-    """Fly-through options (``--path``; vibr.flythrough, docs/FLYTHROUGH.md)."""
+    """Fly-through options (``--path``; vibr.paths.flythrough, docs/FLYTHROUGH.md)."""
     g = p.add_argument_group("fly-through (--path)")
     g.add_argument("--path", metavar="PATH.json",
                    help="render every camera of a camera path (nerfstudio camera_path.json, as written by "
@@ -116,7 +116,7 @@ def run(args) -> int:
                  supersample=args.supersample, **render_params(args))  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth or 8)
     if args.uncertainty:
-        from ..uncertainty_figures import write_sigma
+        from ..eval.sigma_figures import write_sigma
 
         write_sigma(args.uncertainty, res.uncertainty)
         print(f"wrote {args.uncertainty}")
@@ -179,12 +179,12 @@ def _path_views(views):
 
 
 def _run_path(args) -> int:
-    """``--path``: a thin layer over :func:`vibr.flythrough.render_path`."""
+    """``--path``: a thin layer over :func:`vibr.paths.flythrough.render_path`."""
     from ..errors import VibrInputError
     from ..io.outputs import check_output
-    from ..depthcache import load_scene_cached
-    from ..flythrough import render_path
-    from ..path import read_camera_path, scene_processing_transform
+    from ..pipeline import load_scene_cached
+    from ..paths.flythrough import render_path
+    from ..paths.camera_path import read_camera_path, scene_processing_transform
 
     out = args.output
     if args.crf is not None and out.lower().endswith(".gif"):

@@ -72,7 +72,7 @@ def _hint_large_views(scene, scale: float) -> None:
 
 def run(args) -> int:
     from ..errors import VibrInputError
-    from ..depthcache import load_scene_cached
+    from ..pipeline import load_scene_cached
     from ..viewer import Viewer, ViewerOptions, ViewSettings, check_port_free, scene_with_depth
 
     if not 0 <= args.port <= 65535:
@@ -102,7 +102,7 @@ def run(args) -> int:
     url = viewer.start()
     import numba
 
-    logger.debug("renders on %d numba threads (vibr._threads)", numba.config.NUMBA_NUM_THREADS)
+    logger.debug("renders on %d numba threads (vibr._runtime.threads)", numba.config.NUMBA_NUM_THREADS)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         logger.warning("listening on %s: anyone who reaches this machine at %s can use the viewer "
                        "(its photographs, and keyframe paths written beside --path-out)", args.host, url)

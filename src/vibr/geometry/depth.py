@@ -264,3 +264,10 @@ def fill_depth_holes(depth, image, *, radius: int = 4, sigma_space: float = 2.0,
         if n == 0 or np.all(np.isfinite(cur)):
             break
     return cur.astype(np.float32), unknown & np.isfinite(cur)
+
+
+#: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
+#: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
+#: estimates; the renderer's geometric weight, docs/METHOD.md §3, scales with it).
+DEFAULT_SIGMA_Z_REL = 0.01
+

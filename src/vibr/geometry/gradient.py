@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .._jit import FASTMATH
+from .._runtime.jit import FASTMATH
 
 __all__ = ["GRAD_SCHEMES", "DEFAULT_GRAD_SCHEME", "grad_image", "grad_image_adj"]
 

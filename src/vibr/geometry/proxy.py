@@ -17,6 +17,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene, View
+from .depth import DEFAULT_SIGMA_Z_REL
 
 __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "FALLBACK_MODES",
            "FALLBACK_MIN_FRACTION", "FALLBACK_FLAT_STD", "FALLBACK_FACTOR",
@@ -260,7 +261,6 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,
     "fraction": f_k}}`` for the views that have such pixels (``f_k`` their fraction).
     """
-    from .sampling import DEFAULT_SIGMA_Z_REL
 
     dsr = DEFAULT_SIGMA_Z_REL if default_sigma_rel is None else float(default_sigma_rel)
     far = {}
@@ -296,7 +296,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
 
 def apply_fallback(sources: Scene, mode="auto") -> Scene:
     """The fallback proxy by mode (:data:`FALLBACK_MODES`; True/False read as "always" /
-    "never"): the one place :func:`vibr.pipeline.prepare`, :func:`vibr.depthcache.scene_with_depth`
+    "never"): the one place :func:`vibr.pipeline.prepare`, :func:`vibr.stereo.cache.scene_with_depth`
     (fly-throughs, the viewer) and the benchmarks decide it."""
     mode = {True: "always", False: "never", None: "auto"}.get(mode, mode)
     if mode not in FALLBACK_MODES:

@@ -26,7 +26,7 @@ from ..camera import Camera
 from ..errors import VibrInputError, check_stop
 from ..scene import Scene, View
 from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_row
-from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
+from .depth import DEFAULT_EDGE_REL, DEFAULT_SIGMA_Z_REL, depth_derivatives, fill_depth_holes
 from .proxy import PROXY_Z_CORR
 from .samples import Samples
 from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
@@ -48,11 +48,6 @@ OPTIONAL_FIELDS = ("jac", "src_xy")
 #: target, or seen slanted.
 GRAD_MODELS = ("translation", "chain")
 DEFAULT_GRAD_MODEL = "translation"
-
-#: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
-#: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
-#: estimates; the renderer's geometric weight, docs/METHOD.md §3, scales with it).
-DEFAULT_SIGMA_Z_REL = 0.01
 
 
 def usable_pixels(mask: np.ndarray) -> np.ndarray:
@@ -261,7 +256,7 @@ def compute_samples(sources: Scene, target, *, options: SampleOptions | None = N
     prepared : dict, optional
         ``view name → (z, z_x, z_y)`` from :func:`prepare_depth` with the same
         ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
-        callers rendering many targets (:mod:`vibr.flythrough`).
+        callers rendering many targets (:mod:`vibr.paths.flythrough`).
     return_zbuffer : bool
         Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``.
     stop : callable, optional

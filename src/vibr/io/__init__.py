@@ -13,21 +13,21 @@ COLMAP                         sparse model (``root/sparse/0``, ``root/sparse`` 
 :func:`save_scene` writes any scene as nerfstudio ``transforms.json`` (+ PNG images, float32
 ``.npy`` depth, sigma_z maps, sparse points), losslessly: loading the result gives the same
 cameras (to 1e-9), images and depth (bit for bit; resized images are stored on the 16-bit
-grid, see :func:`vibr.io.images.quantise16`).
+grid, see :func:`vibr.geometry.resample.quantise16`).
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from ..errors import VibrInputError
+from .entries import select_entries
 from .camera_json import read_camera_json, write_camera_json
 from .depthfiles import read_depth, read_pfm, write_depth, write_pfm
 from .images import is_image_file, read_image, write_image
 from .transforms import save_scene
 
-__all__ = ["load_scene", "save_scene", "detect_format", "read_image", "write_image", "read_depth",
+__all__ = ["load_scene", "select_entries", "save_scene", "detect_format", "read_image", "write_image", "read_depth",
            "write_depth", "read_pfm", "write_pfm", "read_camera_json", "write_camera_json", "FORMATS"]
 
 FORMATS = ("hci", "strecha", "middlebury", "transforms", "colmap")
@@ -141,34 +141,3 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
     return load_strecha(p, scale=scale, views=views)
 
 
-def select_entries(entries: list[dict], views, root=None) -> list[dict]:
-    """Pick the loader entries named by ``views`` (positions or names/stems), in that order."""
-    if views is None:
-        return entries
-    if isinstance(views, (str, int)):
-        views = [views]
-    names = [e["name"] for e in entries]
-    out, seen = [], set()
-    for k in views:
-        if isinstance(k, int) or (isinstance(k, str) and k.strip().lstrip("-").isdigit() and k.strip() not in names):
-            i = int(k)
-            if not 0 <= i < len(entries):  # -1 is an error, not the last view
-                raise VibrInputError(f"no view {i}: the scene has {len(entries)} views "
-                                     f"(indices 0 to {len(entries) - 1})", root)
-        else:
-            k = str(k).strip()
-            stem = os.path.splitext(k)[0]
-            if k in names:
-                i = names.index(k)
-            elif stem in names:
-                i = names.index(stem)
-            else:
-                raise VibrInputError(
-                    f"no view named {k!r} (views: {', '.join(names[:6])}{', ...' if len(names) > 6 else ''})", root)
-        if i in seen:
-            raise VibrInputError(f"view {names[i]} is listed twice", root)
-        seen.add(i)
-        out.append(entries[i])
-    if not out:
-        raise VibrInputError("no views selected", root)
-    return out

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import VibrInputError, require_file
-from .atomic import atomic_path
+from .._runtime.atomic import atomic_path
 
 #: Largest |R Rᵀ − I| accepted from a file (text files round to ~6 digits); such matrices
 #: are snapped to the nearest rotation. Anything worse is reported as not a rotation.

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._pycolmap import import_pycolmap
+from .._runtime.pycolmap import import_pycolmap
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene
@@ -108,7 +108,7 @@ def colmap_camera(cam, source):
 
 def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     """Load a COLMAP sparse model (+ images, + dense geometric depth maps when present)."""
-    from . import select_entries
+    from .entries import select_entries
 
     rec, model, root = _read_reconstruction(path)
     img_dirs = [d for d in (root / "images", model / "images", model.parent / "images") if d.is_dir()]

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._pycolmap import import_pycolmap
+from .._runtime.pycolmap import import_pycolmap
 from ..errors import VibrInputError
 
 _MAX_SIDE = 1_000_000

@@ -159,7 +159,7 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
     grid : (rows, cols), optional
         Grid shape when there is no parameters.cfg.
     """
-    from . import select_entries
+    from .entries import select_entries
 
     root = Path(path)
     files = {}

@@ -60,7 +60,7 @@ def read_par(path) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
 
 def load_middlebury(path, *, scale: float = 1.0, views=None) -> Scene:
     """Load a Middlebury scene from a ``*_par.txt`` file or a folder holding one."""
-    from . import select_entries
+    from .entries import select_entries
 
     par = find_par_file(path)
     if par is None:

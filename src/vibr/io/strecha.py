@@ -91,7 +91,7 @@ def load_strecha(path, *, scale: float = 1.0, views=None) -> Scene:
     Every image must have a camera file; a missing one raises :class:`VibrInputError` naming
     the image. No depth is loaded (the benchmark has none).
     """
-    from . import select_entries
+    from .entries import select_entries
 
     root = Path(path)
     img_dir = _image_dir(root)

@@ -58,7 +58,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import OutputExists, OutputFailed, VibrInputError
 from ..scene import Scene
-from .atomic import temporary_folder, write_failed
+from .._runtime.atomic import temporary_folder, write_failed
 from .camera_json import ROTATION_TOL, as_scaled_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
 from .images import build_views, image_size, read_mask, write_image
@@ -336,7 +336,7 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
     File paths (images, depth, sigma_z, points) must lie inside the scene folder: an
     absolute path or one escaping it (``../``) is refused unless ``allow_outside``.
     """
-    from . import select_entries
+    from .entries import select_entries
 
     tf = find_transforms(path)
     if tf is None:

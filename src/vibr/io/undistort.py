@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from .._pycolmap import import_pycolmap
+from .._runtime.pycolmap import import_pycolmap
 from ..errors import VibrInputError
 
 logger = logging.getLogger(__name__)

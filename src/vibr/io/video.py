@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import VibrInputError
-from .atomic import atomic_path
+from .._runtime.atomic import atomic_path
 
 logger = logging.getLogger(__name__)
 

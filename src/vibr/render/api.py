@@ -13,7 +13,7 @@ from ..errors import VibrInputError, check_stop
 from ..geometry.resolution import ResolutionPlan
 from ..geometry.samples import Samples
 from ..scene import Scene, View
-from .methods import get_method, method_params, wants_fine_sources
+from .methods import get_method, render_samples, wants_fine_sources
 from .result import RenderResult
 
 __all__ = ["RenderResult", "render", "render_samples", "fine_grid", "grid_params", "SharedGeometry",
@@ -21,39 +21,16 @@ __all__ = ["RenderResult", "render", "render_samples", "fine_grid", "grid_params
 
 logger = logging.getLogger(__name__)
 
-def render_samples(samples: Samples, method="gradient", *, source_centres=None,
-                   target_centre=None, callback=None, progress_bar: bool = False,
-                   verbose: bool = False, uncertainty: bool = False, stop=None, **params) -> RenderResult:
-    """Render from precomputed :class:`~vibr.geometry.Samples` (see :func:`render` for the
-    parameters) with the registered method (:mod:`vibr.render.methods`).
-    ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr and the view prior
-    (``view_k``); None takes those :func:`vibr.geometry.compute_samples` stored in
-    ``samples.meta``."""
-    m = get_method(method)
-    if "auto" in (params.get("gamma"), params.get("lam")):
-        raise VibrInputError("gamma/lam 'auto' tunes on the source views: use vibr.render.render "
-                             "(render_samples has only the samples)")
-    p = method_params(m.name, **params)
-    if len(samples) == 0:
-        raise VibrInputError("no source sample lands in the target view")
-    if source_centres is None:
-        source_centres = samples.meta.get("source_centres")
-    if target_centre is None:
-        target_centre = samples.meta.get("target_centre")
-    return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
-                    callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty,
-                    stop=stop)
-
 
 def _resolve_auto(src: Scene, cam: Camera, m, params: dict) -> dict:
     """``gamma`` / ``lam`` = "auto" replaced by the leave-one-source-out choice of
-    :func:`vibr.autotune.tune` (only the target's camera is passed: never its image)."""
+    :func:`vibr.render.autotune.tune` (only the target's camera is passed: never its image)."""
     from .methods import DEFAULTS
 
     given = [DEFAULTS[k] if params.get(k) is None else params[k] for k in ("gamma", "lam")]
     if "auto" not in given:
         return params
-    from ..autotune import resolve_auto
+    from .autotune import resolve_auto
 
     return resolve_auto(src, cam, m.name, params)
 
@@ -62,7 +39,7 @@ def _ready_sources(sources: Scene, target) -> Scene:
     """``sources`` unchanged when ready to render from; else the target held out and depth
     transferred to the views lacking it (:func:`vibr.geometry.ensure_source_depth`), which
     is :func:`vibr.pipeline.prepare`'s ``depth="gt"``. Estimating depth is the pipeline's
-    job, not the renderer's (docs/ARCHITECTURE.md)."""
+    job, not the renderer's (docs/explanation/architecture.md)."""
     from ..geometry import ensure_source_depth
 
     tname = target.name if isinstance(target, View) else None
@@ -87,7 +64,7 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     (:meth:`Camera.scaled`: pixel centres such that ``k × k`` blocks average back to the
     target's pixels, or a coarser grid enlarges onto them; :meth:`RenderResult.on_target`
     brings the result back); the sources in ``plan.scales``
-    resized by :func:`vibr.io.images.scaled_view` (as :func:`vibr.io.load_scene` resizes
+    resized by :func:`vibr.geometry.resample.scaled_view` (as :func:`vibr.io.load_scene` resizes
     with ``scale``); ``prepared`` (depth prepared per view name, for
     :func:`vibr.geometry.compute_samples`) without those, whose full-size preparation no
     longer applies. On "auto", when one of ``renders`` (``(method, params)`` pairs) models
@@ -102,7 +79,7 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     if supersample == "auto" and plan.coarsen == 1 and any(wants_fine_sources(m, **p) for m, p in renders):
         return sources, camera, prepared, ResolutionPlan()
     if plan.scales:
-        from ..io.images import scaled_view
+        from ..geometry.resample import scaled_view
 
         sources = sources.replace(views=[scaled_view(v, plan.scales[v.name]) if v.name in plan.scales else v
                                          for v in sources.views])
@@ -174,7 +151,7 @@ def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample, sto
     """The geometry stage of :func:`render`: ``(sources, samples, plan)``, the samples on
     :func:`fine_grid`'s grid (``stop`` polled between its stages)."""
     from ..geometry import compute_samples
-    from ..validate import check_render_memory
+    from .checks import check_render_memory
     from .methods import with_sample_fields
 
     src = _ready_sources(sources, target)

@@ -25,7 +25,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .._jit import FASTMATH
+from .._runtime.jit import FASTMATH
 from .operators import _sum_in_order, _grad_adj_row, _is_forward, _grad_row, _stencil_row
 from .tv import _weight_arg
 

@@ -28,7 +28,7 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   unless given.
   With the view prior the colour term is divided by the prior-weighted density
   (:func:`vibr.render.variational.colour_density`), the gradient term by the plain one.
-  ``"auto"`` for either: chosen per scene by leave-one-source-out (:mod:`vibr.autotune`).
+  ``"auto"`` for either: chosen per scene by leave-one-source-out (:mod:`vibr.render.autotune`).
 * ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/METHOD.md §3, the authors' value).
 * ``sigma_z = None`` depth std. dev., scene units: the samples' own (the geometry stage's
   per-view value, default 1 % of the median depth).
@@ -106,7 +106,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import VibrInputError
+from ..geometry.samples import Samples
 from .operators import PSFS as _PSFS
+from .result import RenderResult
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "HOLE_FILLS", "get_method",
            "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields",
@@ -337,7 +340,7 @@ def method_params(method: str, preset: str | None = None, **params) -> dict:
         raise VibrInputError(f"hole_fill must be one of {HOLE_FILLS}, got {p['hole_fill']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
-    from ..validate import check_render_params
+    from .checks import check_render_params
 
     return check_render_params(p)
 
@@ -366,3 +369,28 @@ def with_sample_fields(geometry_kw: dict | None, *renders) -> dict:
     for method, params in renders:
         keep |= set(sample_fields(method, **params))
     return {**(geometry_kw or {}), "keep": tuple(sorted(keep))}
+
+
+def render_samples(samples: Samples, method="gradient", *, source_centres=None,
+                   target_centre=None, callback=None, progress_bar: bool = False,
+                   verbose: bool = False, uncertainty: bool = False, stop=None, **params) -> RenderResult:
+    """Render from precomputed :class:`~vibr.geometry.Samples` (see :func:`render` for the
+    parameters) with the registered method (:mod:`vibr.render.methods`).
+    ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr and the view prior
+    (``view_k``); None takes those :func:`vibr.geometry.compute_samples` stored in
+    ``samples.meta``."""
+    m = get_method(method)
+    if "auto" in (params.get("gamma"), params.get("lam")):
+        raise VibrInputError("gamma/lam 'auto' tunes on the source views: use vibr.render.render "
+                             "(render_samples has only the samples)")
+    p = method_params(m.name, **params)
+    if len(samples) == 0:
+        raise VibrInputError("no source sample lands in the target view")
+    if source_centres is None:
+        source_centres = samples.meta.get("source_centres")
+    if target_centre is None:
+        target_centre = samples.meta.get("target_centre")
+    return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
+                    callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty,
+                    stop=stop)
+

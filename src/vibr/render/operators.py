@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .._jit import FASTMATH
+from .._runtime.jit import FASTMATH
 from ..geometry.gradient import (DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_adj_row, _grad_row,  # noqa: F401
                                  _is_forward, grad_image, grad_image_adj)
 

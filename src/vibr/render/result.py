@@ -88,8 +88,8 @@ class RenderResult:
         :meth:`vibr.camera.Camera.scaled`, whose pixel centres the resize maps back): the
         image (and ``init``) by bicubic interpolation clipped to [0, 1], the uncertainty
         bilinear, a pixel covered where every grid pixel under its bilinear footprint is
-        (:func:`vibr.io.images.resize_mask`). Energies, times and counts stay the grid's."""
-        from ..io.images import resize_image, resize_mask
+        (:func:`vibr.geometry.resample.resize_mask`). Energies, times and counts stay the grid's."""
+        from ..geometry.resample import resize_image, resize_mask
 
         shape = tuple(int(v) for v in shape)
         if self.coverage.shape == shape:

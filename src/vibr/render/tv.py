@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .._jit import FASTMATH
+from .._runtime.jit import FASTMATH
 from .operators import _sum_in_order
 __all__ = ["tv_value", "TVProx"]
 

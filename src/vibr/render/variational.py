@@ -82,7 +82,7 @@ def splat_coverage(samples: Samples, p: dict, *, footprint: bool, gradient: bool
     sp = splat if splat is not None else make_splat(samples, footprint)
     c = float(p.get("grad_consistency") or 0.0) if gradient else 0.0
     # one pass: the unit-weight stencils (the per-sample blend weight sw in [0, 1] of
-    # vibr.flythrough, else 1), or with consistency weights only the mean gradient they need,
+    # vibr.paths.flythrough, else 1), or with consistency weights only the mean gradient they need,
     # and the initial blend's deformation-weighted splat
     A0, rhs0, c0, wsum, bw = coverage_blend(samples, sp, p["sigma_s"], gradient, blend_factor, stencils=c <= 0)
     if not gradient:

@@ -158,7 +158,7 @@ class LightFieldOptions:
         Disparity margin added around the local estimate's range.
     st_max_disp : float
         When the local estimate's disparities exceed this (px per step), the sweep's range
-        comes from :func:`vibr.stereo.api.default_depth_range` instead.
+        comes from :func:`vibr.stereo.partners.default_depth_range` instead.
     tv_lambda, tv_iter : float, int
         Data weight and iterations of the TV-L1 refinement.
     pm_iter, pm_views, pm_stride : int
@@ -355,12 +355,12 @@ def _sweep_range(scene: Scene, ref: int, cams, img, others, pos, best_d, st_conf
     """Depth range of the fine sweep: the given one; else the coherent local disparities'
     1st–99th percentiles widened by ``margin_px``; else (large disparities, where the
     3-tap derivative along s aliases, or no local estimate) the generic coarse-sweep range
-    of :func:`vibr.stereo.api.default_depth_range`. Records ``range_from`` in ``stats``."""
+    of :func:`vibr.stereo.partners.default_depth_range`. Records ``range_from`` in ``stats``."""
     r0, c0 = pos[ref]
     dsel = best_d[st_conf] if st_conf.sum() > 100 else best_d.ravel()
     dlo, dhi = np.percentile(dsel, [1, 99])
     if depth_range is None and (st_conf.sum() <= 100 or max(abs(dlo), abs(dhi)) > st_max_disp):
-        from .api import default_depth_range
+        from .partners import default_depth_range
 
         nb0 = sorted(others, key=lambda k: abs(pos[k][0] - r0) + abs(pos[k][1] - c0))[:4]
         depth_range = default_depth_range(scene, ref, cams, {k: img(k) for k in [ref] + nb0}, nb0,
@@ -378,11 +378,11 @@ def _sweep_range(scene: Scene, ref: int, cams, img, others, pos, best_d, st_conf
 
 def _small(img, k: int, camera: Camera) -> np.ndarray:
     """View ``k``'s image at ``camera``'s (smaller) size: the estimator's cached resize when
-    ``img`` has one, else :func:`vibr.stereo.api._resized`."""
+    ``img`` has one, else :func:`vibr.stereo.partners._resized`."""
     small = getattr(img, "small", None)
     if small is not None:
         return small(k, camera)
-    from .api import _resized
+    from .partners import _resized
 
     return _resized(img(k), camera)
 
@@ -417,7 +417,7 @@ def _sweep_planes(img, cams, ref, nb, dr, o: LightFieldOptions, *, desc, n_plane
         # pm_iter iterations in all: the coarse ones first, at least one at full size
         coarse_iter = max(0, min(int(coarse_iter), pm_iter - 1))
         pm_iter -= coarse_iter
-        from .api import upsample_sweep
+        from .partners import upsample_sweep
 
         cs = {k: cams[k].scaled(scale) for k in [ref] + list(nb)}
         # disparities shrink with the images: planes the same parallax apart are fewer

@@ -127,10 +127,10 @@ def encode_png(img: np.ndarray, compress_level: int = 1) -> bytes:
 def shown_image(out) -> tuple[np.ndarray, str]:
     """The uint8 image the viewer shows for a render (:class:`ViewImage`) and what the
     status line adds: the render itself, or its σ map through viridis on
-    :func:`vibr.uncertainty_figures.sigma_scale` (the scale said in the status line)."""
+    :func:`vibr.eval.sigma_figures.sigma_scale` (the scale said in the status line)."""
     if out.uncertainty is None:
         return np.clip(out.image * 255.0 + 0.5, 0, 255).astype(np.uint8), ""
-    from ..uncertainty_figures import colourise, sigma_scale
+    from ..eval.sigma_figures import colourise, sigma_scale
 
     vmax = sigma_scale(out.uncertainty)
     return colourise(np.where(np.isfinite(out.uncertainty), out.uncertainty, vmax), vmax), \
@@ -312,10 +312,10 @@ class Viewer:
 
     def move_client(self, client, camera: Camera) -> None:
         """Move ``client``'s viewport to ``camera``: its pose and vertical field of view,
-        turned upright as a path's keys are (:func:`vibr.path.orient_keys`, "snap": a
+        turned upright as a path's keys are (:func:`vibr.paths.camera_path.orient_keys`, "snap": a
         photograph taken rolled by 90° is seen turned; the orbit controls keep the scene's
         up, and would turn it on the first drag)."""
-        from ..path import orient_keys
+        from ..paths.camera_path import orient_keys
 
         (camera,), _ = orient_keys([camera], "snap", self.up)
         wxyz, pos, fov, _ = viser_pose_from_camera(camera)
@@ -445,10 +445,10 @@ class Viewer:
 
     def export_path(self, path=None, seconds: float | None = None) -> Path:
         """Write the keyframes as nerfstudio's camera_path.json: a C²-smooth path through
-        them (:func:`vibr.path.interpolate`, ``seconds`` × fps frames; default
+        them (:func:`vibr.paths.camera_path.interpolate`, ``seconds`` × fps frames; default
         ``seconds_per_keyframe`` per interval), written by
-        :func:`vibr.path.write_camera_path`. Returns the file written."""
-        from ..path import interpolate, write_camera_path
+        :func:`vibr.paths.camera_path.write_camera_path`. Returns the file written."""
+        from ..paths.camera_path import interpolate, write_camera_path
 
         if not self.keyframes:
             raise VibrInputError("no keyframes to export: add some first")

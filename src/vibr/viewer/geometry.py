@@ -121,11 +121,11 @@ def frustum_size(scene: Scene, scale: float) -> float:
 
 
 def world_up(scene: Scene) -> np.ndarray:
-    """World "up" as camera paths take it (:func:`vibr.path.scene_up`: the mean of the
+    """World "up" as camera paths take it (:func:`vibr.paths.camera_path.scene_up`: the mean of the
     cameras' image-up directions, or the normal of a ring of cameras, which stays right when
     the photographs are rolled); ``(0, -1, 0)`` when the cameras have none."""
     from ..errors import VibrInputError
-    from ..path import scene_up
+    from ..paths.camera_path import scene_up
 
     try:
         return scene_up([v.camera for v in scene.views])

@@ -1,7 +1,7 @@
 """The viewer's renders: a vibr camera and the GUI's settings in, an image out.
 
 Rendering is :func:`vibr.render.render` itself, from the ``n_views`` best sources for the
-camera (:func:`vibr.selection.select_views`, ranked on a fixed sample of the scene's points
+camera (:func:`vibr.geometry.selection.select_views`, ranked on a fixed sample of the scene's points
 so that ranking costs no depth-map pass per request); nothing here is viewer-specific maths.
 """
 
@@ -19,7 +19,7 @@ from ..errors import check_stop
 from ..render import render
 from ..render.methods import DEFAULTS, METHODS, method_params
 from ..scene import Scene
-from ..selection import select_views
+from ..geometry.selection import select_views
 from .geometry import points_in_view
 
 logger = logging.getLogger(__name__)
@@ -112,7 +112,7 @@ class ViewRenderer:
         the depth maps.
     threads : int, optional
         numba threads per render; default all that numba started (in ``vibr view``, two per
-        core: :mod:`vibr._threads`). The image does not depend on it.
+        core: :mod:`vibr._runtime.threads`). The image does not depend on it.
     """
 
     def __init__(self, scene: Scene, rank_points: np.ndarray | None = None, threads: int | None = None):
@@ -215,17 +215,17 @@ class ViewRenderer:
 
 def scaled_scene(scene: Scene, s: float) -> Scene:
     """Every view resized by ``s`` as :func:`vibr.io.load_scene` does with ``scale``
-    (:func:`vibr.io.images.scaled_scene`), the factor kept in ``meta["viewer_scale"]``."""
-    from ..io.images import scaled_scene as _scaled
+    (:func:`vibr.geometry.resample.scaled_scene`), the factor kept in ``meta["viewer_scale"]``."""
+    from ..geometry.resample import scaled_scene as _scaled
 
     return _scaled(scene, s).replace(meta=dict(scene.meta, viewer_scale=s))
 
 
 def scene_with_depth(scene: Scene, *, cache_dir=None) -> Scene:
     """``scene`` with depth on every view, as fly-throughs get it
-    (:func:`vibr.depthcache.scene_with_depth`, depth "auto"): the scene's own, transferred
+    (:func:`vibr.stereo.cache.scene_with_depth`, depth "auto"): the scene's own, transferred
     to the views without it, or estimated once and kept in the on-disk cache; the fallback
     proxy as ``vibr render`` applies it."""
-    from ..depthcache import scene_with_depth as _with_depth
+    from ..stereo.cache import scene_with_depth as _with_depth
 
     return _with_depth(scene, depth="auto", cache_dir=cache_dir)

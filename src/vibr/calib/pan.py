@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ._pycolmap import import_pycolmap
+from .._runtime.pycolmap import import_pycolmap
 
 __all__ = [
     "MAX_REPROJECTION_PX",

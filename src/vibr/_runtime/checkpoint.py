@@ -1,7 +1,7 @@
 """Per-view checkpoints of long jobs (``vibr depth``): a job killed midway and run again
 keeps the views it had finished.
 
-Each finished view is written atomically (:func:`vibr.io.atomic.atomic_path`) to
+Each finished view is written atomically (:func:`vibr._runtime.atomic.atomic_path`) to
 ``folder/NAME.npz`` with a key: the SHA-1 of everything its result depends on (the view's
 image and camera, its partners', the job's parameters, vibr's code). A file is read back
 only when its key matches and it loads completely; anything else (another run's

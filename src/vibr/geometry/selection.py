@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .camera import Camera, axes_meeting_point
-from .scene import Scene
+from ..camera import Camera, axes_meeting_point
+from ..scene import Scene
 
 
 def depth_points(view, n_points: int) -> np.ndarray:

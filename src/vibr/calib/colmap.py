@@ -3,7 +3,7 @@
 Pipeline (``vibr calibrate PHOTOS_DIR OUT_SCENE``)
 --------------------------------------------------
 0. From a **video** (``vibr calibrate VIDEO OUT_SCENE``): the sharpest frame of each of
-   ``frames`` equal stretches becomes a photo (:mod:`vibr.video_frames`), and matching is
+   ``frames`` equal stretches becomes a photo (:mod:`vibr.calib.video_frames`), and matching is
    sequential by default.
 1. **Downscale** every photo by ``scale`` (Lanczos) into a work folder, as PNG (lossless).
 2. **Features**: SIFT extraction (``pycolmap.extract_features``), one shared camera by
@@ -41,14 +41,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._pycolmap import import_pycolmap
-from .camera import Camera
-from .errors import OutputExists, VibrInputError
-from .io.images import IMAGE_EXTS
-from .io.video import VIDEO_INPUTS, is_video_input
-from .pan_calibration import Choice, fit_one_centre, focal_note, prefer_one_centre
-from .progress import progress
-from .scene import Scene, View
+from .._runtime.pycolmap import import_pycolmap
+from ..camera import Camera
+from ..errors import OutputExists, VibrInputError
+from ..io.images import IMAGE_EXTS
+from ..io.video import VIDEO_INPUTS, is_video_input
+from .pan import Choice, fit_one_centre, focal_note, prefer_one_centre
+from ..progress import progress
+from ..scene import Scene, View
 from .video_frames import DEFAULT_FRAMES, extract_frames
 
 logger = logging.getLogger(__name__)
@@ -124,7 +124,7 @@ MIN_PHOTO_SIDE = 32
 
 def _header_sizes(files: list[Path]) -> list[tuple[int, int]] | None:
     """(width, height) of each photo from its header, or None if one is unreadable."""
-    from .io.images import image_size
+    from ..io.images import image_size
 
     try:
         return [image_size(f) for f in files]
@@ -328,9 +328,9 @@ class CalibrateOptions:
     pan : bool, optional
         Photographs turned on the spot (a panorama, a video panned from one place): one
         centre for every camera, rotations and intrinsics fitted to the tracks without the
-        mapper's translations (:mod:`vibr.pan_calibration`). None ("auto", the default):
+        mapper's translations (:mod:`vibr.calib.pan`). None ("auto", the default):
         when most image pairs are related by homographies and the mapper's model does no
-        better (:func:`vibr.pan_calibration.prefer_one_centre`); True: always; False: never
+        better (:func:`vibr.calib.pan.prefer_one_centre`); True: always; False: never
         (the mapper's cameras as they are).
     min_registered : int
         Fewer registered images raise :class:`VibrInputError` naming the unregistered ones.
@@ -368,7 +368,7 @@ def calibrate_scene(photos_dir, *, options: CalibrateOptions | None = None, work
     photos_dir : path
         Folder of photos of one static scene (jpg/png/tif...), not recursive, or a video of
         it (:data:`vibr.io.video.VIDEO_INPUTS`): the sharpest frame of each of
-        ``options.frames`` stretches is calibrated (:func:`vibr.video_frames.extract_frames`).
+        ``options.frames`` stretches is calibrated (:func:`vibr.calib.video_frames.extract_frames`).
     options : CalibrateOptions, optional
         How to calibrate; ``kw`` (fields of :class:`CalibrateOptions`, e.g. ``scale=0.5``)
         applies over it. Any other keyword raises ``TypeError``.
@@ -649,7 +649,7 @@ def _kept_model(recs, names: list[str], stem: dict, photos_dir: Path, opt: Calib
 
 
 def _fit_one_centre(db: Path, opt: CalibrateOptions):
-    """:func:`vibr.pan_calibration.fit_one_centre` unless ``opt.pan`` is False; a fit that
+    """:func:`vibr.calib.pan.fit_one_centre` unless ``opt.pan`` is False; a fit that
     fails numerically leaves COLMAP's mapper to do the work, with a warning."""
     if opt.pan is False:
         return None
@@ -661,7 +661,7 @@ def _fit_one_centre(db: Path, opt: CalibrateOptions):
 
 
 def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tuple[dict, Choice | None]:
-    """COLMAP's mapper, or the model of one centre (:mod:`vibr.pan_calibration`): asked for
+    """COLMAP's mapper, or the model of one centre (:mod:`vibr.calib.pan`): asked for
     (``opt.pan``), or fitted because the pairs are related by homographies and then compared
     with the mapper's. Returns the models to keep the largest of, and the choice (None
     where there was none to make)."""
@@ -690,7 +690,7 @@ def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tu
 
 
 def _one_centre_summary(one, choice) -> dict:
-    """calibration.json's record of the test (:mod:`vibr.pan_calibration`); an error that
+    """calibration.json's record of the test (:mod:`vibr.calib.pan`); an error that
     could not be measured (no homography pairs, a model without points) is null."""
     def px(v):
         return round(float(v), 4) if np.isfinite(v) else None
@@ -808,7 +808,7 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
     ``overwrite``. Returns the scene (its ``meta["calibration"]`` holds the summary).
     """
     try:
-        from .io import save_scene
+        from ..io import save_scene
     except ImportError:
         raise VibrInputError("vibr.io.save_scene is not available in this installation", out_dir) from None
 
@@ -816,7 +816,7 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
     if out.exists() and not overwrite:
         raise OutputExists("output folder already exists", out)
     if out.exists():
-        from .io.outputs import check_not_input, check_replaceable
+        from ..io.outputs import check_not_input, check_replaceable
 
         check_not_input(out, [photos_dir])
         check_replaceable(out)  # overwrite replaces only a folder vibr wrote
@@ -830,7 +830,7 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
         # The calibration summary beside transforms.json (registered images, errors, times).
         with open(tmp / "scene" / "calibration.json", "w") as fh:
             json.dump(scene.meta["calibration"], fh, indent=2)
-        from .io.outputs import replace_folder, write_marker
+        from ..io.outputs import replace_folder, write_marker
 
         write_marker(tmp / "scene")  # lists calibration.json too
         replace_folder(tmp / "scene", out, overwrite=overwrite)

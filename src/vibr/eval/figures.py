@@ -68,7 +68,7 @@ def _write_png(path: Path, img: np.ndarray) -> None:
     """An 8-bit PNG at full zlib compression (figures are kept in docs), written atomically."""
     from PIL import Image
 
-    from .io.atomic import atomic_path
+    from .._runtime.atomic import atomic_path
 
     q = (np.clip(np.asarray(img, np.float32), 0, 1) * 255 + 0.5).astype(np.uint8)
     with atomic_path(path) as tmp:
@@ -112,7 +112,7 @@ def write_figures(folder, ref: np.ndarray, images: dict[str, np.ndarray], mask=N
 
 def write_evaluation_figures(evaluation, folder, *, labels=None, prefix: str | None = None,
                              downscale: int = 1) -> dict:
-    """:func:`write_figures` of a :class:`vibr.evaluate.Evaluation`: the reference, the
+    """:func:`write_figures` of a :class:`vibr.eval.protocol.Evaluation`: the reference, the
     renders of the settings ``labels`` (default all, in the evaluation's order) and the
     evaluated pixels. ``prefix`` defaults to the evaluation's (``TARGET_DEPTH``). Returns
     the figures' entry of a report (file names, columns, crop window)."""

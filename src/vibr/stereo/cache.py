@@ -36,17 +36,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import VibrInputError
-from .io.atomic import atomic_path
-from .io.checkpoint import code_fingerprint, resume_folder
-from .scene import Scene
+from ..errors import VibrInputError
+from .._runtime.atomic import atomic_path
+from .._runtime.checkpoint import code_fingerprint, resume_folder
+from ..scene import Scene
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["scene_with_depth", "estimated_depth", "load_scene_cached", "default_cache_dir", "depth_cache_key",
+__all__ = ["scene_with_depth", "estimated_depth", "default_cache_dir", "depth_cache_key",
            "prune_cache", "CACHE_MAX_BYTES"]
 
-_CACHE_VERSION = 2  # 2: the estimator's statistics; vibr's code in the key
+CACHE_VERSION = 2  # 2: the estimator's statistics; vibr's code in the key
 
 #: The cache folder's entries are kept under this many bytes (``$VIBR_CACHE_MAX_GB``
 #: overrides it, in GB): after each write the least recently used entries go. One entry of
@@ -84,12 +84,12 @@ def depth_cache_key(scene: Scene, estimate_kw: dict | None = None, exclude=()) -
     """SHA-256 (hex) of the scene root, views (names, sizes, images, cameras), the
     excluded views, the estimation parameters, the estimator's version
     (:data:`vibr.stereo.api.ESTIMATOR_VERSION`) and vibr's code
-    (:func:`vibr.io.checkpoint.code_fingerprint`): other code estimates again rather than
+    (:func:`vibr._runtime.checkpoint.code_fingerprint`): other code estimates again rather than
     take maps it might not make."""
-    from .stereo.api import ESTIMATOR_VERSION
+    from .api import ESTIMATOR_VERSION
 
     h = hashlib.sha256()
-    h.update(f"vibr-depth-cache v{_CACHE_VERSION} estimator {ESTIMATOR_VERSION} code {code_fingerprint()}|".encode())
+    h.update(f"vibr-depth-cache v{CACHE_VERSION} estimator {ESTIMATOR_VERSION} code {code_fingerprint()}|".encode())
     h.update(str(os.path.abspath(scene.root)).encode() if scene.root else b"<memory>")
     for v in scene.views:
         _view_fingerprint(v, h)
@@ -107,7 +107,7 @@ def _cache_max_bytes() -> int:
         return CACHE_MAX_BYTES
 
 
-def _used(path: Path) -> None:
+def mark_used(path: Path) -> None:
     """Mark a cache entry as just used (its modification time orders the pruning)."""
     with contextlib.suppress(OSError):
         os.utime(path)
@@ -202,7 +202,7 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
     views : names, optional
         When depth is estimated: only these views get it, and only they are returned (all
         kept views still serve as stereo partners; part of the key). A fly-through passes
-        the views its frames may use (:func:`vibr.flythrough.views_for_path`).
+        the views its frames may use (:func:`vibr.paths.flythrough.views_for_path`).
 
     Returns
     -------
@@ -211,7 +211,7 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
         ``meta["depth_cache"]`` the cache file (when used), ``meta["depth_time_s"]`` the
         time spent obtaining depth.
     """
-    from .geometry import apply_fallback
+    from ..geometry import apply_fallback
 
     out = _scene_with_depth(scene, depth, estimate_kw, cache_dir, exclude, executor, views)
     return apply_fallback(out, fallback)
@@ -232,7 +232,7 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude, exec
         if all(v.depth is None for v in src.views):
             raise VibrInputError("the scene has no depth maps: use depth='estimated'", scene.root)
         if not src.has_depth:
-            from .geometry import ensure_source_depth
+            from ..geometry import ensure_source_depth
 
             src = ensure_source_depth(src)
         # a new meta: the caller's scene is not changed
@@ -254,9 +254,9 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
     sweeps run (:func:`vibr.stereo.estimate_depth`). ``views``: only these views get depth
     and are returned (the others still serve as stereo partners).
     """
-    from .camera import shared_centre
-    from .geometry import sphere_proxy
-    from .stereo import estimate_depth
+    from ..camera import shared_centre
+    from ..geometry import sphere_proxy
+    from .api import estimate_depth
 
     t0 = time.perf_counter()
     bare = Scene([v.replace(depth=None, sigma_z=None) for v in scene.views], scene.name, scene.root,
@@ -277,7 +277,7 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
         cpath = folder / f"depth-{depth_cache_key(bare, key_kw)}.npz"
         out = _load(cpath, wanted) if cpath.is_file() else None
         if out is not None:
-            _used(cpath)
+            mark_used(cpath)
             logger.info("depth of %d views loaded from the cache %s", len(out), cpath)
             out.meta.update(depth_source="cache", depth_cache=str(cpath), depth_time_s=time.perf_counter() - t0)
             return out
@@ -297,66 +297,3 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
     return out
 
 
-def _folder_fingerprint(root: Path, h, max_files: int = 20000) -> None:
-    """Feed the names, sizes and modification times of the files under ``root`` (hidden
-    ones and the cache's own files skipped) into hash ``h``."""
-    n = 0
-    for dirpath, dirnames, filenames in os.walk(root):
-        dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
-        for f in sorted(filenames):
-            if f.startswith("."):
-                continue
-            st = os.stat(os.path.join(dirpath, f))
-            h.update(f"{os.path.relpath(os.path.join(dirpath, f), root)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
-            n += 1
-            if n > max_files:
-                raise OSError("too many files to fingerprint")
-
-
-def load_scene_cached(path, *, scale: float = 1.0, cache_dir=None):
-    """:func:`vibr.io.load_scene` through an on-disk cache of the loaded (resized) scene.
-
-    Decoding and resizing full-size photographs (fountain: 11 JPEGs of 3072×2048) takes
-    seconds; a second fly-through of the same scene at the same scale loads the resized
-    views instead (``scene-KEY.pkl``, KEY a SHA-256 of the folder, the names, sizes and
-    modification times of its files, the scale and vibr's code). The file is a pickle written by vibr
-    in the user's own cache folder (:func:`default_cache_dir`); ``cache_dir=False``
-    disables it.
-    """
-    import pickle
-
-    from .io import load_scene
-
-    root = Path(path)
-    if cache_dir is False:
-        return load_scene(path, scale=scale)
-    h = hashlib.sha256()
-    # vibr's code in the key: a loader that changed (undistortion, masks) loads afresh
-    h.update(f"vibr-scene-cache v{_CACHE_VERSION} code {code_fingerprint()}|{os.path.abspath(root)}|"
-             f"{float(scale)!r}|".encode())
-    try:
-        _folder_fingerprint(root if root.is_dir() else root.parent, h)
-    except OSError:
-        return load_scene(path, scale=scale)
-    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    cpath = folder / f"scene-{h.hexdigest()[:32]}.pkl"
-    if cpath.is_file():
-        try:
-            with open(cpath, "rb") as f:
-                scene = pickle.load(f)
-            if isinstance(scene, Scene):
-                _used(cpath)
-                logger.info("scene loaded from the cache %s", cpath)
-                return scene
-        except Exception as exc:  # noqa: BLE001 - a bad cache entry is only a slower load
-            logger.warning("ignoring unreadable scene cache %s (%s)", cpath, exc)
-    scene = load_scene(path, scale=scale)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with atomic_path(cpath) as tmp:
-            with open(tmp, "wb") as f:
-                pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
-        prune_cache(folder, keep=[cpath])
-    except OSError as exc:
-        logger.warning("could not write the scene cache %s (%s)", cpath, getattr(exc, "problem", exc))
-    return scene

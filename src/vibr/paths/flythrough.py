@@ -1,14 +1,14 @@
 """Fly-throughs: render every camera of a path, write the frames, encode a video.
 
 :func:`render_path` loads nothing itself: it takes a loaded scene and a
-:class:`vibr.path.CameraPath`, gets the sources' depth once
-(:func:`vibr.depthcache.scene_with_depth`, cached on disk), then renders frame by frame.
+:class:`vibr.paths.camera_path.CameraPath`, gets the sources' depth once
+(:func:`vibr.stereo.cache.scene_with_depth`, cached on disk), then renders frame by frame.
 
 Per frame (:func:`render_frame`, a top-level function of ``(context, frame index)`` so that
 :func:`vibr.executor.run_tasks` can run frames on processes or Dask):
 
 1. **Sources with soft weights** (:func:`view_weights`): views are ranked for the frame's
-   camera as :func:`vibr.selection.rank_views` does (penalty ``p_k``); with ``n_views = K``
+   camera as :func:`vibr.geometry.selection.rank_views` does (penalty ``p_k``); with ``n_views = K``
    the threshold is the midpoint ``m`` of the K-th and (K+1)-th smallest penalties and a
    view's blend weight is ``s_k = smoothstep(½ + (m − p_k) / (blend · m))``. Far from a
    change of the selected set the K best have weight 1 and the others 0 (the frame is what
@@ -45,10 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera
-from .errors import VibrInputError
-from .render.methods import with_sample_fields
-from .scene import Scene
+from ..camera import Camera
+from ..errors import VibrInputError
+from ..render.methods import with_sample_fields
+from ..scene import Scene
 
 logger = logging.getLogger(__name__)
 
@@ -101,8 +101,8 @@ class FrameContext:
 
 def _source_points(sources: Scene, max_points: int = 1024) -> list:
     """Per source, the strided subsample of its depth map backprojected to the world
-    (exactly :func:`vibr.selection.target_points`' sampling, done once per source)."""
-    from .selection import depth_points
+    (exactly :func:`vibr.geometry.selection.target_points`' sampling, done once per source)."""
+    from ..geometry.selection import depth_points
 
     per_view = max(64, max_points // max(1, len(sources)))
     return [depth_points(v, per_view) for v in sources.views]
@@ -110,7 +110,7 @@ def _source_points(sources: Scene, max_points: int = 1024) -> list:
 
 def _points_in_target(view_points, target: Camera, max_points: int = 1024):
     """The sources' points the target sees: the same filtering and random subsample (seed
-    0) as :func:`vibr.selection.target_points`, so the ranking is the same."""
+    0) as :func:`vibr.geometry.selection.target_points`, so the ranking is the same."""
     pts = [p for p in view_points if len(p)]
     if not pts:
         return None
@@ -126,8 +126,8 @@ def _points_in_target(view_points, target: Camera, max_points: int = 1024):
 def prepare_sources(ctx: FrameContext, cache_depth: bool = True) -> None:
     """The per-source work that does not depend on the frame, done once: the points used to
     rank views and (``cache_depth``) the depth and its slopes (:func:`prepare_depth`)."""
-    from .geometry import prepare_depth
-    from .geometry.depth import DEFAULT_EDGE_REL
+    from ..geometry import prepare_depth
+    from ..geometry.depth import DEFAULT_EDGE_REL
 
     ctx.view_points = _source_points(ctx.sources)
     ctx.job_key = job_key(ctx)
@@ -142,7 +142,7 @@ def job_key(ctx: FrameContext) -> str:
     """SHA-1 of what every frame depends on besides its camera: vibr's code, the method and
     its parameters, the source selection and the sources (names, cameras, images, depth,
     sigma_z, fallback masks, photograph masks)."""
-    from .io.checkpoint import code_fingerprint, digest
+    from .._runtime.checkpoint import code_fingerprint, digest
 
     parts = [code_fingerprint(), ctx.method, ctx.params, ctx.n_views, ctx.blend, ctx.geometry_kw, str(ctx.supersample)]
     for v in ctx.sources.views:
@@ -157,7 +157,7 @@ def job_key(ctx: FrameContext) -> str:
 def frame_key(ctx: FrameContext, i: int) -> str:
     """The key written into frame ``i``'s PNG (text chunk ``vibr-frame``): a frame on disk is
     reused only when its key is this one (:func:`render_frame`)."""
-    from .io.checkpoint import digest
+    from .._runtime.checkpoint import digest
 
     c = ctx.cameras[i]
     return digest(ctx.job_key, c.K, c.R, c.t, list(c.shape))
@@ -165,7 +165,7 @@ def frame_key(ctx: FrameContext, i: int) -> str:
 
 def frame_done(ctx: FrameContext, i: int, key: str | None = None) -> bool:
     """Whether frame ``i`` is on disk with its :func:`frame_key` (``key`` when given)."""
-    from .io.images import read_png_text
+    from ..io.images import read_png_text
 
     key = frame_key(ctx, i) if key is None else key
     if read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) != key:
@@ -185,7 +185,7 @@ def _sigma_key(path) -> str | None:
 
 
 def _write_sigma_frame(path, sigma, key: str) -> None:
-    from .io.atomic import atomic_path
+    from .._runtime.atomic import atomic_path
 
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, sigma=np.asarray(sigma, np.float16), key=np.array(key))
@@ -193,11 +193,11 @@ def _write_sigma_frame(path, sigma, key: str) -> None:
 
 def write_sigma_video(paths, out, *, fps: float, crf: int = 18) -> tuple[int, int, int, float]:
     """The σ maps of a path's frames (``sigma_NNNNN.npz``) as a video, each frame colour-mapped
-    with a scale bar (:func:`vibr.uncertainty_figures.sigma_figure`) on one scale for all:
-    :func:`vibr.uncertainty_figures.sigma_scale` of every frame's σ (0 to their 99th
+    with a scale bar (:func:`vibr.eval.sigma_figures.sigma_figure`) on one scale for all:
+    :func:`vibr.eval.sigma_figures.sigma_scale` of every frame's σ (0 to their 99th
     percentile below σ_hole, rounded up). Returns ``(n_frames, width, height, vmax)``."""
-    from .io.video import write_video
-    from .uncertainty_figures import sigma_figure, sigma_scale
+    from ..io.video import write_video
+    from ..eval.sigma_figures import sigma_figure, sigma_scale
 
     def load(p):
         with np.load(p) as z:
@@ -218,11 +218,11 @@ def view_weights(sources: Scene, camera: Camera, n_views: int | None, *, blend: 
                  view_points=None, min_overlap: float = 0.05) -> np.ndarray:
     """Blend weight in [0, 1] of every source for ``camera`` (module docstring, step 1).
 
-    ``p_k`` is :func:`vibr.selection.rank_views`' penalty (``inf`` below ``min_overlap``);
+    ``p_k`` is :func:`vibr.geometry.selection.rank_views`' penalty (``inf`` below ``min_overlap``);
     ``m = (p_(K) + p_(K+1)) / 2``; ``s_k = smoothstep(½ + (m − p_k) / (blend · m))``.
-    ``blend = 0`` is the hard selection of :func:`vibr.selection.select_views`.
+    ``blend = 0`` is the hard selection of :func:`vibr.geometry.selection.select_views`.
     """
-    from .selection import rank_views
+    from ..geometry.selection import rank_views
 
     n = len(sources)
     if n_views is None or n_views >= n:
@@ -250,9 +250,9 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     docstring). Returns a small dict: index, skipped, seconds, views and weights, and the
     seconds of each stage (``times``); for a frame that sees nothing, ``failed`` (why) and no
     file (:func:`render_path` then names every such frame in one error)."""
-    from .geometry import compute_samples
-    from .io import write_image
-    from .render import fine_grid, grid_params, render_samples
+    from ..geometry import compute_samples
+    from ..io import write_image
+    from ..render import fine_grid, grid_params, render_samples
 
     out = os.path.join(ctx.frames_dir, frame_name(i))
     key = frame_key(ctx, i)
@@ -331,11 +331,11 @@ PATH_MARGIN = 2
 def views_for_path(scene: Scene, cameras, n_views: int | None, exclude=()) -> list[str] | None:
     """Names of the views a path's frames may take as sources, or None for all of them.
 
-    Each frame's ``PATH_MARGIN · n_views`` best views by :func:`vibr.selection.rank_views`
+    Each frame's ``PATH_MARGIN · n_views`` best views by :func:`vibr.geometry.selection.rank_views`
     on the geometry known before depth (the scene's sparse points, else a plane where the
     cameras' axes meet), united over the frames. None when ``n_views`` is None or the scene
     has at most ``PATH_MARGIN · n_views`` views (every view may serve)."""
-    from .selection import select_views
+    from ..geometry.selection import select_views
 
     if n_views is None:
         return None
@@ -353,12 +353,12 @@ def views_for_path(scene: Scene, cameras, n_views: int | None, exclude=()) -> li
 
 def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
     """Raise :class:`VibrInputError` when most of the path's cameras see nothing of the
-    scene: the centre of the scene (:func:`vibr.path.scene_centre`) lies behind or outside
+    scene: the centre of the scene (:func:`vibr.paths.camera_path.scene_centre`) lies behind or outside
     the frame (with a one-frame margin) for more than half of them — typically a path
     exported by nerfstudio's viewer, which lives in nerfstudio's normalised frame."""
-    from .path import scene_centre
+    from .camera_path import scene_centre
 
-    from .path import scene_points
+    from .camera_path import scene_points
 
     X = scene_centre([v.camera for v in scene.views], scene_points(scene))
     seen = 0
@@ -378,7 +378,7 @@ def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
 
 
 def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
-    from .io.video import VIDEO_FORMATS, is_video
+    from ..io.video import VIDEO_FORMATS, is_video
 
     if is_video(out):
         return (Path(frames_dir) if frames_dir else out.with_name(out.stem + "_frames")), out
@@ -391,11 +391,11 @@ def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
 
 def _check_frame_memory(scene: Scene, cams, n_views, source, supersample="auto") -> None:
     """Refuse, before the depth work, a path whose largest frame could not be rendered in
-    the memory available (:func:`vibr.validate.check_render_memory`; the largest sources, the
+    the memory available (:func:`vibr.render.checks.check_render_memory`; the largest sources, the
     frame on the grid it is rendered on: with "auto", as fine as the largest source's pixels
     allow, at most ``SUPERSAMPLE_MAX`` times)."""
-    from .geometry.resolution import SUPERSAMPLE_MAX
-    from .validate import check_render_memory
+    from ..geometry.resolution import SUPERSAMPLE_MAX
+    from ..render.checks import check_render_memory
 
     if not cams:
         return
@@ -426,7 +426,7 @@ class FlyOptions:
         Frames coarser than the photographs are rendered on a finer grid and averaged back
         (:func:`vibr.render.render`'s ``supersample``; the factor is in each frame's record).
     depth, estimate_kw, cache_dir, exclude
-        The sources' depth: see :func:`vibr.depthcache.scene_with_depth`.
+        The sources' depth: see :func:`vibr.stereo.cache.scene_with_depth`.
     frames_dir : path, optional
         Where the frames go with a video output (default ``OUT_frames/`` beside it).
     crf, fps : int, float
@@ -475,7 +475,7 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
     Parameters
     ----------
     scene : Scene
-    camera_path : vibr.path.CameraPath
+    camera_path : vibr.paths.camera_path.CameraPath
     out : path
         a video (``*.mp4``, or another of :data:`vibr.io.video.VIDEO_FORMATS`; frames in
         ``frames_dir``, default ``OUT_frames/`` beside it) or a folder
@@ -484,8 +484,8 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
         How to render; ``kw`` (its fields, e.g. ``n_views=4``) applies over it. Any other
         keyword raises ``TypeError``.
     """
-    from .depthcache import scene_with_depth
-    from .geometry.resolution import check_supersample
+    from ..stereo.cache import scene_with_depth
+    from ..geometry.resolution import check_supersample
 
     t_start = time.perf_counter()
     o = replace(options or FlyOptions(), **kw)
@@ -527,9 +527,9 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
 def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
     """The frames folder, the video (None: frames only) and the frame rate of a path's
     outputs, every option checked before any frame is rendered."""
-    from .io.outputs import check_not_input
-    from .io.video import VIDEO_FORMATS, check_video_options, is_video
-    from .render.methods import METHODS
+    from ..io.outputs import check_not_input
+    from ..io.video import VIDEO_FORMATS, check_video_options, is_video
+    from ..render.methods import METHODS
 
     if o.method not in METHODS:
         raise VibrInputError(f"unknown method {o.method!r} (choose from {', '.join(METHODS)})")
@@ -552,8 +552,8 @@ def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
 
 def _write_videos(res: FlyResult, fdir: Path, n: int, video, uncertainty, fps: float, crf: int) -> None:
     """The frames' video and the σ video, when asked, into ``res``."""
-    from .io import read_image
-    from .io.video import write_video
+    from ..io import read_image
+    from ..io.video import write_video
 
     if video is not None:
         paths = [fdir / frame_name(i) for i in range(n)]
@@ -596,8 +596,8 @@ def auto_executor(ctx: FrameContext, n_todo: int):
     """``executor="auto"``: the number of processes :func:`vibr.executor.auto_workers` gives
     for ``n_todo`` frames of the path's size, each worker holding the context and one
     render from ``n_views`` + 2 sources (the soft selection's extra views); None for 1."""
-    from .executor import auto_workers
-    from .validate import render_memory
+    from ..executor import auto_workers
+    from ..render.checks import render_memory
 
     cam = ctx.cameras[0]
     k = len(ctx.sources) if ctx.n_views is None else min(len(ctx.sources), ctx.n_views + 2)
@@ -617,7 +617,7 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
     if executor == "auto":
         executor = auto_executor(ctx, len(todo))
     if executor is not None:
-        from .executor import parse_executor, run_tasks
+        from ..executor import parse_executor, run_tasks
 
         kind, arg = parse_executor(executor)
         n_proc = min(arg, max(len(todo), 1)) if kind == "processes" else arg
@@ -626,7 +626,7 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
         out = run_tasks(render_frame, todo, setup=_same, setup_args=(ctx,), executor=executor,
                         desc="frames") if todo else []
     else:
-        from .progress import progress as bar
+        from ..progress import progress as bar
 
         engine = "in this process"
         out = [render_frame(ctx, i) for i in (bar(todo, desc="frames") if progress else todo)]

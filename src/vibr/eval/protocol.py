@@ -20,12 +20,12 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import VibrInputError
-from .metrics import METRIC_BORDER, check_measurable, dssim, psnr, view_metrics
-from .progress import progress
-from .render.methods import DEFAULTS, METHODS, get_method
-from .geometry.samples import view_counts
-from .scene import Scene
+from ..errors import VibrInputError
+from ..metrics import METRIC_BORDER, check_measurable, dssim, psnr, view_metrics
+from ..progress import progress
+from ..render.methods import DEFAULTS, METHODS, get_method
+from ..geometry.samples import view_counts
+from ..scene import Scene
 
 logger = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = GA
 @dataclass
 class Evaluation:
     """What :func:`run_evaluation` measured: the JSON-serialisable ``report`` (see
-    :func:`evaluate`), and for figures (:func:`vibr.figures.write_evaluation_figures`) the
+    :func:`evaluate`), and for figures (:func:`vibr.eval.figures.write_evaluation_figures`) the
     held-out ``reference`` image, the rendered ``images`` by setting label, the evaluated
     pixels ``mask`` (H×W bool) and a default file-name ``prefix`` (``TARGET_DEPTH``)."""
 
@@ -121,7 +121,7 @@ class EvalOptions:
     uncertainty : bool
         Render with ``uncertainty=True`` and add entry ``uncertainty`` = {ause, spearman,
         fractions, curve, oracle, rmse} (:func:`vibr.metrics.uncertainty_metrics`, the same
-        pixels as the other metrics; plot: :func:`vibr.uncertainty_figures.write_sparsification_figure`).
+        pixels as the other metrics; plot: :func:`vibr.eval.sigma_figures.write_sparsification_figure`).
     supersample : "auto" or int
         The grid every setting renders on, as :func:`vibr.render.render` chooses it (a
         held-out view at its sources' resolution: the target's own).
@@ -155,7 +155,7 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     (:func:`vibr.render.shared_geometry`), and every setting renders from them, as
     ``render()`` would render it. Per-setting ``seconds`` are therefore render times
     only; ``depth_seconds`` and ``samples_seconds`` are reported once. Nothing is written:
-    figures are :func:`vibr.figures.write_evaluation_figures`'s job.
+    figures are :func:`vibr.eval.figures.write_evaluation_figures`'s job.
 
     ``options`` (:class:`EvalOptions`) says how; ``kw`` (its fields, e.g. ``depth="gt"``)
     applies over it. Any other keyword raises ``TypeError``.
@@ -167,8 +167,8 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     parameter the renderer used), ``depth``, ``psnr``, ``dssim``, ``ssim``, ``seconds``,
     ``coverage``, ``iterations`` (and ``lpips`` when the ``lpips`` package works here).
     """
-    from .pipeline import prepare
-    from .render import shared_geometry
+    from ..pipeline import prepare
+    from ..render import shared_geometry
 
     o = replace(options or EvalOptions(), **kw)
     settings, intensity_scale = _checked_settings(settings, o.mask, o.intensity_scale)
@@ -229,7 +229,7 @@ def _measure_rows(rows, tview, cover, samples, intensity_scale, o: EvalOptions) 
         if lp is not None:
             entry["lpips"] = lp(res.image, tview.image)
         if o.uncertainty:  # issue 28
-            from .metrics import uncertainty_metrics
+            from ..metrics import uncertainty_metrics
 
             entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
                                                        border=o.border)
@@ -249,7 +249,7 @@ def _checked_settings(settings, mask: str, intensity_scale):
     if not settings:
         raise VibrInputError("no setting to evaluate")
     if intensity_scale is None:
-        from .render.methods import DEFAULTS
+        from ..render.methods import DEFAULTS
 
         intensity_scale = DEFAULTS["scale"]
     intensity_scale = float(intensity_scale)
@@ -388,7 +388,7 @@ def _lpips_fn():
 
 def write_report(report: dict, path) -> None:
     """Write a report as JSON, atomically."""
-    from .io.atomic import atomic_path
+    from .._runtime.atomic import atomic_path
 
     with atomic_path(path) as tmp:
         with open(tmp, "w") as fh:

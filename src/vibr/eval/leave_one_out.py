@@ -1,4 +1,4 @@
-"""Leave-one-out over many views: :func:`vibr.evaluate.evaluate` once per target, through
+"""Leave-one-out over many views: :func:`vibr.eval.protocol.evaluate` once per target, through
 :func:`vibr.executor.run_tasks`.
 
 Each held-out view is one task: the worker loads the scene once (:func:`load_context`),
@@ -23,8 +23,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import VibrInputError
-from .evaluate import Setting, write_report
+from ..errors import VibrInputError
+from .protocol import Setting, write_report
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ def resolve_targets(scene, spec: str | Sequence[str]) -> list[str]:
 
 def load_context(scene_path, scale: float):
     """Per-worker setup: the scene, loaded once (``scene.meta['scale']`` recorded)."""
-    from .io import load_scene
+    from ..io import load_scene
 
     scene = load_scene(scene_path, scale=scale)
     scene.meta.setdefault("scale", scale)
@@ -61,7 +61,7 @@ def load_context(scene_path, scale: float):
 def _config_key(task: dict) -> str:
     """A hash of everything that decides a target's numbers (not where files go), vibr's
     code included: a report written by other code is recomputed, not mixed in."""
-    from .io.checkpoint import code_fingerprint
+    from .._runtime.checkpoint import code_fingerprint
 
     cfg = {k: v for k, v in task.items() if k not in ("report", "eval_kw")}
     cfg["code"] = code_fingerprint()
@@ -88,11 +88,11 @@ def evaluate_target(scene, task: dict) -> dict:
     """One leave-one-out evaluation (a task of :func:`vibr.executor.run_tasks`).
 
     ``task``: ``target``, ``settings``, ``eval_kw`` (keyword arguments of
-    :func:`vibr.evaluate.evaluate`), ``report`` (the JSON file to write), ``config`` (hash
+    :func:`vibr.eval.protocol.evaluate`), ``report`` (the JSON file to write), ``config`` (hash
     of the settings). Returns the target's report; when ``report`` already holds a report
     with the same ``config``, returns it without recomputing (``"skipped": true``).
     """
-    from .evaluate import run_evaluation
+    from .protocol import run_evaluation
 
     old = _report_done(task)
     if old is not None:
@@ -132,7 +132,7 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
     executor
         :func:`vibr.executor.run_tasks`'s engine: None, N processes, "local", an address.
     **eval_kw
-        Keyword arguments of :func:`vibr.evaluate.evaluate` (depth, n_views, mask, ...).
+        Keyword arguments of :func:`vibr.eval.protocol.evaluate` (depth, n_views, mask, ...).
 
     Returns
     -------
@@ -140,7 +140,7 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
         ``scene``, ``targets``, ``settings`` (labels), ``per_view`` (target → report),
         ``summary`` (:func:`summarise`), ``wall_seconds``.
     """
-    from .executor import run_tasks
+    from ..executor import run_tasks
 
     targets = list(targets)
     settings = list(settings)

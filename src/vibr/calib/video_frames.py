@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import VibrInputError
-from .io.video import VideoInfo, open_video
-from .progress import progress
+from ..errors import VibrInputError
+from ..io.video import VideoInfo, open_video
+from ..progress import progress
 
 logger = logging.getLogger(__name__)
 

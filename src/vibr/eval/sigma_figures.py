@@ -51,7 +51,7 @@ def sigma_scale(values, scale: float = 255.0) -> float:
     fly-through 7 % of a frame's pixels are holes, the 99th percentile of all pixels is σ_hole
     (73.6) and the σ of the pixels the sources reach (median 7, 90th percentile 18) took the
     bottom tenth of the colours."""
-    from .render.uncertainty import hole_sigma
+    from ..render.uncertainty import hole_sigma
 
     v = np.asarray(values, np.float64).ravel()
     v = v[np.isfinite(v) & (v < 0.999 * hole_sigma(scale))]  # σ_hole, also as float16
@@ -89,8 +89,8 @@ def sigma_figure(sigma, vmax: float | None = None, label: str = "sigma, grey lev
 def write_sigma(path, sigma, vmax: float | None = None) -> None:
     """Write a σ map atomically: ``.npy`` the raw float32 array, ``.png`` the colour-mapped
     figure with its scale bar (:func:`sigma_figure`)."""
-    from .errors import VibrInputError
-    from .io.atomic import atomic_path
+    from ..errors import VibrInputError
+    from .._runtime.atomic import atomic_path
 
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
@@ -116,7 +116,7 @@ def sparsification_plot(path, fractions, curves: dict, title: str = "", size=(48
     import imageio.v3 as iio
     from PIL import Image, ImageDraw
 
-    from .io.atomic import atomic_path
+    from .._runtime.atomic import atomic_path
 
     Wd, Hd = size
     ml, mr, mt, mb = 46, 12, 22, 34
@@ -154,7 +154,7 @@ def sparsification_plot(path, fractions, curves: dict, title: str = "", size=(48
 
 def write_sparsification_figure(folder, results, prefix: str) -> str:
     """``FOLDER/PREFIX_sparsification.png``: the sparsification curve of every evaluated
-    setting that has one (``results`` of :func:`vibr.evaluate.evaluate`, entry
+    setting that has one (``results`` of :func:`vibr.eval.protocol.evaluate`, entry
     ``uncertainty``) and the oracle of the first; returns the path."""
     rows = [r for r in results if r.get("uncertainty")]
     curves = {f"{r['label']} (AUSE {r['uncertainty']['ause']:.3f})": r["uncertainty"]["curve"] for r in rows}
