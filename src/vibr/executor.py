@@ -57,7 +57,9 @@ import time
 import uuid
 from typing import Any, Callable, Sequence
 
+from ._runtime.atomic import remove_partial
 from ._runtime.malloc import tune_malloc
+from ._runtime.memory import available_memory
 from .errors import VibrInputError
 from .progress import progress
 
@@ -113,7 +115,6 @@ def auto_workers(n_tasks: int, task_pixels: int, worker_bytes: int, *, cores: in
     cores, memory : int, optional
         Default :func:`available_cores` and :func:`vibr._runtime.memory.available_memory`.
     """
-    from ._runtime.memory import available_memory
 
     cores = available_cores() if cores is None else int(cores)
     if cores < 2 or task_pixels < AUTO_MIN_TASK_PIXELS or multiprocessing.current_process().daemon:
@@ -291,7 +292,6 @@ def _on_sigterm(signum, frame) -> None:
     (:func:`vibr._runtime.atomic.atomic_path`) are removed before the process ends. Through
     ``os._exit``: an exception raised here would be caught as the running task's error and
     leave the process alive, for the pool to wait on."""
-    from ._runtime.atomic import remove_partial
 
     remove_partial()
     os._exit(128 + signum)
@@ -482,9 +482,8 @@ def start_local_cluster(n_workers: int = 2):
     ``NUMBA_NUM_THREADS = cores // n_workers`` set in its environment before it starts."""
     import logging as _logging
 
-    from distributed import LocalCluster
-
     import dask
+    from distributed import LocalCluster
 
     threads = threads_per_worker(n_workers)
     # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which turns off glibc's

@@ -48,13 +48,16 @@ import os
 from pathlib import Path
 from typing import Sequence
 
-from .camera import Camera
-from .errors import VibrInputError
-from .scene import Scene, View
 from ._runtime.atomic import atomic_path
 from ._runtime.checkpoint import code_fingerprint
-from .io import load_scene
-from .stereo.cache import CACHE_VERSION, default_cache_dir, mark_used, prune_cache
+from .camera import Camera
+from .errors import VibrInputError
+from .geometry import apply_fallback, ensure_source_depth, planar_proxy
+from .geometry.selection import select_views
+from .io import load_scene, read_depth
+from .io.depthfiles import fit_depth
+from .scene import Scene, View
+from .stereo.cache import CACHE_VERSION, default_cache_dir, estimated_depth, mark_used, prune_cache
 
 __all__ = ["ALL_VIEWS", "DEPTH_MODES", "ESTIMATED_SOURCES", "PLANAR_SOURCES", "prepare"]
 
@@ -145,7 +148,6 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     if depth == "gt":
         src = _gt_depth(scene, src, ti)
     elif depth == "estimated":
-        from .stereo.cache import estimated_depth
 
         if len(src) < 2:  # the target takes no part in its sources' depth
             raise VibrInputError("depth is estimated from the sources alone and one source is too few: "
@@ -155,7 +157,6 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         src = _planar_depth(scene, src, tcam)
     else:
         src = _files_depth(src, depth_files)
-    from .geometry import apply_fallback
 
     return apply_fallback(src, fallback), tview
 
@@ -203,7 +204,6 @@ def missing_view_camera(scene: Scene, name) -> Camera | None:
 def _hold_out(scene: Scene, target, sources, n_views):
     """(sources, target View or Camera, target index or None): the target held out, the
     sources listed or the ``n_views`` best (:func:`vibr.geometry.selection.select_views`)."""
-    from .geometry.selection import select_views
 
     absent = missing_view_camera(scene, target)
     if absent is not None:
@@ -224,7 +224,6 @@ def _hold_out(scene: Scene, target, sources, n_views):
 def _gt_depth(scene: Scene, src: Scene, ti) -> Scene:
     """The scene's depth; views without it get it by transfer (a light field whose ground
     truth is the held-out centre's: from the target, which is never rendered from)."""
-    from .geometry import ensure_source_depth
 
     if all(v.depth is None for v in src.views):
         if ti is None or scene.views[ti].depth is None:
@@ -239,7 +238,6 @@ def _gt_depth(scene: Scene, src: Scene, ti) -> Scene:
 
 def _planar_depth(scene: Scene, src: Scene, tcam) -> Scene:
     """The fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`)."""
-    from .geometry import planar_proxy
 
     plane, known = {}, []
     if all(v.depth is None for v in src.views) and (src.points is None or not len(src.points)):
@@ -258,8 +256,6 @@ def _planar_depth(scene: Scene, src: Scene, tcam) -> Scene:
 
 def _files_depth(src: Scene, depth_files) -> Scene:
     """Depth read from ``NAME.npy/.pfm/.png/.bin`` files in the folder ``depth_files``."""
-    from .io import read_depth
-    from .io.depthfiles import fit_depth
 
     if depth_files is None:
         raise VibrInputError("depth 'files' needs a folder of depth files (depth_files)")

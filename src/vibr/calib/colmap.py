@@ -44,11 +44,12 @@ import numpy as np
 from .._runtime.pycolmap import import_pycolmap
 from ..camera import Camera
 from ..errors import OutputExists, VibrInputError
-from ..io.images import IMAGE_EXTS
+from ..io.images import IMAGE_EXTS, image_size
+from ..io.outputs import check_not_input, check_replaceable
 from ..io.video import VIDEO_INPUTS, is_video_input
-from .pan import Choice, fit_one_centre, focal_note, prefer_one_centre
 from ..progress import progress
 from ..scene import Scene, View
+from .pan import Choice, fit_one_centre, focal_note, prefer_one_centre
 from .video_frames import DEFAULT_FRAMES, extract_frames
 
 logger = logging.getLogger(__name__)
@@ -124,7 +125,6 @@ MIN_PHOTO_SIDE = 32
 
 def _header_sizes(files: list[Path]) -> list[tuple[int, int]] | None:
     """(width, height) of each photo from its header, or None if one is unreadable."""
-    from ..io.images import image_size
 
     try:
         return [image_size(f) for f in files]
@@ -816,7 +816,6 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
     if out.exists() and not overwrite:
         raise OutputExists("output folder already exists", out)
     if out.exists():
-        from ..io.outputs import check_not_input, check_replaceable
 
         check_not_input(out, [photos_dir])
         check_replaceable(out)  # overwrite replaces only a folder vibr wrote

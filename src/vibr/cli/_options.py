@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES, PLANAR_SOURCES
 from ..metrics import METRIC_BORDER
+from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES, PLANAR_SOURCES
 from ..render.autotune import AUTO, GAMMA_GRID, LAM_GRID
 from ..render.methods import DEFAULTS, METHODS, PRESETS, PSFS, REGISTRY
 

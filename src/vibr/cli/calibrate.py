@@ -7,9 +7,9 @@ import argparse
 import shlex
 
 from ..calib.colmap import CAMERA_MODELS, MATCHERS
+from ..calib.video_frames import DEFAULT_FRAMES
 from ..errors import VibrInputError
 from ..io.video import VIDEO_INPUTS, is_video_input
-from ..calib.video_frames import DEFAULT_FRAMES
 from . import add_quiet, count
 
 _EPILOG = """\

@@ -47,14 +47,13 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..errors import VibrInputError
     from ..io import write_image
+    from ..io.images import check_image_ext
+    from ..io.outputs import check_output
     from ..metrics import dssim, psnr
     from ..render import render
     from ..synthetic import make_scene
-
-    from ..errors import VibrInputError
-    from ..io.images import check_image_ext
-    from ..io.outputs import check_output
 
     if args.output is not None:
         check_output(args.output, "file", what="-o")
@@ -95,10 +94,9 @@ def _demo_video(scene, args) -> None:
     import tempfile
 
     from ..errors import VibrInputError
-    from ..paths.flythrough import render_path
-    from ..paths.camera_path import orbit
-
     from ..io.video import VIDEO_FORMATS, is_video
+    from ..paths.camera_path import orbit
+    from ..paths.flythrough import render_path
 
     if not is_video(args.video):
         raise VibrInputError(f"the demo video must be a video file ({', '.join(VIDEO_FORMATS)})", args.video)

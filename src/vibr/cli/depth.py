@@ -106,8 +106,8 @@ def _refuse_mvs_options(args, scene) -> None:
 def run(args) -> int:
     import shutil
 
-    from ..io import load_scene, save_scene
     from .._runtime.checkpoint import resume_folder
+    from ..io import load_scene, save_scene
     from ..stereo import estimate_depth
     from ..stereo.checks import check_depth_params
 

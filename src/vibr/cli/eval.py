@@ -5,13 +5,22 @@ from __future__ import annotations
 import argparse
 import logging
 
+from ..eval.protocol import GAMMAS
 from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS
-from ..eval.protocol import GAMMAS
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
-from ._options import (add_depth_options, add_intensity_scale_option, add_psf_option, add_source_options,
-                       cache_dir_from_args, check_depth_args, method_default, method_help, names)
+from ._options import (
+    add_depth_options,
+    add_intensity_scale_option,
+    add_psf_option,
+    add_source_options,
+    cache_dir_from_args,
+    check_depth_args,
+    method_default,
+    method_help,
+    names,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -204,8 +213,8 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
     """``--target all`` / a comma list: one leave-one-out task per view (vibr.eval.leave_one_out)."""
     from pathlib import Path
 
-    from ..eval.protocol import write_report
     from ..eval.leave_one_out import evaluate_all, format_all_table, resolve_targets
+    from ..eval.protocol import write_report
 
     targets = resolve_targets(scene, args.target)
     # every target has sources of its own, each estimate is used once, and the per-view

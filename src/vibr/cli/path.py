@@ -76,8 +76,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..paths import camera_path as P
     from ..errors import VibrInputError
+    from ..paths import camera_path as P
     from ..pipeline import load_scene_cached
 
     if not args.output.lower().endswith(".json"):

@@ -8,11 +8,21 @@ import os
 
 from ..io.video import VIDEO_FORMATS, is_video
 from ..pipeline import ALL_VIEWS
-from ._executor import add_executor_args, executor_from_args
 from . import add_quiet, count
-from ._options import (METRIC_RULE, add_bit_depth_option, add_depth_options, add_method_option,
-                       add_render_params, add_source_options, cache_dir_from_args, check_depth_args, names,
-                       refuse_ignored_params, render_params)
+from ._executor import add_executor_args, executor_from_args
+from ._options import (
+    METRIC_RULE,
+    add_bit_depth_option,
+    add_depth_options,
+    add_method_option,
+    add_render_params,
+    add_source_options,
+    cache_dir_from_args,
+    check_depth_args,
+    names,
+    refuse_ignored_params,
+    render_params,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -86,9 +96,9 @@ def _add_path_options(p) -> None:
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, write_image
-    from ..pipeline import prepare
     from ..io.images import check_image_ext
     from ..io.outputs import check_not_scene_file, check_output
+    from ..pipeline import prepare
     from ..render import render
     from ..render.methods import method_params
 
@@ -182,9 +192,9 @@ def _run_path(args) -> int:
     """``--path``: a thin layer over :func:`vibr.paths.flythrough.render_path`."""
     from ..errors import VibrInputError
     from ..io.outputs import check_output
-    from ..pipeline import load_scene_cached
-    from ..paths.flythrough import render_path
     from ..paths.camera_path import read_camera_path, scene_processing_transform
+    from ..paths.flythrough import render_path
+    from ..pipeline import load_scene_cached
 
     out = args.output
     if args.crf is not None and out.lower().endswith(".gif"):

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._runtime.atomic import atomic_path
+
 # A perceptually ordered dark-to-bright map (approximating 'inferno') for error images.
 _ANCHORS = np.array([[0, 0, 4], [40, 11, 84], [101, 21, 110], [159, 42, 99], [212, 72, 66],
                      [245, 125, 21], [250, 193, 39], [252, 255, 164]], float) / 255.0
@@ -68,7 +70,6 @@ def _write_png(path: Path, img: np.ndarray) -> None:
     """An 8-bit PNG at full zlib compression (figures are kept in docs), written atomically."""
     from PIL import Image
 
-    from .._runtime.atomic import atomic_path
 
     q = (np.clip(np.asarray(img, np.float32), 0, 1) * 255 + 0.5).astype(np.uint8)
     with atomic_path(path) as tmp:

@@ -23,8 +23,12 @@ from typing import Sequence
 
 import numpy as np
 
+from .._runtime.checkpoint import code_fingerprint
 from ..errors import VibrInputError
-from .protocol import Setting, write_report
+from ..executor import run_tasks
+from ..io import load_scene
+from .figures import write_evaluation_figures
+from .protocol import Setting, run_evaluation, write_report
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +55,6 @@ def resolve_targets(scene, spec: str | Sequence[str]) -> list[str]:
 
 def load_context(scene_path, scale: float):
     """Per-worker setup: the scene, loaded once (``scene.meta['scale']`` recorded)."""
-    from ..io import load_scene
 
     scene = load_scene(scene_path, scale=scale)
     scene.meta.setdefault("scale", scale)
@@ -61,7 +64,6 @@ def load_context(scene_path, scale: float):
 def _config_key(task: dict) -> str:
     """A hash of everything that decides a target's numbers (not where files go), vibr's
     code included: a report written by other code is recomputed, not mixed in."""
-    from .._runtime.checkpoint import code_fingerprint
 
     cfg = {k: v for k, v in task.items() if k not in ("report", "eval_kw")}
     cfg["code"] = code_fingerprint()
@@ -92,7 +94,6 @@ def evaluate_target(scene, task: dict) -> dict:
     of the settings). Returns the target's report; when ``report`` already holds a report
     with the same ``config``, returns it without recomputing (``"skipped": true``).
     """
-    from .protocol import run_evaluation
 
     old = _report_done(task)
     if old is not None:
@@ -106,7 +107,6 @@ def evaluate_target(scene, task: dict) -> dict:
     ev = run_evaluation(scene, task["target"], task["settings"], **kw)
     rep = ev.report
     if figures:
-        from .figures import write_evaluation_figures
 
         rep["figures"] = write_evaluation_figures(ev, figures)
     rep["wall_seconds"] = round(time.perf_counter() - t0, 3)
@@ -140,7 +140,6 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
         ``scene``, ``targets``, ``settings`` (labels), ``per_view`` (target → report),
         ``summary`` (:func:`summarise`), ``wall_seconds``.
     """
-    from ..executor import run_tasks
 
     targets = list(targets)
     settings = list(settings)

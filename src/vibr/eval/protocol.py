@@ -20,11 +20,14 @@ from typing import Sequence
 
 import numpy as np
 
+from .._runtime.atomic import atomic_path
 from ..errors import VibrInputError
-from ..metrics import METRIC_BORDER, check_measurable, dssim, psnr, view_metrics
-from ..progress import progress
-from ..render.methods import DEFAULTS, METHODS, get_method
 from ..geometry.samples import view_counts
+from ..metrics import METRIC_BORDER, check_measurable, dssim, psnr, uncertainty_metrics, view_metrics
+from ..pipeline import prepare
+from ..progress import progress
+from ..render import shared_geometry
+from ..render.methods import DEFAULTS, METHODS, get_method
 from ..scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -167,8 +170,6 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     parameter the renderer used), ``depth``, ``psnr``, ``dssim``, ``ssim``, ``seconds``,
     ``coverage``, ``iterations`` (and ``lpips`` when the ``lpips`` package works here).
     """
-    from ..pipeline import prepare
-    from ..render import shared_geometry
 
     o = replace(options or EvalOptions(), **kw)
     settings, intensity_scale = _checked_settings(settings, o.mask, o.intensity_scale)
@@ -229,7 +230,6 @@ def _measure_rows(rows, tview, cover, samples, intensity_scale, o: EvalOptions) 
         if lp is not None:
             entry["lpips"] = lp(res.image, tview.image)
         if o.uncertainty:  # issue 28
-            from ..metrics import uncertainty_metrics
 
             entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
                                                        border=o.border)
@@ -249,7 +249,6 @@ def _checked_settings(settings, mask: str, intensity_scale):
     if not settings:
         raise VibrInputError("no setting to evaluate")
     if intensity_scale is None:
-        from ..render.methods import DEFAULTS
 
         intensity_scale = DEFAULTS["scale"]
     intensity_scale = float(intensity_scale)
@@ -388,7 +387,6 @@ def _lpips_fn():
 
 def write_report(report: dict, path) -> None:
     """Write a report as JSON, atomically."""
-    from .._runtime.atomic import atomic_path
 
     with atomic_path(path) as tmp:
         with open(tmp, "w") as fh:

@@ -9,6 +9,10 @@ import os
 
 import numpy as np
 
+from .._runtime.atomic import atomic_path
+from ..errors import VibrInputError
+from ..render.uncertainty import hole_sigma
+
 logger = logging.getLogger(__name__)
 
 __all__ = ["colourise", "sigma_scale", "sigma_figure", "write_sigma", "sparsification_plot", "write_sparsification_figure"]
@@ -51,7 +55,6 @@ def sigma_scale(values, scale: float = 255.0) -> float:
     fly-through 7 % of a frame's pixels are holes, the 99th percentile of all pixels is σ_hole
     (73.6) and the σ of the pixels the sources reach (median 7, 90th percentile 18) took the
     bottom tenth of the colours."""
-    from ..render.uncertainty import hole_sigma
 
     v = np.asarray(values, np.float64).ravel()
     v = v[np.isfinite(v) & (v < 0.999 * hole_sigma(scale))]  # σ_hole, also as float16
@@ -89,8 +92,6 @@ def sigma_figure(sigma, vmax: float | None = None, label: str = "sigma, grey lev
 def write_sigma(path, sigma, vmax: float | None = None) -> None:
     """Write a σ map atomically: ``.npy`` the raw float32 array, ``.png`` the colour-mapped
     figure with its scale bar (:func:`sigma_figure`)."""
-    from ..errors import VibrInputError
-    from .._runtime.atomic import atomic_path
 
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
@@ -116,7 +117,6 @@ def sparsification_plot(path, fractions, curves: dict, title: str = "", size=(48
     import imageio.v3 as iio
     from PIL import Image, ImageDraw
 
-    from .._runtime.atomic import atomic_path
 
     Wd, Hd = size
     ml, mr, mt, mb = 46, 12, 22, 34

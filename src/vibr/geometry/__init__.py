@@ -12,12 +12,16 @@ Modules: ``depth`` (radial/disparity → orthogonal depth, slopes, bilateral hol
 ``transfer``, ``proxy``, ``sampling`` (the stage end to end) (the weights are the renderer's: :mod:`vibr.render.weights`).
 """
 
-from .depth import (depth_derivatives, disparity_to_depth, fill_depth_holes, radial_to_orthogonal,
-                    radial_to_orthogonal_derivatives)
-from .sampling import SampleOptions, compute_samples, prepare_depth
-from .proxy import (FALLBACK_MODES, apply_fallback, fallback_depth, planar_proxy, plane_depth,
-                    sphere_proxy)
+from .depth import (
+                    depth_derivatives,
+                    disparity_to_depth,
+                    fill_depth_holes,
+                    radial_to_orthogonal,
+                    radial_to_orthogonal_derivatives,
+)
+from .proxy import FALLBACK_MODES, apply_fallback, fallback_depth, planar_proxy, plane_depth, sphere_proxy
 from .samples import Samples
+from .sampling import SampleOptions, compute_samples, prepare_depth
 from .transfer import ensure_source_depth, transfer_depth
 from .visibility import new_zbuffers, reduce_zbuffers, splat_mesh, splat_zbuffer, visibility_mask
 from .warp import warp_constants, warp_points, warp_view

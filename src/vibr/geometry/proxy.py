@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..camera import Camera
+from ..camera import Camera, axes_meeting_point, shared_centre
 from ..errors import VibrInputError
 from ..scene import Scene, View
 from .depth import DEFAULT_SIGMA_Z_REL
@@ -122,7 +122,6 @@ def _axes_depth(sources: Scene, target: Camera) -> tuple[float, str]:
     light-field grid). Sources that share one centre (a rotation-only capture) see the same
     image through any surface (``∂τ/∂z = 0``): the plane then sits at depth 1, the radius
     :func:`sphere_proxy` takes without points."""
-    from ..camera import axes_meeting_point, shared_centre
 
     cams = [v.camera for v in sources.views]
     if shared_centre(cams) is not None:

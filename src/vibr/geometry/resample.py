@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..camera import Camera
+
 
 def from_uint(q: np.ndarray) -> np.ndarray:
     """Integer pixels → float32 in [0, 1]: ``q / (2^bits − 1)`` evaluated in float32."""
@@ -183,7 +185,6 @@ def scaled_scene(scene, s: float):
     views = [scaled_view(v, s) for v in scene.views]
     meta = dict(scene.meta)
     if meta.get("missing_views"):  # a light field's absent positions (vibr.io.hci)
-        from ..camera import Camera
 
         meta["missing_views"] = {n: Camera.from_dict(d).scaled(s).to_dict() for n, d in meta["missing_views"].items()}
     return scene.replace(views=views, meta=meta)

@@ -25,12 +25,19 @@ from numba import njit, prange
 from ..camera import Camera
 from ..errors import VibrInputError, check_stop
 from ..scene import Scene, View
-from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_row
 from .depth import DEFAULT_EDGE_REL, DEFAULT_SIGMA_Z_REL, depth_derivatives, fill_depth_holes
+from .gradient import DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_row
 from .proxy import PROXY_Z_CORR
 from .samples import Samples
-from .visibility import (DEFAULT_MAX_QUAD_PX, DEFAULT_VIS_THRESHOLD, VISIBLE, new_zbuffers,
-                         reduce_zbuffers, splat_zbuffer, visibility_mask)
+from .visibility import (
+    DEFAULT_MAX_QUAD_PX,
+    DEFAULT_VIS_THRESHOLD,
+    VISIBLE,
+    new_zbuffers,
+    reduce_zbuffers,
+    splat_zbuffer,
+    visibility_mask,
+)
 from .warp import DEFAULT_MAX_INV_DET, _project_one, _warp_one, warp_constants
 
 __all__ = ["compute_samples", "SampleOptions", "prepare_depth", "DEFAULT_SIGMA_Z_REL", "OPTIONAL_FIELDS"]

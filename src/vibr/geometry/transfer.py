@@ -17,8 +17,7 @@ import numpy as np
 from ..errors import VibrInputError
 from ..scene import Scene
 from .depth import DEFAULT_EDGE_REL, depth_derivatives, fill_depth_holes
-from .visibility import (DEFAULT_MAX_QUAD_PX, new_zbuffers, reduce_zbuffers, splat_mesh,
-                         splat_zbuffer)
+from .visibility import DEFAULT_MAX_QUAD_PX, new_zbuffers, reduce_zbuffers, splat_mesh, splat_zbuffer
 from .warp import warp_constants
 
 __all__ = ["ensure_source_depth", "transfer_depth"]

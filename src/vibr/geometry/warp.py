@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..camera import Camera
+from .depth import depth_derivatives
 
 __all__ = ["warp_constants", "warp_view", "warp_points", "DEFAULT_MAX_INV_DET"]
 
@@ -155,7 +156,6 @@ def warp_view(src: Camera, tgt: Camera, depth, z_x=None, z_y=None) -> dict:
     ``w`` (H, W), ``jac`` (H, W, 2, 2), ``det`` (H, W), ``dtau_dz`` (H, W, 2). If the slopes
     are not given they are computed with :func:`vibr.geometry.depth.depth_derivatives`.
     """
-    from .depth import depth_derivatives
 
     z = np.asarray(depth, dtype=np.float64)
     H, W = z.shape

@@ -21,11 +21,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import VibrInputError
-from .entries import select_entries
 from .camera_json import read_camera_json, write_camera_json
+from .colmap import find_colmap_model, load_colmap
 from .depthfiles import read_depth, read_pfm, write_depth, write_pfm
+from .entries import select_entries
+from .hci import is_hci_folder, load_hci
 from .images import is_image_file, read_image, write_image
-from .transforms import save_scene
+from .middlebury import find_par_file, load_middlebury
+from .strecha import is_strecha_folder, load_strecha
+from .transforms import find_transforms, load_transforms, save_scene
 
 __all__ = ["load_scene", "select_entries", "save_scene", "detect_format", "read_image", "write_image", "read_depth",
            "write_depth", "read_pfm", "write_pfm", "read_camera_json", "write_camera_json", "FORMATS"]
@@ -41,11 +45,6 @@ def detect_format(path) -> str:
 
     Raises :class:`VibrInputError` when the path is missing or nothing is recognised.
     """
-    from .colmap import find_colmap_model
-    from .hci import is_hci_folder
-    from .middlebury import find_par_file
-    from .strecha import is_strecha_folder
-    from .transforms import find_transforms
 
     p = Path(path)
     if not p.exists():
@@ -118,25 +117,20 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
     fmt = detect_format(path)
     p = Path(path)
     if fmt == "hci":
-        from .hci import load_hci
 
         return load_hci(p.parent if p.is_file() else p, scale=scale, views=views, **options)
     if options:
         raise VibrInputError(f"options {sorted(options)} do not apply to {fmt} scenes", p)
     if fmt == "transforms":
-        from .transforms import load_transforms
 
         return load_transforms(p, scale=scale, views=views,
                                allow_outside=ALLOW_OUTSIDE_PATHS if allow_outside is None else allow_outside)
     if fmt == "colmap":
-        from .colmap import load_colmap
 
         return load_colmap(p, scale=scale, views=views)
     if fmt == "middlebury":
-        from .middlebury import load_middlebury
 
         return load_middlebury(p, scale=scale, views=views)
-    from .strecha import load_strecha
 
     return load_strecha(p, scale=scale, views=views)
 

@@ -12,9 +12,9 @@ import os
 
 import numpy as np
 
+from .._runtime.atomic import atomic_path
 from ..camera import Camera
 from ..errors import VibrInputError, require_file
-from .._runtime.atomic import atomic_path
 
 #: Largest |R Rᵀ − I| accepted from a file (text files round to ~6 digits); such matrices
 #: are snapped to the nearest rotation. Anything worse is reported as not a rotation.

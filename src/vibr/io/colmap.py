@@ -30,6 +30,7 @@ from ..scene import Scene
 from .camera_json import as_rotation
 from .colmap_check import check_colmap_model
 from .depthfiles import fit_depth, read_depth
+from .entries import select_entries
 from .images import build_views
 from .undistort import Distortion, check_lens, pinhole
 from .undistort import summary as undistort_summary
@@ -108,7 +109,6 @@ def colmap_camera(cam, source):
 
 def load_colmap(path, *, scale: float = 1.0, views=None) -> Scene:
     """Load a COLMAP sparse model (+ images, + dense geometric depth maps when present)."""
-    from .entries import select_entries
 
     rec, model, root = _read_reconstruction(path)
     img_dirs = [d for d in (root / "images", model / "images", model.parent / "images") if d.is_dir()]

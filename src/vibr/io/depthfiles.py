@@ -22,9 +22,10 @@ import os
 
 import numpy as np
 
-from ..errors import VibrInputError, require_file
-from ..scene import depth_from_file_values
 from .._runtime.atomic import atomic_path
+from ..errors import VibrInputError, require_file
+from ..geometry.resample import resize_depth
+from ..scene import depth_from_file_values
 
 DEPTH_EXTS = (".pfm", ".npy", ".png", ".bin")
 
@@ -162,7 +163,6 @@ def fit_depth(depth: np.ndarray, shape, path=None, what: str = "the view") -> np
     loaded at ``--scale``, COLMAP's dense maps at its ``max_image_size``) resized to
     ``shape`` = (H, W) by nearest neighbour, which never mixes depths across an edge. Another
     aspect is an error naming ``path`` (the map is of another image)."""
-    from ..geometry.resample import resize_depth
 
     (h, w), (H, W) = depth.shape[:2], tuple(shape)
     if (h, w) == (H, W):

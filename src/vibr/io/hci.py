@@ -45,8 +45,9 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import VibrInputError
-from ..scene import Scene
+from ..scene import Scene, depth_from_file_values
 from .depthfiles import read_pfm
+from .entries import select_entries
 from .images import build_views, image_size
 
 _CAM_RE = re.compile(r"^input_Cam(\d+)\.(png|jpg|jpeg|tif|tiff)$", re.IGNORECASE)
@@ -112,7 +113,6 @@ def _read_ground_truth(disp_path: Path, depth_path: Path, H: int, W: int):
         if not np.all(np.isfinite(disp)):
             raise VibrInputError(f"disparity has {int((~np.isfinite(disp)).sum())} NaN or infinite values", disp_path)
     elif depth_path.is_file():
-        from ..scene import depth_from_file_values
 
         depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
     return disp, depth_gt
@@ -159,7 +159,6 @@ def load_hci(path, *, scale: float = 1.0, views=None, grid: tuple[int, int] | No
     grid : (rows, cols), optional
         Grid shape when there is no parameters.cfg.
     """
-    from .entries import select_entries
 
     root = Path(path)
     files = {}

@@ -19,9 +19,16 @@ import zlib
 import numpy as np
 from numba import njit
 
-from ..errors import VibrInputError, require_file
 from .._runtime.atomic import atomic_path
+from .._runtime.memory import check_memory
+from ..errors import VibrInputError, require_file
 from ..geometry.resample import from_uint, resize_depth, resize_image, resize_mask
+from ..progress import progress
+from ..scene import (
+    View,
+    check_image,  # NaN, or 0..255 as floats: refused, not clipped to white
+)
+from .undistort import undistort_array
 
 #: Set by :func:`headers_only`: :func:`build_views` then reads image headers, not pixels.
 _HEADERS_ONLY = contextvars.ContextVar("vibr_headers_only", default=False)
@@ -198,7 +205,6 @@ def read_image(path) -> np.ndarray:
     if a.dtype in (np.uint8, np.uint16):
         return np.ascontiguousarray(from_uint(a))
     if np.issubdtype(a.dtype, np.floating):
-        from ..scene import check_image  # NaN, or 0..255 as floats: refused, not clipped to white
 
         return np.clip(check_image(a, p), 0.0, 1.0)
     if np.issubdtype(a.dtype, np.integer):
@@ -347,14 +353,11 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     """
     from concurrent.futures import ThreadPoolExecutor
 
-    from ..progress import progress
-    from ..scene import View
 
     if scale <= 0 or not np.isfinite(scale):
         raise VibrInputError(f"scale must be positive, got {scale}")
     headers = _HEADERS_ONLY.get()
     if not headers:
-        from .._runtime.memory import check_memory
 
         npx = sum(e["camera"].width * e["camera"].height for e in entries)  # float32 RGB + decoding
         check_memory(16.0 * npx, f"loading {len(entries)} images ({npx / 1e6:.0f} Mpixels)",
@@ -399,7 +402,6 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
 
 def _undistorted(img, depth, sz, mask, dist, cam):
     """A distorted view's arrays resampled onto its pinhole ``cam`` (:mod:`vibr.io.undistort`)."""
-    from .undistort import undistort_array
 
     img = None if img is None else undistort_array(img, dist)
     depth = None if depth is None else undistort_array(depth, dist, nearest=True)

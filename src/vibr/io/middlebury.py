@@ -18,6 +18,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene
 from .camera_json import as_rotation
+from .entries import select_entries
 from .images import build_views, image_size
 
 
@@ -60,7 +61,6 @@ def read_par(path) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
 
 def load_middlebury(path, *, scale: float = 1.0, views=None) -> Scene:
     """Load a Middlebury scene from a ``*_par.txt`` file or a folder holding one."""
-    from .entries import select_entries
 
     par = find_par_file(path)
     if par is None:

@@ -30,6 +30,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene
 from .camera_json import as_rotation
+from .entries import select_entries
 from .images import build_views, is_image_file
 
 _CAM_DIRS = ("gt_dense_cameras", "cameras", "gt_cameras")
@@ -91,7 +92,6 @@ def load_strecha(path, *, scale: float = 1.0, views=None) -> Scene:
     Every image must have a camera file; a missing one raises :class:`VibrInputError` naming
     the image. No depth is loaded (the benchmark has none).
     """
-    from .entries import select_entries
 
     root = Path(path)
     img_dir = _image_dir(root)

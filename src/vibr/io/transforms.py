@@ -55,13 +55,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .._runtime.atomic import temporary_folder, write_failed
 from ..camera import Camera
 from ..errors import OutputExists, OutputFailed, VibrInputError
+from ..progress import progress
 from ..scene import Scene
-from .._runtime.atomic import temporary_folder, write_failed
 from .camera_json import ROTATION_TOL, as_scaled_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
+from .entries import select_entries
 from .images import build_views, image_size, read_mask, write_image
+from .outputs import check_not_input, check_replaceable, replace_folder, write_marker
 from .undistort import NERFSTUDIO_FISHEYE, check_lens, from_nerfstudio, pinhole
 from .undistort import summary as undistort_summary
 
@@ -336,7 +339,6 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
     File paths (images, depth, sigma_z, points) must lie inside the scene folder: an
     absolute path or one escaping it (``../``) is refused unless ``allow_outside``.
     """
-    from .entries import select_entries
 
     tf = find_transforms(path)
     if tf is None:
@@ -501,9 +503,7 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
     """
     from concurrent.futures import ThreadPoolExecutor
 
-    from ..progress import progress
 
-    from .outputs import replace_folder, write_marker
 
     out = Path(out_dir).absolute()
     _check_save(scene, out, overwrite, in_place)
@@ -556,7 +556,6 @@ def _check_save(scene: Scene, out: Path, overwrite: bool, in_place: bool) -> Non
     """Refuse a save to ``out`` before any work: into the scene's own files (unless an
     in-place update), over an output vibr did not write or without ``overwrite``, or of a
     view without an image."""
-    from .outputs import check_not_input, check_replaceable
 
     if in_place:  # the scene is in memory; check_replaceable below guards its folder
         if scene.root is None or Path(scene.root).resolve() != out.resolve():

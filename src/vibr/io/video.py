@@ -24,8 +24,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import VibrInputError
 from .._runtime.atomic import atomic_path
+from ..errors import OutputFailed, VibrInputError
 
 logger = logging.getLogger(__name__)
 
@@ -170,7 +170,6 @@ def _start_ffmpeg(out, size, fps, codec: list, log):
 def _finish_ffmpeg(proc, log, path) -> None:
     """Close ffmpeg's input, wait, and raise :class:`OutputFailed` with its last message
     when it did not end well."""
-    from ..errors import OutputFailed
 
     with contextlib.suppress(BrokenPipeError):
         proc.stdin.close()

@@ -34,9 +34,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .._runtime.atomic import atomic_path
 from ..camera import Camera, axes_meeting_point, image_side, shared_centre
 from ..errors import VibrInputError
-from .._runtime.atomic import atomic_path
+from ..geometry.selection import depth_points
+from ..io.camera_json import as_rotation, as_scaled_rotation, parse_json
+from ..io.transforms import find_transforms
+from ..stereo.lightfield import grid_positions
 
 logger = logging.getLogger(__name__)
 
@@ -133,7 +137,6 @@ def camera_from_c2w_opengl(c2w_4x4, fov_deg_vertical: float, width: int, height:
         raise VibrInputError("camera_to_world has non-finite entries", source)
     if np.abs(M[3] - [0, 0, 0, 1]).max() > 1e-6:
         raise VibrInputError(f"camera_to_world's last row is {M[3].tolist()}, not [0, 0, 0, 1]", source)
-    from ..io.camera_json import as_scaled_rotation
 
     Rgl, _ = as_scaled_rotation(M[:3, :3], source, "camera_to_world's rotation")
     try:
@@ -215,7 +218,6 @@ def read_dataparser_transforms(path) -> tuple[np.ndarray, float]:
     """nerfstudio's ``dataparser_transforms.json``: ``(T, scale)`` with ``T`` the 3×4
     ``transform`` and ``scale`` such that a world point of the data maps to the
     normalised frame as ``x_n = scale · (T[:, :3] x + T[:, 3])``."""
-    from ..io.camera_json import as_rotation, parse_json
 
     p = os.fspath(path)
     d = parse_json(p)
@@ -306,7 +308,6 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
         Not JSON, no ``camera_path`` or an empty one, a size that is not positive, a
         camera type other than perspective, a non-rigid matrix, a fov outside (0, 180).
     """
-    from ..io.camera_json import parse_json
 
     p = os.fspath(path)
     d = parse_json(p)
@@ -432,7 +433,6 @@ def scene_centre(cameras, points: np.ndarray | None = None) -> np.ndarray:
 def scene_points(scene, max_points: int = 4096) -> np.ndarray | None:
     """World points of the scene: a strided subsample of its views' depth maps, else its
     sparse points, else None (used where the cameras' axes do not meet)."""
-    from ..geometry.selection import depth_points
 
     per_view = max(64, max_points // max(1, len(scene)))
     pts = [depth_points(v, per_view) for v in scene.views if v.depth is not None]
@@ -807,7 +807,6 @@ def grid_loop(scene) -> list[int] | None:
     each); round the border it circles the grid once, showing the parallax all round."""
     if scene.grid is None and not scene.meta.get("grid_pos"):
         return None
-    from ..stereo.lightfield import grid_positions
 
     pos = grid_positions(scene)
     at = {rc: i for i, rc in pos.items()}
@@ -971,8 +970,6 @@ def scene_processing_transform(scene_path) -> tuple[np.ndarray | None, float]:
         A transforms.json whose ``applied_transform`` is not 3×4 finite numbers or whose
         ``applied_scale`` is not a positive number (the path would land elsewhere).
     """
-    from ..io.camera_json import parse_json
-    from ..io.transforms import find_transforms
 
     tj = find_transforms(scene_path)
     if tj is None:  # not a transforms.json scene

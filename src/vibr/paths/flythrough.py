@@ -45,10 +45,27 @@ from pathlib import Path
 
 import numpy as np
 
+from .._runtime.atomic import atomic_path
+from .._runtime.checkpoint import code_fingerprint, digest
 from ..camera import Camera
 from ..errors import VibrInputError
-from ..render.methods import with_sample_fields
+from ..eval.sigma_figures import sigma_figure, sigma_scale
+from ..executor import auto_workers, parse_executor, run_tasks
+from ..geometry import compute_samples, prepare_depth
+from ..geometry.depth import DEFAULT_EDGE_REL
+from ..geometry.resolution import SUPERSAMPLE_MAX, check_supersample
+from ..geometry.selection import depth_points, rank_views, select_views
+from ..io import read_image, write_image
+from ..io.images import read_png_text
+from ..io.outputs import check_not_input
+from ..io.video import VIDEO_FORMATS, check_video_options, is_video, write_video
+from ..progress import progress as bar
+from ..render import fine_grid, grid_params, render_samples
+from ..render.checks import check_render_memory, render_memory
+from ..render.methods import METHODS, with_sample_fields
 from ..scene import Scene
+from ..stereo.cache import scene_with_depth
+from .camera_path import scene_centre, scene_points
 
 logger = logging.getLogger(__name__)
 
@@ -102,7 +119,6 @@ class FrameContext:
 def _source_points(sources: Scene, max_points: int = 1024) -> list:
     """Per source, the strided subsample of its depth map backprojected to the world
     (exactly :func:`vibr.geometry.selection.target_points`' sampling, done once per source)."""
-    from ..geometry.selection import depth_points
 
     per_view = max(64, max_points // max(1, len(sources)))
     return [depth_points(v, per_view) for v in sources.views]
@@ -126,8 +142,6 @@ def _points_in_target(view_points, target: Camera, max_points: int = 1024):
 def prepare_sources(ctx: FrameContext, cache_depth: bool = True) -> None:
     """The per-source work that does not depend on the frame, done once: the points used to
     rank views and (``cache_depth``) the depth and its slopes (:func:`prepare_depth`)."""
-    from ..geometry import prepare_depth
-    from ..geometry.depth import DEFAULT_EDGE_REL
 
     ctx.view_points = _source_points(ctx.sources)
     ctx.job_key = job_key(ctx)
@@ -142,7 +156,6 @@ def job_key(ctx: FrameContext) -> str:
     """SHA-1 of what every frame depends on besides its camera: vibr's code, the method and
     its parameters, the source selection and the sources (names, cameras, images, depth,
     sigma_z, fallback masks, photograph masks)."""
-    from .._runtime.checkpoint import code_fingerprint, digest
 
     parts = [code_fingerprint(), ctx.method, ctx.params, ctx.n_views, ctx.blend, ctx.geometry_kw, str(ctx.supersample)]
     for v in ctx.sources.views:
@@ -157,7 +170,6 @@ def job_key(ctx: FrameContext) -> str:
 def frame_key(ctx: FrameContext, i: int) -> str:
     """The key written into frame ``i``'s PNG (text chunk ``vibr-frame``): a frame on disk is
     reused only when its key is this one (:func:`render_frame`)."""
-    from .._runtime.checkpoint import digest
 
     c = ctx.cameras[i]
     return digest(ctx.job_key, c.K, c.R, c.t, list(c.shape))
@@ -165,7 +177,6 @@ def frame_key(ctx: FrameContext, i: int) -> str:
 
 def frame_done(ctx: FrameContext, i: int, key: str | None = None) -> bool:
     """Whether frame ``i`` is on disk with its :func:`frame_key` (``key`` when given)."""
-    from ..io.images import read_png_text
 
     key = frame_key(ctx, i) if key is None else key
     if read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) != key:
@@ -185,7 +196,6 @@ def _sigma_key(path) -> str | None:
 
 
 def _write_sigma_frame(path, sigma, key: str) -> None:
-    from .._runtime.atomic import atomic_path
 
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, sigma=np.asarray(sigma, np.float16), key=np.array(key))
@@ -196,8 +206,6 @@ def write_sigma_video(paths, out, *, fps: float, crf: int = 18) -> tuple[int, in
     with a scale bar (:func:`vibr.eval.sigma_figures.sigma_figure`) on one scale for all:
     :func:`vibr.eval.sigma_figures.sigma_scale` of every frame's σ (0 to their 99th
     percentile below σ_hole, rounded up). Returns ``(n_frames, width, height, vmax)``."""
-    from ..io.video import write_video
-    from ..eval.sigma_figures import sigma_figure, sigma_scale
 
     def load(p):
         with np.load(p) as z:
@@ -222,7 +230,6 @@ def view_weights(sources: Scene, camera: Camera, n_views: int | None, *, blend: 
     ``m = (p_(K) + p_(K+1)) / 2``; ``s_k = smoothstep(½ + (m − p_k) / (blend · m))``.
     ``blend = 0`` is the hard selection of :func:`vibr.geometry.selection.select_views`.
     """
-    from ..geometry.selection import rank_views
 
     n = len(sources)
     if n_views is None or n_views >= n:
@@ -250,9 +257,6 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     docstring). Returns a small dict: index, skipped, seconds, views and weights, and the
     seconds of each stage (``times``); for a frame that sees nothing, ``failed`` (why) and no
     file (:func:`render_path` then names every such frame in one error)."""
-    from ..geometry import compute_samples
-    from ..io import write_image
-    from ..render import fine_grid, grid_params, render_samples
 
     out = os.path.join(ctx.frames_dir, frame_name(i))
     key = frame_key(ctx, i)
@@ -335,7 +339,6 @@ def views_for_path(scene: Scene, cameras, n_views: int | None, exclude=()) -> li
     on the geometry known before depth (the scene's sparse points, else a plane where the
     cameras' axes meet), united over the frames. None when ``n_views`` is None or the scene
     has at most ``PATH_MARGIN · n_views`` views (every view may serve)."""
-    from ..geometry.selection import select_views
 
     if n_views is None:
         return None
@@ -356,9 +359,7 @@ def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
     scene: the centre of the scene (:func:`vibr.paths.camera_path.scene_centre`) lies behind or outside
     the frame (with a one-frame margin) for more than half of them — typically a path
     exported by nerfstudio's viewer, which lives in nerfstudio's normalised frame."""
-    from .camera_path import scene_centre
 
-    from .camera_path import scene_points
 
     X = scene_centre([v.camera for v in scene.views], scene_points(scene))
     seen = 0
@@ -378,7 +379,6 @@ def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
 
 
 def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
-    from ..io.video import VIDEO_FORMATS, is_video
 
     if is_video(out):
         return (Path(frames_dir) if frames_dir else out.with_name(out.stem + "_frames")), out
@@ -394,8 +394,6 @@ def _check_frame_memory(scene: Scene, cams, n_views, source, supersample="auto")
     the memory available (:func:`vibr.render.checks.check_render_memory`; the largest sources, the
     frame on the grid it is rendered on: with "auto", as fine as the largest source's pixels
     allow, at most ``SUPERSAMPLE_MAX`` times)."""
-    from ..geometry.resolution import SUPERSAMPLE_MAX
-    from ..render.checks import check_render_memory
 
     if not cams:
         return
@@ -484,8 +482,6 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
         How to render; ``kw`` (its fields, e.g. ``n_views=4``) applies over it. Any other
         keyword raises ``TypeError``.
     """
-    from ..stereo.cache import scene_with_depth
-    from ..geometry.resolution import check_supersample
 
     t_start = time.perf_counter()
     o = replace(options or FlyOptions(), **kw)
@@ -527,9 +523,6 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
 def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
     """The frames folder, the video (None: frames only) and the frame rate of a path's
     outputs, every option checked before any frame is rendered."""
-    from ..io.outputs import check_not_input
-    from ..io.video import VIDEO_FORMATS, check_video_options, is_video
-    from ..render.methods import METHODS
 
     if o.method not in METHODS:
         raise VibrInputError(f"unknown method {o.method!r} (choose from {', '.join(METHODS)})")
@@ -552,8 +545,6 @@ def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
 
 def _write_videos(res: FlyResult, fdir: Path, n: int, video, uncertainty, fps: float, crf: int) -> None:
     """The frames' video and the σ video, when asked, into ``res``."""
-    from ..io import read_image
-    from ..io.video import write_video
 
     if video is not None:
         paths = [fdir / frame_name(i) for i in range(n)]
@@ -596,8 +587,6 @@ def auto_executor(ctx: FrameContext, n_todo: int):
     """``executor="auto"``: the number of processes :func:`vibr.executor.auto_workers` gives
     for ``n_todo`` frames of the path's size, each worker holding the context and one
     render from ``n_views`` + 2 sources (the soft selection's extra views); None for 1."""
-    from ..executor import auto_workers
-    from ..render.checks import render_memory
 
     cam = ctx.cameras[0]
     k = len(ctx.sources) if ctx.n_views is None else min(len(ctx.sources), ctx.n_views + 2)
@@ -617,7 +606,6 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
     if executor == "auto":
         executor = auto_executor(ctx, len(todo))
     if executor is not None:
-        from ..executor import parse_executor, run_tasks
 
         kind, arg = parse_executor(executor)
         n_proc = min(arg, max(len(todo), 1)) if kind == "processes" else arg
@@ -626,7 +614,6 @@ def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[li
         out = run_tasks(render_frame, todo, setup=_same, setup_args=(ctx,), executor=executor,
                         desc="frames") if todo else []
     else:
-        from ..progress import progress as bar
 
         engine = "in this process"
         out = [render_frame(ctx, i) for i in (bar(todo, desc="frames") if progress else todo)]

@@ -10,10 +10,15 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import VibrInputError, check_stop
-from ..geometry.resolution import ResolutionPlan
+from ..geometry import compute_samples, ensure_source_depth
+from ..geometry.resample import scaled_view
+from ..geometry.resolution import ResolutionPlan, check_supersample, resolution_plan
 from ..geometry.samples import Samples
+from ..metrics import view_metrics
 from ..scene import Scene, View
-from .methods import get_method, render_samples, wants_fine_sources
+from .autotune import resolve_auto
+from .checks import check_render_memory
+from .methods import DEFAULTS, get_method, render_samples, wants_fine_sources, with_sample_fields
 from .result import RenderResult
 
 __all__ = ["RenderResult", "render", "render_samples", "fine_grid", "grid_params", "SharedGeometry",
@@ -25,12 +30,10 @@ logger = logging.getLogger(__name__)
 def _resolve_auto(src: Scene, cam: Camera, m, params: dict) -> dict:
     """``gamma`` / ``lam`` = "auto" replaced by the leave-one-source-out choice of
     :func:`vibr.render.autotune.tune` (only the target's camera is passed: never its image)."""
-    from .methods import DEFAULTS
 
     given = [DEFAULTS[k] if params.get(k) is None else params[k] for k in ("gamma", "lam")]
     if "auto" not in given:
         return params
-    from .autotune import resolve_auto
 
     return resolve_auto(src, cam, m.name, params)
 
@@ -40,7 +43,6 @@ def _ready_sources(sources: Scene, target) -> Scene:
     transferred to the views lacking it (:func:`vibr.geometry.ensure_source_depth`), which
     is :func:`vibr.pipeline.prepare`'s ``depth="gt"``. Estimating depth is the pipeline's
     job, not the renderer's (docs/explanation/architecture.md)."""
-    from ..geometry import ensure_source_depth
 
     tname = target.name if isinstance(target, View) else None
     names = sources.names
@@ -72,14 +74,12 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     the target's own grid and the sources as they are, unless the sources are coarser (a
     coarser grid then, as for the others). Render on the grid with :func:`grid_params`.
     """
-    from ..geometry.resolution import check_supersample, resolution_plan
 
     supersample = check_supersample(supersample)
     plan = resolution_plan(sources, camera, supersample)
     if supersample == "auto" and plan.coarsen == 1 and any(wants_fine_sources(m, **p) for m, p in renders):
         return sources, camera, prepared, ResolutionPlan()
     if plan.scales:
-        from ..geometry.resample import scaled_view
 
         sources = sources.replace(views=[scaled_view(v, plan.scales[v.name]) if v.name in plan.scales else v
                                          for v in sources.views])
@@ -137,8 +137,6 @@ def shared_geometry(sources: Scene, target: View | Camera, renders=(("gradient",
     reads (:func:`vibr.render.methods.with_sample_fields`). ``SharedGeometry.render(method,
     **params)`` then equals ``render(sources, target, method, **params)`` without computing
     the samples again."""
-    from ..geometry import compute_samples
-    from .methods import with_sample_fields
 
     cam = target.camera if isinstance(target, View) else target
     renders = list(renders)
@@ -150,9 +148,6 @@ def shared_geometry(sources: Scene, target: View | Camera, renders=(("gradient",
 def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample, stop=None):
     """The geometry stage of :func:`render`: ``(sources, samples, plan)``, the samples on
     :func:`fine_grid`'s grid (``stop`` polled between its stages)."""
-    from ..geometry import compute_samples
-    from .checks import check_render_memory
-    from .methods import with_sample_fields
 
     src = _ready_sources(sources, target)
     gkw = with_sample_fields(geometry_kw, (m, params))
@@ -261,7 +256,6 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:
-        from ..metrics import view_metrics
 
         cover = res.coverage if target.mask is None else res.coverage & target.mask
         res.metrics = view_metrics(res.image, target.image, cover)

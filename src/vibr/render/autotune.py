@@ -22,7 +22,11 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import VibrInputError
+from ..geometry import compute_samples
+from ..geometry.resample import scaled_scene
+from ..metrics import mse
 from ..scene import Scene
+from .methods import DEFAULTS, get_method, render_samples, sample_fields
 
 logger = logging.getLogger("vibr.render.autotune")
 
@@ -75,8 +79,6 @@ def probe_scale(sources: Scene, target: Camera, probes, n_renders: int, budget: 
 def _probe_cases(sources: Scene, probes, s: float, keep=()):
     """Per probe: (samples from the other sources, their centres, probe camera, probe image,
     the probe's mask or None: a masked pixel of its photograph is no error of a render)."""
-    from ..geometry import compute_samples
-    from ..geometry.resample import scaled_scene
 
     small = scaled_scene(sources, s)
     out = []
@@ -92,8 +94,6 @@ def _probe_cases(sources: Scene, probes, s: float, keep=()):
 def _score(cases, method: str, params: dict) -> float:
     """Mean over the probes of the MSE of their renders (all pixels of their masks, border
     excluded)."""
-    from ..metrics import mse
-    from .methods import render_samples
 
     errs = []
     for samples, centres, cam, img, mask in cases:
@@ -112,7 +112,6 @@ def tune(sources: Scene, target: Camera, method: str = "gradient", *, gamma=AUTO
         raise VibrInputError("tune: the target must be a Camera (its image is never used)")
     if len(sources) < 2:
         raise VibrInputError("gamma/lam 'auto' needs at least 2 source views (one is held out)")
-    from .methods import DEFAULTS
 
     t0 = time.perf_counter()
     tune_g, tune_l = gamma == AUTO, lam == AUTO
@@ -125,7 +124,6 @@ def tune(sources: Scene, target: Camera, method: str = "gradient", *, gamma=AUTO
     n_renders = (len(gammas) if tune_g else 0) + (len(lams) - 1 if tune_l else 0)
     probes = probe_views(sources, target, n_probe)
     s = probe_scale(sources, target, probes, max(n_renders, 1), budget)
-    from .methods import sample_fields
 
     cases = _probe_cases(sources, probes, s, sample_fields(method, **params))
     scores: dict = {}
@@ -153,7 +151,6 @@ def resolve_auto(sources: Scene, target: Camera, method: str, params: dict) -> d
     """``params`` with ``gamma`` / ``lam`` = ``"auto"`` (given, or the default) replaced by
     :func:`tune`'s choice; unchanged when neither is "auto" or the method has no gradient
     term (then only an "auto" lam is tuned)."""
-    from .methods import DEFAULTS, get_method
 
     m = get_method(method)
     g = DEFAULTS["gamma"] if params.get("gamma") is None else params["gamma"]

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import check_int, check_real
 from .._runtime.memory import check_memory
+from ..errors import check_int, check_real
+from ..geometry.samples import Samples
+from ..geometry.sampling import OPTIONAL_FIELDS
 
 
 def check_render_params(p: dict) -> dict:
@@ -63,8 +65,6 @@ ENLARGE_BYTES_PER_TARGET_PIXEL = 2 * (3 * 8 * 2 + 3 * 4) + 4 + 1
 def sample_bytes(keep=()) -> int:
     """Bytes of one :class:`vibr.geometry.Samples` entry, from its arrays' dtypes: the
     optional fields (:data:`vibr.geometry.sampling.OPTIONAL_FIELDS`) only when in ``keep``."""
-    from ..geometry.samples import Samples
-    from ..geometry.sampling import OPTIONAL_FIELDS
 
     e = Samples.concatenate([], (1, 1))
     return sum(int(a.dtype.itemsize * np.prod(a.shape[1:], dtype=np.int64))

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit, prange
 
 from .._runtime.jit import FASTMATH
-from .operators import _sum_in_order, _grad_adj_row, _is_forward, _grad_row, _stencil_row
+from .operators import _grad_adj_row, _grad_row, _is_forward, _stencil_row, _sum_in_order
 from .tv import _weight_arg
 
 __all__ = ["hessian_terms", "hessian_power", "forward_step", "power_start", "power_scale", "power_unscale",

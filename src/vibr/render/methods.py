@@ -108,8 +108,14 @@ import numpy as np
 
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
+from .checks import check_render_params
 from .operators import PSFS as _PSFS
+from .pushpull import push_pull
 from .result import RenderResult
+from .ulr import ulr_blend
+from .uncertainty import ulr_sigma
+from .variational import TV_WEIGHTINGS, solve_variational, splat_coverage
+from .weights import ROBUST_LOSSES
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "HOLE_FILLS", "get_method",
            "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields",
@@ -179,7 +185,6 @@ class Method:
         (:func:`method_params`); returns a :class:`~vibr.render.RenderResult` (with its
         ``uncertainty`` map when asked, :mod:`vibr.render.uncertainty`)."""
         if self.solve:
-            from .variational import solve_variational
 
             return solve_variational(samples, p, self, callback=callback, progress_bar=progress_bar,
                                      verbose=verbose, uncertainty=uncertainty,
@@ -191,10 +196,6 @@ def _render_ulr(method: Method, samples, p, source_centres, target_centre, uncer
     """Buehler et al.'s blend of the ``ulr_k`` best views per pixel, holes by push–pull."""
     import time
 
-    from .pushpull import push_pull
-    from .result import RenderResult
-    from .ulr import ulr_blend
-    from .variational import splat_coverage
 
     if source_centres is None or target_centre is None:
         raise ValueError("ulr needs source_centres and target_centre")
@@ -209,7 +210,6 @@ def _render_ulr(method: Method, samples, p, source_centres, target_centre, uncer
     times["init"] = time.perf_counter() - t0
     sig = None
     if uncertainty:  # issue 28: the ULR-weighted spread of the blended views
-        from .uncertainty import ulr_sigma
 
         sig = ulr_sigma(var[0], cov.coverage, scale=float(p["scale"]))
     times["total"] = time.perf_counter() - t_all
@@ -251,7 +251,6 @@ METHOD_OVERRIDES = {name: m.overrides for name, m in REGISTRY.items()}
 
 def get_method(method: "str | Method") -> Method:
     """The registered :class:`Method` named ``method`` (a Method passes through)."""
-    from ..errors import VibrInputError
 
     if isinstance(method, Method):
         return method
@@ -287,7 +286,6 @@ def paper_params(params: dict) -> dict:
     out = dict(params)
     paper = {k: PAPER_DEFAULTS[k] if params.get(k) is None else float(params[k]) for k in PAPER_DEFAULTS}
     if params.get("scale") not in (None, 255.0):
-        from ..errors import VibrInputError
 
         raise VibrInputError("preset 'paper' fixes the intensity scale to 255")
     out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
@@ -309,7 +307,6 @@ def method_params(method: str, preset: str | None = None, **params) -> dict:
     gamma is forced to 0 for the methods without the gradient term). Unknown keyword
     arguments raise TypeError. ``preset`` (a name of :data:`PRESETS`, e.g. ``"paper"``)
     reads ``params`` in that preset's units first."""
-    from ..errors import VibrInputError
 
     m = get_method(method)
     if preset is not None:
@@ -328,11 +325,9 @@ def method_params(method: str, preset: str | None = None, **params) -> dict:
             p[k] = v
     if p["psf"] not in PSFS:
         raise VibrInputError(f"psf must be one of {PSFS}, got {p['psf']!r}")
-    from .weights import ROBUST_LOSSES
 
     if p["robust"] not in ROBUST_LOSSES:
         raise VibrInputError(f"robust must be one of {ROBUST_LOSSES}, got {p['robust']!r}")
-    from .variational import TV_WEIGHTINGS
 
     if p["tv_weighting"] not in TV_WEIGHTINGS:
         raise VibrInputError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {p['tv_weighting']!r}")
@@ -340,7 +335,6 @@ def method_params(method: str, preset: str | None = None, **params) -> dict:
         raise VibrInputError(f"hole_fill must be one of {HOLE_FILLS}, got {p['hole_fill']!r}")
     if p["grad_weighting"] not in GRAD_WEIGHTINGS:
         raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
-    from .checks import check_render_params
 
     return check_render_params(p)
 

@@ -30,8 +30,15 @@ import numpy as np
 from numba import njit, prange
 
 from .._runtime.jit import FASTMATH
-from ..geometry.gradient import (DEFAULT_GRAD_SCHEME, GRAD_SCHEMES, _grad_adj_row, _grad_row,  # noqa: F401
-                                 _is_forward, grad_image, grad_image_adj)
+from ..geometry.gradient import (  # noqa: F401
+    DEFAULT_GRAD_SCHEME,
+    GRAD_SCHEMES,
+    _grad_adj_row,
+    _grad_row,
+    _is_forward,
+    grad_image,
+    grad_image_adj,
+)
 
 __all__ = [
     "PSFS", "Splat", "stencil_apply", "stencil_to_sparse", "explicit_B",

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..geometry.resample import resize_image, resize_mask
+
 __all__ = ["RenderResult"]
 
 
@@ -89,7 +91,6 @@ class RenderResult:
         image (and ``init``) by bicubic interpolation clipped to [0, 1], the uncertainty
         bilinear, a pixel covered where every grid pixel under its bilinear footprint is
         (:func:`vibr.geometry.resample.resize_mask`). Energies, times and counts stay the grid's."""
-        from ..geometry.resample import resize_image, resize_mask
 
         shape = tuple(int(v) for v in shape)
         if self.coverage.shape == shape:

@@ -38,8 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .fused import (forward_step, hessian_power, hessian_terms, power_scale, power_start, power_unscale,
-                    row_sum_bound)
+from .fused import forward_step, hessian_power, hessian_terms, power_scale, power_start, power_unscale, row_sum_bound
 from .operators import dot, grad_image_adj
 from .tv import TVProx
 

@@ -25,6 +25,7 @@ from numba import njit, prange
 
 from .._runtime.jit import FASTMATH
 from .operators import _sum_in_order
+
 __all__ = ["tv_value", "TVProx"]
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.samples import Samples
+from .weights import ulr_pixels
 
 __all__ = ["ulr_blend", "ulr_penalty", "ulr_view_weights"]
 
@@ -46,7 +47,6 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
         ``Σ_v w_v ‖c_v − c‖² / (3 Σ_v w_v)``: the ULR-weighted variance of the blended views'
         colours around the blend (per channel, [0, 1] units; 0 where no view lands).
     """
-    from .weights import ulr_pixels
 
     # compiled: a numpy pass per view does not scale to a light field's 80 views
     # (docs/RENDERER.md, "Density with the view prior")

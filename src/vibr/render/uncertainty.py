@@ -48,7 +48,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .operators import _row_coef, sample_at
+from ..geometry.samples import view_counts
+from .operators import Splat, _row_coef, sample_at
+from .weights import deformation_weight
 
 logger = logging.getLogger(__name__)
 
@@ -441,8 +443,6 @@ def sample_spread_sigma(samples, *, scale: float = 255.0, coverage=None,
     splatted samples around their mean (weights: bilinear × deformation ``1/|det ∂tau/∂x|``,
     no model), ``σ_hole`` where the samples' bilinear coverage is below ``hole_threshold``
     (or outside ``coverage`` when given)."""
-    from .weights import deformation_weight
-    from .operators import Splat
 
     sp = Splat(samples.xy, samples.target_shape)
     s2, _ = sample_spread(sp, deformation_weight(samples), np.asarray(samples.colour) * float(scale))
@@ -454,7 +454,6 @@ def sample_spread_sigma(samples, *, scale: float = 255.0, coverage=None,
 def view_count_sigma(samples) -> np.ndarray:
     """Baseline: σ(p) = 1 / (number of source views with a sample landing on p, rounded to
     the nearest pixel); ``inf`` where none does. Unit-free (a ranking, not a std. dev.)."""
-    from ..geometry.samples import view_counts
 
     n = view_counts(samples).astype(np.float64)
     with np.errstate(divide="ignore"):

@@ -25,12 +25,14 @@ import numpy as np
 
 from ..errors import VibrInputError, check_stop
 from ..geometry.samples import Samples
-from .weights import coverage_blend, gradient_consistency, robust_factor, view_prior, weighted_normal
+from ..progress import progress
 from .operators import DEFAULT_GRAD_SCHEME, Splat
 from .pushpull import push_pull
 from .result import RenderResult
 from .solver import QuadraticModel, fista
 from .tv import TVProx
+from .uncertainty import variational_sigma
+from .weights import coverage_blend, gradient_consistency, robust_factor, view_prior, weighted_normal
 
 __all__ = ["SplatCoverage", "splat_coverage", "sample_density", "colour_density", "view_density", "initial_image", "fill_holes", "solve_variational",
            "TV_WEIGHTINGS", "tv_weight_map"]
@@ -337,7 +339,6 @@ def _outer_passes(prob: _Problem, method, u, *, callback, progress_bar, verbose,
     power_state: dict = {}
     passes = range(n_outer)
     if progress_bar:
-        from ..progress import progress
 
         passes = progress(passes, desc=f"render {method.name}")
     A = b = c = None
@@ -379,7 +380,6 @@ def _outer_passes(prob: _Problem, method, u, *, callback, progress_bar, verbose,
 def _uncertainty(prob: _Problem, method, samples: Samples, run: _Passes, terms):
     """Issue 28: the Jacobi diag(H⁻¹) of the last pass's model + the sources' spread
     (:func:`vibr.render.uncertainty.variational_sigma`); timed into ``times["uncertainty"]``."""
-    from .uncertainty import variational_sigma
 
     t0 = time.perf_counter()
     model, Wk = run.model, run.Wk

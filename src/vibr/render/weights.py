@@ -20,9 +20,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..geometry.samples import Samples
 from ..geometry.gradient import _grad_row
-from .operators import _row_coef, _sum_in_order, accumulate_bucket, sample_at
+from ..geometry.samples import Samples
+from .operators import Splat, _row_coef, _sum_in_order, accumulate_bucket, grad_central, sample_at
 from .solver import median
 
 __all__ = ["luminance", "luminance_gradient", "deformation_weight", "geometric_weights", "ROBUST_LOSSES",
@@ -44,7 +44,6 @@ def luminance(u) -> np.ndarray:
 def luminance_gradient(u) -> np.ndarray:
     """Central-difference gradient of the luminance: (H, W, 2) float32, (d/dx, d/dy) per
     target pixel (replicated border)."""
-    from .operators import grad_central
 
     lum = np.ascontiguousarray(luminance(u))[None]  # planar (1, H, W)
     return np.ascontiguousarray(grad_central(lum)[0].transpose(1, 2, 0))
@@ -250,7 +249,6 @@ def _geometric_weights(samples, u, sigma_s, sigma_z, scale, grad_max, inv_det_ca
     base = 1.0 / (sigma_s ** 2)
     if u is None or not np.any(np.nan_to_num(sz) > 0):
         return (deformation_weight(samples, inv_det_cap) * base).astype(dtype, copy=False)
-    from .operators import Splat
 
     g = _weight_gradient(u, scale, grad_max)
     sp = splat if splat is not None else Splat(samples.xy, samples.target_shape)
@@ -776,7 +774,6 @@ def view_prior(samples: Samples, source_centres, target_centre, k: int = 4, beta
     order of their penalties (the render's ``view_tie``). A sample reads its view's map
     through ``B`` at its landing point. Computed once per render (it does not depend on u); three compiled
     passes (penalty splat, per-pixel weights, gather)."""
-    from .operators import Splat
 
     H, W = samples.target_shape
     Cs = np.ascontiguousarray(source_centres, np.float64).reshape(-1, 3)
@@ -801,7 +798,6 @@ def ulr_pixels(samples: Samples, source_centres, target_centre, k: int = 4, beta
     colour, penalty and coverage splatted per target pixel (float32 sums, ``(H, W, V, 5)``),
     then Buehler's weights and the blend per pixel. Returns ``(image (H, W, 3), coverage
     (H, W), variance (H, W) or None)`` float32."""
-    from .operators import Splat
 
     H, W = samples.target_shape
     Cs = np.ascontiguousarray(source_centres, np.float64).reshape(-1, 3)

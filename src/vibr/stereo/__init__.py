@@ -11,9 +11,9 @@
 """
 
 from .api import DepthOptions, depth_options, estimate_depth
-from .partners import complete_coverage, default_depth_range, frustum_coverage, select_neighbours, upsample_depth
 from .consistency import ConsistencyResult, check_consistency
 from .lightfield import LightFieldOptions, disparity_model, epi_disparity, lightfield_depth
+from .partners import complete_coverage, default_depth_range, frustum_coverage, select_neighbours, upsample_depth
 from .planesweep import RefineOptions, SweepResult, median_planes, plane_homographies, plane_sweep, refine_planes
 from .segments import SegmentFill, fill_segment_planes, segment_image
 

@@ -30,13 +30,26 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from ..camera import Camera
+from .._runtime.checkpoint import ViewCheckpoint
+from ..camera import Camera, shared_centre
 from ..errors import VibrInputError
+from ..executor import run_tasks
+from ..geometry.resample import resize_mask
 from ..progress import progress
 from ..scene import Scene
+from .checks import check_depth_params
 from .consistency import check_consistency
-from .partners import (_ray_parallax, _resized, complete_coverage, default_depth_range, select_neighbours,
-                       upsample_depth, upsample_map, upsample_sweep)
+from .lightfield import LightFieldOptions, lightfield_depth
+from .partners import (
+    _ray_parallax,
+    _resized,
+    complete_coverage,
+    default_depth_range,
+    select_neighbours,
+    upsample_depth,
+    upsample_map,
+    upsample_sweep,
+)
 from .planesweep import SweepResult, median_planes, plane_sweep, refine_planes
 from .segments import fill_segment_planes, segment_image
 
@@ -262,7 +275,6 @@ class DepthOptions:
 def _lightfield_keywords() -> frozenset[str]:
     """Fields of :class:`~vibr.stereo.lightfield.LightFieldOptions` a caller may set through
     ``DepthOptions.lightfield`` (the others come from the DepthOptions fields)."""
-    from .lightfield import LightFieldOptions
 
     own = {"depth_range", "radius", "max_cost", "mem_bytes", "n_best"}
     return frozenset(f.name for f in fields(LightFieldOptions) if f.name not in own)
@@ -337,7 +349,6 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
     """
     t_all = time.perf_counter()
     opt = depth_options(options, **kw)
-    from .checks import check_depth_params
 
     check_depth_params(**{f.name: getattr(opt, f.name) for f in fields(opt)})  # issue 24: ranges
     targets, inputs, excl, method, opt = _check_request(scene, views, exclude, opt)
@@ -420,7 +431,6 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
         raise VibrInputError(f"pm_radius must be an integer >= 1, got {r}", scene.root)
     method = depth_method(scene, opt.method)
     if method == "lightfield":
-        from .lightfield import LightFieldOptions
 
         LightFieldOptions(**opt.lightfield)  # its checks, before any view is estimated
     if opt.depth_range is not None:
@@ -455,7 +465,6 @@ class _Images:
     def mask(self, i: int, camera: Camera | None = None) -> np.ndarray | None:
         """View ``i``'s mask (:attr:`vibr.scene.View.mask`) at ``camera``'s size (default
         the working scale), or None."""
-        from ..geometry.resample import resize_mask
 
         m = self.scene.views[i].mask
         if m is None:
@@ -469,7 +478,6 @@ class _Images:
 
 def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
     """Light-field depth of each requested view (:func:`lightfield_depth`)."""
-    from .lightfield import lightfield_depth
 
     def one(i):
         lf = dict(opt.lightfield)
@@ -506,10 +514,8 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
     med_r = 9 if opt.median_radius is None else int(opt.median_radius)  # MVS default: 19×19 window
     ck = None
     if checkpoint is not None:
-        from .._runtime.checkpoint import ViewCheckpoint
 
         ck = ViewCheckpoint(checkpoint, {**{f.name: getattr(opt, f.name) for f in fields(opt)}, "med_r": med_r})
-    from ..executor import run_tasks
 
     todo = [i for i in est if nbrs[i]]
     # serial: here, on this call's images; else each worker receives them once
@@ -567,7 +573,6 @@ def sweep_task(ctx: dict, task) -> tuple:
 
 
 def _why_no_partner(cams, i, inputs) -> str:
-    from ..camera import shared_centre
 
     others = [j for j in inputs if j != i]
     if others and shared_centre([cams[i]] + [cams[j] for j in others]) is not None:

@@ -36,10 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import VibrInputError
 from .._runtime.atomic import atomic_path
 from .._runtime.checkpoint import code_fingerprint, resume_folder
+from ..camera import shared_centre
+from ..errors import VibrInputError
+from ..geometry import apply_fallback, ensure_source_depth, sphere_proxy
 from ..scene import Scene
+from .api import ESTIMATOR_VERSION, estimate_depth
 
 logger = logging.getLogger(__name__)
 
@@ -86,7 +89,6 @@ def depth_cache_key(scene: Scene, estimate_kw: dict | None = None, exclude=()) -
     (:data:`vibr.stereo.api.ESTIMATOR_VERSION`) and vibr's code
     (:func:`vibr._runtime.checkpoint.code_fingerprint`): other code estimates again rather than
     take maps it might not make."""
-    from .api import ESTIMATOR_VERSION
 
     h = hashlib.sha256()
     h.update(f"vibr-depth-cache v{CACHE_VERSION} estimator {ESTIMATOR_VERSION} code {code_fingerprint()}|".encode())
@@ -211,7 +213,6 @@ def scene_with_depth(scene: Scene, *, depth: str = "auto", estimate_kw: dict | N
         ``meta["depth_cache"]`` the cache file (when used), ``meta["depth_time_s"]`` the
         time spent obtaining depth.
     """
-    from ..geometry import apply_fallback
 
     out = _scene_with_depth(scene, depth, estimate_kw, cache_dir, exclude, executor, views)
     return apply_fallback(out, fallback)
@@ -232,7 +233,6 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude, exec
         if all(v.depth is None for v in src.views):
             raise VibrInputError("the scene has no depth maps: use depth='estimated'", scene.root)
         if not src.has_depth:
-            from ..geometry import ensure_source_depth
 
             src = ensure_source_depth(src)
         # a new meta: the caller's scene is not changed
@@ -254,9 +254,6 @@ def estimated_depth(scene: Scene, estimate_kw: dict | None = None, cache_dir=Non
     sweeps run (:func:`vibr.stereo.estimate_depth`). ``views``: only these views get depth
     and are returned (the others still serve as stereo partners).
     """
-    from ..camera import shared_centre
-    from ..geometry import sphere_proxy
-    from .api import estimate_depth
 
     t0 = time.perf_counter()
     bare = Scene([v.replace(depth=None, sigma_z=None) for v in scene.views], scene.name, scene.root,

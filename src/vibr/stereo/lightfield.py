@@ -37,6 +37,7 @@ from ..camera import Camera
 from ..errors import VibrInputError
 from ..scene import Scene
 from . import _kernels as kern
+from .partners import _resized, default_depth_range, upsample_sweep
 from .planesweep import median_planes, plane_sweep, refine_planes, to_grey
 
 #: Default spacing of the sweep's planes as parallax on the nearest view swept, in pixels
@@ -360,7 +361,6 @@ def _sweep_range(scene: Scene, ref: int, cams, img, others, pos, best_d, st_conf
     dsel = best_d[st_conf] if st_conf.sum() > 100 else best_d.ravel()
     dlo, dhi = np.percentile(dsel, [1, 99])
     if depth_range is None and (st_conf.sum() <= 100 or max(abs(dlo), abs(dhi)) > st_max_disp):
-        from .partners import default_depth_range
 
         nb0 = sorted(others, key=lambda k: abs(pos[k][0] - r0) + abs(pos[k][1] - c0))[:4]
         depth_range = default_depth_range(scene, ref, cams, {k: img(k) for k in [ref] + nb0}, nb0,
@@ -382,7 +382,6 @@ def _small(img, k: int, camera: Camera) -> np.ndarray:
     small = getattr(img, "small", None)
     if small is not None:
         return small(k, camera)
-    from .partners import _resized
 
     return _resized(img(k), camera)
 
@@ -417,7 +416,6 @@ def _sweep_planes(img, cams, ref, nb, dr, o: LightFieldOptions, *, desc, n_plane
         # pm_iter iterations in all: the coarse ones first, at least one at full size
         coarse_iter = max(0, min(int(coarse_iter), pm_iter - 1))
         pm_iter -= coarse_iter
-        from .partners import upsample_sweep
 
         cs = {k: cams[k].scaled(scale) for k in [ref] + list(nb)}
         # disparities shrink with the images: planes the same parallax apart are fewer

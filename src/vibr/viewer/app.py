@@ -21,6 +21,9 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import RenderStopped, VibrInputError
+from ..eval.sigma_figures import colourise, sigma_scale
+from ..io.outputs import check_not_scene_file, check_output
+from ..paths.camera_path import interpolate, orient_keys, write_camera_path
 from ..render.methods import METHODS
 from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
@@ -130,7 +133,6 @@ def shown_image(out) -> tuple[np.ndarray, str]:
     :func:`vibr.eval.sigma_figures.sigma_scale` (the scale said in the status line)."""
     if out.uncertainty is None:
         return np.clip(out.image * 255.0 + 0.5, 0, 255).astype(np.uint8), ""
-    from ..eval.sigma_figures import colourise, sigma_scale
 
     vmax = sigma_scale(out.uncertainty)
     return colourise(np.where(np.isfinite(out.uncertainty), out.uncertainty, vmax), vmax), \
@@ -315,7 +317,6 @@ class Viewer:
         turned upright as a path's keys are (:func:`vibr.paths.camera_path.orient_keys`, "snap": a
         photograph taken rolled by 90° is seen turned; the orbit controls keep the scene's
         up, and would turn it on the first drag)."""
-        from ..paths.camera_path import orient_keys
 
         (camera,), _ = orient_keys([camera], "snap", self.up)
         wxyz, pos, fov, _ = viser_pose_from_camera(camera)
@@ -448,13 +449,11 @@ class Viewer:
         them (:func:`vibr.paths.camera_path.interpolate`, ``seconds`` × fps frames; default
         ``seconds_per_keyframe`` per interval), written by
         :func:`vibr.paths.camera_path.write_camera_path`. Returns the file written."""
-        from ..paths.camera_path import interpolate, write_camera_path
 
         if not self.keyframes:
             raise VibrInputError("no keyframes to export: add some first")
         if path is None:
             path = self._gui_path_file()
-        from ..io.outputs import check_not_scene_file, check_output
 
         out = check_output(path, "file", overwrite=True, what="path file")  # said in the panel, not a traceback
         check_not_scene_file(out, self.scene, "the path file")

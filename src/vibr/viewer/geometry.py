@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import shared_centre
+from ..errors import VibrInputError
+from ..paths.camera_path import scene_up
 from ..scene import Scene
 
 __all__ = ["point_cloud", "scene_scale", "frustum_size", "world_up", "thumbnail", "points_in_view",
@@ -124,8 +126,6 @@ def world_up(scene: Scene) -> np.ndarray:
     """World "up" as camera paths take it (:func:`vibr.paths.camera_path.scene_up`: the mean of the
     cameras' image-up directions, or the normal of a ring of cameras, which stays right when
     the photographs are rolled); ``(0, -1, 0)`` when the cameras have none."""
-    from ..errors import VibrInputError
-    from ..paths.camera_path import scene_up
 
     try:
         return scene_up([v.camera for v in scene.views])

@@ -15,12 +15,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..camera import Camera
-from ..errors import check_stop
+from ..errors import VibrInputError, check_stop
+from ..geometry import prepare_depth
+from ..geometry.resample import scaled_scene as _scaled
+from ..geometry.selection import select_views
 from ..render import render
 from ..render.methods import DEFAULTS, METHODS, method_params
 from ..scene import Scene
-from ..geometry.selection import select_views
-from .geometry import points_in_view
+from ..stereo.cache import scene_with_depth as _with_depth
+from .geometry import point_cloud, points_in_view
 
 logger = logging.getLogger(__name__)
 
@@ -70,7 +73,6 @@ class ViewSettings:
     show: str = "image"
 
     def __post_init__(self):
-        from ..errors import VibrInputError
 
         if self.method not in METHODS:
             raise VibrInputError(f"unknown method {self.method!r} (choose from {', '.join(METHODS)})")
@@ -116,7 +118,6 @@ class ViewRenderer:
     """
 
     def __init__(self, scene: Scene, rank_points: np.ndarray | None = None, threads: int | None = None):
-        from .geometry import point_cloud
 
         self.scene = scene
         self._long_side = max(max(v.shape) for v in scene.views)
@@ -129,7 +130,6 @@ class ViewRenderer:
         # entered from two threads at once, and renders are CPU-bound anyway
         self._lock = threading.Lock()
         if threads is not None and int(threads) < 1:
-            from ..errors import VibrInputError
 
             raise VibrInputError(f"threads must be >= 1, got {threads}")
         self.threads = threads
@@ -155,7 +155,6 @@ class ViewRenderer:
         stage's defaults) of the views ``idx`` of ``scene`` (this renderer's scene or one of
         its :meth:`scene_for` scalings): target-independent, so kept for the session (up to
         :data:`PREPARED_BUDGET_BYTES`; views beyond it are prepared per request)."""
-        from ..geometry import prepare_depth
 
         key = float(scene.meta.get("viewer_scale", 1.0))
         cache = self._prepared.setdefault(key, {})
@@ -216,7 +215,6 @@ class ViewRenderer:
 def scaled_scene(scene: Scene, s: float) -> Scene:
     """Every view resized by ``s`` as :func:`vibr.io.load_scene` does with ``scale``
     (:func:`vibr.geometry.resample.scaled_scene`), the factor kept in ``meta["viewer_scale"]``."""
-    from ..geometry.resample import scaled_scene as _scaled
 
     return _scaled(scene, s).replace(meta=dict(scene.meta, viewer_scale=s))
 
@@ -226,6 +224,5 @@ def scene_with_depth(scene: Scene, *, cache_dir=None) -> Scene:
     (:func:`vibr.stereo.cache.scene_with_depth`, depth "auto"): the scene's own, transferred
     to the views without it, or estimated once and kept in the on-disk cache; the fallback
     proxy as ``vibr render`` applies it."""
-    from ..stereo.cache import scene_with_depth as _with_depth
 
     return _with_depth(scene, depth="auto", cache_dir=cache_dir)
