@@ -1,13 +1,13 @@
 """Scale-out benchmark (issue 26): the same job serially, with --workers N and with --dask local;
-wall times, and whether the engines give the same output (docs/SCALE.md).
+wall times, and whether the engines give the same output (docs/explanation/scale-out.md).
 
-Fly-through (default): the fountain path of docs/FLYTHROUGH.md (`vibr path interpolate`
+Fly-through (default): the fountain path of docs/explanation/flythrough.md (`vibr path interpolate`
 through the 11 cameras, 60 frames, 768x512 at --scale 0.25), rendered by
 `vibr render SCENE --path path.json -o DIR --views 8` with each engine, each run a fresh
 process (scene load, numba's cached kernels, worker start-up all counted). The sources'
 depth is estimated once, before the timed runs, into a depth cache that every run reads
 (`--cache-dir`): each run loads it in the driver, prepares the sources once and sends them
-once to each worker (docs/SCALE.md). The PNG frames of every run must be byte-identical
+once to each worker (docs/explanation/scale-out.md). The PNG frames of every run must be byte-identical
 to the first serial run's (exit status 1 otherwise).
 
     python3 benchmarks/bench_scaleout.py                      # 60 frames, 3 engines, 2 rounds

@@ -1,4 +1,4 @@
-"""A zoom in `vibr calibrate` (docs/CALIBRATE.md, "A zoom or a second camera"): 10 synthetic
+"""A zoom in `vibr calibrate` (docs/explanation/calibration.md, "A zoom or a second camera"): 10 synthetic
 480×360 photos on an arc, every other one zoomed ×1.5, saved as JPEG with EXIF focal lengths
 24 and 36 mm; calibrated as vibr does (one camera per photo, from the EXIF) and with one
 shared camera (what it did before 2026-11-27). Prints each photo's focal-length error and

@@ -1,5 +1,5 @@
 """Cotton (HCI 2016), centre view from its 8 neighbours with ground-truth geometry: PSNR split
-by region, near depth discontinuities and elsewhere (docs/RENDERER.md, "Why γ = 3 loses
+by region, near depth discontinuities and elsewhere (docs/explanation/renderer.md, "Why γ = 3 loses
 with exact geometry").
 
 "Near" is the dataset's ``mask_discontinuities_lowres.png`` dilated by 2 px; PSNR (dB) over

@@ -6,7 +6,7 @@ case) and through each distortion model (every pixel's 2×2 sub-pixel rays undis
 COLMAP's inverse of the model, ``pycolmap.Camera.cam_from_img``), with the ray-cast
 orthogonal depth of each pixel centre. The distorted sources are written as a transforms.json
 (``OPENCV`` k1 k2 p1 p2, or ``OPENCV_FISHEYE`` k1..k4; depth as ``depth_file_path``) and
-loaded by vibr, which undistorts them (docs/CALIBRATE.md, "Distorted cameras from
+loaded by vibr, which undistorts them (docs/explanation/calibration.md, "Distorted cameras from
 elsewhere"); the same files with the distortion keys removed show what reading them as
 pinhole costs. Each inner
 view is held out (its pinhole photograph is the truth) and rendered by ULR and the default;

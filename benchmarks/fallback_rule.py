@@ -1,4 +1,4 @@
-"""Which source pixels of unknown depth get the fallback plane (docs/RENDERER.md, "Fallback proxy").
+"""Which source pixels of unknown depth get the fallback plane (docs/explanation/renderer.md, "Fallback proxy").
 
 Stereo leaves a pixel without depth for two reasons: its window is flat (a plain wall, the
 sky, a black backdrop: nothing to match), or matching failed on a textured surface (an

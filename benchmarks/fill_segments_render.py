@@ -1,5 +1,5 @@
 """Fountain view 5 rendered from the other 10 with depth estimated with and without the
-segment completion (``estimate_depth(fill_segments=True)``, docs/DEPTH.md step 9): does
+segment completion (``estimate_depth(fill_segments=True)``, docs/explanation/depth.md step 9): does
 the dense depth help the render?
 
 PSNR dB / DSSIM over the pixels both geometries' renders covered, 2-pixel border, as

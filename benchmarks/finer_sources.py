@@ -1,5 +1,5 @@
 """Sources finer than the target: the target's own grid against the supersampled grid
-(docs/RENDERER.md, "Sources finer than the target").
+(docs/explanation/renderer.md, "Sources finer than the target").
 
 A held-out view is rendered at ``1/f`` of its sources' resolution (its camera scaled by
 :meth:`vibr.Camera.scaled`) and compared with the photograph averaged over ``f × f`` blocks

@@ -1,4 +1,4 @@
-"""A strip of fly-through frames of the synthetic demo scene, for docs/FLYTHROUGH.md.
+"""A strip of fly-through frames of the synthetic demo scene, for docs/explanation/flythrough.md.
 
     python3 benchmarks/flythrough_strip.py [-o docs/flythrough_strip.png] [--size 160] [--frames 6]
 

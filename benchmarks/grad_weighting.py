@@ -1,10 +1,10 @@
 """The gradient term's weights under the default's solver and view prior, on
 ``sweep_defaults.py``'s 19 cases plus templeSR0005 from its 15 other views. Two studies:
 
-* ``weighting`` (docs/RENDERER.md, "Known gaps"): ``grad_weighting`` "visibility" (the
+* ``weighting`` (docs/explanation/renderer.md, "Known gaps"): ``grad_weighting`` "visibility" (the
   default) against "W" (the colour term's weights, the authors' ``gw_type 1``) at a few
   (gamma, lam);
-* ``coverage`` (docs/RENDERER.md, "The gradient term where few samples land"): the
+* ``coverage`` (docs/explanation/renderer.md, "The gradient term where few samples land"): the
   consistency weight times ``min(1, coverage / grad_coverage)`` for a few ``grad_coverage``
   (0: no such factor), beside ULR and BVS; the value with the best mean on the sweep's
   *choose* half is the default.

@@ -2,7 +2,7 @@
 
 The light-field estimator (:func:`vibr.stereo.lightfield.lightfield_depth`) sweeps planes
 ``step`` px of disparity apart and refines the winners with ``pm_iter`` slanted-plane
-iterations; the refinement is ~70 % of its time and the sweep ~27 % (docs/DEPTH.md, "Where
+iterations; the refinement is ~70 % of its time and the sweep ~27 % (docs/explanation/depth.md, "Where
 the light-field time goes"). For each setting, on every light field we have:
 
 * **cotton, 3×3 block** (``../shared/data/hci2016_cotton``, 512²): the 8 neighbours of the

@@ -1,6 +1,6 @@
 """The render against the number of source views: cotton's centre view (input_Cam040) from
 its n best views (vibr.geometry.selection's ranking), ground-truth depth, n = 8, 24, 48 and 80 (every
-other view), each method at its defaults (docs/RENDERER.md, "Density with the view prior").
+other view), each method at its defaults (docs/explanation/renderer.md, "Density with the view prior").
 
     python3 benchmarks/many_views.py [--views 8,24,48,80] [--data DIR]
 

@@ -1,4 +1,4 @@
-"""Photograph masks (nerfstudio's ``mask_path``; docs/RENDERER.md, "Photograph masks"): a
+"""Photograph masks (nerfstudio's ``mask_path``; docs/explanation/renderer.md, "Photograph masks"): a
 passer-by in one source photograph, masked out or not.
 
 Two synthetic layouts: the 3×3 grid (a light field: its depth estimate is the light-field

@@ -1,5 +1,5 @@
 """The outer re-weighting passes (``n_outer``) on the cases of the defaults' sweep
-(docs/RENDERER.md, "Known gaps"): ULR and the default ``gradient`` with 1, 2 (the default)
+(docs/explanation/renderer.md, "Known gaps"): ULR and the default ``gradient`` with 1, 2 (the default)
 and 3 passes, each rendered through :func:`vibr.render.shared_geometry` (the grid ``vibr
 render`` uses); all-pixel PSNR dB, 2-px border; the FISTA iterations of each pass of the
 default. Estimated depth comes from the depth cache (``benchmarks/sweep_defaults.py``).

@@ -1,4 +1,4 @@
-"""How sharp the photographs are decides the few-view pans' gap to ULR (docs/RENDERER.md,
+"""How sharp the photographs are decides the few-view pans' gap to ULR (docs/explanation/renderer.md,
 "Known gaps"): the few-view cases of ``sweep_defaults.py`` (the middle of 7 synthetic views
 of 256×192 from its 2 and its 4 best views; the pan without depth, on the sphere round its
 shared centre) with every image, sources and held-out view alike, blurred by a Gaussian of

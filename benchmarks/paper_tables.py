@@ -1,6 +1,6 @@
 """Reproduce the paper's two evaluation protocols on the scenes at hand and write docs/RESULTS.md.
 
-Structured protocol (paper §6, docs/METHOD.md §8), HCI 2016 *cotton* (512×512): the centre view
+Structured protocol (paper §6, docs/explanation/method.md §8), HCI 2016 *cotton* (512×512): the centre view
 ``input_Cam040`` of a 3×3 block is held out and rendered from its 8 neighbours, at strides
 1, 2 and 4 (neighbours 4±s in row and column), with three geometries: depth **estimated**
 from the 8 neighbours only (vibr's light-field estimator), the **ground-truth** disparity of
@@ -31,7 +31,7 @@ overwrites a tracked file unless asked (``--quick`` refuses ``--write-docs``).
 
 Every case (cotton stride × depth, fountain target) is one task of
 ``vibr.executor.run_tasks``: serial by default, the same numbers on processes or Dask
-(docs/SCALE.md); each worker loads a scene once.
+(docs/explanation/scale-out.md); each worker loads a scene once.
 
 JSON reports go to ``--out`` (default ``out/paper_tables``) and the figures to
 ``--figures`` (default ``out/paper_tables/figures``), both git-ignored: the figures show the
@@ -63,7 +63,7 @@ PAPER_FOUNTAIN = {
 PAPER_SETTINGS = [(1.0, 0.0, 0.002), (1.0, 0.0, 0.003), (0.1, 1.0, 0.002)]
 EXTRA_SETTING = (0.1, 0.5, 0.002)
 #: Depth estimation for fountain (vibr.stereo.estimate_depth): the library's defaults
-#: (what a user of ``vibr eval --depth estimated`` gets; docs/DEPTH.md).
+#: (what a user of ``vibr eval --depth estimated`` gets; docs/explanation/depth.md).
 FOUNTAIN_ESTIMATE: dict = {}
 def _mvs_default(name: str):
     """A default of vibr.stereo.estimate_depth (its DepthOptions), read from the code (the text stays true)."""
@@ -429,7 +429,7 @@ def fountain_section(reports, large, args):
 
     # intensity scale
     L.append("#### The intensity scale: the same parameters read on [0, 1]\n")
-    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to (METHOD.md §9). "
+    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to (docs/explanation/method.md §9). "
              "vibr reads them on **0..255** (`scale=255`, the renderer's default: lambda in grey levels, "
              "sensor sigma_s = 1 grey level). Two wrong readings: **[0, 1]** = `vibr eval --intensity-scale 1` "
              "as is (every parameter on [0, 1], sigma_s = 1 too: relative to the data term the TV weight is "
@@ -606,7 +606,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "Gaussian window σ = 1.5, scikit-image's `gaussian_weights=True`), both over the pixels that every "
          "setting of the table reconstructed (the paper's \"reconstructed pixels\"; fraction given per table) "
          "with a 2-pixel border excluded (as the authors' evaluator). The paper's DSSIM column was printed "
-         "by an evaluator with a non-standard SSIM, halved (METHOD.md §10): compare DSSIM with the paper's only "
+         "by an evaluator with a non-standard SSIM, halved (docs/explanation/method.md §10): compare DSSIM with the paper's only "
          "in direction, not in value.",
          f"* **Renderer settings**: vibr's defaults (`vibr.render.methods.DEFAULTS`, as recorded in the reports) "
          f"except the parameters named in each row: sigma_s = {rp.get('sigma_s', float('nan')):g} grey level, sigma_z from "
@@ -617,7 +617,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "in the geometry stage's defaults.",
          "* **Intensity scale**: **255** — all parameters (lambda, sigma_s, the gradient clamp) refer to "
          "intensities in grey levels of 8-bit images (the renderer's documented convention, chosen for the "
-         "authors' sensor sigma of 1 grey level, docs/METHOD.md §9–10). The same scale is used for both protocols; "
+         "authors' sensor sigma of 1 grey level, docs/explanation/method.md §9–10). The same scale is used for both protocols; "
          "the fountain section shows what reading the paper's unstructured settings on [0, 1] does.",
          f"* **Image scale**: cotton at its full 512×512; fountain at {fs:g} × 3072×2048 "
          f"= {fsize} so that the whole "
@@ -631,7 +631,7 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "\"lightfield\", defaults: plane sweep over the grid views, slanted-plane refinement, TV-L1), fountain "
          f"with the plane-sweep MVS at its defaults (planes {_mvs_default('step_px'):g} px of parallax apart, "
          f"≤ {_mvs_default('max_planes')}, slanted-plane "
-         "refinement, consistency check; docs/DEPTH.md)"
+         "refinement, consistency check; docs/explanation/depth.md)"
          + (f" with `{FOUNTAIN_ESTIMATE}`" if FOUNTAIN_ESTIMATE else "") + ". Depth is estimated once per "
          "target (per stride for cotton) and shared by every setting; the warped samples are computed once per "
          "geometry, on the grid `vibr render` would render on (`vibr.render.shared_geometry`).",

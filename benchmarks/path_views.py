@@ -1,5 +1,5 @@
 """A fly-through of a scene without depth estimates depth only for the views its frames may
-use (``vibr.paths.flythrough.views_for_path``; docs/FLYTHROUGH.md, "Depth for the views the path
+use (``vibr.paths.flythrough.views_for_path``; docs/explanation/flythrough.md, "Depth for the views the path
 uses"): time and quality against estimating every view.
 
 The synthetic hand-held layout with ``--views`` views (no depth maps), a path interpolated

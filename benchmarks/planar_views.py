@@ -1,4 +1,4 @@
-"""The planar proxy with many source views: where ULR still leads (docs/RENDERER.md, "Known gaps").
+"""The planar proxy with many source views: where ULR still leads (docs/explanation/renderer.md, "Known gaps").
 
 Each case renders a held-out view through ``prepare(..., depth="planar")`` from its n best
 views (``n_views``; ``all``: every other view, what ``vibr eval --depth planar`` does) with

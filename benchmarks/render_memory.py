@@ -1,4 +1,4 @@
-"""Memory of a render against vibr.render.checks.render_memory's estimate (docs/ERRORS.md), and
+"""Memory of a render against vibr.render.checks.render_memory's estimate (docs/reference/errors-and-limits.md), and
 the 4K render of issue 25.
 
     python3 benchmarks/render_memory.py [SIZE]                 # synthetic grid, SIZE² from 8 views

@@ -1,4 +1,4 @@
-"""Rotation-only captures (docs/RENDERER.md, "Rotation-only captures"): the synthetic ``pan``
+"""Rotation-only captures (docs/explanation/renderer.md, "Rotation-only captures"): the synthetic ``pan``
 layout (cameras at one centre turned about the vertical), each inner view held out and
 rendered from the others by ULR, BVS and the default, with the scene's exact depth and
 without depth (the sphere vibr puts around the shared centre). PSNR / DSSIM over the pixels

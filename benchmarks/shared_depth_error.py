@@ -1,5 +1,5 @@
 """The correlation of the views' depth errors (``z_corr``), chosen across scenes with a
-held-out split (docs/RENDERER.md, "Depth errors the views share").
+held-out split (docs/explanation/renderer.md, "Depth errors the views share").
 
 Three sets of cases, each with its own split fixed in advance:
 

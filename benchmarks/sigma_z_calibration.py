@@ -1,8 +1,8 @@
 """How well the estimated depth's sigma_z predicts its error, where the true depth is known.
 
 The renderer reads ``sigma_z`` as the standard deviation of a source pixel's depth error
-(docs/METHOD.md §3: ``W = 1/(sigma_s² + sigma_z²(∂τ/∂z·∇u)²)``); the estimators give a
-heuristic scale (docs/DEPTH.md, step 8: the sweep cost's curvature and the agreeing partners'
+(docs/explanation/method.md §3: ``W = 1/(sigma_s² + sigma_z²(∂τ/∂z·∇u)²)``); the estimators give a
+heuristic scale (docs/explanation/depth.md, step 8: the sweep cost's curvature and the agreeing partners'
 spread). This script compares the two on every scene of ``../shared/data`` with true depth
 and on synthetic scenes (exact depth), without rendering anything:
 

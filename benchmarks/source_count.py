@@ -1,4 +1,4 @@
-"""How many source views when depth is estimated (docs/PERFORMANCE.md, "Many views and
+"""How many source views when depth is estimated (docs/explanation/performance.md, "Many views and
 estimated depth"): the default's all-pixel PSNR, ULR's and BVS's, and the depth time, for a
 target rendered from its K best views (``vibr eval --views K``), K against every view.
 

@@ -120,19 +120,19 @@ def _settings():
     out += [(f"γ{g:g} λ{l:g} P", "gradient", {"gamma": g, "lam": l, "tv_weighting": "uniform", "precond": True})
             for g, l in ((0.0, 0.3), (0.1, 0.1), (0.1, 0.3), (0.25, 0.3))]
     # the preconditioned solver with the view prior over a wider grid: since the colour term is
-    # divided by the prior-weighted density (docs/RENDERER.md, "Density with the view prior")
+    # divided by the prior-weighted density (docs/explanation/renderer.md, "Density with the view prior")
     # the same (gamma, lam) weigh the colour term up to a few times more
     out += [(f"γ{g:g} λ{l:g} P V4", "gradient", {"gamma": g, "lam": l, "tv_weighting": "uniform", "precond": True,
                                                  "view_k": 4})
             for g in PV4_GAMMAS for l in PV4_LAMS]
-    # the same with the gradient term's consistency weights (docs/RENDERER.md, "The gradient
+    # the same with the gradient term's consistency weights (docs/explanation/renderer.md, "The gradient
     # term's consistency weights"), and two other scales at (0.2, 0.6)
     pc = {"tv_weighting": "uniform", "precond": True, "view_k": 4}
     out += [(f"γ{g:g} λ{l:g} P V4 C", "gradient", {"gamma": g, "lam": l, **pc, "grad_consistency": CONSISTENCY})
             for g in PV4_GAMMAS for l in PV4_LAMS]
     out += [(f"γ0.2 λ0.6 P V4 C{c:g}", "gradient", {"gamma": 0.2, "lam": 0.6, **pc, "grad_consistency": c})
             for c in CONSISTENCY_OTHERS]
-    # the TV weight against the data's sum and the holes filled by push-pull (docs/RENDERER.md,
+    # the TV weight against the data's sum and the holes filled by push-pull (docs/explanation/renderer.md,
     # "Few views: lam against the data's sum, holes by push-pull")
     out += [(f"γ{g:g} λ{l:g} P V4 C D", "gradient", {"gamma": g, "lam": l, **pc, "grad_consistency": CONSISTENCY,
                                                      "lam_density": LAM_DENSITY, "hole_fill": "push-pull"})

@@ -1,4 +1,4 @@
-"""Synthetic scenes with exact depth (docs/RENDERER.md, "Synthetic scenes"): the middle view
+"""Synthetic scenes with exact depth (docs/explanation/renderer.md, "Synthetic scenes"): the middle view
 of each layout rendered from the others by every method with the defaults, and gradient
 with γ = 3. PSNR (dB) over the covered pixels, 2-pixel border excluded.
 

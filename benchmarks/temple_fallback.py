@@ -1,5 +1,5 @@
 """Middlebury temple ring, templeSR0004 from its 4 best views with estimated depth, without and
-with the fallback proxy for source pixels of unknown depth (docs/RENDERER.md, "Fallback
+with the fallback proxy for source pixels of unknown depth (docs/explanation/renderer.md, "Fallback
 proxy"). Prints PSNR (dB) over all pixels and over the pixels the render without fallback
 covered (2-px border), and writes the figure reference | without | with.
 

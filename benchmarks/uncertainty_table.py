@@ -202,7 +202,7 @@ def write_docs(reports, cmd, seconds):
     path = ROOT / "docs" / "RESULTS.md"
     text = path.read_text()
     body = (f"{SECTION}\n\nMade by `{cmd}` ({seconds / 60:.0f} min on a shared 2-core machine; "
-            "method, metrics and baselines in the script's docstring and docs/RENDERER.md \"Uncertainty\"). "
+            "method, metrics and baselines in the script's docstring and docs/explanation/renderer.md \"Uncertainty\"). "
             "AUSE: area between the normalised sparsification curve and the oracle's (50 fractions; lower is "
             "better); ρ: Spearman's rank correlation between σ and the per-pixel error; all pixels of the "
             "image with a 2-pixel border excluded (push–pull filled pixels included). vibr σ, sample spread and "

@@ -3,7 +3,7 @@
 ``vibr calibrate`` on fountain-P11's photographs (``--scale 0.25``, 768x512, the default
 SIMPLE_RADIAL camera) keeps its work folder: the mapper's distorted model with the resized
 photographs, and COLMAP's undistorted copy (``pycolmap.undistort_images``). Loading the first
-(vibr undistorts at load, docs/CALIBRATE.md "Distorted cameras from elsewhere") and the
+(vibr undistorts at load, docs/explanation/calibration.md "Distorted cameras from elsewhere") and the
 second must give the same cameras and the same images up to 8-bit rounding.
 
     python benchmarks/undistort_vs_colmap.py [--scale 0.25] [--data DIR]

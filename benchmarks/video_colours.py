@@ -1,4 +1,4 @@
-"""Colours of vibr's videos as players show them (docs/FLYTHROUGH.md, "Video"): a 1280×720
+"""Colours of vibr's videos as players show them (docs/explanation/flythrough.md, "Video"): a 1280×720
 frame of saturated colour bars encoded by :func:`vibr.io.video.write_video` (BT.709) and as
 vibr encoded it before 2026-11-27 (ffmpeg's default BT.601 matrix, untagged), each decoded
 as a player reads HD video (the BT.709 matrix). Prints the largest error per encoding and

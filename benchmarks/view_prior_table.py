@@ -1,4 +1,4 @@
-"""The view prior (`view_k`, docs/RENDERER.md "What ULR knows") against ULR and today's
+"""The view prior (`view_k`, docs/explanation/renderer.md "What ULR knows") against ULR and today's
 `gradient`, per case: PSNR dB over all pixels and over the pixels every setting covers
 (2-px border).
 

@@ -1,5 +1,5 @@
 """Views that tie in the view prior (``view_tie``), chosen across scenes with a held-out split
-(docs/RENDERER.md, "Views that tie").
+(docs/explanation/renderer.md, "Views that tie").
 
 Buehler's weights give the ``k`` best views ``(1 − p/p_(k+1)) / p``; where fewer than k + 1
 views land, ``p_(k+1)`` is the largest present penalty inflated by 1 %. Where the views nearly

@@ -1,4 +1,4 @@
-"""The viewer on a scene in georeferenced coordinates (docs/VIEWER.md, "Far from the
+"""The viewer on a scene in georeferenced coordinates (docs/explanation/viewer.md, "Far from the
 origin"): the hand-held synthetic scene (9 views of 240×180) as it is and moved by
 (5·10⁵, −1.7·10⁵, 7·10⁴) units, each shown in headless Chromium with the point cloud always
 drawn, from the same camera behind the inputs; then the moved scene again with the viewer's

@@ -1,4 +1,4 @@
-"""Photos taken walking towards the scene (docs/DEPTH.md, step 2 "Depth range"): 7 synthetic
+"""Photos taken walking towards the scene (docs/explanation/depth.md, step 2 "Depth range"): 7 synthetic
 160×120 views, each 0.25 units ahead of the one before; view f3 held out and rendered from
 the others with depth estimated from them, and with the exact depth. Prints each view's
 depth range and kept fraction and the PSNR of ULR and the default.

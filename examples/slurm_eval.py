@@ -17,7 +17,7 @@ run on this machine, without SLURM: ``vibr eval SCENE --target all --dask local`
 
 tests/test_examples.py runs :func:`main` with a ``cluster_factory`` that returns a Dask
 ``LocalCluster`` instead (and renders the SLURM job script without submitting it), so this
-file is exercised in CI; it has not been run on a real SLURM cluster (docs/SCALE.md).
+file is exercised in CI; it has not been run on a real SLURM cluster (docs/explanation/scale-out.md).
 """
 
 from __future__ import annotations

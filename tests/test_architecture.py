@@ -1,4 +1,4 @@
-"""The architecture rules of docs/ARCHITECTURE.md, checked on the source (ast, no import):
+"""The architecture rules of docs/explanation/architecture.md, checked on the source (ast, no import):
 
 * the import rules between vibr's areas (module-level and function-level imports alike);
 * only ``vibr.cli`` prints;
@@ -182,7 +182,7 @@ def long_functions(limit: int = MAX_FUNCTION_LINES) -> list[str]:
 
 
 #: The most keyword options a public function of the library may take before they belong in
-#: an options dataclass (docs/ARCHITECTURE.md; compiled kernels, which take arrays, aside).
+#: an options dataclass (docs/explanation/architecture.md; compiled kernels, which take arrays, aside).
 MAX_OPTIONS = 11
 
 
@@ -289,12 +289,12 @@ def _planted_area(pkg):
 
 
 def test_doc_references_resolve():
-    """Every "docs/NAME.md" the code cites exists, and every "docs/METHOD.md §N" names a
+    """Every "docs/NAME.md" the code cites exists, and every "docs/explanation/method.md §N" names a
     numbered section of it (a user of the package has the repository, nothing else)."""
     import re
 
     root = SRC.parent
-    method = (root / "docs" / "METHOD.md").read_text()
+    method = (root / "docs" / "explanation" / "method.md").read_text()
     sections = set(re.findall(r"^## (\d+)\. ", method, re.M))
     bad = []
     for path, _ in _modules():
@@ -302,10 +302,10 @@ def test_doc_references_resolve():
         for m in re.finditer(r"docs/([\w/.-]+\.md)", text):
             if not (root / "docs" / m.group(1)).is_file():
                 bad.append(f"{path.relative_to(root)}: cites missing docs/{m.group(1)}")
-        for m in re.finditer(r"docs/METHOD\.md §(\d+)(?:[-–](\d+))?", text):
+        for m in re.finditer(r"docs/explanation/method\.md §(\d+)(?:[-–](\d+))?", text):
             for n in filter(None, m.groups()):
                 if n not in sections:
-                    bad.append(f"{path.relative_to(root)}: docs/METHOD.md §{n} does not exist")
+                    bad.append(f"{path.relative_to(root)}: docs/explanation/method.md §{n} does not exist")
         for m in re.finditer(r"(?<![/\w])METHOD(?:\.md)? (?:§|eq)", text):
             bad.append(f"{path.relative_to(root)}: a reference to METHOD outside docs/ ({m.group(0)!r})")
     assert len(sections) >= 10

@@ -26,7 +26,7 @@ def _all_blocks():
 
 def test_the_docs_have_python_examples():
     names = {name for name, _, _ in _all_blocks()}
-    assert {"README.md", "docs/DEPTH.md", "docs/FLYTHROUGH.md"} <= names
+    assert {"README.md", "docs/explanation/depth.md", "docs/explanation/flythrough.md"} <= names
 
 
 @pytest.mark.parametrize("name,i,block", _all_blocks(), ids=lambda v: v if isinstance(v, str) and len(v) < 40 else "")

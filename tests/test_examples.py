@@ -1,5 +1,5 @@
 """examples/slurm_eval.py runs (its cluster replaced by a LocalCluster stand-in) and its
-SLURM job script says what docs/SCALE.md says it does."""
+SLURM job script says what docs/explanation/scale-out.md says it does."""
 
 from __future__ import annotations
 

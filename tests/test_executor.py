@@ -125,7 +125,7 @@ def test_dask_round_trip_and_transient_errors_retried(tmp_path, client):
     check_scheduler(client.scheduler.address)  # the CLI's check passes for a real scheduler
     res = run_tasks(T.square_probe, range(8), setup=T.setup_probe, setup_args=(str(tmp_path),), executor=client)
     _check_workers(res, tmp_path, 2)
-    # without Dask's default MALLOC_TRIM_THRESHOLD_ (it slowed frames ~25 %, docs/SCALE.md)
+    # without Dask's default MALLOC_TRIM_THRESHOLD_ (it slowed frames ~25 %, docs/explanation/scale-out.md)
     assert {r["malloc_trim"] for r in res} == {None}
     out = run_tasks(T.fail_once, ["a", "b"], setup=str, setup_args=(str(tmp_path),), executor=client)
     assert out == ["a", "b"] and client.status == "running"
@@ -350,7 +350,7 @@ def test_a_render_is_bit_identical_on_1_and_2_numba_threads():
     """The same evaluation (plane-sweep depth, samples, every method's render) in a process
     with 1 numba thread and in one with 2 (as a 2-worker pool and a serial run on 2 cores
     have): every number and every image bit for bit. The kernels' reductions are fixed-size
-    chunks summed in index order, never numba's thread-split reductions (docs/SCALE.md)."""
+    chunks summed in index order, never numba's thread-split reductions (docs/explanation/scale-out.md)."""
     import subprocess
 
     out = []

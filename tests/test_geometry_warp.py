@@ -1,4 +1,4 @@
-"""Warps and their analytic Jacobians (docs/METHOD.md §2 eqs. projection, deformation, geometrie):
+"""Warps and their analytic Jacobians (docs/explanation/method.md §2 eqs. projection, deformation, geometrie):
 closed-form cases and finite-difference checks."""
 
 import numpy as np

@@ -251,7 +251,7 @@ def test_cli_psf_option(tmp_path, capsys):
 
 
 def test_footprint_psf_accuracy_on_a_finer_source():
-    """The footprint PSF's claim (docs/RENDERER.md, "The footprint PSF"): with sources twice
+    """The footprint PSF's claim (docs/explanation/renderer.md, "The footprint PSF"): with sources twice
     as fine as the target, against the held-out view integrated over each target pixel (box
     average, the pixel the model assumes), it beats the bilinear PSF by several dB.
     Measured on this scene (96² sources → 48² target, bvs, defaults): bilinear 31.23 dB /

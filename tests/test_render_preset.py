@@ -21,7 +21,7 @@ def test_paper_preset_maps_the_units():
 
 def test_paper_gamma_sweep_non_decreasing_on_a_cotton_crop(cotton_dir):
     """γ = 0, 1, 2, 3 with the preset: PSNR non-decreasing (cotton centre from its 8
-    neighbours at stride 4, GT depth, a 96×96 crop; measured full size in RENDERER.md)."""
+    neighbours at stride 4, GT depth, a 96×96 crop; measured full size in docs/explanation/renderer.md)."""
     from vibr.camera import Camera
     from vibr.geometry import compute_samples
     from vibr.io import load_scene

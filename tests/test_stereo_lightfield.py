@@ -116,7 +116,7 @@ def test_cotton_centre_from_3x3_block(cotton_dir):
     e = (disp - gt)[15:-15, 15:-15]
     badpix = 100 * np.mean(np.abs(e) > 0.07)
     mse100 = 100 * np.mean(e ** 2)
-    # the defaults' 5.24 / 1.687 with the coarse level (docs/DEPTH.md, "Coarse to fine";
+    # the defaults' 5.24 / 1.687 with the coarse level (docs/explanation/depth.md, "Coarse to fine";
     # 5.96 / 1.892 without it), with small slack
     assert badpix < 5.6, badpix
     assert mse100 < 1.8, mse100

@@ -1,6 +1,6 @@
 """Sources finer or coarser than the target: the pixel size of a source in the target (closed
 forms), the grid a target is rendered on (supersampling, source reduction, a coarser grid
-enlarged), and what it buys (docs/RENDERER.md, "Sources finer than the target", "Sources
+enlarged), and what it buys (docs/explanation/renderer.md, "Sources finer than the target", "Sources
 coarser than the target")."""
 
 import math

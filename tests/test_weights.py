@@ -1,4 +1,4 @@
-"""Geometric weights W = omega / |det ∂tau/∂x| (docs/METHOD.md §3)."""
+"""Geometric weights W = omega / |det ∂tau/∂x| (docs/explanation/method.md §3)."""
 
 import numpy as np
 

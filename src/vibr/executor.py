@@ -39,7 +39,7 @@ The task contract (what makes the engines interchangeable):
   retried by the process engine.
 
 Results are identical whatever the engine when ``fn`` is deterministic and does not depend
-on the number of numba threads (docs/SCALE.md reports what was checked).
+on the number of numba threads (docs/explanation/scale-out.md reports what was checked).
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def auto_workers(n_tasks: int, task_pixels: int, worker_bytes: int, *, cores: in
 
     On the 2-core machine two processes of one numba thread rendered the fountain path's
     frames in 0.86–0.94 of the wall time of one process of two threads, with less CPU time
-    in all (docs/SCALE.md, "Fly-through frames"). So ``n = min(cores, n_tasks // AUTO_MIN_TASKS_PER_WORKER,
+    in all (docs/explanation/scale-out.md, "Fly-through frames"). So ``n = min(cores, n_tasks // AUTO_MIN_TASKS_PER_WORKER,
     memory // worker_bytes)`` processes, each with ``cores // n`` threads, when the tasks
     are big enough (``task_pixels ≥ AUTO_MIN_TASK_PIXELS``); else 1. Always 1 inside a
     daemonic process (a Dask worker, a ``multiprocessing.Pool`` worker), which may not start
@@ -489,7 +489,7 @@ def start_local_cluster(n_workers: int = 2):
     # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which turns off glibc's
     # adaptive mmap threshold: every large numpy temporary is then a fresh mmap, page-faulted
     # in and unmapped again, and a fly-through frame took ~25 % longer than in a plain process
-    # (docs/SCALE.md, "Dask's malloc setting"). None removes the key (distributed's rule).
+    # (docs/explanation/scale-out.md, "Dask's malloc setting"). None removes the key (distributed's rule).
     # the scheduler always serves HTTP (its dashboard, or health and metrics): on a free port of
     # the loopback, not on the fixed :8787 (None means that default), which a second cluster
     # or a user's own Dask dashboard would already hold

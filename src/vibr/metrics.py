@@ -1,7 +1,7 @@
 """Image quality metrics, optionally restricted to a mask: PSNR, SSIM and DSSIM; and the
 metrics of a predicted per-pixel uncertainty: sparsification curves, AUSE, Spearman's rho.
 
-docs/METHOD.md §8: PSNR over the three channels, SSIM of Wang et al. (2004) with a
+docs/explanation/method.md §8: PSNR over the three channels, SSIM of Wang et al. (2004) with a
 Gaussian window of sigma 1.5, and the paper's DSSIM = 10⁴ · (1 − SSIM); all with an
 optional border excluded and, for rendered views, only over the reconstructed pixels.
 """

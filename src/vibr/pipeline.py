@@ -22,12 +22,12 @@ chosen geometry:
     where no known surface hides them: by default (``fallback="auto"``) in the views that
     are mostly unknown (a backdrop: it wins on the temple ring) and, in the others, where
     the photograph is flat (a plain wall or sky, which stereo cannot match), not where
-    stereo missed textured patches of the object (it loses on fountain); docs/RENDERER.md
+    stereo missed textured patches of the object (it loses on fountain); docs/explanation/renderer.md
     "Fallback proxy".
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
     paper's coarsest proxy, with one depth uncertainty for every view (``max(0.02 D,
-    0.1 (p95 − p5))``, docs/RENDERER.md "The planar proxy's sigma_z"). Its depth and uncertainty come
+    0.1 (p95 − p5))``, docs/explanation/renderer.md "The planar proxy's sigma_z"). Its depth and uncertainty come
     from the sources' depth or sparse points; when the sources have neither (a light field
     whose only depth is the held-out centre's), from the scene's views that have depth —
     two scalars (median and spread of that depth seen from the target), as
@@ -66,13 +66,13 @@ logger = logging.getLogger(__name__)
 #: When depth is estimated and neither ``sources`` nor ``n_views`` is given, a target is
 #: rendered from this many best views (:mod:`vibr.geometry.selection`): each source costs one depth
 #: estimate, and a 9×9 light field's 80 cost ten minutes and gain nothing over the 16 best
-#: (docs/PERFORMANCE.md, "Many views and estimated depth"). Known depth keeps every view.
+#: (docs/explanation/performance.md, "Many views and estimated depth"). Known depth keeps every view.
 ESTIMATED_SOURCES = 16
 #: With the planar proxy and neither ``sources`` nor ``n_views`` given, a target is rendered
 #: from this many best views: the plane misplaces a view in proportion to its baseline, and
 #: the gradient term reads every view that lands (the colour term only the view prior's
 #: few). Chosen across scenes with a held-out split (``benchmarks/planar_views.py``,
-#: docs/RENDERER.md "The planar proxy's sigma_z"): +1.4 and +1.3 dB over every view on its two halves.
+#: docs/explanation/renderer.md "The planar proxy's sigma_z"): +1.4 and +1.3 dB over every view on its two halves.
 PLANAR_SOURCES = 4
 #: ``n_views`` that asks for every view as a source (CLI ``--views all``).
 ALL_VIEWS = "all"

@@ -19,7 +19,7 @@ bounding box :data:`DEFAULT_BBOX` = x ∈ [-5, 5], y ∈ [-4, 1.5], z ∈ [-1, 6
 * a tilted card (a small textured rectangle) floating in front, for a thin occluder.
 
 Images are band-limited so that a source pixel is well modelled as a bilinear sample of
-another view (the renderer's assumption, docs/METHOD.md §4): textures are pre-smoothed (Gaussian,
+another view (the renderer's assumption, docs/explanation/method.md §4): textures are pre-smoothed (Gaussian,
 sigma 1 texel) and stored as a mip-map pyramid; each ray picks the pyramid level whose
 texel matches the pixel footprint ``z / f`` (divided by ``sqrt|cos θ|`` on slanted
 surfaces), trilinearly, so that a texel is never smaller than about one image pixel; and

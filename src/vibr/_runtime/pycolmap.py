@@ -3,7 +3,7 @@
 pycolmap starts Google's glog when it is first imported, and glog installs its failure
 signal handler, SIGTERM included: a ``kill`` then prints a C++ stack trace and ends the
 process at once, without the ``finally`` blocks that stop worker processes and remove
-half-written files (the ``vibr`` command reads SIGTERM as Ctrl-C: docs/ERRORS.md,
+half-written files (the ``vibr`` command reads SIGTERM as Ctrl-C: docs/reference/errors-and-limits.md,
 "Interrupted jobs"). Seen with ``vibr calibrate`` stopped by SIGTERM (exit -15, a stack
 trace, its work folder left in /tmp). :func:`import_pycolmap` gives SIGTERM back the
 handler it had before the import.

@@ -12,7 +12,7 @@ With twice as many numba threads as cores, each with half the work, the operatin
 can run the share of a delayed thread on the other core. Threads that outnumber the cores
 must sleep at a loop's end (OpenMP's passive wait policy), not spin on a core another
 thread needs. A render's result does not depend on the thread count (tested bit for bit).
-Measurements: docs/VIEWER.md, "Render threads".
+Measurements: docs/explanation/viewer.md, "Render threads".
 
 Only for processes vibr starts (``vibr view``, the viewer's benchmark), and only before
 numba is imported: numba reads ``NUMBA_NUM_THREADS`` when it is imported, libgomp reads

@@ -324,7 +324,7 @@ class CalibrateOptions:
         fixed, then refine it in one global bundle adjustment and keep the result only if
         its covariance shows the photos determine it (:func:`_refine_principal_point`).
         Held at the centre when it is off centre, the poses absorb the offset as a small
-        common rotation of every camera (docs/CALIBRATE.md).
+        common rotation of every camera (docs/explanation/calibration.md).
     pan : bool, optional
         Photographs turned on the spot (a panorama, a video panned from one place): one
         centre for every camera, rotations and intrinsics fitted to the tracks without the
@@ -685,7 +685,7 @@ def _mapping_or_one_centre(one, db, img_dir, sparse, n_photos, opt, times) -> tu
         recs = {0: one.reconstruction} if choice.one_centre else recs
     note = focal_note(one) if choice.one_centre else None
     if note:  # asked for or chosen, an implausible focal length is said
-        logger.warning(f"calibrate: {note}; --pan no keeps COLMAP's mapper (docs/CALIBRATE.md)")
+        logger.warning(f"calibrate: {note}; --pan no keeps COLMAP's mapper (docs/explanation/calibration.md)")
     return recs, choice
 
 
@@ -757,7 +757,7 @@ def _refine_principal_point(rec, num_threads: int):
     gauge fixed by three points) gives the standard deviation σ of each principal-point
     coordinate; the refinement is kept when every σ ≤ ``PP_MAX_STD`` · max(W, H) and the shift
     ≤ ``PP_MAX_SHIFT`` · max(W, H). On a level arc of views σ_y is large: the principal
-    point trades off against a common pitch of the cameras (docs/CALIBRATE.md gives the
+    point trades off against a common pitch of the cameras (docs/explanation/calibration.md gives the
     values measured on fountain-P11 and on an arc).
 
     Returns ``(reconstruction, note)``: the refined copy or ``rec`` itself, and a note.

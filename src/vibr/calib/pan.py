@@ -4,7 +4,7 @@ COLMAP's incremental mapper gives every image a translation and triangulates poi
 baseline. Photographs taken from one point (a panorama from a tripod, a video panned on the
 spot) have no baseline: on a synthetic pan the mapper either invented one (20 frames spread
 over 11 scene units, a focal length of 386 px for a true 307 px) or registered 9–11 of 20 frames
-without a single point (docs/CALIBRATE.md, "Turned on the spot").
+without a single point (docs/explanation/calibration.md, "Turned on the spot").
 
 **The rotation-only model.** Every observation ``x_ij`` of track ``j`` in image ``i`` is the
 image of a direction ``d_j``::
@@ -37,7 +37,7 @@ the matches within :data:`MAX_HOMOGRAPHY_RATIO` times the pairs' own homographie
 :func:`rotation_only_reconstruction` builds the COLMAP model: every image at the origin with
 its fitted rotation, the fitted intrinsics, the tracks' directions at unit distance. vibr
 recognises such a scene as sharing a centre (:func:`vibr.camera.shared_centre`); its renders
-need no depth (docs/RENDERER.md, "Rotation-only captures").
+need no depth (docs/explanation/renderer.md, "Rotation-only captures").
 """
 
 from __future__ import annotations

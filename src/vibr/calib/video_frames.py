@@ -8,7 +8,7 @@ its middle is kept, weighted by up to :data:`CENTRE_PREFERENCE` towards the midd
 spread comes from the stretches, the choice near the middle avoids the blur (which comes and
 goes within a fraction of a second as the hand shakes and the walker steps) without
 trading a blurred frame for a gap in the walk, and of frames about as sharp the middle one
-keeps the kept frames evenly spaced (docs/CALIBRATE.md, "From a video"). The frames are read
+keeps the kept frames evenly spaced (docs/explanation/calibration.md, "From a video"). The frames are read
 once, as a stream: memory holds one stretch's best frame.
 """
 
@@ -143,7 +143,7 @@ def _count_frames(path: Path) -> int:
 def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
     """Keep the sharpest frame of each of ``n`` equal stretches of ``video`` as image files
     ``frame_NNNNNN.bmp`` (NNNNNN the frame's number from 0) in ``out_dir`` (emptied first):
-    BMP, lossless and far faster to write than PNG (docs/CALIBRATE.md), as calibration's
+    BMP, lossless and far faster to write than PNG (docs/explanation/calibration.md), as calibration's
     first step reads them once and writes its own copies.
 
     The stretches are cut by the frame count the video's header gives (frame rate ×

@@ -109,7 +109,7 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=tuple(PRESETS), default=None,
                    help="read --alpha/--gamma/--lam in these units: paper = the paper's symbols as the "
                         "authors' code applies them (gamma x 0.1/4, lam x 255 on [0, 1] intensities, "
-                        "gradient term weighted by W, spatially varying TV; docs/RENDERER.md)")
+                        "gradient term weighted by W, spatially varying TV; docs/explanation/renderer.md)")
     add_psf_option(p)
     from ..geometry.resolution import SUPERSAMPLE_MAX
 
@@ -170,7 +170,7 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                         "behind the view's known depth with a large sigma_z instead of being dropped: "
                         f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown and, in the others, "
                         "where the photograph is flat (auto, the default), at every unknown pixel (always), "
-                        "or never (docs/RENDERER.md \"Fallback proxy\")")
+                        "or never (docs/explanation/renderer.md \"Fallback proxy\")")
     add_cache_options(p)
 
 

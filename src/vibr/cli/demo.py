@@ -89,7 +89,7 @@ def run(args) -> int:
 
 
 def _demo_video(scene, args) -> None:
-    """A ~2 s orbit of the demo scene (the fly-through of docs/FLYTHROUGH.md) to args.video."""
+    """A ~2 s orbit of the demo scene (the fly-through of docs/explanation/flythrough.md) to args.video."""
     import shutil
     import tempfile
 

@@ -69,16 +69,16 @@ def register(sub) -> None:
     p.add_argument("--sweep-scale", type=float, default=None,
                    help="image scale of the coarse level (the plane sweep and --coarse-iter "
                    "refinement iterations), in (0, 1]; 1: sweep at full size, no coarse level "
-                   "(default that of estimate_depth, 0.5: docs/DEPTH.md)")
+                   "(default that of estimate_depth, 0.5: docs/explanation/depth.md)")
     p.add_argument("--coarse-iter", type=int, default=None,
                    help="refinement iterations at the coarse level before the full-size ones "
                    "(default that of estimate_depth, 1; light fields: the first of --refine-iter)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
-    # the views' sweeps (MVS) on local processes or a Dask cluster (docs/SCALE.md)
+    # the views' sweeps (MVS) on local processes or a Dask cluster (docs/explanation/scale-out.md)
     add_executor_args(p, default="here: the sweeps' kernels already use every core of this machine")
     p.add_argument("--fill-segments", action="store_true",
                    help="dense output (MVS): fill unknown pixels from the planes of their colour "
-                   "segments, then re-run the weighted median (docs/DEPTH.md). Better depth "
+                   "segments, then re-run the weighted median (docs/explanation/depth.md). Better depth "
                    "maps; the renderer does better with the unknown pixels left out")
     add_overwrite_option(p, "OUT (only a folder vibr wrote)")
     add_quiet(p)

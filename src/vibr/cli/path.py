@@ -9,7 +9,7 @@ from ._options import names
 
 _DESC = """\
 Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json schema
-(camera_to_world 4x4 row-major in OpenGL camera axes, vertical fov in degrees; docs/FLYTHROUGH.md),
+(camera_to_world 4x4 row-major in OpenGL camera axes, vertical fov in degrees; docs/explanation/flythrough.md),
 to render with 'vibr render SCENE --path PATH.json -o video.mp4'; with --dataparser-transforms
 the path is written in the normalised frame of a nerfstudio model of the scene, for ns-render.
 Kinds: interpolate (a C2-smooth spline through the scene's cameras: all, nearest next, or

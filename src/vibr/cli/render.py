@@ -73,7 +73,7 @@ def register(sub) -> None:
 
 
 def _add_path_options(p) -> None:
-    """Fly-through options (``--path``; vibr.paths.flythrough, docs/FLYTHROUGH.md)."""
+    """Fly-through options (``--path``; vibr.paths.flythrough, docs/explanation/flythrough.md)."""
     g = p.add_argument_group("fly-through (--path)")
     g.add_argument("--path", metavar="PATH.json",
                    help="render every camera of a camera path (nerfstudio camera_path.json, as written by "
@@ -88,7 +88,7 @@ def _add_path_options(p) -> None:
     g.add_argument("--overwrite", action="store_true", help="render frames already written again (default: skip them)")
     g.add_argument("--exclude", type=names, default=(),
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
-    # frames on local processes or Dask (vibr.executor, docs/SCALE.md)
+    # frames on local processes or Dask (vibr.executor, docs/explanation/scale-out.md)
     add_executor_args(g, default="auto: one process per core for a long path of large frames, "
                                   "else here (vibr.executor.auto_workers)")
 

@@ -62,7 +62,7 @@ LARGE_VIEW_PIXELS = 2_500_000
 
 
 def _hint_large_views(scene, scale: float) -> None:
-    """A one-line hint when the views are large (docs/VIEWER.md, "Large photographs")."""
+    """A one-line hint when the views are large (docs/explanation/viewer.md, "Large photographs")."""
     w, h = max((v.camera.width, v.camera.height) for v in scene.views)
     if w * h > LARGE_VIEW_PIXELS:
         s = 2 ** round(math.log2(math.sqrt(500_000 / (w * h)) * scale))  # about half a megapixel

@@ -1,4 +1,4 @@
-"""Geometry stage (paper §5, docs/METHOD.md §2): depth preparation, warps, Jacobians,
+"""Geometry stage (paper §5, docs/explanation/method.md §2): depth preparation, warps, Jacobians,
 visibility → :class:`Samples` (what the renderer consumes).
 
 Main entry points

@@ -1,4 +1,4 @@
-"""Depth preparation (paper §5.1–5.3, docs/METHOD.md §2).
+"""Depth preparation (paper §5.1–5.3, docs/explanation/method.md §2).
 
 Everything downstream works with **orthogonal** depth ``z`` (the third coordinate of
 ``R X + t``, see :mod:`vibr.camera`), NaN where unknown. This module converts the other
@@ -42,7 +42,7 @@ def _rays(K: np.ndarray, shape) -> np.ndarray:
 
 
 def radial_to_orthogonal(h, K) -> np.ndarray:
-    """Radial distance → orthogonal depth (docs/METHOD.md §2 eq. orth).
+    """Radial distance → orthogonal depth (docs/explanation/method.md §2 eq. orth).
 
     ``z_m = h_m / ‖K⁻¹ x̄_m‖``, x̄ = (x, y, 1), pixel centres in vibr's convention.
 
@@ -65,7 +65,7 @@ def radial_to_orthogonal(h, K) -> np.ndarray:
 def radial_to_orthogonal_derivatives(h, h_x, h_y, K):
     """Derivatives of the orthogonal depth from those of the radial distance.
 
-    With ``r = K⁻¹ x̄`` and ``n = ‖r‖``, ``z = h / n`` gives (docs/METHOD.md §2)
+    With ``r = K⁻¹ x̄`` and ``n = ‖r‖``, ``z = h / n`` gives (docs/explanation/method.md §2)
     ``z_x = (h_x − h · rᵀ K⁻¹[:, 0] / n²) / n`` and the same for ``y`` with column 1.
 
     Returns ``(z_x, z_y)``, (H, W) float64, scene units per pixel.
@@ -268,6 +268,6 @@ def fill_depth_holes(depth, image, *, radius: int = 4, sigma_space: float = 2.0,
 
 #: Depth uncertainty of a view that carries none: ``sigma_z = DEFAULT_SIGMA_Z_REL ·
 #: median(depth)`` (1 % of the depth, the order of the error of good MVS / light-field
-#: estimates; the renderer's geometric weight, docs/METHOD.md §3, scales with it).
+#: estimates; the renderer's geometric weight, docs/explanation/method.md §3, scales with it).
 DEFAULT_SIGMA_Z_REL = 0.01
 

@@ -1,4 +1,4 @@
-"""The gradient term's image gradient ``D`` (docs/METHOD.md §5): one implementation for both
+"""The gradient term's image gradient ``D`` (docs/explanation/method.md §5): one implementation for both
 sides of ``B D u ≈ ∇v``, the sources' ``∇v_k`` (:func:`vibr.geometry.compute_samples`) and
 the target image's ``D u`` (:mod:`vibr.render.operators`, :mod:`vibr.render.fused`), with
 one border rule. It lives in the geometry stage because the sources' gradients are computed
@@ -15,12 +15,12 @@ from .._runtime.jit import FASTMATH
 __all__ = ["GRAD_SCHEMES", "DEFAULT_GRAD_SCHEME", "grad_image", "grad_image_adj"]
 
 
-#: Discretisations of the gradient term's image gradient ``D`` (one list, docs/METHOD.md §5):
+#: Discretisations of the gradient term's image gradient ``D`` (one list, docs/explanation/method.md §5):
 #: ``"central"`` ½(u(j+1) − u(j−1)), replicated border (½ one-sided difference there);
 #: ``"forward"`` u(j+1) − u(j), Neumann border (0 on the last column / row), whose
-#: ``DᵀD`` is the compact 5-point Laplacian (the authors' ``Δ₄``, docs/METHOD.md §10).
+#: ``DᵀD`` is the compact 5-point Laplacian (the authors' ``Δ₄``, docs/explanation/method.md §10).
 GRAD_SCHEMES = ("central", "forward")
-#: The default (measured, docs/RENDERER.md "One image gradient").
+#: The default (measured, docs/explanation/renderer.md "One image gradient").
 DEFAULT_GRAD_SCHEME = "forward"
 
 
@@ -128,7 +128,7 @@ def _is_forward(scheme) -> bool:
 
 
 def grad_image(u, scheme: str = "forward", out=None) -> np.ndarray:
-    """The gradient term's image gradient ``D u`` (docs/METHOD.md §5): (C, H, W) → (C, 2, H, W),
+    """The gradient term's image gradient ``D u`` (docs/explanation/method.md §5): (C, H, W) → (C, 2, H, W),
     ``[:, 0]`` = d/dx, ``[:, 1]`` = d/dy; ``scheme`` one of :data:`GRAD_SCHEMES`. The same
     operator gives the sources' ``∇v_k`` (one implementation, same border)."""
     fwd = _is_forward(scheme)

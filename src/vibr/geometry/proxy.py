@@ -2,7 +2,7 @@
 
 The coarsest proxy: a fronto-parallel plane of the *target* camera at depth ``D``
 (target-frame orthogonal depth), with a large depth uncertainty sigma_z so that the
-geometric weights (docs/METHOD.md §3) let the variational model, not the proxy, decide.
+geometric weights (docs/explanation/method.md §3) let the variational model, not the proxy, decide.
 
 For a source pixel with ray ``r = R_kᵀ K_k⁻¹ x̄`` (world, scaled so that orthogonal source
 depth s gives the point ``C_k + s r``), the plane ``n·X + d_u = D`` with ``n = R_u[2]``,
@@ -26,7 +26,7 @@ __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL
 #: Default planar-proxy uncertainty: ``sigma_z = max(PROXY_SIGMA_Z_REL · D,
 #: PROXY_SPREAD_REL · (p95 − p5))``, the p the percentiles of the available depth seen from
 #: the target. Chosen across scenes with a held-out split (``benchmarks/planar_sigma_z.py``,
-#: docs/RENDERER.md, "The planar proxy's sigma_z"): a fifth of the former rule
+#: docs/explanation/renderer.md, "The planar proxy's sigma_z"): a fifth of the former rule
 #: ``max(0.1 D, ½ (p95 − p5))``, which let TV and the gradient term blur every edge the
 #: plane misplaces.
 PROXY_SIGMA_Z_REL = 0.02
@@ -35,7 +35,7 @@ PROXY_SPREAD_REL = 0.1
 #: Correlation of the views' depth errors when one proxy stands in for every view's depth
 #: (``meta["proxy"]``: the plane, the sphere): the render's ``z_corr`` for their samples
 #: (:func:`vibr.render.weights.shared_error_beta`). Chosen across scenes with a held-out split
-#: (``benchmarks/shared_depth_error.py``, docs/RENDERER.md, "Depth errors the views share");
+#: (``benchmarks/shared_depth_error.py``, docs/explanation/renderer.md, "Depth errors the views share");
 #: per-view depth (ground truth, estimated, files) keeps the paper's independent errors, 0.
 PROXY_Z_CORR = 0.9
 
@@ -185,7 +185,7 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
 #: Fallback proxy (issue 23): unknown source pixels get a fronto-parallel plane of their own
 #: view at ``FALLBACK_FACTOR`` times the ``FALLBACK_PERCENTILE``-th percentile of the view's
 #: known depth (just behind its farthest known depth, beyond the visibility test's 2 %
-#: margin; docs/RENDERER.md, "Fallback proxy"), with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times
+#: margin; docs/explanation/renderer.md, "Fallback proxy"), with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times
 #: that depth.
 FALLBACK_FACTOR = 1.03
 FALLBACK_PERCENTILE = 99.0
@@ -194,14 +194,14 @@ FALLBACK_SIGMA_Z_REL = 0.25
 #: at every unknown pixel. A view that stereo leaves mostly unknown shows a backdrop (the
 #: temple ring); in the others, unknown textured patches are stereo failures on the object,
 #: where the plane would be wrong (fountain): the fractions and what the proxy costs are in
-#: docs/RENDERER.md, "Fallback proxy".
+#: docs/explanation/renderer.md, "Fallback proxy".
 FALLBACK_MIN_FRACTION = 0.5
 #: ``fallback="auto"``, in every view: the unknown pixels whose photograph is flat, every
 #: channel's standard deviation over the ``(2·FLAT_RADIUS+1)²`` window below
 #: ``FALLBACK_FLAT_STD`` (intensities in [0, 1]; the depth benchmarks' limit of a textured
-#: window, docs/DEPTH.md). Stereo cannot match them (a plain wall, the sky), and a plane
+#: window, docs/explanation/depth.md). Stereo cannot match them (a plain wall, the sky), and a plane
 #: there costs little colour whatever its depth; an unknown *textured* pixel is a stereo
-#: failure on a surface, where the plane would be wrong (docs/RENDERER.md, "Fallback proxy").
+#: failure on a surface, where the plane would be wrong (docs/explanation/renderer.md, "Fallback proxy").
 FALLBACK_FLAT_STD = 0.02
 FLAT_RADIUS = 3
 #: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown, and the flat unknown pixels of
@@ -254,7 +254,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     when ``flat_std`` is None); the others stay unknown. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
     sample wherever a known surface lands in the target, whatever their depths (known
     geometry wins: a source facing the target has its plane in front of the object); other
-    placements measured in docs/RENDERER.md.
+    placements measured in docs/explanation/renderer.md.
 
     Returns the scene with each such view's ``fallback`` mask (:class:`vibr.scene.View`) set
     to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,

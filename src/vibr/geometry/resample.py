@@ -120,7 +120,7 @@ def _spline_enlarge(img: np.ndarray, shape) -> np.ndarray:
     spline's coefficients (scipy's recursive prefilter along each axis, border "nearest"),
     then four of them per output sample and axis (sparse products; skimage's resize with
     ``order=3`` interpolates across the colour channels as well, 4³ taps a sample: timings in
-    docs/RENDERER.md, "Sources coarser than the target")."""
+    docs/explanation/renderer.md, "Sources coarser than the target")."""
     from scipy.ndimage import spline_filter1d
 
     (h, w), (H, W) = img.shape[:2], shape

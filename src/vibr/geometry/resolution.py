@@ -5,7 +5,7 @@ a thumbnail, a camera far from the scene) puts several samples in each target pi
 bilinear image-formation model (``psf="bilinear"``, paper §4.1) reads each of them as a point
 sample of the target image, so the solution fits an aliased image. Rendering on a grid
 ``k`` times finer and averaging ``k × k`` blocks (a pixel-integrating sensor) avoids it
-(docs/RENDERER.md, "Sources finer than the target"). :func:`source_pixel_size` measures
+(docs/explanation/renderer.md, "Sources finer than the target"). :func:`source_pixel_size` measures
 the ratio, :func:`resolution_plan` chooses ``k`` and the sources to reduce first (those
 still much finer than the fine grid: the cost stays that of a render at the sources'
 resolution), which :func:`vibr.render.render` applies.
@@ -14,7 +14,7 @@ The other way round (a camera closer to the scene than the photographs), a sourc
 covers ``s > 1`` target pixels and most target pixels receive no sample: the image between
 them would be the TV prior's. The target is then rendered on a grid ``g ≈ s / √2`` times
 coarser, where every pixel has samples, and enlarged (cubic spline) to its size
-(docs/RENDERER.md, "Sources coarser than the target").
+(docs/explanation/renderer.md, "Sources coarser than the target").
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ MIN_REDUCED_SIDE = 16
 #: Sources coarser than the target: the grid is coarser by a power of √2 such that a source
 #: pixel is about this many pixels of it (a little finer than the sources: the views' samples
 #: fall at different sub-pixel places; chosen on the *choose* cases of
-#: ``benchmarks/finer_sources.py --coarser``, docs/RENDERER.md).
+#: ``benchmarks/finer_sources.py --coarser``, docs/explanation/renderer.md).
 COARSE_GRID_SOURCE_SIZE = math.sqrt(2.0)
 
 

@@ -1,7 +1,7 @@
 """The geometry stage's output: warped source samples, what the renderer consumes.
 
 Every visible source pixel (k, m) becomes one sample: where it lands in the target
-(``tau_k(x_m)``, docs/METHOD.md §2 eq. projection), its colour and colour gradient in the source,
+(``tau_k(x_m)``, docs/explanation/method.md §2 eq. projection), its colour and colour gradient in the source,
 the local Jacobian of the warp, the deformation factor ``1/|det ∂tau_k/∂x_m|``, the depth
 derivative ``∂tau_k/∂z`` and the depth uncertainty. Samples of all source views are
 concatenated; ``view`` tells which view each came from. :func:`vibr.geometry.compute_samples`
@@ -34,13 +34,13 @@ class Samples:
         pixels: :func:`vibr.geometry.gradient.grad_image` of the source image with the
         scheme of ``meta["grad_scheme"]``.
     jac : (N, 2, 2) float32 or None
-        ``∂tau_k/∂x_m`` (docs/METHOD.md §2 eq. deformation); rows are target x, y; columns source
+        ``∂tau_k/∂x_m`` (docs/explanation/method.md §2 eq. deformation); rows are target x, y; columns source
         x, y. Only the footprint PSF reads it: None unless asked for
         (:func:`vibr.geometry.compute_samples`'s ``keep``).
     inv_det : (N,) float32
         Deformation weight ``1 / |det ∂tau_k/∂x_m|``.
     dtau_dz : (N, 2) float32
-        ``∂tau_k/∂z`` (docs/METHOD.md §2 eq. geometrie), target pixels per scene unit of depth.
+        ``∂tau_k/∂z`` (docs/explanation/method.md §2 eq. geometrie), target pixels per scene unit of depth.
     sigma_z : (N,) float32
         Depth standard deviation of the sample, scene units.
     view : (N,) int32

@@ -1,6 +1,6 @@
 """The geometry stage end to end: source views with depth + target camera → :class:`Samples`.
 
-Steps (paper §5, docs/METHOD.md §2), per source view k:
+Steps (paper §5, docs/explanation/method.md §2), per source view k:
 
 1. depth preparation: NaN = unknown; optionally fill holes (joint bilateral, Kopf 2007);
    slopes ``(z_x, z_y)`` (edge-aware, :func:`vibr.geometry.depth.depth_derivatives`);
@@ -211,7 +211,7 @@ class SampleOptions:
         Fill unknown depth with the joint bilateral filter before warping.
     max_inv_det : float
         Cap of the deformation weight ``1/|det ∂tau/∂x_m|`` (default 4, see
-        :data:`vibr.geometry.warp.DEFAULT_MAX_INV_DET`; the authors use 1, docs/METHOD.md §10).
+        :data:`vibr.geometry.warp.DEFAULT_MAX_INV_DET`; the authors use 1, docs/explanation/method.md §10).
     edge_rel : float
         Edge detection of the depth slopes (:func:`depth_derivatives`).
     max_quad_px : int

@@ -1,4 +1,4 @@
-"""Visibility (paper §5.5, docs/METHOD.md §2): target z-buffer by quad splatting, and the
+"""Visibility (paper §5.5, docs/explanation/method.md §2): target z-buffer by quad splatting, and the
 per-sample visibility test.
 
 1. **Z-buffer.** Every source pixel m of every source view is a small 3D surface element:
@@ -70,7 +70,7 @@ VISIBLE = 4
 #: The warps' kernels divide by IEEE rules (numba's "numpy" error model): each divisor is
 #: tested before or after its division (w > 0, |det| > 0, area ≠ 0), so a zero gives an
 #: infinity the test rejects, where Python's model added a zero test and an exception path
-#: to every division (docs/RENDERER.md, "Speed round 6").
+#: to every division (docs/explanation/renderer.md, "Speed round 6").
 _DIVISION = "numpy"
 
 

@@ -1,4 +1,4 @@
-"""Warps ``tau_k`` and their analytic Jacobians (paper §5.2–5.4, docs/METHOD.md §2).
+"""Warps ``tau_k`` and their analytic Jacobians (paper §5.2–5.4, docs/explanation/method.md §2).
 
 For a source view k with camera (K_k, R_k, t_k, centre C_k) and the target u, the warp
 of source pixel x_m with orthogonal depth z_m is (eq. projection)
@@ -40,7 +40,7 @@ __all__ = ["warp_constants", "warp_view", "warp_points", "DEFAULT_MAX_INV_DET"]
 #: quad), and 1/det would then give one sample an unbounded weight. The cap is a safety
 #: bound, not the weighting policy: 4 = a source pixel covering a quarter of a target
 #: pixel (a source at twice the target's resolution); beyond that, extra resolution is not
-#: rewarded. The authors' public code caps at 1 in unstructured scenes (docs/METHOD.md §10): pass
+#: rewarded. The authors' public code caps at 1 in unstructured scenes (docs/explanation/method.md §10): pass
 #: ``max_inv_det=1`` to ``compute_samples`` (or cap in the renderer's
 #: ``vibr.render.weights.deformation_weight``) to reproduce it.
 DEFAULT_MAX_INV_DET = 4.0

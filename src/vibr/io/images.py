@@ -253,7 +253,7 @@ def to_uint(img: np.ndarray, bits: int | None = None) -> np.ndarray:
 WRITE_EXTS = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".webp", ".ppm")
 _EIGHT_BIT_EXTS = (".jpg", ".jpeg", ".bmp", ".webp", ".ppm")
 #: Pillow's defaults (75 for JPEG, 80 for WebP) lose more than a render's own error; 95 as
-#: image tools write them (measured in docs/ERRORS.md, "Image files").
+#: image tools write them (measured in docs/reference/errors-and-limits.md, "Image files").
 _LOSSY_QUALITY = {".jpg": {"quality": 95}, ".jpeg": {"quality": 95}, ".webp": {"quality": 95}}
 
 

@@ -34,7 +34,7 @@ __all__ = ["write_video", "read_video_info", "even_pad", "BT709_FILTER", "BT709_
 
 #: RGB → YUV with the BT.709 matrix, and the stream tagged BT.709 (matrix, primaries,
 #: transfer, limited range): players read untagged HD video as BT.709 whatever matrix made
-#: it, and ffmpeg's default matrix is BT.601 (what that cost: docs/FLYTHROUGH.md, "Video").
+#: it, and ffmpeg's default matrix is BT.601 (what that cost: docs/explanation/flythrough.md, "Video").
 BT709_FILTER = ("scale=out_color_matrix=bt709:out_range=tv,"
                 "setparams=color_primaries=bt709:color_trc=bt709:colorspace=bt709:range=tv")
 BT709_TAGS = ("-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "bt709", "-color_range", "tv")

@@ -17,7 +17,7 @@ OpenCV axes (x right, y down, looking down +z): the flip ``diag(1, −1, −1)``
 axes lives in :func:`camera_from_c2w_opengl` / :func:`c2w_opengl_from_camera` and nowhere
 else. The focal length is nerfstudio's ``f = (H / 2) / tan(fov / 2)`` (fx = fy), the
 principal point the image centre (``W/2, H/2`` with nerfstudio's pixel centres at half
-integers, ``(W − 1)/2, (H − 1)/2`` in vibr's). docs/FLYTHROUGH.md has the details, the
+integers, ``(W − 1)/2, (H − 1)/2`` in vibr's). docs/explanation/flythrough.md has the details, the
 ``dataparser_transforms.json`` mapping and the sources.
 
 Generators (:func:`interpolate`, :func:`orbit`, :func:`spiral`) return a :class:`CameraPath`.

@@ -32,7 +32,7 @@ Work that does not depend on the frame is done once (:func:`prepare_sources`): t
 the sources' depth, the world points of every source used to rank views (a strided
 subsample of each depth map, backprojected) and each source's depth slopes
 (:func:`vibr.geometry.prepare_depth`, passed to :func:`compute_samples` as ``prepared``);
-measured in docs/FLYTHROUGH.md.
+measured in docs/explanation/flythrough.md.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``vibr.render.render``: a novel view from a scene (paper §4, docs/METHOD.md §3-7)."""
+"""``vibr.render.render``: a novel view from a scene (paper §4, docs/explanation/method.md §3-7)."""
 
 from __future__ import annotations
 
@@ -163,13 +163,13 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
            supersample="auto", stop=None, **params) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
-    Minimises (docs/METHOD.md §5, paper eq. energy_final)
+    Minimises (docs/explanation/method.md §5, paper eq. energy_final)
 
         E(u) = alpha · ½ Σ_km W_km ((B_k u)(m) − v_k(m))²
              + gamma · ½ Σ_km C_km ‖(B_k D u)(m) − ∇v_k(m)‖²
              + lam · TV(u)
 
-    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (docs/METHOD.md §3) by monotone FISTA, re-estimating
+    with ``W_km = omega_km / |det ∂tau_k/∂x_m|`` (docs/explanation/method.md §3) by monotone FISTA, re-estimating
     omega from u in ``n_outer`` passes; ulr blends directly.
 
     Parameters

@@ -76,7 +76,7 @@ def render_memory(source_shapes, target_shape, keep=()) -> int:
     """Estimated peak bytes of a render of ``target_shape`` (H, W) from sources of the
     given shapes: samples (at most one per source pixel landing in the target, ×1.5 for
     the geometry's temporaries; with the optional fields ``keep``, :func:`sample_bytes`)
-    plus the per-pixel buffers of the solve and the geometry (docs/ERRORS.md)."""
+    plus the per-pixel buffers of the solve and the geometry (docs/reference/errors-and-limits.md)."""
     th, tw = target_shape
     tpx = float(th) * float(tw)
     n_samples = sum(min(float(h) * float(w), 4.0 * tpx) for h, w in source_shapes)

@@ -313,7 +313,7 @@ def _forward_kernel(x, xp, hx, hxp, r, beta, dinv, step, out):
         dv = dinv[i0:i1] if use_d else dinv[:0]
         for c in range(C):
             # slices indexed from 0: with range(i0, i1) numba's negative-index wraparound
-            # made LLVM gather each element instead of loading vectors (docs/RENDERER.md)
+            # made LLVM gather each element instead of loading vectors (docs/explanation/renderer.md)
             xc, xpc, hc, hpc = x[c, i0:i1], xp[c, i0:i1], hx[c, i0:i1], hxp[c, i0:i1]
             rc, oc = r[c, i0:i1], out[c, i0:i1]
             if use_d:

@@ -5,18 +5,18 @@ ulr        Unstructured Lumigraph Rendering (Buehler et al. 2001): direct blend 
            k best views per pixel with angle and resolution penalties; no solve.
 savsr      Wanner & Goldluecke 2012: variational, W = deformation weight only
            (omega = 1/sigma_s², no geometric uncertainty), gamma = 0, one solve.
-bvs        Pujades et al. 2014: variational with the Bayesian weights of docs/METHOD.md §3
+bvs        Pujades et al. 2014: variational with the Bayesian weights of docs/explanation/method.md §3
            (omega re-estimated from u in outer iterations), gamma = 0.
 gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term, gamma > 0.
 =========  ==========================================================================
 
-Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/METHOD.md §9):
+Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/explanation/method.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
 * ``gamma = 0.3`` gradient-term weight for ``gradient`` and ``lam = 0.8`` TV weight (grey
   levels of 255: a 1-grey-level step costs 0.8 per pixel of edge where 3 views weigh a pixel,
   ``lam_density`` below), with the uniform TV
-  (eq. energy_final; vibr's units: forward differences, docs/RENDERER.md "One image
+  (eq. energy_final; vibr's units: forward differences, docs/explanation/renderer.md "One image
   gradient"; the paper's γ is reached through ``preset="paper"``), the view prior
   (``view_k = 4``), the gradient term's consistency weights (``grad_consistency = 24``),
   the TV weight against the data's sum (``lam_density = 3``), the holes filled by push–pull
@@ -29,11 +29,11 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   With the view prior the colour term is divided by the prior-weighted density
   (:func:`vibr.render.variational.colour_density`), the gradient term by the plain one.
   ``"auto"`` for either: chosen per scene by leave-one-source-out (:mod:`vibr.render.autotune`).
-* ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/METHOD.md §3, the authors' value).
+* ``sigma_s = 1.0`` sensor noise, grey levels of 255 (docs/explanation/method.md §3, the authors' value).
 * ``sigma_z = None`` depth std. dev., scene units: the samples' own (the geometry stage's
   per-view value, default 1 % of the median depth).
 * ``psf = "bilinear"`` the image-formation model ``v_k = B_k u`` (paper §4.1 eq. normal,
-  docs/METHOD.md §4): ``"bilinear"`` (unit-square transformed PSF: the bilinear coefficients of
+  docs/explanation/method.md §4): ``"bilinear"`` (unit-square transformed PSF: the bilinear coefficients of
   ``tau_k(x_m)``) or ``"footprint"`` (``B_kmp = area(P_km ∩ p) / area(P_km)``, the source
   pixel's parallelogram ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²``, paper fig.
   discretization right; footprints larger than a target pixel shrunk per axis to 1 px, see
@@ -45,58 +45,58 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (:func:`vibr.render.weights.robust_factor`): samples that disagree with the others
   (occluded, mismatched: speckles) stop pulling the render; ``"none"`` is least squares.
   Off by default: it wins on cotton and fountain but loses on the synthetic scenes
-  (docs/RENDERER.md "Robust data term").
+  (docs/explanation/renderer.md "Robust data term").
 * ``view_k = 4``: > 0 multiplies each sample's data weight by ULR's view prior
   (:func:`vibr.render.weights.view_prior`: Buehler's angle + ``ulr_beta_res`` × resolution
-  penalty, the ``view_k`` best views per pixel; docs/RENDERER.md "What ULR knows"); 0 weighs
+  penalty, the ``view_k`` best views per pixel; docs/explanation/renderer.md "What ULR knows"); 0 weighs
   every view alike. Needs the camera centres (stored by :func:`vibr.geometry.compute_samples`).
   ``view_tie = 1.1``: Buehler's threshold ``p_(k+1)`` is at least this times the pixel's best
   penalty, so views that nearly tie with the best (a grid's four neighbours) share the
-  weight; ≤ 1: Buehler's threshold (docs/RENDERER.md "Views that tie").
+  weight; ≤ 1: Buehler's threshold (docs/explanation/renderer.md "Views that tie").
 * ``precond = True``: variable-metric FISTA (:func:`vibr.render.solver.fista`, the authors'
   diagonal preconditioner, ``d_floor`` its floor); the same energy, reached in fewer
-  iterations where the sample density is uneven (docs/RENDERER.md "Preconditioned solver").
+  iterations where the sample density is uneven (docs/explanation/renderer.md "Preconditioned solver").
 * ``tol = 1e-4``: FISTA stops when an accepted step lowers the energy by less than this
   fraction (the authors' rule); ``tol_outer = None``: the passes before the last stop at
   ``tol`` too. A looser ``tol_outer`` saves iterations at the same mean PSNR but moves single
-  scenes' results, so it is not the default (docs/RENDERER.md, "Solver settings").
+  scenes' results, so it is not the default (docs/explanation/renderer.md, "Solver settings").
 * ``lam_density = 3`` (views): lam is the TV weight where the colour term's density counted
   in views (:func:`vibr.render.variational.view_density`) is 3, and scales by 3 over it
   elsewhere: the TV weight of a MAP estimate, constant against the data's *sum*, so a pixel
   that two views see is smoothed more than one that eight see. 0: lam as it is, against
   data terms divided by their density rho (the paper's normalisation; bvs and savsr keep
-  it). Chosen with lam by the cross-scene sweep, its few-view cases included (docs/RENDERER.md,
+  it). Chosen with lam by the cross-scene sweep, its few-view cases included (docs/explanation/renderer.md,
   "Few views").
 * ``grid_factor = 1``: the samples lie on a grid this many times finer than the target
   (set by :func:`vibr.render.render` when it supersamples, :func:`vibr.render.fine_grid`);
   lam is divided by it, since the ``k × k`` average that follows smooths too (measured on
-  four scenes at two factors: docs/RENDERER.md, "Sources finer than the target").
+  four scenes at two factors: docs/explanation/renderer.md, "Sources finer than the target").
 * ``grid_source_size = 1``: the median size of a source pixel on the grid rendered on (set
   with ``grid_factor``); above 1, sources coarser than the target (a camera closer to the
   scene than the photographs, a video larger than them), gamma is divided by its square: a
   coarse source's gradient says nothing of the finer grid's detail, and the term then pulls
-  the image toward its blur (docs/RENDERER.md, "Sources coarser than the target").
+  the image toward its blur (docs/explanation/renderer.md, "Sources coarser than the target").
 * ``grad_consistency = 24`` (grey levels per pixel, on the intensity scale ``scale``): each
   sample's weight in the gradient term is multiplied by ``1 / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,
   ``Ḡ = Bᵀ∇v / Bᵀ1`` the mean of the views' gradients at each target pixel (a Cauchy
   M-estimator's weight, Holland & Welsch 1977, against the views' consensus): a gradient no
   other view confirms (a misregistered edge, an occlusion boundary) stops steering the image,
-  where integrated it would drift (docs/RENDERER.md, "The gradient term's consistency
+  where integrated it would drift (docs/explanation/renderer.md, "The gradient term's consistency
   weights"). 0: every visible sample at full weight, the paper's term.
 * ``grad_coverage = 1.5`` (samples): with the consistency weights, a sample's weight in the
   gradient term is also multiplied by ``min(1, (B acc)_m / 1.5)``, ``acc = Bᵀ1`` the number
   of samples landing on each target pixel: where fewer than 1.5 land (a crack between the
   views' footprints, a border seen by one view), the views' mean gradient is mostly the
   sample's own and confirms nothing, and the term's integrated gradients there, with almost
-  no colour data to hold them, drift (docs/RENDERER.md, "The gradient term where few samples
+  no colour data to hold them, drift (docs/explanation/renderer.md, "The gradient term where few samples
   land"). 0: no such factor.
 * ``hole_fill = "push-pull"``: the holes (pixels no sample covers) take the push–pull fill
   of the solved image's covered pixels, as ULR's blend and the initial image fill theirs,
   for bvs and savsr too; ``"solve"``: the energy's minimiser there, where only TV and the
   gradient term act and the gradient samples at a hole's edge, integrated into it, streak it
-  (docs/RENDERER.md, "Few views").
+  (docs/explanation/renderer.md, "Few views").
 * ``tv_weighting = "uniform"``: lam everywhere; ``"samples"``: the spatially varying TV of
-  the authors' code (docs/METHOD.md §10), lam raised up to 100× where few samples land
+  the authors' code (docs/explanation/method.md §10), lam raised up to 100× where few samples land
   (:func:`vibr.render.variational.tv_weight_map`).
 """
 
@@ -233,7 +233,7 @@ register_method(Method("ulr", "Unstructured Lumigraph Rendering (direct blend, n
                        solve=False, reweight=False, overrides=dict(gamma=0.0, n_outer=0)))
 # the baselines keep their published form (no view prior, plain FISTA) unless asked, and
 # the TV weight they had before the gradient method's defaults moved with the prior-weighted
-# density (docs/RENDERER.md, "Density with the view prior")
+# density (docs/explanation/renderer.md, "Density with the view prior")
 _PUBLISHED = dict(view_k=0, precond=False, lam=0.3, z_corr=0.0, lam_density=0.0)
 register_method(Method("savsr", "Wanner & Goldluecke 2012: deformation weights, one solve",
                        reweight=False, geometric=False, overrides=dict(gamma=0.0, n_outer=1, **_PUBLISHED)))
@@ -261,7 +261,7 @@ def get_method(method: "str | Method") -> Method:
 
 
 #: The paper's (alpha, gamma, lam) when ``preset="paper"`` is given without them: the
-#: light-field setting of the authors' experiments (docs/METHOD.md §10: lambda = 0.001 on [0, 1]).
+#: light-field setting of the authors' experiments (docs/explanation/method.md §10: lambda = 0.001 on [0, 1]).
 PAPER_DEFAULTS = dict(alpha=1.0, gamma=1.0, lam=0.001)
 
 #: Paper gamma → vibr gamma: the authors apply ``dt_beta × gradient_step`` (0.1) to the
@@ -274,7 +274,7 @@ PAPER_LAM_FACTOR = 255.0
 
 
 def paper_params(params: dict) -> dict:
-    """The paper's units → vibr's (docs/RENDERER.md, "The paper's units"): ``alpha`` kept,
+    """The paper's units → vibr's (docs/explanation/renderer.md, "The paper's units"): ``alpha`` kept,
     ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
     weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``), the spatially
     varying TV (``tv_weighting="samples"``), no view prior, every gradient sample at full

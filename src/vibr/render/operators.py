@@ -1,7 +1,7 @@
-"""Linear operators of the image-formation model (paper §4.1, docs/METHOD.md §4-5), with adjoints.
+"""Linear operators of the image-formation model (paper §4.1, docs/explanation/method.md §4-5), with adjoints.
 
 * ``B`` (:class:`Splat`): the PSF matrix, ``(B u)(m) = Σ_p B_mp u(p)`` (paper §4.1
-  eq. normal, docs/METHOD.md §4). Row m holds 4 coefficients on a 2×2 block of target pixels:
+  eq. normal, docs/explanation/method.md §4). Row m holds 4 coefficients on a 2×2 block of target pixels:
   the bilinear coefficients of ``tau_k(x_m)`` (``psf="bilinear"``, the default), or the
   overlap areas of the source pixel's footprint parallelogram with the block's pixels
   (``psf="footprint"``, the paper's figure fig:discretization, right). Its adjoint ``Bᵀ``
@@ -10,10 +10,10 @@
   a 2×2 block of target pixels, ``A`` only couples pixels at offsets in {-1,0,1}²:
   it is a **9-point stencil with spatially varying coefficients** whatever the warps.
   :meth:`Splat.normal` builds it (plus ``Bᵀ W v`` and ``½ Σ W v²``) once per weight update and
-  :func:`stencil_apply` applies it; ``½ uᵀAu − bᵀu + c = ½ Σ W (Bu − v)²`` (docs/METHOD.md §5).
+  :func:`stencil_apply` applies it; ``½ uᵀAu − bᵀu + c = ½ Σ W (Bu − v)²`` (docs/explanation/method.md §5).
 * ``∇`` / ``div = -∇ᵀ``: forward differences with Neumann boundary (Chambolle 2004),
   used by TV.
-* ``D`` / ``Dᵀ`` (:func:`grad_image`): the gradient term's image gradient (docs/METHOD.md §5),
+* ``D`` / ``Dᵀ`` (:func:`grad_image`): the gradient term's image gradient (docs/explanation/method.md §5),
   forward or central differences (:data:`GRAD_SCHEMES`). The source gradients ``∇v_k`` of
   :class:`~vibr.geometry.Samples` are computed by the same function, so both sides of the
   term use one discretisation with one border rule.
@@ -530,7 +530,7 @@ PSFS = ("bilinear", "footprint")
 
 
 class Splat:
-    """The PSF matrix ``B`` of a set of sample positions (paper §4.1, docs/METHOD.md §4).
+    """The PSF matrix ``B`` of a set of sample positions (paper §4.1, docs/explanation/method.md §4).
 
     Parameters
     ----------
@@ -564,7 +564,7 @@ class Splat:
     ----------
     x0, y0, fx, fy : (N,) int32, int32, float64, float64
         The bilinear cell and fractions of ``xy`` (bilinear *interpolation* at ``tau``,
-        whatever the PSF: the weights of docs/METHOD.md §3 sample ``∇u`` there).
+        whatever the PSF: the weights of docs/explanation/method.md §3 sample ``∇u`` there).
     bx0, by0 : (N,) int32
         Top-left pixel of each row's 2×2 block (``x0``, ``y0`` for the bilinear PSF).
     coef : (N, 4) float64

@@ -1,4 +1,4 @@
-"""Push–pull hole filling (Gortler et al. 1996, "The Lumigraph", §3.4; docs/METHOD.md §6).
+"""Push–pull hole filling (Gortler et al. 1996, "The Lumigraph", §3.4; docs/explanation/method.md §6).
 
 Given a splatted colour sum ``S(p) = Σ w c`` and weight ``w(p)`` (H, W), the *push* phase
 builds a pyramid by 2×2 weighted averaging, weights clamped to 1 at every level

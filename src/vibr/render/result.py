@@ -48,7 +48,7 @@ class RenderResult:
         FISTA iterations and power iterations (step size) over all outer passes.
     uncertainty : (H, W) float32 or None
         Per-pixel standard deviation, grey levels of ``scale``, when rendered with
-        ``uncertainty=True`` (:mod:`vibr.render.uncertainty`; docs/RENDERER.md).
+        ``uncertainty=True`` (:mod:`vibr.render.uncertainty`; docs/explanation/renderer.md).
     """
 
     image: np.ndarray

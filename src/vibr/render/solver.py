@@ -1,4 +1,4 @@
-"""FISTA for the energy of docs/METHOD.md §5 (paper §4.2-4.4, eq. energy_final).
+"""FISTA for the energy of docs/explanation/method.md §5 (paper §4.2-4.4, eq. energy_final).
 
     E(u) = alpha · E_color(u) + gamma · E_grad(u) + lam · TV(u)
 
@@ -24,7 +24,7 @@ rotate between x, x_prev and the candidate.
 with [0, s] images).
 
 ``precond=True`` runs the variable-metric variant (the authors' diagonal preconditioner,
-docs/METHOD.md §10): gradient step divided per pixel by ``d ≥ row-sum|H|`` (floored where few
+docs/explanation/method.md §10): gradient step divided per pixel by ``d ≥ row-sum|H|`` (floored where few
 samples land, which raises lambda there) and the TV prox taken in the same metric
 (weighted ROF), the step from a power iteration on ``d^{-½} H d^{-½}``.
 """

@@ -1,4 +1,4 @@
-"""Total variation: value and proximal operator (docs/METHOD.md §5, E_prior = TV(u)).
+"""Total variation: value and proximal operator (docs/explanation/method.md §5, E_prior = TV(u)).
 
 ``TV(u) = Σ_p |∇u(p)|`` with forward differences (:func:`~vibr.render.operators.grad_fwd`);
 ``coupled=True`` is the vectorial (colour-coupled) TV ``Σ_p sqrt(Σ_c |∇u_c(p)|²)``,

@@ -49,7 +49,7 @@ def ulr_blend(samples: Samples, source_centres, target_centre, *, k: int = 4,
     """
 
     # compiled: a numpy pass per view does not scale to a light field's 80 views
-    # (docs/RENDERER.md, "Density with the view prior")
+    # (docs/explanation/renderer.md, "Density with the view prior")
     img, acc, var = ulr_pixels(samples, source_centres, target_centre, k, beta_res, eps, spread)
     return (img, acc) if not spread else (img, acc, var)
 
@@ -79,7 +79,7 @@ def ulr_view_weights(pview, k: int = 4, eps: float = 1e-6, tie: float = 0.0) -> 
     ``tie`` > 1 keeps the threshold at least ``tie`` times the best view's penalty, so that
     views which nearly tie with the best share the weight instead of the order of their
     penalties' last digits choosing among them (the view prior's default,
-    docs/RENDERER.md "Views that tie"); 0 (ULR as published) leaves Buehler's threshold."""
+    docs/explanation/renderer.md "Views that tie"); 0 (ULR as published) leaves Buehler's threshold."""
     V = pview.shape[0]
     order = np.sort(pview, axis=0)
     kk = min(k, V - 1)

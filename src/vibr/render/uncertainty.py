@@ -1,8 +1,8 @@
-"""Per-pixel confidence of a rendered view (issue 28; derivation in docs/RENDERER.md,
+"""Per-pixel confidence of a rendered view (issue 28; derivation in docs/explanation/renderer.md,
 section "Uncertainty").
 
 The variational renderer computes the MAP estimate of a posterior whose smooth part is the
-quadratic ``f(u) = ½⟨u, H u⟩ − ⟨r, u⟩ + c`` with the Hessian (docs/METHOD.md §5)
+quadratic ``f(u) = ½⟨u, H u⟩ − ⟨r, u⟩ + c`` with the Hessian (docs/explanation/method.md §5)
 
     H = alpha · Σ_k B_kᵀ W_k B_k + gamma · Dᵀ (Σ_k B_kᵀ C_k B_k) D
 
@@ -315,12 +315,12 @@ def _finish(var, coverage, scale):
     return sig.astype(np.float32)
 
 
-#: The terms of σ² (docs/RENDERER.md "Uncertainty": chosen by measurement).
+#: The terms of σ² (docs/explanation/renderer.md "Uncertainty": chosen by measurement).
 TERMS = ("model", "spread", "views", "hole")
 
 
 #: Range (pixels) of the variance inflation next to push–pull filled pixels:
-#: σ² is multiplied by ``1 + HOLE_RANGE / d`` (docs/RENDERER.md "Uncertainty").
+#: σ² is multiplied by ``1 + HOLE_RANGE / d`` (docs/explanation/renderer.md "Uncertainty").
 HOLE_RANGE = 4.0
 
 
@@ -408,7 +408,7 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
 
 
 def view_offset_prior(offsets, counts):
-    """Where the target's photometric offset is expected and how far from it (docs/RENDERER.md
+    """Where the target's photometric offset is expected and how far from it (docs/explanation/renderer.md
     "Uncertainty", *View offsets*): ``(centre (C,), var)``.
 
     Model: view k's samples carry an offset ``β_k`` (exposure, view-dependent brightness),

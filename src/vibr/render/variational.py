@@ -1,4 +1,4 @@
-"""The variational render from warped samples, in named steps (paper §4, docs/METHOD.md §3-7).
+"""The variational render from warped samples, in named steps (paper §4, docs/explanation/method.md §3-7).
 
     splat_coverage    the image-formation operator B (bilinear or footprint PSF), the
                       unweighted coverage Bᵀ1 and, with the gradient term, Bᵀ B and Bᵀ ∇v
@@ -110,7 +110,7 @@ def _covering(cov: SplatCoverage) -> SplatCoverage:
     return cov
 
 
-#: TV weightings (docs/METHOD.md §10): ``"uniform"`` lam everywhere, ``"samples"`` lam raised where
+#: TV weightings (docs/explanation/method.md §10): ``"uniform"`` lam everywhere, ``"samples"`` lam raised where
 #: few samples land (:func:`tv_weight_map`).
 TV_WEIGHTINGS = ("uniform", "samples")
 
@@ -123,7 +123,7 @@ def tv_weight_map(acc, weighting: str = "samples", k_max: float = 100.0, m_full:
     on the pixel (the accumulated splat weight ``Bᵀ1``) blurred by a Gaussian of ``blur``
     px: ``k_max`` (100) times lam where no sample lands, falling linearly to lam at
     ``m_full`` samples. The defaults are the authors' light-field rule
-    ``max(λ, 100λ − m/8)`` at λ = 0.001 (docs/METHOD.md §10: 100λ − m/8 = λ at m = 99·8λ = 0.792),
+    ``max(λ, 100λ − m/8)`` at λ = 0.001 (docs/explanation/method.md §10: 100λ − m/8 = λ at m = 99·8λ = 0.792),
     made relative to lam so that it holds whatever lam's value and scale.
     """
     if weighting not in TV_WEIGHTINGS:
@@ -160,7 +160,7 @@ def colour_density(rho: float, prior, normalise: bool) -> float:
 
     The prior keeps about ``view_k`` views per pixel whatever the number of sources, so
     dividing the colour term by rho (every view that lands) would shrink it against the
-    TV and the gradient term as the sources grow (docs/RENDERER.md, "Density with the view
+    TV and the gradient term as the sources grow (docs/explanation/renderer.md, "Density with the view
     prior")."""
     if prior is None or not normalise or len(prior) == 0:
         return rho
@@ -201,7 +201,7 @@ def _view_prior(samples, p, centres, times, splat):
 
 
 class _ColourTerm:
-    """The colour term's stencils ``A, b, c`` with the weights ``W_km`` (docs/METHOD.md §3)
+    """The colour term's stencils ``A, b, c`` with the weights ``W_km`` (docs/explanation/method.md §3)
     divided by rho, the weights computed inside the assembly
     (:func:`vibr.render.weights.weighted_normal`); timed into ``times["weights"]``. ``W``
     (N,) is kept only when something needs it (``keep``)."""
@@ -262,7 +262,7 @@ def _outer_line(name, o, n_outer, res) -> str:
 
 
 class _Problem:
-    """What every outer pass of one render shares (docs/METHOD.md §3-7): the splat ``B`` and
+    """What every outer pass of one render shares (docs/explanation/method.md §3-7): the splat ``B`` and
     its coverage, the densities rho and rho_c, the colour and gradient terms, the TV weights
     and the model's constants. :meth:`model` assembles one pass's energy from the colour term's
     stencils."""
@@ -290,7 +290,7 @@ class _Problem:
         self.grad_scheme = samples.meta.get("grad_scheme", DEFAULT_GRAD_SCHEME)
         self.tv_w = tv_weight_map(self.cov.acc, p["tv_weighting"])
         # on a grid k times finer than the target (supersampling), lam / k: the k × k average
-        # smooths too (docs/RENDERER.md, "Sources finer than the target")
+        # smooths too (docs/explanation/renderer.md, "Sources finer than the target")
         self.lam_eff = p["lam"] / p["grid_factor"] * (p["lam_density"] / view_density(self.rho_c, samples)
                                                      if p.get("lam_density") else 1.0)
         self.grad_term = _GradientTerm(self.cov, p, self.rho) if self.gamma > 0 else None
@@ -385,7 +385,7 @@ def _uncertainty(prob: _Problem, method, samples: Samples, run: _Passes, terms):
     model, Wk = run.model, run.Wk
     if prob.colour_term.z_corr > 0 and method.reweight and Wk is not None:
         # σ from the independent errors' weights: the shared-error weights count a first-order
-        # cancellation as certainty (docs/RENDERER.md, "Depth errors the views share")
+        # cancellation as certainty (docs/explanation/renderer.md, "Depth errors the views share")
         run.model = model = None  # the last pass's stencils go before these come, as between passes
         A, b, c, Wk = prob.colour_term(run.u_w.transpose(1, 2, 0), z_corr=0.0)
         model = prob.model(A, b, c, Wk)

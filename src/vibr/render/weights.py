@@ -1,4 +1,4 @@
-"""Per-sample weights of the data term (paper §5.6, docs/METHOD.md §3; after Pujades et al. 2014).
+"""Per-sample weights of the data term (paper §5.6, docs/explanation/method.md §3; after Pujades et al. 2014).
 
 ``W_km = pi_km · omega_km · |det ∂tau_k/∂x_m|⁻¹`` (``pi_km`` the optional view prior,
 :func:`view_prior`, 1 without: a per-sample factor like the robust one) with the geometric
@@ -81,10 +81,10 @@ def misregistration(sz, dtau_x, dtau_y, gx, gy):
 
 @njit(cache=True)
 def sample_weight(inv_det, cap, sz, dtau_x, dtau_y, gx, gy, sigma_s2, z_corr=0.0, beta=0.0):
-    """THE per-sample weight ``W_km`` (docs/METHOD.md §3), one sample, float64:
+    """THE per-sample weight ``W_km`` (docs/explanation/method.md §3), one sample, float64:
     ``min(1/|det|, cap) / (sigma_s² + a²)``, ``a`` the :func:`misregistration`; non-finite
     ``inv_det`` counts as 0. With depth errors shared by the views (``z_corr`` ρ > 0,
-    docs/RENDERER.md, "Depth errors the views share"):
+    docs/explanation/renderer.md, "Depth errors the views share"):
     ``min(1/|det|, cap) / (sigma_s² + (1 − ρ) a²) · max(0, 1 − a β)``, ``β`` the landing
     point's :func:`shared_error_beta`. Every kernel that weights samples calls this function
     (:func:`geometric_weights` here, the fused assembly of :func:`weighted_normal`)."""
@@ -175,7 +175,7 @@ def _shared_error_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, cap,
 
 def shared_error_beta(samples: Samples, splat, g, sigma_z, sigma_s: float, z_corr: float, factor=None,
                       inv_det_cap: float | None = None) -> np.ndarray:
-    """The shared depth error's correction per target pixel (docs/RENDERER.md, "Depth errors
+    """The shared depth error's correction per target pixel (docs/explanation/renderer.md, "Depth errors
     the views share"):
 
         ``β = ρ Σ_m B_m P_m a_m / (1 + ρ Σ_m B_m P_m a_m²)``,  ``P_m = 1/|det| · f_m / (σ_s² + (1 − ρ) a_m²)``
@@ -202,7 +202,7 @@ def geometric_weights(samples: Samples, u, sigma_s: float = 1.0, sigma_z=None, *
                       scale: float = 255.0, grad_max: float | None = 64.0,
                       inv_det_cap: float | None = None, splat=None, dtype=np.float64,
                       prior=None, z_corr: float = 0.0, factor=None) -> np.ndarray:
-    """Data-term weights ``W_km`` (docs/METHOD.md §3), (N,) ``dtype`` (float64 by default).
+    """Data-term weights ``W_km`` (docs/explanation/method.md §3), (N,) ``dtype`` (float64 by default).
 
     Parameters
     ----------
@@ -511,7 +511,7 @@ def _consistency_kernel(bx0, fx, fy, coef, order, starts, g, G, inv_c2, acc, inv
 
 def gradient_consistency(samples: Samples, splat, btg, acc, c: float, keep_weights: bool = True,
                          min_coverage: float = 0.0):
-    """The gradient term's stencils with each sample's consistency weight (docs/RENDERER.md,
+    """The gradient term's stencils with each sample's consistency weight (docs/explanation/renderer.md,
     "The gradient term's consistency weights"):
 
         ``w_m = min(1, (B acc)_m / t) / (1 + |∇v_m − (B Ḡ)_m|² / c²)``,  ``Ḡ = Bᵀ(sw ∇v) / Bᵀ sw``
@@ -520,7 +520,7 @@ def gradient_consistency(samples: Samples, splat, btg, acc, c: float, keep_weigh
     the mean of every view's gradients at the target pixels it lands on (``sw`` =
     ``meta["sample_weight"]`` or 1), times the coverage where it lands over ``t`` =
     ``min_coverage`` (0: no such factor): where fewer than ``t`` samples land, the mean is
-    mostly the sample itself and confirms nothing (docs/RENDERER.md, "The gradient term where
+    mostly the sample itself and confirms nothing (docs/explanation/renderer.md, "The gradient term where
     few samples land"). ``btg`` (K, H, W) ``Bᵀ (sw ∇v)`` and ``acc`` (H, W) ``Bᵀ sw``, both
     from :func:`coverage_blend` (``stencils=False``); ``c`` in the gradients' units
     (intensity per pixel), ``t`` in samples.
@@ -578,7 +578,7 @@ def fast_acos(x):
     Stegun 4.4.46, ``arccos|x| = √(1 − |x|) · Σ_k a_k |x|^k`` (k ≤ 7), and
     ``arccos x = π − arccos(−x)`` for x < 0. Why: ``math.acos``, one call per sample, was
     the costliest step of the view prior's splat; this error is below the float32 sums the
-    prior accumulates (docs/RENDERER.md, "Speed round 2")."""
+    prior accumulates (docs/explanation/renderer.md, "Speed round 2")."""
     ax = abs(x)
     p = -0.0012624911
     p = p * ax + 0.0066700901

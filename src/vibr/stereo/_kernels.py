@@ -615,7 +615,7 @@ def _cost_setup(offs, srcs):
     floats, the window's radius, and the sources as float64 rows (``flat``, (n, Hmax·Wmax)).
     Why float64 and flat: the window sums read four source pixels per sample, and
     converting each from float32 and indexing a 3-d array were a large share of the
-    innermost loop (the same values, so the same costs; docs/DEPTH.md, "The plane cost's
+    innermost loop (the same values, so the same costs; docs/explanation/depth.md, "The plane cost's
     reads")."""
     nv = srcs.shape[0]
     offf = offs.astype(np.float64)
@@ -811,7 +811,7 @@ def patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2
     ``memo``: a propagation candidate whose source pixel has not changed since this pixel
     last tried it, in the same direction, is skipped (:func:`_try_plane`; the same planes
     and costs as without, fewer propagation evaluations from the second iteration on;
-    docs/DEPTH.md gives the count on fountain). Returns the number of plane costs evaluated.
+    docs/explanation/depth.md gives the count on fountain). Returns the number of plane costs evaluated.
     """
     H, W = w.shape
     nv = srcs.shape[0]
@@ -902,7 +902,7 @@ def _stable_order(vals, m, order):
     """``order[:m]``: the indices of ``vals[:m]`` in ascending order, ties in index order
     (a stable argsort), from each value's rank. Why ranks: the m² comparisons have no
     data-dependent branch and run in vectors, where an insertion sort of a few dozen votes
-    mispredicted at every step (docs/DEPTH.md, "The median's sort")."""
+    mispredicted at every step (docs/explanation/depth.md, "The median's sort")."""
     for a in range(m):
         v = vals[a]
         r = 0

@@ -57,13 +57,13 @@ logger = logging.getLogger(__name__)
 
 
 #: Default number of slanted-plane refinement iterations after the sweep (see
-#: :func:`estimate_depth` and docs/DEPTH.md for the measurements behind it).
+#: :func:`estimate_depth` and docs/explanation/depth.md for the measurements behind it).
 REFINE_ITER = 2
 
 #: Changes whenever :func:`estimate_depth` gives other depths for the same inputs and
 #: options (a new default, a changed algorithm): the on-disk depth cache
 #: (:mod:`vibr.stereo.cache`) keys on it, so a cache written by an older estimator is not
-#: served. 2: the light-field sweep's plane step from the parallax (docs/DEPTH.md). 3: the
+#: served. 2: the light-field sweep's plane step from the parallax (docs/explanation/depth.md). 3: the
 #: light field's coarse level (sweep and first refinement iteration at half size). 4: the
 #: light field's full-size refinement with a random search of the depth alone.
 ESTIMATOR_VERSION = 4
@@ -72,7 +72,7 @@ ESTIMATOR_VERSION = 4
 #: At most this many light-field views are estimated side by side (threads,
 #: :func:`map_views`): each holds its own working arrays, so the peak memory grows with
 #: it. The MVS method estimates one view at a time: side by side it was no faster on
-#: fountain (docs/DEPTH.md, "Views side by side").
+#: fountain (docs/explanation/depth.md, "Views side by side").
 VIEW_THREADS = 2
 
 
@@ -86,7 +86,7 @@ def map_views(fn, items: list) -> list:
     writes its own pixels: tested bit for bit against the serial loop), so the depths are
     the serial loop's. Why: the Python and SciPy work between one view's kernels (EPI
     structure tensor, resizing, upsampling) runs on one core; side by side, the other view
-    keeps the second one busy (docs/DEPTH.md, "Views side by side")."""
+    keeps the second one busy (docs/explanation/depth.md, "Views side by side")."""
     import numba
 
     n = numba.get_num_threads()
@@ -158,7 +158,7 @@ def _planes_for(ref: Camera, srcs: list[Camera], depth_range, step_px: float, lo
 class DepthOptions:
     """How :func:`estimate_depth` estimates depth (every field has a default).
 
-    Where each default comes from (the measurements) is in docs/DEPTH.md, "Defaults of
+    Where each default comes from (the measurements) is in docs/explanation/depth.md, "Defaults of
     estimate_depth".
 
     Attributes

@@ -41,7 +41,7 @@ from .partners import _resized, default_depth_range, upsample_sweep
 from .planesweep import median_planes, plane_sweep, refine_planes, to_grey
 
 #: Default spacing of the sweep's planes as parallax on the nearest view swept, in pixels
-#: (``step`` of :func:`lightfield_depth`; the measurements behind it: docs/DEPTH.md, "Light
+#: (``step`` of :func:`lightfield_depth`; the measurements behind it: docs/explanation/depth.md, "Light
 #: fields", step 2).
 PARALLAX_STEP = 0.1
 
@@ -52,7 +52,7 @@ REFINE_MODES = ("st", "sweep", "sweep+tv")
 
 
 #: Image scale of the light-field estimate's coarse level (sweep and first refinement
-#: iteration; :func:`lightfield_depth`'s ``pm_coarse_scale``): measured in docs/DEPTH.md
+#: iteration; :func:`lightfield_depth`'s ``pm_coarse_scale``): measured in docs/explanation/depth.md
 #: ("Coarse to fine").
 COARSE_SCALE = 0.5
 
@@ -126,7 +126,7 @@ def epi_disparity(stack: np.ndarray, offsets: np.ndarray, axis: str = "x", *,
 @dataclass(frozen=True)
 class LightFieldOptions:
     """How :func:`lightfield_depth` estimates a grid view's depth (every field has a
-    default; the measurements behind them: docs/DEPTH.md, "Defaults of estimate_depth").
+    default; the measurements behind them: docs/explanation/depth.md, "Defaults of estimate_depth").
 
     Attributes
     ----------
@@ -170,7 +170,7 @@ class LightFieldOptions:
         baselines need a dense window and all the sweep's views).
     pm_radius : int, optional
         Window half-size of the refinement (default: the sweep's ``radius``; 2 is faster,
-        docs/DEPTH.md, "The depth alone at full size").
+        docs/explanation/depth.md, "The depth alone at full size").
     pm_sigma_c, pm_sigma_s : float
         Grey-level and spatial scales of the refinement's adaptive-support weights on the
         colour image; tighter than the MVS defaults (0.05, the radius), since the dense

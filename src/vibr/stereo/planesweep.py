@@ -293,7 +293,7 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
     the depth, and propagation alone spreads orientations: for full-size iterations whose
     planes, normals included, were refined at the coarse level, where the normal
     candidates no longer win often enough to be worth their cost (the light-field method;
-    docs/DEPTH.md, "The depth alone at full size").
+    docs/explanation/depth.md, "The depth alone at full size").
 
     Returns a :class:`SweepResult` with the refined depth and cost (``meta["plane_gradient"]``
     holds the planes' ``(gx, gy)``, inverse depth per pixel); ``confident`` = the

@@ -43,7 +43,7 @@ __all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "POINT_MODES",
 POINT_MODES = ("while moving", "always", "never")
 #: The side of a drawn point, as a fraction of the scene's size (:func:`.geometry.scene_scale`):
 #: 0.004 until 2026-11-28; a browser without a GPU rasterises every point of the frames it
-#: draws after a move, which overlap the full render (docs/VIEWER.md, "The heap's top")
+#: draws after a move, which overlap the full render (docs/explanation/viewer.md, "The heap's top")
 POINT_SIDE = 0.002
 
 _SOURCE_COLOUR = (255, 96, 0)
@@ -119,7 +119,7 @@ def encode_png(img: np.ndarray, compress_level: int = 1) -> bytes:
     """Lossless PNG bytes of an H×W×3 uint8 image with zlib level ``compress_level``.
 
     viser's own encoder (Pillow's default level when OpenCV is absent) is several times
-    slower for slightly smaller files (measured in docs/VIEWER.md, "Where the time goes")."""
+    slower for slightly smaller files (measured in docs/explanation/viewer.md, "Where the time goes")."""
     from PIL import Image
 
     buf = io.BytesIO()
@@ -549,7 +549,7 @@ class Viewer:
         if kind == "preview" and stale is not None and not stale():
             # no newer camera: hide the points with this image rather than when the full render
             # starts, so that the frames the browser draws for it fall before that render
-            # (docs/VIEWER.md, "Points hidden with the preview")
+            # (docs/explanation/viewer.md, "Points hidden with the preview")
             self._at_rest(client)
         client.flush()
         dt = time.perf_counter() - req.t_update

@@ -37,7 +37,7 @@ PREPARED_BUDGET_BYTES = 1 << 30
 
 #: Outer passes (weights re-estimated from u) of a preview, for the methods that make more:
 #: a preview lasts until the camera has been still for a moment, and one pass is faster at
-#: about the same PSNR (docs/VIEWER.md, "Previews in one outer pass"). The full view keeps
+#: about the same PSNR (docs/explanation/viewer.md, "Previews in one outer pass"). The full view keeps
 #: the method's passes: it is what ``vibr render`` gives for the camera.
 PREVIEW_OUTER = 1
 
