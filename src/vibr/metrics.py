@@ -141,7 +141,7 @@ def checkerboard_energy(img, mask=None, border: int = 0) -> float:
     """Energy at the Nyquist frequency (checkerboard) of the grey image g:
     ``mean |g(i,j) − g(i+1,j) − g(i,j+1) + g(i+1,j+1)|`` over the 2×2 blocks whose top-left
     pixel is counted (``mask``, ``border`` excluded). A pure checkerboard of amplitude a
-    gives 4a; a linear ramp gives 0 (issue 22)."""
+    gives 4a; a linear ramp gives 0."""
     g, m = _grey_mask(img, mask, border, 1)
     d = np.abs(g[:-1, :-1] - g[1:, :-1] - g[:-1, 1:] + g[1:, 1:])
     m = m[:-1, :-1]
@@ -151,7 +151,7 @@ def checkerboard_energy(img, mask=None, border: int = 0) -> float:
 def speckle_density(img, mask=None, border: int = 0, threshold: float = 0.1) -> float:
     """Isolated outlier pixels per 10,000: pixels of the grey image (intensities in [0, 1])
     that differ from the median of their 3×3 neighbourhood by more than ``threshold``
-    (issue 22; compare a render with its reference photo, which has its own)."""
+    (compare a render with its reference photo, which has its own)."""
     from scipy.ndimage import median_filter
 
     g, m = _grey_mask(img, mask, border, 1)

@@ -259,7 +259,7 @@ class Scene:
         """Index of a view given by index, name (file stem) or numeric string."""
         if isinstance(key, (int, np.integer)):
             i = int(key)
-            if not 0 <= i < len(self.views):  # -1 is an error, not the last view (issue 24)
+            if not 0 <= i < len(self.views):  # -1 is an error, not the last view
                 raise VibrInputError(f"no view {i}: the scene has {len(self.views)} views "
                                      f"(indices 0 to {len(self.views) - 1})", self.root)
             return i

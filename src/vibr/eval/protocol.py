@@ -229,7 +229,7 @@ def _measure_rows(rows, tview, cover, samples, intensity_scale, o: EvalOptions) 
         entry = _measure(s, res, dt, tview.image, m, o.border, o.depth, intensity_scale)
         if lp is not None:
             entry["lpips"] = lp(res.image, tview.image)
-        if o.uncertainty:  # issue 28
+        if o.uncertainty:
 
             entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
                                                        border=o.border)

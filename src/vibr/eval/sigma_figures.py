@@ -1,4 +1,4 @@
-"""Pictures of a per-pixel uncertainty (issue 28): a colour-mapped σ map with a scale bar,
+"""Pictures of a per-pixel uncertainty: a colour-mapped σ map with a scale bar,
 the raw array, and sparsification plots, drawn with numpy and Pillow (already required by
 imageio; no plotting library)."""
 

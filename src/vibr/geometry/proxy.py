@@ -182,7 +182,7 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
     return sources.replace(views=views, meta=meta)
 
 
-#: Fallback proxy (issue 23): unknown source pixels get a fronto-parallel plane of their own
+#: Fallback proxy: unknown source pixels get a fronto-parallel plane of their own
 #: view at ``FALLBACK_FACTOR`` times the ``FALLBACK_PERCENTILE``-th percentile of the view's
 #: known depth (just behind its farthest known depth, beyond the visibility test's 2 %
 #: margin; docs/explanation/renderer.md, "Fallback proxy"), with ``sigma_z = FALLBACK_SIGMA_Z_REL`` times

@@ -1,5 +1,5 @@
 """``gamma="auto"`` / ``lam="auto"``: the gradient-term and TV weights chosen per scene,
-without the target's image (issue 23; measured in docs/RESULTS.md, the block of benchmarks/sweep_defaults.py).
+without the target's image (measured in docs/RESULTS.md, the block of benchmarks/sweep_defaults.py).
 
 Leave-one-source-out: the source view(s) nearest the target camera (by centre distance; the
 target's image is never read, only its camera) are held out in turn and rendered from the

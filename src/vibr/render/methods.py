@@ -21,7 +21,7 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (``view_k = 4``), the gradient term's consistency weights (``grad_consistency = 24``),
   the TV weight against the data's sum (``lam_density = 3``), the holes filled by push–pull
   and the preconditioned solver (``precond = True``): chosen together by
-  ``benchmarks/sweep_defaults.py`` (issue 23), the best mean all-pixel PSNR over the
+  ``benchmarks/sweep_defaults.py``, the best mean all-pixel PSNR over the
   *choose* half of a sweep across cotton, fountain, temple and the synthetic scenes, reported
   on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs,
   which keep their published form (``view_k = 0``, ``precond = False``, ``lam_density = 0``)
@@ -39,7 +39,7 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   discretization right; footprints larger than a target pixel shrunk per axis to 1 px, see
   :class:`vibr.render.operators.Splat`). Worth it when the sources are finer than the
   target. ulr ignores it.
-* ``robust = "none"``, ``robust_c = 3`` the data term's loss (issue 22); ``"cauchy"``: the weights are
+* ``robust = "none"``, ``robust_c = 3`` the data term's loss; ``"cauchy"``: the weights are
   multiplied in each outer pass by the Cauchy IRLS factor ``1/(1 + (r/s)²)`` of each
   sample's residual against the current estimate, ``s = robust_c · 1.4826 · median(r)``
   (:func:`vibr.render.weights.robust_factor`): samples that disagree with the others
@@ -209,7 +209,7 @@ def _render_ulr(method: Method, samples, p, source_centres, target_centre, uncer
     img = push_pull(img * cov.acc[..., None], cov.acc)
     times["init"] = time.perf_counter() - t0
     sig = None
-    if uncertainty:  # issue 28: the ULR-weighted spread of the blended views
+    if uncertainty:  # the ULR-weighted spread of the blended views
 
         sig = ulr_sigma(var[0], cov.coverage, scale=float(p["scale"]))
     times["total"] = time.perf_counter() - t_all

@@ -1,4 +1,4 @@
-"""Per-pixel confidence of a rendered view (issue 28; derivation in docs/explanation/renderer.md,
+"""Per-pixel confidence of a rendered view (derivation in docs/explanation/renderer.md,
 section "Uncertainty").
 
 The variational renderer computes the MAP estimate of a posterior whose smooth part is the

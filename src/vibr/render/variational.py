@@ -378,7 +378,7 @@ def _outer_passes(prob: _Problem, method, u, *, callback, progress_bar, verbose,
 
 
 def _uncertainty(prob: _Problem, method, samples: Samples, run: _Passes, terms):
-    """Issue 28: the Jacobi diag(H⁻¹) of the last pass's model + the sources' spread
+    """The Jacobi diag(H⁻¹) of the last pass's model + the sources' spread
     (:func:`vibr.render.uncertainty.variational_sigma`); timed into ``times["uncertainty"]``."""
 
     t0 = time.perf_counter()

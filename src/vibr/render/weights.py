@@ -303,7 +303,7 @@ def _weight_gradient(u, scale, grad_max):
     return out
 
 
-#: Robust data terms (issue 22): ``"none"`` (least squares) or ``"cauchy"`` (IRLS).
+#: Robust data terms: ``"none"`` (least squares) or ``"cauchy"`` (IRLS).
 ROBUST_LOSSES = ("none", "cauchy")
 
 
@@ -316,7 +316,7 @@ def robust_factor(samples: Samples, u, splat, c: float = 3.0, loss: str = "cauch
     the residuals' standard deviation), the Cauchy (Lorentzian) loss
     ``ρ(r) = ½ s² log(1 + (r/s)²)`` gives the reweighting factor
     ``ρ'(r)/r = 1 / (1 + (r/s)²)``: samples that disagree with the others (occluded or
-    mismatched ones, the speckles of issue 22) lose their weight in the next outer pass,
+    mismatched ones, the speckles) lose their weight in the next outer pass,
     the inliers keep theirs (Holland & Welsch 1977, "Robust regression using iteratively
     reweighted least-squares"). ``loss="none"`` gives ones.
     """

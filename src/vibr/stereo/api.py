@@ -350,7 +350,7 @@ def estimate_depth(scene: Scene, *, views=None, exclude=(), options: DepthOption
     t_all = time.perf_counter()
     opt = depth_options(options, **kw)
 
-    check_depth_params(**{f.name: getattr(opt, f.name) for f in fields(opt)})  # issue 24: ranges
+    check_depth_params(**{f.name: getattr(opt, f.name) for f in fields(opt)})  # ranges
     targets, inputs, excl, method, opt = _check_request(scene, views, exclude, opt)
     cams = [v.camera.scaled(opt.scale) if opt.scale != 1.0 else v.camera for v in scene.views]
     imgs = _Images(scene, cams)
