@@ -234,16 +234,16 @@ def test_a_view_too_small_to_measure(capsys, tmp_path, temple_dir):
 
 
 @pytest.mark.parametrize("cmd", [
-    ["info", "{scene}", "--views", ",,"],
-    ["convert", "{scene}", "{tmp}/c", "--views", " , "],
-    ["depth", "{scene}", "-o", "{tmp}/d", "--views", ","],
+    ["info", "{scene}", "--only", ",,"],
+    ["convert", "{scene}", "{tmp}/c", "--only", " , "],
+    ["depth", "{scene}", "-o", "{tmp}/d", "--targets", ","],
     ["depth", "{scene}", "-o", "{tmp}/d", "--exclude", ","],
-    ["path", "interpolate", "{scene}", "-o", "{tmp}/p.json", "--views", ",,"],
+    ["path", "interpolate", "{scene}", "-o", "{tmp}/p.json", "--through", ",,"],
     ["render", "{scene}", "--target", "3", "--sources", ",", "-o", "{tmp}/x.png"],
     ["eval", "{scene}", "--target", "3", "--gamma", ",", "--json", "{tmp}/e.json"],
 ])
 def test_an_empty_list_is_refused(capsys, tmp_path, temple_dir, cmd):
-    """An option given with an empty comma list is a mistake, not "all" (vibr depth --views ,
+    """An option given with an empty comma list is a mistake, not "all" (vibr depth --targets ,
     wrote a scene with depth for no view)."""
     args = [a.format(scene=temple_dir, tmp=tmp_path) for a in cmd]
     with pytest.raises(SystemExit) as e:

@@ -33,7 +33,7 @@ def _cases(s, o):
     cases += [(d + [flag, *v.split()], o / "d") for flag, v in [
         ("--step-px", "0"), ("--max-planes", "0"), ("--median-radius", "-1"), ("--depth-scale", "2"), ("--scale", "0"),
         ("--neighbours", "0"), ("--refine-iter", "-1"), ("--depth-range", "5 1"), ("--depth-range", "nan 1"),
-        ("--sweep-scale", "0"), ("--views", "-1")]]
+        ("--sweep-scale", "0"), ("--targets", "-1")]]
     cases += [(["convert", s, o / "c", "--scale", v], o / "c") for v in ("0", "nan", "-1", "1e9")]
     cases += [(["info", s, "--scale", v], None) for v in ("0", "nan")]
     cases += [(["demo", "--size", v, "-o", o / "x.png"], o / "x.png") for v in ("0", "-3", "100000")]
@@ -99,7 +99,7 @@ def test_depth_refuses_the_plane_sweeps_options_for_a_light_field(cotton_dir, tm
     accepted and did nothing)."""
     out = tmp_path / "d"
     capsys.readouterr()
-    assert main(["-q", "depth", str(cotton_dir), "--views", "input_Cam040", "-o", str(out), *extra]) == 2
+    assert main(["-q", "depth", str(cotton_dir), "--targets", "input_Cam040", "-o", str(out), *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and msg in err and str(cotton_dir) in err
     assert not out.exists()

@@ -557,7 +557,7 @@ def test_path_options_with_a_target_are_refused(grid_dir, tmp_path, capsys, extr
 
 
 @pytest.mark.parametrize("kind,extra,msg", [
-    ("orbit", ["--views", "view_001,view_002"], "--views applies to 'vibr path interpolate' only"),
+    ("orbit", ["--through", "view_001,view_002"], "--through applies to 'vibr path interpolate' only"),
     ("spiral", ["--order", "given"], "--order applies to 'vibr path interpolate' only"),
     ("interpolate", ["--full"], "--full applies to 'vibr path orbit' only"),
     ("orbit", ["--roll", "level"], "--roll applies to 'vibr path interpolate' only"),

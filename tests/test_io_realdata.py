@@ -97,9 +97,9 @@ def test_fountain_camera_file_convention(fountain_dir, fountain):
     np.testing.assert_allclose(xy, x[:2] / x[2], atol=1e-3)
 
 
-@pytest.mark.parametrize("which,args", [("cotton_dir", ["--views", "input_Cam040,input_Cam041"]),
+@pytest.mark.parametrize("which,args", [("cotton_dir", ["--only", "input_Cam040,input_Cam041"]),
                                         ("temple_dir", []),
-                                        ("fountain_dir", ["--scale", "0.0625", "--views", "0,5"])])
+                                        ("fountain_dir", ["--scale", "0.0625", "--only", "0,5"])])
 def test_vibr_info_real_scenes(request, capsys, which, args):
     path = request.getfixturevalue(which)
     assert main(["info", str(path), "-q"] + args) == 0

@@ -242,7 +242,7 @@ def test_depth_killed_midway_resumes(tmp_path, capsys, monkeypatch):
 
     s = make_scene("free", n_views=4, width=40, height=32, seed=2)
     src = save_scene(s.replace(views=[v.replace(depth=None, sigma_z=None) for v in s.views]), tmp_path / "s")
-    args = ["-q", "depth", str(src), "--views", "view_000,view_001,view_002", "--refine-iter", "1",
+    args = ["-q", "depth", str(src), "--targets", "view_000,view_001,view_002", "--refine-iter", "1",
             "--sweep-scale", "1"]
     assert main(args + ["-o", str(tmp_path / "ref")]) == 0
     ref = load_scene(tmp_path / "ref")

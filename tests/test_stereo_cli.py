@@ -19,7 +19,7 @@ def test_vibr_depth_in_place_and_out(tmp_path, capsys):
         v.sigma_z = None
     src = save_scene(s, tmp_path / "scene")
     out = tmp_path / "out"
-    assert main(["-q", "depth", str(src), "-o", str(out), "--views", "view_000",
+    assert main(["-q", "depth", str(src), "-o", str(out), "--targets", "view_000",
                  "--exclude", "view_003"]) == 0
     e = load_scene(out)
     # a 64×48 scene with 2 usable partners keeps ~20 % (an end-to-end smoke test: the
@@ -28,14 +28,14 @@ def test_vibr_depth_in_place_and_out(tmp_path, capsys):
     assert np.ndim(e[0].sigma_z) == 2
     assert e[3].depth is None
     # in place
-    assert main(["-q", "depth", str(src), "--views", "view_001", "--no-consistency"]) == 0
+    assert main(["-q", "depth", str(src), "--targets", "view_001", "--no-consistency"]) == 0
     e2 = load_scene(src)
     assert e2[1].depth is not None
     assert "depth" in json.dumps(json.load(open(src / "transforms.json")))
     # --fill-segments reaches estimate_depth: no fewer known pixels, and the report says so
     capsys.readouterr()
     out2 = tmp_path / "out_fill"
-    assert main(["depth", str(src), "-o", str(out2), "--views", "view_000", "--exclude", "view_003",
+    assert main(["depth", str(src), "-o", str(out2), "--targets", "view_000", "--exclude", "view_003",
                  "--fill-segments"]) == 0
     assert np.isfinite(load_scene(out2)[0].depth).sum() > np.isfinite(e[0].depth).sum()
     assert "filled from segment planes" in capsys.readouterr().out
@@ -59,13 +59,13 @@ def test_vibr_depth_coarse_level_options(tmp_path, capsys):
     s = make_scene("free", n_views=3, width=64, height=48, seed=2)
     src = save_scene(s, tmp_path / "scene")
     out = tmp_path / "bad"
-    assert main(["-q", "depth", str(src), "-o", str(out), "--views", "view_000",
+    assert main(["-q", "depth", str(src), "-o", str(out), "--targets", "view_000",
                  "--coarse-iter", "-1"]) == 2
     err = capsys.readouterr().err
     assert "coarse_iter" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
     out = tmp_path / "full"
-    assert main(["-q", "depth", str(src), "-o", str(out), "--views", "view_000",
+    assert main(["-q", "depth", str(src), "-o", str(out), "--targets", "view_000",
                  "--sweep-scale", "1", "--coarse-iter", "0", "--no-consistency"]) == 0
     assert np.isfinite(load_scene(out)[0].depth).mean() > 0.15
 

@@ -12,6 +12,7 @@ import argparse
 import errno
 import importlib
 import importlib.util
+import logging
 import signal
 import sys
 import threading
@@ -21,6 +22,8 @@ from .._runtime.malloc import tune_malloc
 from .._runtime.threads import oversubscribe_render_threads
 from ..errors import VibrInputError
 from ..progress import configure_logging
+
+logger = logging.getLogger(__name__)
 
 # Order shown in --help.
 _COMMANDS = ["demo", "info", "convert", "path", "render", "eval", "depth", "calibrate", "view"]
@@ -53,36 +56,69 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"vibr {__version__}")
-    _add_verbosity(parser, None)
-    parser.add_argument("--allow-outside-paths", action="store_true",
-                        help="accept transforms.json file paths that are absolute or lead out of the "
-                        "scene folder (refused by default)")
+    add_global_options(parser, top=True)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in _COMMANDS:
         modname = f"{__name__}.{name}"
         if importlib.util.find_spec(modname) is None:
             continue
         importlib.import_module(modname).register(sub)
+    for p in dict.fromkeys(sub.choices.values()):  # an alias names the same parser
+        add_global_options(p, top=False)
     return parser
 
 
-def _add_verbosity(p: argparse.ArgumentParser, default) -> None:
-    kw = {} if default is None else {"default": default}
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or status lines "
+#: Title of the argument group of the options every command accepts, before or after its name.
+GLOBAL_OPTIONS = "global options (before or after COMMAND)"
+
+
+def add_global_options(p: argparse.ArgumentParser, top: bool) -> None:
+    """The top-level options (``--version``, ``-q``, ``-v``, ``--allow-outside-paths``), on
+    the top-level parser (``top``) and on every subcommand's, so that they may be given
+    before or after the subcommand. A subcommand's copy has no default (``SUPPRESS``): it
+    sets the option when given and otherwise leaves the top-level value alone."""
+    kw = {} if top else {"default": argparse.SUPPRESS}
+    g = p.add_argument_group(GLOBAL_OPTIONS)
+    g.add_argument("--version", action="version", version=f"vibr {__version__}")
+    g.add_argument("-q", "--quiet", action="store_true", help="no progress bars or status lines "
                    "(warnings and errors only)", **kw)
-    p.add_argument("-v", "--verbose", action="store_true", help="also debugging lines (each solver "
+    g.add_argument("-v", "--verbose", action="store_true", help="also debugging lines (each solver "
                    "pass, each stage's details)", **kw)
-
-
-def add_quiet(p: argparse.ArgumentParser) -> None:
-    """Let ``-q`` / ``-v`` also be given after the subcommand."""
-    _add_verbosity(p, argparse.SUPPRESS)
+    g.add_argument("--allow-outside-paths", action="store_true",
+                   help="accept transforms.json file paths that are absolute or lead out of the "
+                   "scene folder (refused by default)", **kw)
 
 
 def verbosity(args) -> int:
     """-1 with ``-q``, 1 with ``-v``, else 0."""
     return -1 if getattr(args, "quiet", False) else 1 if getattr(args, "verbose", False) else 0
+
+
+#: Attribute of the parsed arguments listing the deprecated spellings used (logged once the
+#: logging is configured).
+DEPRECATED = "deprecated_spellings"
+
+
+class _DeprecatedAlias(argparse.Action):
+    """An old spelling of an option, hidden from ``--help``: it sets the new option's value
+    and notes a warning naming the new spelling."""
+
+    def __init__(self, option_strings, dest, new, **kw):
+        super().__init__(option_strings, dest, default=argparse.SUPPRESS, help=argparse.SUPPRESS, **kw)
+        self.new = new
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        notes = list(getattr(namespace, DEPRECATED, ()))
+        setattr(namespace, DEPRECATED, notes + [f"{parser.prog} {option_string} is deprecated and will be "
+                                                f"removed: use {self.new}"])
+
+
+def add_deprecated_alias(p: argparse.ArgumentParser, old: str, new: str) -> None:
+    """Accept ``old`` (hidden from ``--help``) as a deprecated spelling of the option ``new``
+    already added to ``p``: the same destination and type; using it logs a warning."""
+    action = p._option_string_actions[new]
+    p.add_argument(old, dest=action.dest, type=action.type, action=_DeprecatedAlias, new=new)
 
 
 #: Flag hints the CLI adds to library errors (the library's messages name no flag).
@@ -139,6 +175,8 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     configure_logging(verbosity(args))
+    for note in getattr(args, DEPRECATED, ()):
+        logger.warning(note)
     tune_malloc()
     before = interrupt_on_sigterm()
     from .. import io as vio

@@ -162,7 +162,10 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                         "the target at the depth it sees, or where the cameras' axes meet (planar), "
                         "NAME.npy/.pfm/.png files in --depth-files (files), or gt when the scene has "
                         "depth and estimated when it has none (auto, the default)")
-    p.add_argument("--depth-files", metavar="DIR", help="folder of per-view depth maps for --depth files (NAME.npy/.pfm/.png/.bin, orthogonal depth, 0 = unknown; a map of the view's aspect at another size, e.g. full size with --scale, is resized to it)")
+    p.add_argument("--depth-files", metavar="DIR",
+                   help="folder of per-view depth maps for --depth files (NAME.npy/.pfm/.png/.bin, orthogonal "
+                        "depth, 0 = unknown; a map of the view's aspect at another size, e.g. full size with "
+                        "--scale, is resized to it)")
     from ..geometry.proxy import FALLBACK_MIN_FRACTION, FALLBACK_MODES
 
     p.add_argument("--fallback", choices=FALLBACK_MODES, default="auto",
@@ -239,7 +242,8 @@ def names(text: str) -> list[str]:
 
 def add_source_options(p: argparse.ArgumentParser) -> None:
     """``--sources`` (a list) and ``--views K`` (the K best), as :func:`vibr.pipeline.prepare`."""
-    p.add_argument("--sources", type=names, help="comma-separated source views (default: all others, see --views)")
+    p.add_argument("--sources", type=names, metavar="VIEW,...",
+                   help="comma-separated source views (default: all others, see --views)")
     p.add_argument("--views", type=view_count, metavar="K|all",
                    help="render from the K best source views for the target, of --sources when given "
                         f"(ULR ranking), or '{ALL_VIEWS}' (default: all, but the {ESTIMATED_SOURCES} best "

@@ -10,7 +10,7 @@ from ..calib.colmap import CAMERA_MODELS, MATCHERS
 from ..calib.video_frames import DEFAULT_FRAMES
 from ..errors import VibrInputError
 from ..io.video import VIDEO_INPUTS, is_video_input
-from . import add_quiet, count
+from . import count
 
 _EPILOG = """\
 stages: [a video: the sharpest frame near the middle of each of --frames stretches ->]
@@ -71,7 +71,6 @@ def register(sub) -> None:
     p.add_argument("--work", metavar="DIR", default=None,
                    help="keep COLMAP's database, model and undistorted images here")
     p.add_argument("--overwrite", action="store_true", help="replace OUT_SCENE if it exists")
-    add_quiet(p)
     p.set_defaults(func=run)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_quiet, count
+from . import add_deprecated_alias, count
 from ._options import add_overwrite_option, names
 
 _DESC = """\
@@ -20,7 +20,8 @@ _EPILOG = """\
 examples:
   vibr convert ../shared/data/hci2016_cotton cotton_ns/
   vibr convert ../shared/data/strecha_fountain-P11 fountain_q/ --scale 0.25
-  vibr convert ../shared/data/hci2016_cotton centre_cross/ --views input_Cam031,input_Cam039,input_Cam040,input_Cam041,input_Cam049
+  vibr convert ../shared/data/hci2016_cotton centre_cross/ \\
+      --only input_Cam031,input_Cam039,input_Cam040,input_Cam041,input_Cam049
   vibr convert SCENE out/ --overwrite               replace an out/ that vibr wrote
 """
 
@@ -33,10 +34,10 @@ def register(sub) -> None:
     p.add_argument("out", metavar="OUT", help="output folder (must not exist unless --overwrite)")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
-    p.add_argument("--views", type=names, default=None,
+    p.add_argument("--only", type=names, default=None, metavar="VIEW,...",
                    help="comma-separated view names or indices to keep (default: all)")
+    add_deprecated_alias(p, "--views", "--only")
     add_overwrite_option(p, "OUT (only a folder vibr wrote)")
-    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -48,7 +49,7 @@ def run(args) -> int:
     check_not_input(out, [args.scene])
     if out.is_dir():
         check_replaceable(out)
-    scene = load_scene(args.scene, scale=args.scale, views=args.views)
+    scene = load_scene(args.scene, scale=args.scale, views=args.only)
     out = save_scene(scene, out, overwrite=args.overwrite)
     nd = sum(v.depth is not None for v in scene.views)
     print(f"wrote {out}/transforms.json: {count(len(scene), 'view')} ({scene.meta.get('format', '?')}), "

@@ -7,7 +7,6 @@ import logging
 import os
 import time
 
-from . import add_quiet
 from ._options import add_bit_depth_option, add_method_option
 
 logger = logging.getLogger(__name__)
@@ -42,7 +41,6 @@ def register(sub) -> None:
                         "its extension as 'vibr render --path' (default: vibr-demo.mp4)")
     v.add_argument("--no-video", action="store_true", help="skip the fly-through video")
     add_bit_depth_option(p)
-    add_quiet(p)
     p.set_defaults(func=run)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from . import add_quiet
+from . import add_deprecated_alias
 from ._executor import add_executor_args, executor_from_args
 from ._options import add_overwrite_option, names
 
@@ -14,8 +14,8 @@ Estimate orthogonal depth maps and their uncertainty sigma_z for the views of a 
 the CPU: light fields (scene with a grid) by the EPI structure tensor refined by a fine
 plane sweep over the grid and TV-L1; other scenes by plane-sweep multi-view stereo (ZNCC
 over the nearest views, slanted-plane PatchMatch refinement, a colour-guided weighted
-median of the planes, cross-view consistency check). Pixels whose depth is unreliable or inconsistent are written as unknown (0 in the
-.npy files).
+median of the planes, cross-view consistency check). Pixels whose depth is unreliable or
+inconsistent are written as unknown (0 in the .npy files).
 
 The result is the scene saved as a nerfstudio transforms.json folder (OUT/transforms.json,
 OUT/depth/*.npy, OUT/sigma_z/*.npy). Without -o, a SCENE that is itself a transforms.json
@@ -26,8 +26,8 @@ _EPILOG = """\
 examples:
   vibr depth ../shared/data/strecha_fountain-P11 -o fountain_depth/ --scale 0.25
   vibr depth ../shared/data/strecha_fountain-P11 -o f/ --scale 0.25 --refine-iter 1   (faster)
-  vibr depth ../shared/data/hci2016_cotton -o cotton_depth/ --views input_Cam040
-  vibr depth fountain_depth/ --views 5 --exclude 4          update in place, never using view 4
+  vibr depth ../shared/data/hci2016_cotton -o cotton_depth/ --targets input_Cam040
+  vibr depth fountain_depth/ --targets 5 --exclude 4        update in place, never using view 4
   vibr depth SCENE -o out/ --depth-scale 0.5 --depth-range 4 20   estimate at half resolution
 """
 
@@ -39,8 +39,12 @@ def register(sub) -> None:
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
     p.add_argument("-o", "--out", default=None,
                    help="output folder (default: update SCENE in place if it is a transforms.json scene)")
-    p.add_argument("--views", type=names, default=None, help="comma-separated views to estimate (default: all)")
-    p.add_argument("--exclude", type=names, default=None, help="comma-separated views never used as inputs")
+    p.add_argument("--targets", type=names, default=None, metavar="VIEW,...",
+                   help="comma-separated views whose depth is estimated; the others still serve as stereo "
+                        "partners (default: all)")
+    add_deprecated_alias(p, "--views", "--targets")
+    p.add_argument("--exclude", type=names, default=None, metavar="VIEW,...",
+                   help="comma-separated views never used as inputs")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.25; the output has that size (default 1)")
     p.add_argument("--resize", dest="scale", type=float, help=argparse.SUPPRESS)  # the old name
@@ -81,7 +85,6 @@ def register(sub) -> None:
                    "segments, then re-run the weighted median (docs/explanation/depth.md). Better depth "
                    "maps; the renderer does better with the unknown pixels left out")
     add_overwrite_option(p, "OUT (only a folder vibr wrote)")
-    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -117,7 +120,7 @@ def run(args) -> int:
     out, in_place = _output_folder(args)
     scene = load_scene(args.scene, scale=args.scale)
     _refuse_mvs_options(args, scene)
-    est = estimate_depth(scene, views=args.views, scale=args.depth_scale,
+    est = estimate_depth(scene, views=args.targets, scale=args.depth_scale,
                          depth_range=args.depth_range, method=args.method,
                          exclude=args.exclude or (),
                          consistency=not args.no_consistency, fill_segments=args.fill_segments,

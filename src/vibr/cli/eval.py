@@ -8,7 +8,6 @@ import logging
 from ..eval.protocol import GAMMAS
 from ..metrics import METRIC_BORDER
 from ..render.methods import DEFAULTS, METHODS
-from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (
     add_depth_options,
@@ -36,10 +35,10 @@ never takes part in depth estimation.
 _EPILOG = """\
 examples:
   vibr eval ../shared/data/hci2016_cotton --target input_Cam040 \\
-      --sources input_Cam030,input_Cam031,input_Cam032,input_Cam039,input_Cam041,input_Cam048,input_Cam049,input_Cam050 \\
-      --depth gt --json cotton.json --figures figs/
+    --sources input_Cam030,input_Cam031,input_Cam032,input_Cam039,input_Cam041,input_Cam048,input_Cam049,input_Cam050 \\
+    --depth gt --json cotton.json --figures figs/
   vibr eval ../shared/data/strecha_fountain-P11 --target 0005 --scale 0.25 --depth estimated \\
-      --method bvs,gradient --alpha 0.1 --gamma 1 --lam 0.002 --intensity-scale 255 --json fountain5.json
+    --method bvs,gradient --alpha 0.1 --gamma 1 --lam 0.002 --intensity-scale 255 --json fountain5.json
 
 --scale is the IMAGE scale (0.25: 3072x2048 -> 768x512); --intensity-scale is the scale of the
 intensities the parameters refer to (255: lam, sigma_s in grey levels). Both are recorded in
@@ -67,7 +66,7 @@ def _floats(s):
 def register(sub) -> None:
     p = sub.add_parser("eval", help="render held-out views and measure PSNR / DSSIM (paper protocol)",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scene", help="scene folder or transforms.json")
+    p.add_argument("scene", metavar="SCENE", help="scene folder or transforms.json")
     p.add_argument("--target", required=True,
                    help="view to hold out and render (name or index); 'all' or a comma list: "
                         "leave-one-out over those views (one task each, see --workers / --dask), "
@@ -102,7 +101,6 @@ def register(sub) -> None:
                    help="also score each render's per-pixel std. dev.: AUSE, Spearman rho and the "
                         "sparsification curves in the report, the sparsification plot in --figures")
     add_executor_args(p)
-    add_quiet(p)
     p.set_defaults(func=run)
 
 

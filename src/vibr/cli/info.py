@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_quiet
+from . import add_deprecated_alias
 from ._options import names
 
 _DESC = """\
@@ -22,7 +22,7 @@ examples:
   vibr info ../shared/data/hci2016_cotton                   81-view 9x9 light field, centre depth
   vibr info ../shared/data/strecha_fountain-P11 --scale 0.25
   vibr info ../shared/data/middlebury_templeSparseRing/templeSR_par.txt
-  vibr info out/transforms.json --views 0,4,8               a few views of a converted scene
+  vibr info out/transforms.json --only 0,4,8                a few views of a converted scene
 """
 
 
@@ -33,9 +33,9 @@ def register(sub) -> None:
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
     p.add_argument("--scale", type=float, default=1.0,
                    help="image scale the scene is loaded at, e.g. 0.25 (default: 1)")
-    p.add_argument("--views", type=names, default=None,
+    p.add_argument("--only", type=names, default=None, metavar="VIEW,...",
                    help="comma-separated view names or indices to load (default: all)")
-    add_quiet(p)
+    add_deprecated_alias(p, "--views", "--only")
     p.set_defaults(func=run)
 
 
@@ -147,7 +147,7 @@ def run(args) -> int:
     from ..io.images import headers_only
 
     with headers_only():
-        scene = load_scene(args.scene, scale=args.scale, views=args.views)
+        scene = load_scene(args.scene, scale=args.scale, views=args.only)
     try:
         print(describe(scene), flush=True)
     except BrokenPipeError:  # `vibr info ... | head`: the reader has gone, not an error

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_quiet, count
+from . import add_deprecated_alias, count
 from ._options import names
 
 _DESC = """\
@@ -13,7 +13,7 @@ Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json 
 to render with 'vibr render SCENE --path PATH.json -o video.mp4'; with --dataparser-transforms
 the path is written in the normalised frame of a nerfstudio model of the scene, for ns-render.
 Kinds: interpolate (a C2-smooth spline through the scene's cameras: all, nearest next, or
---views in that order; on a light field's grid a loop round it through its corners and the
+those of --through in that order; on a light field's grid a loop round it through its corners and the
 middles of its sides), orbit (an ellipse around the point the cameras look at, at their
 mean height and distance; an arc swept back and forth when the cameras do not surround
 it), spiral (an LLFF-style forward-facing spiral around the mean camera).
@@ -24,7 +24,7 @@ examples:
   vibr path interpolate ../shared/data/strecha_fountain-P11 -o fountain.json --frames 60 --scale 0.25
   vibr path orbit ../shared/data/middlebury_templeSparseRing -o orbit.json --seconds 4 --fps 24
   vibr path spiral SCENE -o spiral.json --frames 90 --size 640x480
-  vibr path interpolate SCENE -o p.json --views 0003,0005,0004 --order proximity
+  vibr path interpolate SCENE -o p.json --through 0003,0005,0004 --order proximity
   vibr path interpolate ../shared/data/middlebury_templeSparseRing -o ring.json --frames 96 --roll level
 """
 
@@ -46,18 +46,21 @@ def register(sub) -> None:
     p = sub.add_parser("path", help="make a camera path (nerfstudio camera_path.json) for a fly-through",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("kind", choices=PATH_KINDS, help="kind of path")
-    p.add_argument("scene", help="scene folder (any supported format)")
+    p.add_argument("scene", metavar="SCENE", help="scene folder (any supported format)")
     p.add_argument("-o", "--output", required=True, help="camera path file to write (.json)")
     p.add_argument("--frames", type=int, help="number of frames (default: --seconds x --fps)")
     p.add_argument("--seconds", type=float, default=None, help="duration in seconds (default 4 without --frames)")
     p.add_argument("--fps", type=float, default=24.0, help="frames per second (default 24)")
-    p.add_argument("--size", type=_size, metavar="WxH", help="frame size (default: the first view's, after --scale; W and H swapped when its "
+    p.add_argument("--size", type=_size, metavar="WxH",
+                   help="frame size (default: the first view's, after --scale; W and H swapped when its "
                         "photograph is turned upright by a quarter turn, see --roll)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.25 (default 1)")
-    p.add_argument("--views", type=names, help="interpolate: comma-separated views to pass through, in order (default: all)")
+    p.add_argument("--through", type=names, metavar="VIEW,...",
+                   help="interpolate: comma-separated views to pass through, in order (default: all)")
+    add_deprecated_alias(p, "--views", "--through")
     p.add_argument("--order", choices=["given", "proximity"], default=None,
                    help="interpolate: keep the given order or reorder the views by proximity (default: "
-                        "proximity through all the scene's views, the given order with --views or for the "
+                        "proximity through all the scene's views, the given order with --through or for the "
                         "frames of a video, from 'vibr calibrate VIDEO': time order)")
     p.add_argument("--roll", choices=list(ROLL_MODES), default=None,
                    help="interpolate: how the key cameras are turned about their axes: "
@@ -71,7 +74,6 @@ def register(sub) -> None:
                    help="write the path in the normalised frame of a nerfstudio model trained on SCENE (its "
                         "dataparser_transforms.json), the frame ns-render renders in; vibr render --path reads "
                         "such a file with the same option")
-    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -91,7 +93,7 @@ def run(args) -> int:
         raise VibrInputError(f"--scale must be positive, got {args.scale}")
     if args.smooth is not None and not args.smooth >= 0:  # before the scene is read
         raise VibrInputError(f"--smooth must be a number of keys >= 0, got {args.smooth}")
-    for flag, kind, value in (("--views", "interpolate", args.views), ("--order", "interpolate", args.order),
+    for flag, kind, value in (("--through", "interpolate", args.through), ("--order", "interpolate", args.order),
                               ("--roll", "interpolate", args.roll), ("--smooth", "interpolate", args.smooth),
                               ("--full", "orbit", args.full)):
         if value not in (None, False) and args.kind != kind:  # refused, not ignored
@@ -104,7 +106,7 @@ def run(args) -> int:
     w, h = args.size if args.size else (None, None)
     kw = dict(n_frames=args.frames, seconds=seconds, fps=args.fps, width=w, height=h)
     if args.kind == "interpolate":
-        path = P.interpolate(scene, args.views, order=args.order, roll=args.roll or "snap",
+        path = P.interpolate(scene, args.through, order=args.order, roll=args.roll or "snap",
                              smooth=args.smooth or 0.0, **kw)
     elif args.kind == "orbit":
         path = P.orbit(scene, full=True if args.full else None, **kw)

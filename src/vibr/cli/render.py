@@ -8,7 +8,7 @@ import os
 
 from ..io.video import VIDEO_FORMATS, is_video
 from ..pipeline import ALL_VIEWS
-from . import add_quiet, count
+from . import count
 from ._executor import add_executor_args, executor_from_args
 from ._options import (
     METRIC_RULE,
@@ -47,7 +47,7 @@ examples:
 def register(sub) -> None:
     p = sub.add_parser("render", help="render a view (held-out view or camera file) of a scene",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scene", help="scene folder (any supported format)")
+    p.add_argument("scene", metavar="SCENE", help="scene folder (any supported format)")
     p.add_argument("--target", metavar="VIEW|CAMERA.json",
                    help="view name / index to hold out and render, or a camera JSON file (K, R, t, "
                         "width, height at the scene's original resolution: --scale applies to it too)")
@@ -68,7 +68,6 @@ def register(sub) -> None:
                    help="also write the per-pixel standard deviation (grey levels of 255): a colour-mapped "
                         "PNG with a scale bar, or the raw float32 array (.npy); with --path a video of every "
                         "frame's, on one colour scale")
-    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -78,7 +77,8 @@ def _add_path_options(p) -> None:
     g.add_argument("--path", metavar="PATH.json",
                    help="render every camera of a camera path (nerfstudio camera_path.json, as written by "
                         "'vibr path' or nerfstudio's viewer) to -o OUT.mp4 or -o FRAMES_DIR/ instead of --target")
-    g.add_argument("--frames-dir", metavar="DIR", help="where the numbered PNG frames go (default: OUT_frames/ beside the video)")
+    g.add_argument("--frames-dir", metavar="DIR",
+                   help="where the numbered PNG frames go (default: OUT_frames/ beside the video)")
     g.add_argument("--crf", type=int, default=None,
                    help="video quality (H.264's and VP9's constant rate factor), 0 (lossless) .. 51 (default 18; "
                         "a GIF has none)")
@@ -86,7 +86,7 @@ def _add_path_options(p) -> None:
     g.add_argument("--dataparser-transforms", metavar="JSON",
                    help="nerfstudio's dataparser_transforms.json: the path is in nerfstudio's normalised frame")
     g.add_argument("--overwrite", action="store_true", help="render frames already written again (default: skip them)")
-    g.add_argument("--exclude", type=names, default=(),
+    g.add_argument("--exclude", type=names, default=(), metavar="VIEW,...",
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
     # frames on local processes or Dask (vibr.executor, docs/explanation/scale-out.md)
     add_executor_args(g, default="auto: one process per core for a long path of large frames, "

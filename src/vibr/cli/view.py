@@ -7,7 +7,7 @@ import logging
 import math
 import time
 
-from . import add_quiet, count
+from . import count
 from ._options import add_cache_options, add_method_option, cache_dir_from_args
 
 logger = logging.getLogger(__name__)
@@ -35,13 +35,14 @@ examples:
 def register(sub) -> None:
     p = sub.add_parser("view", help="interactive viewer in the web browser",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scene", help="scene folder (any supported format)")
+    p.add_argument("scene", metavar="SCENE", help="scene folder (any supported format)")
     p.add_argument("--port", type=int, default=8080, help="port to listen on (default 8080)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default 127.0.0.1; 0.0.0.0 exposes the viewer to the network)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.5 (default 1)")
     add_method_option(p)
-    p.add_argument("--views", type=int, default=8, metavar="K", help="initial number of source views (default 8)")
+    p.add_argument("--views", type=int, default=8, metavar="K",
+                   help="initial number of source views: the K best for the view shown (default 8)")
     from ..viewer.app import POINT_MODES, ViewerOptions
 
     p.add_argument("--max-points", type=int, default=ViewerOptions.max_points,
@@ -53,7 +54,6 @@ def register(sub) -> None:
                         "once the camera has stopped and the preview of where it stopped is shown)")
     add_cache_options(p)
     p.add_argument("--path-out", default=None, help="file 'export path' writes (default camera_path.json)")
-    add_quiet(p)
     p.set_defaults(func=run)
 
 

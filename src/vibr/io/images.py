@@ -361,7 +361,7 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
 
         npx = sum(e["camera"].width * e["camera"].height for e in entries)  # float32 RGB + decoding
         check_memory(16.0 * npx, f"loading {len(entries)} images ({npx / 1e6:.0f} Mpixels)",
-                     "load fewer views (--views) or resize the images first",
+                     "load fewer views (--only) or resize the images first",
                      entries[0]["path"] if entries else None)
 
     def work(e):
