@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from vibr.paths.flythrough import render_path
 from vibr.io import read_image, write_image
 from vibr.paths.camera_path import CameraPath, orbit
+from vibr.paths.flythrough import render_path
 from vibr.synthetic import make_scene
 
 

@@ -15,7 +15,6 @@ import sys
 import time
 from pathlib import Path
 
-
 _REPO = Path(__file__).resolve().parents[2]
 
 

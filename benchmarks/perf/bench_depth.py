@@ -24,23 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-_REPO = Path(__file__).resolve().parents[2]
-
-
-def data_dir() -> Path:
-    env = os.environ.get("VIBR_DATA")
-    d = Path(env) if env else _REPO.parent / "shared" / "data"
-    if not d.is_dir():
-        sys.exit(f"data folder not found: {d}")
-    return d
-
-
-def hci_metrics(disp: np.ndarray, gt: np.ndarray, border: int = 15) -> tuple[float, float]:
-    """HCI 4D LF benchmark metrics (Honauer et al. 2016): BadPix(0.07) in percent and
-    MSE×100, on all pixels but a ``border``-pixel frame (the benchmark's 15 px)."""
-    sl = (slice(border, -border), slice(border, -border)) if border else (slice(None),) * 2
-    e = (disp - gt)[sl]
-    return 100.0 * float(np.mean(np.abs(e) > 0.07)), 100.0 * float(np.mean(e ** 2))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import centre_disparity_model, data_dir, hci_metrics, seen_count, surface_textured, textured  # noqa: E402
 
 
 def bench_cotton(args) -> None:
@@ -106,7 +91,7 @@ def _bench_cotton_block(scene, gt, ref, block, args) -> None:
         est = estimate_depth(sub, views=[centre])
         t1.append(time.perf_counter() - t)
     z = est[centre].depth
-    a, b = _centre_disparity_model(sub, centre)
+    a, b = centre_disparity_model(sub, centre)
     with np.errstate(divide="ignore", invalid="ignore"):
         d = -(a + b / z.astype(np.float64))
     bp, mse = hci_metrics(d, gt, 15)
@@ -115,15 +100,6 @@ def _bench_cotton_block(scene, gt, ref, block, args) -> None:
           f"(median of {len(t8)}: {', '.join(f'{x:.1f}' for x in sorted(t8))})")
     print(f"  centre view from its 8 neighbours: {statistics.median(t1):.1f} s; "
           f"BadPix(0.07) {bp:.2f} %, MSE*100 {mse:.3f} (15 px border excluded)")
-
-
-def _centre_disparity_model(sub, centre):
-    """``(a, b)`` of ``d = −(a + b/z)`` for the view ``centre`` of the grid scene ``sub``."""
-    from vibr.stereo.lightfield import _grid_disparity_model, grid_positions
-
-    pos = grid_positions(sub)
-    i = sub.index(centre)
-    return _grid_disparity_model([v.camera for v in sub.views], i, [j for j in pos if j != i], pos)
 
 
 def bench_fountain(args) -> None:
@@ -218,72 +194,10 @@ def bench_temple(args) -> None:
           f"(load average {os.getloadavg()[0]:.1f})")
 
 
-def _textured(img, r=3, thr=0.02):
-    """Pixels whose (2r+1)² window has a grey-level std above ``thr`` (images in [0, 1])."""
-    from scipy.ndimage import uniform_filter
-
-    from vibr.stereo.planesweep import to_grey
-
-    g = to_grey(img).astype(np.float64)
-    m = uniform_filter(g, 2 * r + 1)
-    return np.sqrt(np.maximum(uniform_filter(g * g, 2 * r + 1) - m * m, 0)) > thr
-
-
-def _surface_textured(img, depth, r=3, thr=0.02, tol=0.02):
-    """Pixels whose own surface is textured: the grey-level std over the pixels of the
-    (2r+1)² window whose exact depth is within ``tol`` (relative) of the centre's is above
-    ``thr``. A flat background pixel next to a textured foreground passes :func:`_textured`
-    (its window holds the foreground's texture) but not this: its depth is not determined by
-    local photo-consistency, since its window matches at the background's depth and at the
-    foreground's alike (the "fattening" ambiguity)."""
-    from vibr.stereo.planesweep import to_grey
-
-    g = to_grey(img).astype(np.float64)
-    H, W = g.shape
-    d = np.where(np.isfinite(depth), depth, np.inf)
-    gp = np.pad(g, r, mode="edge")
-    dp = np.pad(d, r, mode="constant", constant_values=np.inf)
-    s1 = np.zeros((H, W))
-    s2 = np.zeros((H, W))
-    n = np.zeros((H, W))
-    with np.errstate(invalid="ignore"):
-        for dy in range(2 * r + 1):
-            for dx in range(2 * r + 1):
-                m = np.abs(dp[dy:dy + H, dx:dx + W] - d) <= tol * d
-                q = gp[dy:dy + H, dx:dx + W]
-                s1 += m * q
-                s2 += m * q * q
-                n += m
-    mu = s1 / np.maximum(n, 1)
-    return (np.sqrt(np.maximum(s2 / np.maximum(n, 1) - mu * mu, 0)) > thr) & np.isfinite(depth)
-
-
-def _seen_count(scene, ref: int, views, tol: float = 0.02) -> np.ndarray:
-    """How many of ``views`` see the exact 3D point of each pixel of view ``ref``: it
-    projects inside the view and the view's exact depth at the nearest pixel agrees
-    within ``tol`` (relative). (H, W) int."""
-    cam, gt = scene[ref].camera, scene[ref].depth
-    ok = np.isfinite(gt)
-    X = cam.backproject(cam.pixel_grid()[ok], gt[ok])
-    cnt = np.zeros(ok.sum(), int)
-    for j in views:
-        c, dj = scene[j].camera, scene[j].depth
-        xy, zz = c.project(X)
-        u = np.round(xy[:, 0]).astype(int)
-        v = np.round(xy[:, 1]).astype(int)
-        ins = (zz > 0) & (u >= 0) & (v >= 0) & (u < c.width) & (v < c.height)
-        d = np.full(len(zz), np.nan)
-        d[ins] = dj[v[ins], u[ins]]
-        cnt += ins & (np.abs(d - zz) <= tol * zz)
-    out = np.zeros(gt.shape, int)
-    out[ok] = cnt
-    return out
-
-
 def _seen_elsewhere(scene, ref: int, tol: float = 0.02) -> np.ndarray:
     """Pixels of view ``ref`` whose exact 3D point is visible in at least one other view
-    (:func:`_seen_count`). A pixel seen by no other view cannot be triangulated."""
-    return _seen_count(scene, ref, [j for j in range(len(scene)) if j != ref], tol) > 0
+    (:func:`_common.seen_count`). A pixel seen by no other view cannot be triangulated."""
+    return seen_count(scene, ref, [j for j in range(len(scene)) if j != ref], tol) > 0
 
 
 def bench_synthetic(args) -> None:
@@ -326,9 +240,9 @@ def _bench_synthetic_at(args, W: int) -> None:
                              coarse_iter=args.coarse_iter, fill_segments=args.fill_segments)
         t = time.perf_counter() - t
         gt, d = scene[ref].depth, est[ref].depth
-        tex = _textured(scene[ref].image) & np.isfinite(gt)
+        tex = textured(scene[ref].image) & np.isfinite(gt)
         seen = tex & _seen_elsewhere(scene, ref)
-        surf = tex & _surface_textured(scene[ref].image, gt)
+        surf = tex & surface_textured(scene[ref].image, gt)
         kept = np.isfinite(d) & np.isfinite(gt)
         with np.errstate(invalid="ignore"):
             ok = np.abs(d - gt) / gt < 0.01

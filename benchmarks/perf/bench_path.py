@@ -170,9 +170,9 @@ def main():
                  f"{med:.2f} / {ch.max():.2f} (max/median {ch.max() / med:.2f})"))
 
     # where the selected set changes (weights recomputed from the cached depth)
-    from vibr.stereo.cache import scene_with_depth
-    from vibr.paths.flythrough import _source_points, view_weights
     from vibr.io import load_scene
+    from vibr.paths.flythrough import _source_points, view_weights
+    from vibr.stereo.cache import scene_with_depth
 
     sc = scene_with_depth(load_scene(scene, scale=a.scale), cache_dir=cache)
     pts = _source_points(sc)
@@ -213,10 +213,10 @@ def ab_prepared(scene_dir, cache, scale=0.25, views=8, n=6, frames=60):
     (alternating frames A/B, medians): `python3 -c 'import bench_path as b; b.ab_prepared(...)'`."""
     import tempfile
 
-    from vibr.stereo.cache import scene_with_depth
-    from vibr.paths.flythrough import FrameContext, prepare_sources, render_frame
     from vibr.io import load_scene
     from vibr.paths.camera_path import interpolate
+    from vibr.paths.flythrough import FrameContext, prepare_sources, render_frame
+    from vibr.stereo.cache import scene_with_depth
 
     sc = scene_with_depth(load_scene(scene_dir, scale=scale), cache_dir=cache)
     p = interpolate(sc, n_frames=frames)
@@ -243,10 +243,10 @@ def breakdown(scene_dir, cache, scale=0.25, views=8, frames=60, step=6):
     import tempfile
 
     sys.path.insert(0, str(REPO / "src"))
+    from vibr.paths.camera_path import interpolate
+    from vibr.paths.flythrough import FrameContext, prepare_sources, render_frame
     from vibr.pipeline import load_scene_cached
     from vibr.stereo.cache import scene_with_depth
-    from vibr.paths.flythrough import FrameContext, prepare_sources, render_frame
-    from vibr.paths.camera_path import interpolate
 
     t0 = time.perf_counter()
     sc = scene_with_depth(load_scene_cached(scene_dir, scale=scale, cache_dir=cache), cache_dir=cache)

@@ -43,9 +43,13 @@ import platform
 import resource
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import centre_index, grid_scene  # noqa: E402
 
 
 @njit(parallel=True, cache=True)
@@ -94,17 +98,6 @@ def reset_peak_rss() -> None:
             f.write("5")
     except OSError:
         pass
-
-
-def grid_scene(rows: int, cols: int, size: int, seed: int = 0):
-    from vibr.synthetic import make_scene
-
-    return make_scene("grid", width=size, height=size, seed=seed, grid=(rows, cols))
-
-
-def centre_index(scene) -> int:
-    r, c = scene.grid
-    return (r // 2) * c + c // 2
 
 
 def run_once(sources, target, measure_bw=False, **params):
@@ -242,9 +235,9 @@ def kernel_profile(sources, target, repeat: int) -> list:
     import importlib
     import pkgutil
 
-    import vibr
     from numba.core.registry import CPUDispatcher
 
+    import vibr
     from vibr.render import render
 
     tot, calls = collections.Counter(), collections.Counter()

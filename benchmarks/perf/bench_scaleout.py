@@ -127,8 +127,8 @@ def bench_path(a) -> int:
 def bench_loo(a) -> int:
     """The leave-one-out comparison, in this process; returns the exit status."""
     sys.path.insert(0, str(REPO / "src"))
-    from vibr.eval.protocol import settings_grid
     from vibr.eval.leave_one_out import evaluate_all, resolve_targets, results_only
+    from vibr.eval.protocol import settings_grid
     from vibr.io import load_scene, save_scene
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_scaleout_"))

@@ -21,8 +21,8 @@ import resource
 import time
 
 from vibr.render import render
-from vibr.synthetic import make_scene
 from vibr.render.checks import render_memory
+from vibr.synthetic import make_scene
 
 
 def _rss() -> int:

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from paper_tables import data_dir  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import data_dir  # noqa: E402
 
 #: cotton's views left out (a light field with missing views)
 COTTON_MISSING = (3, 17, 22, 44, 58, 61, 79)

@@ -28,9 +28,10 @@ def neighbours(scene, s):
 
 def baseline(scene, s):
     """Plain average of the 8 neighbours warped by the centre's GT disparity."""
+    from scipy.ndimage import map_coordinates
+
     from vibr.io import read_pfm
     from vibr.metrics import dssim, psnr
-    from scipy.ndimage import map_coordinates
 
     d = read_pfm(DATA / "gt_disp_lowres.pfm").astype(np.float64)  # top row first
     if d.ndim == 3:

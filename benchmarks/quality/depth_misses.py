@@ -6,7 +6,7 @@ runs :func:`vibr.stereo.estimate_depth` on every view (as ``bench_depth.py synth
 does), and splits the misses:
 
 * by the object of the synthetic world that each pixel's centre ray hits (back wall,
-  floor, box, sphere, card), with the share whose own surface is flat (``bench_depth._surface_textured``), unknown
+  floor, box, sphere, card), with the share whose own surface is flat (``_common.surface_textured``), unknown
   (NaN) and estimated nearer than the truth;
 * by the number of the reference's stereo partners that see the exact point;
 * by the distance to a depth edge of the exact depth map;
@@ -45,10 +45,9 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_depth import _seen_count, _surface_textured, _textured  # noqa: E402
-
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
 import vibr.stereo.api as api  # noqa: E402
+from _common import seen_count, surface_textured, textured  # noqa: E402
 
 NOMASK = np.zeros((0, 1, 1), np.uint8)  # the kernels' ``valid`` for sources without masks
 from vibr.stereo import _kernels as kern  # noqa: E402
@@ -171,7 +170,7 @@ def run(seed: int, size: int, args) -> None:
     finally:
         api.refine_planes, api.median_planes, api.check_consistency = refine0, median0, check0
     gt, d, img = scene[0].depth, est[0].depth, scene[0].image
-    tex = _textured(img) & np.isfinite(gt)
+    tex = textured(img) & np.isfinite(gt)
     n = tex.sum()
     ok = _within(d, gt)
     miss = tex & ~ok
@@ -181,7 +180,7 @@ def run(seed: int, size: int, args) -> None:
           f"re-decision {args.redecide}")
     if args.quick:
         return
-    surf = _surface_textured(img, gt)
+    surf = surface_textured(img, gt)
     d0, nb_depths, nb_cams = rec["before_check"]
     ok0 = _within(d0, gt)
     print(f"  before the consistency check {100 * ok0[tex].mean():.2f} %")
@@ -202,7 +201,7 @@ def run(seed: int, size: int, args) -> None:
                   f"{100 * (mm & ~surf).sum() / n:>14.2f} {100 * (mm & ~np.isfinite(d)).sum() / n:>8.2f} "
                   f"{100 * (mm & (d < gt)).sum() / n:>7.2f}")
     partners = [scene.index(k) for k in est.meta["depth_estimation"]["views"]["view_000"]["neighbours"]]
-    seen = _seen_count(scene, 0, partners)
+    seen = seen_count(scene, 0, partners)
     print(f"  seen by k of the {len(partners)} partners {[scene.views[j].name for j in partners]}:")
     for k in range(len(partners) + 1):
         m = tex & (seen == k)

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import cotton_neighbours, data_dir  # noqa: E402
 
 SETTINGS = [("bvs", {}), ("gradient γ=3", {"gamma": 3.0}),
             ("gradient γ=3, grad_weighting=W", {"gamma": 3.0, "grad_weighting": "W"}),
@@ -31,8 +32,6 @@ def main(argv=None):
     a = ap.parse_args(argv)
     from scipy.ndimage import binary_dilation
 
-    from cotton_table import neighbours
-    from paper_tables import data_dir
     from vibr.geometry import compute_samples
     from vibr.io import load_scene, read_image
     from vibr.metrics import psnr
@@ -48,7 +47,7 @@ def main(argv=None):
     print("| stride, GT | all | near discontinuities | elsewhere |")
     print("|---|---|---|---|")
     for s in [int(x) for x in a.strides.split(",")]:
-        src, tview = prepare(scene, "input_Cam040", sources=neighbours(scene, s), depth="gt")
+        src, tview = prepare(scene, "input_Cam040", sources=cotton_neighbours(scene, s), depth="gt")
         samples = compute_samples(src, tview.camera)
         res = {name: render(src, tview, method="bvs" if name == "bvs" else "gradient", samples=samples, **kw)
                for name, kw in SETTINGS}

@@ -31,10 +31,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import data_dir  # noqa: E402
 
 MODELS = {
     "OPENCV": {"k1": -0.12, "k2": 0.03, "p1": 0.001, "p2": -0.0015},
@@ -107,8 +111,6 @@ def cost(size: str) -> None:
 
 
 def fountain(data) -> None:
-    import sys
-
     from scipy.ndimage import map_coordinates
 
     from vibr.eval.protocol import Setting, evaluate
@@ -117,8 +119,6 @@ def fountain(data) -> None:
     from vibr.io.undistort import from_nerfstudio
     from vibr.scene import Scene
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from paper_tables import data_dir
 
     orig = load_scene(data_dir(data) / "strecha_fountain-P11", scale=0.25)
     k = {"k1": -0.1, "k2": 0.01, "p1": 0.0, "p2": 0.0}

@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 _REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(_REPO / "benchmarks"))
-
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import data_dir  # noqa: E402
 
 BG_RADIUS = 7
 
@@ -89,11 +89,10 @@ def rules():
 
 def cases(size: int, seeds: int):
     """(family, name, sources without the fallback, target view)."""
-    from bench_depth import data_dir
 
-    from vibr.stereo.cache import scene_with_depth
-    from vibr.io import load_scene
     from vibr.geometry.selection import select_views
+    from vibr.io import load_scene
+    from vibr.stereo.cache import scene_with_depth
     from vibr.synthetic import make_scene
 
     def est(src):

@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import data_dir  # noqa: E402
 
 
 def main(argv=None):
@@ -26,7 +27,6 @@ def main(argv=None):
     ap.add_argument("--methods", default="gradient,ulr")
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
     a = ap.parse_args(argv)
-    from paper_tables import data_dir
     from vibr.eval.protocol import Setting, run_evaluation
     from vibr.io import load_scene
     from vibr.metrics import dssim, psnr

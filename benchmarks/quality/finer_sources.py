@@ -47,28 +47,26 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import cotton_gt_case, data_dir, synthetic_grid_case  # noqa: E402
 
 METHODS = ("ulr", "bvs", "gradient")
 WAYS = ("target grid", "footprint", "auto")
 
 
 def cotton():
-    from footprint_table import cotton_case
 
-    name, src, tgt = cotton_case()
+    name, src, tgt = cotton_gt_case()
     return "cotton, stride 2, GT depth", src, tgt
 
 
 def synthetic():
-    from footprint_table import synthetic_case
 
-    name, src, tgt = synthetic_case()
+    name, src, tgt = synthetic_grid_case()
     return "synthetic grid 256², exact depth", src, tgt
 
 
 def temple():
-    from paper_tables import data_dir
     from vibr.io import load_scene
     from vibr.pipeline import prepare
 
@@ -78,7 +76,6 @@ def temple():
 
 
 def fountain():
-    from paper_tables import data_dir
     from vibr.io import load_scene
     from vibr.pipeline import prepare
 
@@ -89,9 +86,8 @@ def fountain():
 
 def coarser_case(key, f):
     """``(name, sources, target)``: the sources ``f`` times coarser than the target."""
-    from paper_tables import data_dir
-    from vibr.io import load_scene
     from vibr.geometry.resample import scaled_scene
+    from vibr.io import load_scene
     from vibr.pipeline import prepare
 
     if key in ("cotton", "synthetic"):

@@ -35,31 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-COTTON = ROOT.parent / "shared" / "data" / "hci2016_cotton"
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import cotton_gt_case, synthetic_grid_case  # noqa: E402
+
 SETTINGS = [("bvs", "bilinear"), ("bvs", "footprint"), ("gradient", "bilinear"), ("gradient", "footprint")]
-
-
-def synthetic_case():
-    from vibr.synthetic import make_scene
-
-    sc = make_scene("grid", width=256, height=256)
-    tgt = sc.views[4]
-    src = sc.subset([v.name for v in sc.views if v.name != tgt.name])
-    return "synthetic grid 256²", src, tgt
-
-
-def cotton_case(stride=2):
-    from vibr.io import load_scene
-    from vibr.pipeline import prepare
-
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    from cotton_table import neighbours
-
-    scene = load_scene(COTTON)
-    tgt = scene["input_Cam040"]
-    src, _ = prepare(scene.subset(neighbours(scene, stride) + ["input_Cam040"]), tgt.name, depth="gt")
-    return f"cotton stride {stride}, GT", src, tgt
 
 
 def run_case(name, src, tgt, factors, extra):
@@ -158,7 +137,7 @@ def main(argv=None):
         if c == "coarse":
             coarse_case(extra)
             continue
-        name, src, tgt = {"synthetic": synthetic_case, "cotton": cotton_case}[c]()
+        name, src, tgt = {"synthetic": synthetic_grid_case, "cotton": cotton_gt_case}[c]()
         run_case(name, src, tgt, factors, extra)
 
 

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
-import sweep_defaults as S  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import TEMPLE5, SceneCache, data_dir, sweep_cases, sweep_sources, temple5_sources  # noqa: E402
 
 STUDIES = {
     "weighting": [("ULR", "ulr", {}), ("default", "gradient", {}), ("γ0", "gradient", {"gamma": 0.0}),
@@ -37,22 +37,11 @@ STUDIES = {
     "coverage": [("ULR", "ulr", {}), ("BVS", "bvs", {"lam": 0.1})]  # BVS at the sweep's lam
     + [(f"cov {t:g}", "gradient", {"grad_coverage": t}) for t in (0.0, 1.0, 1.5, 2.0, 3.0)],
 }
-EXTRA = "temple 0005 all 15"
-
-
-def _temple5(cache):
-    from vibr.stereo.cache import scene_with_depth
-    from vibr.geometry import apply_fallback
-
-    rest, tv = cache.get("middlebury_templeSparseRing", 1.0).split("templeSR0005")
-    return apply_fallback(scene_with_depth(rest, depth="estimated"), "auto"), tv
-
-
 def run_case(cache, case) -> dict:
     from vibr.metrics import psnr
     from vibr.render import shared_geometry
 
-    src, tv = _temple5(cache) if case["name"] == EXTRA else S._sources(cache, case)
+    src, tv = temple5_sources(cache) if case["name"] == TEMPLE5 else sweep_sources(cache, case)
     geo = shared_geometry(src, tv, [(m, kw) for _, m, kw in STUDIES[case["study"]]])
     res = {lab: float(psnr(geo.render(m, **kw).image, tv.image, border=2))
            for lab, m, kw in STUDIES[case["study"]]}
@@ -67,9 +56,9 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes")
     ap.add_argument("--study", choices=tuple(STUDIES), default="weighting", help="the settings compared")
     a = ap.parse_args(argv)
-    cases = [{**c, "study": a.study} for c in S.case_list() + [{"name": EXTRA, "split": "extra", "family": "extra"}]]
+    cases = [{**c, "study": a.study} for c in sweep_cases() + [{"name": TEMPLE5, "split": "extra", "family": "extra"}]]
     t0 = time.perf_counter()
-    reps = run_tasks(run_case, cases, setup=S.SceneCache, setup_args=(str(S.data_dir(a.data)),),
+    reps = run_tasks(run_case, cases, setup=SceneCache, setup_args=(str(data_dir(a.data)),),
                      executor=a.workers, desc="cases")
     labs = [v[0] for v in STUDIES[a.study]]
     print("| case | split | " + " | ".join(labs) + " |\n|---|---|" + "---|" * len(labs))

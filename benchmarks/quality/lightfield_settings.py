@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_depth import _centre_disparity_model, _textured, data_dir, hci_metrics  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import centre_disparity_model, data_dir, hci_metrics, textured  # noqa: E402
 
 
 def _parse(s: str) -> tuple:
@@ -134,7 +134,7 @@ def cotton_case(settings):
         est8 = estimate_depth(sub, views=nbs, exclude=[centre], **kw)
         t8 = time.perf_counter() - t
         est1 = estimate_depth(sub, views=[centre], **kw)
-        a, b = _centre_disparity_model(sub, centre)
+        a, b = centre_disparity_model(sub, centre)
         with np.errstate(divide="ignore", invalid="ignore"):
             d = -(a + b / est1[centre].depth.astype(np.float64))
         bp, mse = hci_metrics(d, gt, 15)
@@ -165,7 +165,7 @@ def synthetic_renders(settings, W: int, grids):
         names = [v.name for v in scene.views]
         centre, nbs = names[4], names[:4] + names[5:]
         gt = scene[4].depth
-        tex = _textured(scene[4].image) & np.isfinite(gt)
+        tex = textured(scene[4].image) & np.isfinite(gt)
         for se in settings:
             kw = _kw(se)
             t = time.perf_counter()
@@ -195,7 +195,7 @@ def synthetic_cases(settings, W: int):
     for seed, bl in GRIDS:
         scene = make_scene("grid", n_views=9, width=W, height=H, seed=seed, baseline=bl)
         gt = scene[4].depth
-        tex = _textured(scene[4].image) & np.isfinite(gt)
+        tex = textured(scene[4].image) & np.isfinite(gt)
         for se in settings:
             t = time.perf_counter()
             est = estimate_depth(scene, views=[4], method="lightfield", **_kw(se))

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import sweep_defaults as S  # noqa: E402  (the sweep's cases and their sources)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import SWEEP_BORDER, SceneCache, data_dir, sparse_cases, sweep_cases, sweep_sources  # noqa: E402
 
 PASSES = (1, 2, 3)
 
@@ -26,13 +26,13 @@ def run_case(cache, case) -> dict:
     from vibr.metrics import psnr
     from vibr.render import shared_geometry
 
-    src, tv = S._sources(cache, case)
+    src, tv = sweep_sources(cache, case)
     geo = shared_geometry(src, tv)
-    res = {"ULR": float(psnr(geo.render("ulr").image, tv.image, border=S.BORDER))}
+    res = {"ULR": float(psnr(geo.render("ulr").image, tv.image, border=SWEEP_BORDER))}
     iters = []
     for n in PASSES:
         r = geo.render("gradient", n_outer=n)
-        res[f"n_outer {n}"] = float(psnr(r.image, tv.image, border=S.BORDER))
+        res[f"n_outer {n}"] = float(psnr(r.image, tv.image, border=SWEEP_BORDER))
         if n == 2:
             starts = [int(x) for x in r.outer] + [len(r.energy)]
             iters = [b - a for a, b in zip(starts, starts[1:])]
@@ -47,11 +47,11 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2, metavar="N")
     ap.add_argument("--only", default="", help="comma list of case-name prefixes")
     a = ap.parse_args(argv)
-    cases = S.case_list() + S.sparse_cases()
+    cases = sweep_cases() + sparse_cases()
     if a.only:
         cases = [c for c in cases if c["name"].startswith(tuple(a.only.split(",")))]
     t0 = time.perf_counter()
-    reps = run_tasks(run_case, cases, setup=S.SceneCache, setup_args=(str(S.data_dir(a.data)),),
+    reps = run_tasks(run_case, cases, setup=SceneCache, setup_args=(str(data_dir(a.data)),),
                      executor=a.workers, desc="cases")
     labs = list(reps[0]["psnr"])
     print("| case | split | " + " | ".join(labs) + " | FISTA iterations per pass (n_outer 2) |")

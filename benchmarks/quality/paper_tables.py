@@ -1,4 +1,5 @@
-"""Reproduce the paper's two evaluation protocols on the scenes at hand and write docs/RESULTS.md.
+"""Reproduce the paper's two evaluation protocols on the scenes at hand and write
+docs/results/paper-tables.md.
 
 Structured protocol (paper §6, docs/explanation/method.md §8), HCI 2016 *cotton* (512×512): the centre view
 ``input_Cam040`` of a 3×3 block is held out and rendered from its 8 neighbours, at strides
@@ -21,13 +22,17 @@ every setting reconstructed, 2-pixel border excluded. Depth is estimated once pe
 (target, stride) and shared by all settings; the warped samples are computed once per
 geometry (``vibr.eval.protocol.run_evaluation``). Nothing is cached between runs.
 
-    python benchmarks/quality/paper_tables.py --write-docs    # everything, writes docs/RESULTS.md
+    python benchmarks/quality/paper_tables.py --write-docs    # everything, writes docs/results/paper-tables.md
     python benchmarks/quality/paper_tables.py --quick         # a small smoke run (writes no tracked file)
     python benchmarks/quality/paper_tables.py --quick --dask local   # the cases on a Dask LocalCluster;
                                                              # --workers N: N local processes
 
 Without ``--write-docs`` (or an explicit ``--doc PATH``) no markdown is written: a run never
 overwrites a tracked file unless asked (``--quick`` refuses ``--write-docs``).
+
+A fountain view at scale 0.25 whose (0.1, 1, 0.002) PSNR falls below :data:`FOUNTAIN_FLOOR`
+makes the run exit 1 with a one-line reason (after writing its reports and page);
+``--check-only FILE`` applies that check alone to a JSON report or a list of reports.
 
 Every case (cotton stride × depth, fountain target) is one task of
 ``vibr.executor.run_tasks``: serial by default, the same numbers on processes or Dask
@@ -46,13 +51,15 @@ import json
 import os
 import platform
 import shlex
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import RESULTS, ROOT, SceneCache, cotton_neighbours, data_dir, machine_description, sh  # noqa: E402
+
+#: the generated page (--write-docs)
+PAGE = RESULTS / "paper-tables.md"
 
 #: The paper's unstructured table (PSNR dB, DSSIM), Nieto et al. 2016, fountain-P11 at 3072×2048.
 PAPER_FOUNTAIN = {
@@ -77,27 +84,8 @@ def _mvs_default(name: str):
 GREY_LEVEL_PARAMS = {"sigma_s": 1.0, "grad_max": 64.0}
 
 
-def data_dir(arg) -> Path:
-    d = Path(arg or os.environ.get("VIBR_DATA") or ROOT.parent / "shared" / "data")
-    if not d.is_dir():
-        sys.exit(f"data folder not found: {d}")
-    return d
-
-
 def key(a, g, l) -> str:
     return f"{a:g},{g:g},{l:g}"
-
-
-def sh(cmd) -> str:
-    try:
-        return subprocess.run(cmd, capture_output=True, text=True, check=False, cwd=ROOT).stdout.strip()
-    except OSError:
-        return ""
-
-
-def cotton_neighbours(scene, s):
-    inv = {rc: n for n, rc in scene.meta["grid_pos"].items()}
-    return [inv[(4 + dr * s, 4 + dc * s)] for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
 
 # --------------------------------------------------------------------------------------------
@@ -161,8 +149,8 @@ def fountain_settings():
 def evaluate_with_figures(scene, target, settings, figdir, labels, prefix, downscale, **kw) -> dict:
     """``vibr.eval.protocol.run_evaluation``'s report, with the comparison figures of the settings
     ``labels`` written to ``figdir`` (None: no figures) by ``vibr.eval.figures``."""
-    from vibr.eval.protocol import run_evaluation
     from vibr.eval.figures import write_evaluation_figures
+    from vibr.eval.protocol import run_evaluation
 
     ev = run_evaluation(scene, target, settings, **kw)
     if figdir:
@@ -200,23 +188,6 @@ def _fountain_case(scene, case):
 def fountain_log(rep):
     return (f"fountain {rep['target']} at scale {rep['scale']:g}: {rep['wall_seconds']:.0f} s "
             f"(depth {rep['depth_seconds']:.0f} s)")
-
-
-class SceneCache:
-    """Per-worker context of run_case: each scene (name, image scale) loaded once per worker."""
-
-    def __init__(self, data):
-        self.data = Path(data)
-        self.scenes = {}
-
-    def get(self, name, scale):
-        from vibr.io import load_scene
-
-        if (name, scale) not in self.scenes:
-            sc = load_scene(self.data / name, scale=scale)
-            sc.meta["scale"] = scale
-            self.scenes[(name, scale)] = sc
-        return self.scenes[(name, scale)]
 
 
 def run_case(cache, case):
@@ -463,7 +434,8 @@ def fountain_section(reports, large, args):
     return L
 
 
-#: Issue 22's floor for vibr's (0.1, 1, 0.002) row on fountain at scale 0.25 (PSNR dB per view).
+#: The floor of vibr's (0.1, 1, 0.002) row on fountain at scale 0.25 (PSNR dB per view): a run
+#: below it exits 1 (:func:`floor_failures`).
 FOUNTAIN_FLOOR = {"0002": 29.09, "0005": 30.20, "0008": 27.82}
 
 
@@ -472,6 +444,25 @@ def _lead(rep):
     rs = [r for r in rep["results"] if abs(r["intensity_scale"] - 255) < 1e-9]
     b = max(rs, key=lambda r: r["psnr"])
     return b["label"], b["psnr"]
+
+
+def floor_failures(reports) -> list[str]:
+    """One line per fountain report at scale 0.25 whose (0.1, 1, 0.002) PSNR is below
+    :data:`FOUNTAIN_FLOOR` (reports of other scales or views have no floor)."""
+    out = []
+    for rep in reports:
+        floor = FOUNTAIN_FLOOR.get(rep.get("target")) if abs(rep.get("scale", 0) - 0.25) < 1e-9 else None
+        ours = find(rep, "gradient", "0.1,1,0.002") if floor else None
+        if ours is not None and ours["psnr"] < floor:
+            out.append(f"fountain view {rep['target']}: (0.1, 1, 0.002) {ours['psnr']:.2f} dB BELOW floor {floor:.2f} dB")
+    return out
+
+
+def check_floors(reports) -> None:
+    """Exit 1 with a one-line reason when a report is below its floor."""
+    bad = floor_failures(reports)
+    if bad:
+        sys.exit("paper_tables.py: " + "; ".join(bad))
 
 
 def discussion_section(cotton, fountain, large):
@@ -492,7 +483,7 @@ def discussion_section(cotton, fountain, large):
             floor = FOUNTAIN_FLOOR.get(t) if abs(rep["scale"] - 0.25) < 1e-9 else None
             L.append(f"* view {int(t)}: best setting {lab} ({ps:.2f} dB). (0.1, 1, 0.002) {ours['psnr']:.2f} dB"
                      + (f" ({ours['psnr'] - pp[0]:+.2f} dB against the paper's {pp[0]:.2f})" if pp else "")
-                     + (f", {'at or above' if ours['psnr'] >= floor else 'BELOW'} issue 22's floor {floor:.2f}"
+                     + (f", {'at or above' if ours['psnr'] >= floor else 'BELOW'} the floor {floor:.2f}"
                         if floor else "")
                      + f"; minus the best γ = 0 setting: {ours['psnr'] - g0['psnr']:+.2f} dB "
                      f"(DSSIM {ours['dssim'] - g0['dssim']:+.0f}); γ = 0.5 minus γ = 1: "
@@ -538,14 +529,6 @@ def discussion_section(cotton, fountain, large):
     return L
 
 
-def machine_section():
-    lscpu = sh(["lscpu"])
-    keep = ("Architecture", "CPU(s)", "On-line", "Model name", "Thread(s) per core", "Core(s) per",
-            "Socket(s)", "CPU max MHz", "L2 cache", "L3 cache", "Hypervisor")
-    lines = [ln for ln in lscpu.splitlines() if ln.split(":")[0].strip().startswith(keep)]
-    return lines, sh(["nproc"])
-
-
 def git_state() -> dict:
     """The commit and the files that differ from it (tracked), now."""
     return {"commit": sh(["git", "rev-parse", "HEAD"]), "dirty": sh(["git", "diff", "--name-only", "HEAD"])}
@@ -560,10 +543,10 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
     tail = old.split("<!-- END DISCUSSION -->", 1)[1].lstrip("\n") if "<!-- END DISCUSSION -->" in old else ""
     discussion = "\n".join(["<!-- BEGIN DISCUSSION -->", *discussion_section(cotton, fountain, large),
                              "<!-- END DISCUSSION -->"])
-    lscpu, nproc = machine_section()
+    lscpu = machine_description()
     reps = cotton + fountain + large
     mi = reps[0]["machine"] if reps else machine_info()
-    commit, dirty = (git or git_state())["commit"], (git or git_state())["dirty"]
+    dirty = (git or git_state())["dirty"]  # the commit stays in summary.json, not on the page
     cmd = "python3 " + " ".join(shlex.quote(a) for a in ["benchmarks/quality/paper_tables.py"] + list(argv))
     env_txt = env or "unset"
     rp = next((x["params"] for r in fountain + cotton for x in r["results"] if x["method"] == "gradient"), {})
@@ -578,14 +561,10 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "## The run",
          "",
          f"* Command (from the repository root): `time {env}{cmd}`",
-         f"* Started {started} (UTC); wall time of the whole run **{t_total / 60:.1f} min** ({t_total:.0f} s).",
-         f"* Code at the start of the run: commit `{commit[:12]}`" + (" plus uncommitted changes in: " + ", ".join(
-             f"`{ln}`" for ln in dirty.splitlines()) if dirty else " (clean)") + "."
-         + (f" At the end: commit `{git_end['commit'][:12]}`"
-            + (" plus uncommitted changes in: " + ", ".join(f"`{ln}`" for ln in git_end["dirty"].splitlines())
-               if git_end["dirty"] else " (clean)") + "." if git_end and git_end != git else "")
+         f"* Wall time of the whole run **{t_total / 60:.1f} min** ({t_total:.0f} s)."
+         + (" Run with uncommitted changes." if dirty or (git_end and git_end.get("dirty")) else "")
          + (f" {note}" if note else ""),
-         f"* Machine: `nproc` = {nproc}; numba threads {mi.get('numba_threads')} "
+         f"* Machine: numba threads {mi.get('numba_threads')} "
          f"(NUMBA_NUM_THREADS {env_txt}); "
          f"load average at start {load0[0]:.2f} (the machine is shared: "
          "timings are indicative).",
@@ -685,7 +664,7 @@ def main(argv=None):
                     help="comparison figures (not committed: they show the datasets' photographs)")
     ap.add_argument("--doc", default="", help="markdown to write (default: none)")
     ap.add_argument("--write-docs", action="store_true",
-                    help="write the tracked docs/RESULTS.md (the full run only)")
+                    help="write the tracked docs/results/paper-tables.md (the full run only)")
     ap.add_argument("--strides", default="1,2,4")
     ap.add_argument("--cotton-depths", default="estimated,gt,planar")
     ap.add_argument("--figure-stride", type=int, default=2)
@@ -696,6 +675,8 @@ def main(argv=None):
     ap.add_argument("--skip", default="", help="comma list among cotton, fountain, large")
     ap.add_argument("--report-only", action="store_true",
                     help="only rewrite --doc from the JSON reports of the last run in --out")
+    ap.add_argument("--check-only", metavar="FILE",
+                    help="only check the floors on the JSON report(s) in FILE: exit 1 when one is below")
     ap.add_argument("--quick", action="store_true", help="smoke run: stride 2, gt+planar, view 5 at 0.0625, no large row")
     ex = ap.add_mutually_exclusive_group()
     ex.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes (vibr.executor)")
@@ -703,6 +684,11 @@ def main(argv=None):
                     "(a LocalCluster of 2 workers x 1 thread); needs pip install 'vibr[dask]'")
     args = ap.parse_args(argv)
     args.executor = args.dask if args.dask else args.workers
+    if args.check_only:
+        reps = json.loads(Path(args.check_only).read_text())
+        check_floors(reps if isinstance(reps, list) else [reps])
+        print(f"paper_tables.py: {args.check_only}: every floor met", file=sys.stderr)
+        return
     if args.dask:
         from vibr.executor import require_distributed
 
@@ -712,8 +698,8 @@ def main(argv=None):
             sys.exit(f"paper_tables.py: {exc}")
     if args.write_docs:
         if args.quick:
-            ap.error("--quick is a smoke run: it does not write docs/RESULTS.md (drop --write-docs)")
-        args.doc = str(ROOT / "docs" / "RESULTS.md")
+            ap.error("--quick is a smoke run: it does not write the docs (drop --write-docs)")
+        args.doc = str(PAGE)
     if args.report_only and not args.doc:
         ap.error("--report-only rewrites a markdown file: give --write-docs or --doc PATH")
     if args.quick:
@@ -736,6 +722,7 @@ def main(argv=None):
                       summ["log"], env=summ.get("env"), git=summ.get("git"), git_end=summ.get("git_end"),
                       note=summ.get("note"))
         print(f"wrote {args.doc} from {args.out}", file=sys.stderr)
+        check_floors(load(summ["fountain"]))
         return
 
     started = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M")
@@ -777,6 +764,7 @@ def main(argv=None):
         write_results(args.doc, args, argv, cotton, fountain, large, t_total, started, load0, log_lines, env=env,
                       git=git0, git_end=git_state())
         print(f"wrote {args.doc}", file=sys.stderr)
+    check_floors(fountain)
 
 
 if __name__ == "__main__":

@@ -32,32 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from paper_tables import SceneCache, data_dir  # noqa: E402
-from sweep_defaults import _sources, case_list  # noqa: E402  (the same cases and sources)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import SceneCache, data_dir, planar_cases, plane_sources  # noqa: E402
 
 FRACTIONS = (0.005, 0.01, 0.02, 0.04, 0.08, 0.16)
 FACTORS = (0.25, 0.5, 2.5, 5.0)  # of the default; 5: the former rule
 BORDER = 2
-
-
-def planar_cases():
-    """The sweep's cases with a plane: cotton planar, fountain, temple 0004 (4 views), synthetic."""
-    keep = ("cotton planar", "fountain", "other")
-    return [c for c in case_list() if any(c["family"].startswith(k) for k in keep)]
-
-
-def _plane(cache, case):
-    """(sources on the plane with the default sigma_z, target view, D, that sigma_z)."""
-    from vibr.geometry import planar_proxy
-
-    src, tv = _sources(cache, case)
-    if case["kind"] != "cotton":  # cotton's sources are already on the plane
-        src = planar_proxy(src, tv.camera)
-    p = src.meta["proxy"]
-    return src, tv, float(p["depth"]), float(p["sigma_z"])
 
 
 def rules(D, default):
@@ -73,7 +53,7 @@ def run_case(cache, case):
     from vibr.render import shared_geometry
 
     t0 = time.perf_counter()
-    src, tv, D, default = _plane(cache, case)
+    src, tv, D, default = plane_sources(cache, case)
     res = {}
     for lab, sz in rules(D, default).items():
         s = src.replace(views=[v.replace(sigma_z=sz) for v in src.views])

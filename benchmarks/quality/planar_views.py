@@ -23,31 +23,17 @@ on *report* beside ULR and BVS from the same views and from every view.
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from paper_tables import SceneCache, data_dir  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import planar_view_cases  # noqa: E402
 
 NS = (4, 8, 16, "all")
-LAYOUTS = (("grid", 25), ("arc", 16), ("free", 16), ("handheld", 16))
 SPLIT = ("choose", "report")
-
-
-def cases():
-    """(name, split, scene, target) in the fixed order."""
-    from vibr.synthetic import make_scene
-
-    sc = SceneCache(data_dir(None)).get("hci2016_cotton", 1.0)
-    for i, t in enumerate(("input_Cam040", "input_Cam020", "input_Cam060")):
-        yield f"cotton {t}", SPLIT[i % 2], sc, t
-    for i, (lo, n, seed) in enumerate((lo, n, seed) for lo, n in LAYOUTS for seed in (0, 1)):
-        s = make_scene(lo, n_views=n, width=128, height=128, seed=seed)
-        yield f"synthetic {lo} ({n} views, seed {seed})", SPLIT[i % 2], s, s.views[len(s) // 2].name
 
 
 def _psnr(src, tv, S, method, **kw):
@@ -57,7 +43,10 @@ def _psnr(src, tv, S, method, **kw):
     return psnr(render(src, tv.camera, method, samples=S, **kw).image, tv.image, border=2)
 
 
-def main():
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
+    a = ap.parse_args(argv)
     from vibr.geometry import compute_samples
     from vibr.pipeline import prepare
     from vibr.render.operators import Splat
@@ -67,7 +56,7 @@ def main():
     print(f"| case | split | {head} | all: gradient γ 0 | all: prior on both terms (probe) |")
     print("|---|---|" + "---|" * (len(NS) + 2))
     rows = []
-    for name, split, sc, t in cases():
+    for name, split, sc, t in planar_view_cases(a.data):
         res = {}
         for n in NS:
             src, tv = prepare(sc, t, depth="planar", n_views=n)

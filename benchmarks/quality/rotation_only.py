@@ -21,8 +21,8 @@ def main(argv=None):
     ap.add_argument("--pan-deg", type=float, default=24.0)
     args = ap.parse_args(argv)
     from vibr.eval.protocol import Setting, evaluate
-    from vibr.synthetic import DEFAULT_SIGMA_Z, default_world, pan_cameras, render_view
     from vibr.scene import Scene, View
+    from vibr.synthetic import DEFAULT_SIGMA_Z, default_world, pan_cameras, render_view
 
     w, h = (int(x) for x in args.size.split("x"))
     world = default_world(0)

@@ -26,57 +26,24 @@ on the *report* halves.
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
-import sweep_defaults as S  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import run_study, study_sources  # noqa: E402
 
 VALUES = (0.0, 0.5, 0.7, 0.8, 0.9, 0.95)
-SETS = ("sweep", "planar 4", "plane")
 MIN_GAIN = 0.05
 TIE = 0.005
-
-
-def case_list():
-    import grad_weighting as G
-    import planar_sigma_z as P
-
-    out = [{**c, "set": "sweep"} for c in S.case_list()]
-    out.append({"name": G.EXTRA, "split": "extra", "family": "extra", "set": "sweep"})
-    out += [{"name": f"planar 4 #{i}", "index": i, "split": sp, "set": "planar 4"}
-            for i, sp in enumerate(["choose", "report", "choose"] + ["choose", "report"] * 4)]
-    out += [{**c, "set": "plane"} for c in P.planar_cases() if c["family"] != "cotton planar"]
-    return out
-
-
-def _sources(cache, case):
-    import grad_weighting as G
-    import planar_sigma_z as P
-
-    if case["set"] == "sweep":
-        return G._temple5(cache) if case["name"] == G.EXTRA else S._sources(cache, case)
-    if case["set"] == "plane":
-        return P._plane(cache, case)[:2]
-    from planar_views import cases
-    from vibr.pipeline import prepare
-
-    name, split, sc, t = list(cases())[case["index"]]
-    assert split == case["split"]
-    case["name"] = name
-    return prepare(sc, t, depth="planar", n_views=4)
 
 
 def run_case(cache, case) -> dict:
     from vibr.metrics import psnr
     from vibr.render import shared_geometry
 
-    src, tv = _sources(cache, case)
+    src, tv = study_sources(cache, case)
     geo = shared_geometry(src, tv)
     P = lambda m, **kw: float(psnr(geo.render(m, **kw).image, tv.image, border=2))  # noqa: E731
     res = {"ULR": P("ulr"), "BVS": P("bvs", lam=0.1) if case["set"] == "sweep" else P("bvs")}  # the sweep's BVS lam
@@ -84,30 +51,6 @@ def run_case(cache, case) -> dict:
     res["default"] = P("gradient")
     return {"name": case["name"], "split": case["split"], "set": case["set"], "psnr": res,
             "proxy": bool(geo.samples.meta.get("z_corr"))}
-
-
-def main(argv=None, run_case=run_case, summary=None, doc=__doc__) -> None:
-    """Run ``run_case`` over :func:`case_list` (``--workers`` processes), print the per-case
-    table and ``summary(reps, labels)`` (this benchmark's, by default); ``view_prior_tie.py``
-    runs its own cases through it."""
-    from vibr.executor import run_tasks
-
-    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
-    ap.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes")
-    ap.add_argument("--json", help="write the per-case results here")
-    a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    reps = run_tasks(run_case, case_list(), setup=S.SceneCache, setup_args=(str(S.data_dir(a.data)),),
-                     executor=a.workers, desc="cases")
-    if a.json:
-        Path(a.json).write_text(json.dumps(reps, indent=1))
-    labs = list(reps[0]["psnr"])
-    print("| set | case | split | " + " | ".join(labs) + " |\n|---|---|---|" + "---|" * len(labs))
-    for r in reps:
-        print(f"| {r['set']} | {r['name']} | {r['split']} | " + " | ".join(f"{r['psnr'][k]:.2f}" for k in labs) + " |")
-    (summary or _summary)(reps, labs)
-    print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
 
 
 def _summary(reps, labs):
@@ -134,6 +77,10 @@ def _summary(reps, labs):
     print(f"library: PROXY_Z_CORR = {PROXY_Z_CORR:g}; cases where the default trails ULR or BVS: "
           + (", ".join(f"{r['set']}: {r['name']}" for r in reps
                        if r["psnr"]["default"] < max(r["psnr"]["ULR"], r["psnr"]["BVS"])) or "none"))
+
+
+def main(argv=None) -> None:
+    run_study(run_case, _summary, __doc__, argv)
 
 
 if __name__ == "__main__":

@@ -45,7 +45,8 @@ from pathlib import Path
 import numpy as np
 
 _REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(_REPO / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import centre_disparity_model, cotton_neighbours, data_dir, textured  # noqa: E402
 
 GAUSS_MAD = 0.6745  # median |x| of a standard normal
 GROSS = 0.05  # a relative depth error beyond which a pixel counts as a gross error
@@ -72,8 +73,6 @@ def calibration(z_est, sigma, z_true, mask=None, border: int = 15) -> dict:
 
 def cotton_cases(strides):
     """(name, estimator, estimated view, true depth) of cotton's centre from its 8 neighbours at each stride."""
-    from bench_depth import _centre_disparity_model, data_dir
-    from paper_tables import cotton_neighbours
 
     from vibr.io import load_scene, read_pfm
     from vibr.stereo import estimate_depth
@@ -85,7 +84,7 @@ def cotton_cases(strides):
     for s in strides:
         sub = scene.subset([centre, *cotton_neighbours(scene, s)])
         est = estimate_depth(sub, views=[centre])
-        a, b = _centre_disparity_model(sub, centre)
+        a, b = centre_disparity_model(sub, centre)
         with np.errstate(divide="ignore", invalid="ignore"):
             z_true = b / (-gt - a)  # d = −(a + b/z)
         yield f"cotton centre, stride {s}", "light field", est[centre], z_true
@@ -120,12 +119,11 @@ def main(argv=None) -> int:
     print("| case | estimator | textured pixels | k = median(|e|/σ)/0.6745 | k_rms | k_rms99 | gross % (all pixels) | within 1σ % | "
           "within 2σ % | Spearman ρ(σ, |e|) | median |e|/z | median σ/z | s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    from bench_depth import _textured
 
     ks = {}
     t = time.perf_counter()
     for name, method, v, zt in itertools.chain(cotton_cases((1, 2, 4)), synthetic_cases(args.size, args.seeds)):
-        c = calibration(v.depth, v.sigma_z, zt, _textured(v.image), args.border)
+        c = calibration(v.depth, v.sigma_z, zt, textured(v.image), args.border)
         gross_all = calibration(v.depth, v.sigma_z, zt, None, args.border)["gross"]
         ks.setdefault(method, []).append((c["k"], c["k_rms"], c["k_rms99"]))
         print(f"| {name} | {method} | {c['n']} | {c['k']:.2f} | {c['k_rms']:.2f} | {c['k_rms99']:.2f} | "

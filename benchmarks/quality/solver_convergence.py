@@ -16,7 +16,8 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import SWEEP_BORDER, SceneCache, data_dir, sweep_cases, sweep_sources  # noqa: E402
 
 
 def main(argv=None):
@@ -25,24 +26,22 @@ def main(argv=None):
     ap.add_argument("--view-k", type=int, default=0, help="view prior (default 0: none)")
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
     a = ap.parse_args(argv)
-    import sweep_defaults as SD
-    from paper_tables import SceneCache, data_dir
 
     from vibr.geometry import compute_samples
     from vibr.metrics import psnr
     from vibr.render import render
 
     names = [c.strip() for c in a.cases.split(",")]
-    cases = [c for c in SD.case_list() if c["name"] in names]
+    cases = [c for c in sweep_cases() if c["name"] in names]
     if len(cases) != len(names):
-        sys.exit(f"unknown case among {names} (known: {', '.join(c['name'] for c in SD.case_list())})")
+        sys.exit(f"unknown case among {names} (known: {', '.join(c['name'] for c in sweep_cases())})")
     cache = SceneCache(data_dir(a.data))
     variants = [("plain, default stop", dict(precond=False)), ("preconditioned, default stop", dict(precond=True)),
                 ("plain, converged", dict(precond=False, max_iter=600, tol=1e-7)),
                 ("preconditioned, converged", dict(precond=True, max_iter=600, tol=1e-7))]
     print("| case | solver | PSNR dB | iterations (per pass) | energy after pass 1 | s |\n|---|---|---|---|---|---|")
     for case in cases:
-        src, tv = SD._sources(cache, case)
+        src, tv = sweep_sources(cache, case)
         S = compute_samples(src, tv.camera)
         for label, kw in variants:
             t = time.perf_counter()
@@ -50,7 +49,7 @@ def main(argv=None):
             dt = time.perf_counter() - t
             o = list(r.outer) + [len(r.energy)]
             per = [o[j + 1] - o[j] for j in range(len(o) - 1)]
-            print(f"| {case['name']} | {label} | {psnr(r.image, tv.image, border=SD.BORDER):.2f} | {r.iterations} "
+            print(f"| {case['name']} | {label} | {psnr(r.image, tv.image, border=SWEEP_BORDER):.2f} | {r.iterations} "
                   f"({' + '.join(map(str, per))}) | {r.energy[o[1] - 1]:.6g} | {dt:.1f} |", flush=True)
 
 

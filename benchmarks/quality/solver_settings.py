@@ -17,7 +17,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import centre_index, cotton_neighbours, data_dir, grid_scene  # noqa: E402
 
 
 def main(argv=None):
@@ -28,14 +29,13 @@ def main(argv=None):
                     help="the table of tol_outer (1e-4, 3e-4, 1e-3) instead of n_outer / tv_iter")
     if ap.parse_args(argv).tol_outer:
         return tol_outer_table()
-    from cotton_table import DATA, neighbours
     from vibr.geometry import compute_samples
     from vibr.io import load_scene
     from vibr.metrics import dssim, psnr
     from vibr.pipeline import prepare
     from vibr.render.api import render_samples
 
-    scene = load_scene(DATA)
+    scene = load_scene(data_dir() / "hci2016_cotton")
     tgt = scene["input_Cam040"]
     variants = [dict(n_outer=2, tv_iter=2), dict(n_outer=3, tv_iter=2), dict(n_outer=2, tv_iter=1),
                 dict(n_outer=2, tv_iter=5)]
@@ -43,7 +43,7 @@ def main(argv=None):
     print("|---|---|---|" + "---|" * len(variants))
     for s in (1, 2, 4):
         for depth in ("gt", "planar"):
-            src, _ = prepare(scene.subset(neighbours(scene, s) + ["input_Cam040"]), tgt.name, depth=depth)
+            src, _ = prepare(scene.subset(cotton_neighbours(scene, s) + ["input_Cam040"]), tgt.name, depth=depth)
             S = compute_samples(src, tgt.camera)
             for m, kw in [("bvs", {}), ("gradient", {"gamma": 1.0}), ("gradient", {"gamma": 1.0, "lam": 2.0})]:
                 cells = []
@@ -61,8 +61,6 @@ def tol_outer_table():
     """PSNR (dB, covered pixels, 2-pixel border) and FISTA iterations per pass for
     ``tol_outer`` 1e-4, 3e-4, 1e-3: cotton (strides 1, 2, 4, GT and planar geometry) and the
     synthetic 768² grid of ``bench_render.py``, with each method's defaults."""
-    from bench_render import centre_index, grid_scene
-    from cotton_table import DATA, neighbours
     from vibr.geometry import compute_samples
     from vibr.io import load_scene
     from vibr.metrics import psnr
@@ -83,11 +81,11 @@ def tol_outer_table():
                              f"({' + '.join(map(str, its))} it)")
             print(f"| {scene_label} | {geometry} | {m} | " + " | ".join(cells) + " |", flush=True)
 
-    scene = load_scene(DATA)
+    scene = load_scene(data_dir() / "hci2016_cotton")
     tgt = scene["input_Cam040"]
     for s in (1, 2, 4):
         for depth in ("gt", "planar"):
-            src, _ = prepare(scene.subset(neighbours(scene, s) + ["input_Cam040"]), tgt.name, depth=depth)
+            src, _ = prepare(scene.subset(cotton_neighbours(scene, s) + ["input_Cam040"]), tgt.name, depth=depth)
             row(f"cotton stride {s}", "GT" if depth == "gt" else "planar", compute_samples(src, tgt.camera), tgt)
     grid = grid_scene(3, 3, 768)
     src, tgt = grid.split(centre_index(grid))

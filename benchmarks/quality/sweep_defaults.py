@@ -1,4 +1,4 @@
-"""Issue 23: the defaults of ``gradient`` (gamma, lam, TV variant) chosen by a sweep across
+"""The defaults of ``gradient`` (gamma, lam, TV variant) chosen by a sweep across
 every scene and setting at hand, with a held-out split; and ``gamma="auto"`` measured.
 
 Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
@@ -12,10 +12,10 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
 * every other view a source, as ``vibr eval`` renders by default: cotton's centre from its
   80 other views (ground-truth depth) and templeSR0004 from the 15 others (estimated depth,
   the fallback proxy where it is unknown);
-* few views (:func:`sparse_cases`, since 2026-11-28): the middle of 7 synthetic views of
+* few views (``_common.sparse_cases``): the middle of 7 synthetic views of
   256×192 (grid, arc, free, handheld layouts with exact depth; a pan turned on the spot,
   without depth) from its 2 and its 4 best views, seeds 0 and 1;
-* no geometry (:func:`nogeo_cases`, since 2026-11-28): the middle of 7 synthetic views of
+* no geometry (:func:`nogeo_cases`): the middle of 7 synthetic views of
   256×192 (arc, free, hand-held layouts, seeds 0 and 1) from the 6 others, their depth
   estimated from them as ``vibr eval`` does for a scene without depth maps (the fallback
   proxy where it is unknown).
@@ -41,7 +41,7 @@ against the median full-size render time of the target over the case's gradient 
 
 Each case renders every setting from one geometry stage, on the grid ``vibr render`` would
 choose (:func:`vibr.render.shared_geometry`: a supersampled or coarser grid, gamma / s² for
-coarser sources); before 2026-11-28 the sweep rendered on the target's own grid.
+coarser sources).
 
 Metrics: PSNR over all pixels and over the covered pixels (those every setting of the case
 reconstructed), 2-pixel border excluded. The held-out split is fixed before any number is
@@ -51,28 +51,41 @@ and "report" (2nd, 4th, ...); in the few-view and no-geometry families seed 0 is
 over the "choose" cases; it is reported on the "report" cases beside BVS, ULR, the auto
 weights and the per-case oracle (the best setting of the sweep for that case).
 
-    python benchmarks/quality/sweep_defaults.py --workers 2 --write-docs   # docs/RESULTS.md (q23b block)
+    python benchmarks/quality/sweep_defaults.py --workers 2 --write-docs   # docs/results/defaults.md
     python benchmarks/quality/sweep_defaults.py --only synthetic            # a quick subset, no docs
     python benchmarks/quality/sweep_defaults.py --report-only --write-docs  # the table from the JSON
 
-Each case writes its JSON report to --out as it completes (with the commit it ran on).
+Each case writes its JSON report to --out as it completes (with the commit it ran on). The run
+exits 1 with a one-line reason when the chosen setting misses one of the targets (the floors
+printed under "The targets"); ``--report-only`` checks them on the JSON of an earlier run.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import (  # noqa: E402  (the cases other studies share)
+    RESULTS,
+    ROOT,
+    SWEEP_BORDER,
+    SceneCache,
+    data_dir,
+    git_commit,
+    replace_block,
+    sparse_cases,
+    sweep_cases,
+    sweep_sources,
+)
 
-from paper_tables import SceneCache, cotton_neighbours, data_dir  # noqa: E402  (the same case runners)
+#: the generated page (--write-docs)
+PAGE = RESULTS / "defaults.md"
 
 GAMMAS = (0.0, 0.1, 0.25, 0.5, 1.0)
 LAMS = (0.1, 0.3)
@@ -80,7 +93,7 @@ SAMPLES_GAMMAS = (0.1, 0.25, 0.5)
 PV4_GAMMAS = (0.1, 0.2, 0.3)
 PV4_LAMS = (0.3, 0.6, 1.0)
 BEGIN, END = "<!-- q23b:begin -->", "<!-- q23b:end -->"
-BORDER = 2
+BORDER = SWEEP_BORDER
 
 
 #: every gradient setting pins what the library's defaults may change
@@ -95,7 +108,6 @@ D_LAMS = (0.6, 0.8, 1.0)
 #: other scales tried at the former default's (gamma, lam)
 CONSISTENCY = 24.0
 CONSISTENCY_OTHERS = (12.0, 48.0)
-SPARSE_LAYOUTS = ("grid", "arc", "free", "handheld", "pan")
 NOGEO_LAYOUTS = ("arc", "free", "handheld")
 
 
@@ -110,7 +122,7 @@ def _settings():
             for g in GAMMAS for l in LAMS]
     out += [(f"γ{g:g} λ0.1 TVs", "gradient", {"gamma": g, "lam": 0.1, "tv_weighting": "samples"})
             for g in SAMPLES_GAMMAS]
-    # the spatially varying TV at the stronger lam, and ULR's view prior (view_k, issue 23)
+    # the spatially varying TV at the stronger lam, and ULR's view prior (view_k)
     out += [("γ0.1 λ0.3 TVs", "gradient", {"gamma": 0.1, "lam": 0.3, "tv_weighting": "samples"})]
     out += [(f"γ{g:g} λ0.3{tvs} V4{w}", "gradient",
              {"gamma": g, "lam": 0.3, "tv_weighting": tv, "view_k": 4, "grad_weighting": gw})
@@ -140,35 +152,8 @@ def _settings():
     return out
 
 
-def case_list():
-    """The cases, each with its family and split ("choose" / "report"), in the fixed order."""
-    fam = {}
-    for depth in ("gt", "estimated", "planar"):
-        fam[f"cotton {depth}"] = [dict(kind="cotton", depth=depth, stride=s, name=f"cotton {depth} s{s}")
-                                  for s in (1, 2, 4)]
-    fam["fountain"] = [dict(kind="fountain", target=t, name=f"fountain {t}") for t in ("0002", "0005", "0008")]
-    fam["other"] = ([dict(kind="temple", name="temple 0004")]
-                    + [dict(kind="synthetic", layout=lo, name=f"synthetic {lo}") for lo in ("grid", "arc", "free", "handheld")])
-    # every other view a source (what vibr eval does by default): cotton's 80, temple's 15
-    fam["all views"] = [dict(kind="cotton", depth="gt", stride=0, name="cotton gt all 80"),
-                        dict(kind="temple", all=True, name="temple 0004 all 15")]
-    out = []
-    for f, cases in fam.items():
-        for i, c in enumerate(cases):
-            out.append({**c, "family": f, "split": "choose" if i % 2 == 0 else "report"})
-    return out
-
-
-def sparse_cases():
-    """The sweep's few-view family (not in :func:`case_list`, which other benchmarks share): the
-    middle of 7 synthetic views of 256×192 from its 2 or 4 best, seed 0 *choose*, seed 1 *report*."""
-    return [dict(kind="sparse", layout=lo, n=n, seed=sd, name=f"sparse {lo} from {n} seed {sd}", family="sparse",
-                 split="choose" if sd == 0 else "report")
-            for lo in SPARSE_LAYOUTS for n in (2, 4) for sd in (0, 1)]
-
-
 def nogeo_cases():
-    """The sweep's no-geometry family (not in :func:`case_list`): the middle of 7 synthetic
+    """The sweep's no-geometry family (not in ``_common.sweep_cases``): the middle of 7 synthetic
     views of 256×192 from the 6 others with depth estimated from them, seed 0 *choose*, seed 1
     *report*."""
     return [dict(kind="nogeo", layout=lo, seed=sd, name=f"no geometry {lo} seed {sd}", family="no geometry",
@@ -176,67 +161,15 @@ def nogeo_cases():
             for lo in NOGEO_LAYOUTS for sd in (0, 1)]
 
 
-def _sources(cache, case):
-    """(sources with depth, target View) of a case; estimated depth through the depth cache."""
-    from vibr.stereo.cache import scene_with_depth
-    from vibr.pipeline import prepare
-    from vibr.geometry.selection import select_views
-
-    if case["kind"] == "synthetic":
-        from vibr.synthetic import make_scene
-
-        sc = make_scene(case["layout"], width=128, height=128)
-        return sc.split(len(sc) // 2)
-    if case["kind"] == "sparse":
-        from vibr.synthetic import make_scene
-
-        sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=case["seed"])
-        if case["layout"] == "pan":  # a pan has no depth: the sphere round the shared centre
-            sc = sc.replace(views=[v.replace(depth=None, sigma_z=None) for v in sc.views])
-        return prepare(sc, 3, n_views=case["n"])
-    if case["kind"] == "nogeo":
-        from vibr.synthetic import make_scene
-
-        sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=case["seed"])
-        src, tv = sc.split(3)
-        src = src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views])
-        return scene_with_depth(src, depth="estimated"), tv
-    if case["kind"] == "cotton":
-        sc = cache.get("hci2016_cotton", 1.0)
-        tname = "input_Cam040"
-        names = ([v.name for v in sc.views if v.name != tname] if case["stride"] == 0
-                 else cotton_neighbours(sc, case["stride"]))
-    elif case["kind"] == "fountain":
-        sc = cache.get("strecha_fountain-P11", 0.25)
-        tname = case["target"]
-        names = [v.name for v in sc.views if v.name != tname]
-    else:
-        sc = cache.get("middlebury_templeSparseRing", 1.0)
-        tname = "templeSR0004"
-        rest, tv = sc.split(tname)
-        names = ([v.name for v in rest.views] if case.get("all")
-                 else [rest.views[i].name for i in select_views(rest, tv.camera, 4)])
-    depth = case.get("depth", "estimated")
-    if depth != "estimated":
-        return prepare(sc, tname, sources=names, depth=depth)
-    tview = sc[tname]
-    src = scene_with_depth(sc.subset(names), depth="estimated")  # the target takes no part
-    if case.get("all"):  # as vibr eval renders it: the fallback proxy where depth is unknown
-        from vibr.geometry import apply_fallback
-
-        src = apply_fallback(src, "auto")
-    return src, tview
-
-
 def run_case(cache, case):
     """Render one case with every setting and the auto weights; return its measurements."""
-    from vibr.render.autotune import tune
     from vibr.metrics import psnr
     from vibr.render import shared_geometry
+    from vibr.render.autotune import tune
     from vibr.render.methods import DEFAULTS
 
     t0 = time.perf_counter()
-    src, tv = _sources(cache, case)
+    src, tv = sweep_sources(cache, case)
     t_depth = time.perf_counter() - t0
     # the grid and samples vibr render / vibr eval would use (gamma / s² for coarser sources)
     geo = shared_geometry(src, tv, [(m, kw) for _, m, kw in settings()])
@@ -265,19 +198,12 @@ def run_case(cache, case):
                      "tune_seconds": t_tune, "render_seconds": float(np.median(secs)),
                      "ratio": t_tune / float(np.median(secs))},
             "default_at_run": {k: DEFAULTS[k] for k in ("gamma", "lam", "tv_weighting")},
-            "seconds": round(time.perf_counter() - t0, 1), "commit": _commit()}
+            "seconds": round(time.perf_counter() - t0, 1), "commit": git_commit()}
     if case.get("file"):  # each case as it completes: a partial run keeps what it measured
         from vibr.eval.protocol import write_report
 
         write_report(rep, case["file"])
     return rep
-
-
-def _commit() -> str:
-    import subprocess
-
-    r = subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True, cwd=ROOT)
-    return r.stdout.strip()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -294,7 +220,7 @@ def table(reps, chosen):
 
     params = {lab: kw for lab, _, kw in settings()}
     labs = [lab for lab, m, _ in settings() if m == "gradient"]
-    L = [BEGIN, "", "### Defaults chosen across scenes (issue 23), generated by `benchmarks/quality/sweep_defaults.py`", "",
+    L = [BEGIN, "", "### Defaults chosen across scenes, generated by `benchmarks/quality/sweep_defaults.py`", "",
          f"Chosen on the *choose* half (best mean all-pixel PSNR): **{chosen}** "
          f"({', '.join(f'{k} {v}' for k, v in params[chosen].items())}). "
          "Labels: γ gamma, λ lam, TVs `tv_weighting=\"samples\"` (else uniform), V4 `view_k=4` "
@@ -305,12 +231,12 @@ def table(reps, chosen):
          "PSNR dB over all pixels / over the covered pixels (2-px border excluded). *oracle*: the best "
          "gradient setting of the sweep for that case (all pixels). *auto*: `gamma=\"auto\", lam=\"auto\"` "
          "(its choice; *tune / render*: its tuning time over the median full-size render time of the case's gradient settings).", "",
-         f"Command: `python3 benchmarks/quality/sweep_defaults.py --workers 2 --write-docs`; code: "
-         f"{', '.join(sorted({r.get('commit', '?') for r in reps}))}; {len(reps)} cases. Split fixed in "
+         f"Command: `python3 benchmarks/quality/sweep_defaults.py --workers 2 --write-docs`; "
+         f"{len(reps)} cases. Split fixed in "
          "advance: within each family (cotton gt / estimated / planar, fountain, temple + synthetic, all views) "
          "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*; few views (sparse) and no geometry "
          "(synthetic views, depth estimated): seed 0 *choose*, seed 1 *report*. "
-         "Issue 23's targets below are over its own cases (not the few-view and no-geometry families). Estimated depth: from the "
+         "The targets below are over the sweep's own cases (not the few-view and no-geometry families). Estimated depth: from the "
          "sources only, cached (`vibr.stereo.cache`).", "",
          "| case | split | ULR | BVS | chosen | auto (γ, λ) | oracle (setting) | chosen − BVS | auto − oracle | tune / render |",
          "|---|---|---|---|---|---|---|---|---|---|"]
@@ -332,8 +258,8 @@ def table(reps, chosen):
         L.append(f"* mean over {split} ({len(sub)} cases), all pixels: ULR {mean('ULR'):.2f}, BVS {mean('BVS'):.2f}, "
                  f"chosen {mean(chosen):.2f}, auto {mean('auto'):.2f}, oracle {orc:.2f}; best fixed setting "
                  f"on this subset {best_fixed} {mean(best_fixed):.2f}.")
-    L += ["", "Issue 23's targets (all pixels), for the chosen setting and for auto (\"every other case\": "
-          "cotton estimated / planar, fountain, temple, as the issue lists them; the synthetic scenes beside):", ""]
+    L += ["", "The targets (all pixels), for the chosen setting and for auto (\"every other case\": "
+          "cotton estimated / planar, fountain, temple, as the targets list them; the synthetic scenes beside):", ""]
     L += [f"* {k}: {_targets(reps, k, labs)}" for k in (chosen, "auto")]
     rep = [r for r in reps if r["split"] == "report"]
     d = np.mean([r["results"]["auto"]["all"] - r["results"][chosen]["all"] for r in rep]) if rep else float("nan")
@@ -342,7 +268,7 @@ def table(reps, chosen):
     verdict = "auto is better and within budget: make it the default" if d > 0 and over == 0 else \
         "the fixed setting stays the default"
     L.append(f"* auto − chosen on the report half: {d:+.2f} dB; tuning time / full-size render: median "
-             f"{np.median(ratios):.2f}, over the issue's budget of 1× on {over} of {len(ratios)} cases. "
+             f"{np.median(ratios):.2f}, over the budget of 1× on {over} of {len(ratios)} cases. "
              f"Rule: auto becomes the default only if it is better on the report half *and* within budget: "
              f"{verdict}.")
     L += ["", "Every setting, all-pixel PSNR (dB):", "",
@@ -354,15 +280,15 @@ def table(reps, chosen):
 
 
 def _targets(reps, k, labs):
-    """Issue 23's done-when checks for setting ``k``, as text."""
+    """The targets for setting ``k``, as text (a missed one says MISSED)."""
     out = []
-    R = {r["name"]: r["results"] for r in reps if r["family"] not in ("sparse", "no geometry")}  # the issue's cases
+    R = {r["name"]: r["results"] for r in reps if r["family"] not in ("sparse", "no geometry")}  # the targets' cases
     for n in ("cotton gt s2", "cotton gt s4"):
         if n in R:
             d = R[n][k]["all"] - R[n]["BVS"]["all"]
             out.append(f"{n} − BVS {d:+.2f} ({'ok' if d >= 0.2 else 'MISSED'}, ≥ +0.2)")
-    # the issue's "every other case": cotton estimated / planar, fountain, temple; the
-    # synthetic scenes (not in the issue's list) reported beside it
+    # "every other case": cotton estimated / planar, fountain, temple; the synthetic scenes
+    # reported beside it
     listed = [n for n in R if n not in ("cotton gt s2", "cotton gt s4") and not n.startswith("synthetic")]
     for what, group in (("worst other case", listed), ("worst synthetic case", [n for n in R if n.startswith("synthetic")])):
         if group:
@@ -379,29 +305,20 @@ def _targets(reps, k, labs):
     return "; ".join(out)
 
 
-def write_doc(path, block):
-    old = Path(path).read_text()
-    if BEGIN in old:
-        new = re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: block, old, flags=re.S)
-    else:
-        new = old.rstrip("\n") + "\n\n" + block + "\n"
-    Path(path).write_text(new)
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
     ap.add_argument("--out", default=str(ROOT / "out" / "sweep_defaults"), help="JSON reports")
     ap.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes")
     ap.add_argument("--only", default="", help="comma list of case-name prefixes (e.g. cotton,synthetic)")
-    ap.add_argument("--write-docs", action="store_true", help="write the table into docs/RESULTS.md")
+    ap.add_argument("--write-docs", action="store_true", help="write the table into docs/results/defaults.md")
     ap.add_argument("--report-only", action="store_true", help="rebuild the table from the JSON in --out")
     a = ap.parse_args(argv)
     from vibr.executor import run_tasks
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    cases = [c for c in case_list() + sparse_cases() + nogeo_cases() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
+    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     fname = lambda c: out / (c["name"].replace(" ", "_") + ".json")  # noqa: E731
     if a.report_only:
         reps = [json.loads(fname(c).read_text()) for c in cases if fname(c).is_file()]
@@ -410,12 +327,17 @@ def main(argv=None):
         reps = run_tasks(run_case, [{**c, "file": str(fname(c))} for c in cases], setup=SceneCache,
                          setup_args=(str(data_dir(a.data)),), executor=a.workers, desc="sweep")
         print(f"# {len(reps)} cases in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-    block = table(reps, choose(reps))
+    chosen = choose(reps)
+    block = table(reps, chosen)
     print(block)
     if a.write_docs:
         if a.only:
             sys.exit("--write-docs needs the whole case list (no --only)")
-        write_doc(ROOT / "docs" / "RESULTS.md", block)
+        replace_block(PAGE, BEGIN, END, block, title="Defaults chosen across scenes")
+    labs = [lab for lab, m, _ in settings() if m == "gradient"]
+    missed = [x for x in _targets(reps, chosen, labs).split("; ") if "MISSED" in x]
+    if missed and not a.only:  # the targets are over the whole case list
+        sys.exit(f"sweep_defaults.py: the chosen setting {chosen} is below a floor: " + "; ".join(missed))
 
 
 if __name__ == "__main__":

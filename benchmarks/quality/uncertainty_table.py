@@ -1,4 +1,4 @@
-"""Calibration of vibr's per-pixel uncertainty on held-out views (issue 28).
+"""Calibration of vibr's per-pixel uncertainty on held-out views.
 
 Cases: HCI 2016 *cotton* (512×512), centre view ``input_Cam040`` from the 8 neighbours of its
 3×3 block at strides 1, 2, 4, with ground-truth, estimated and planar-proxy geometry
@@ -21,18 +21,18 @@ alone (``sample_spread_sigma``) and 1 / number of views seeing the pixel
 (``view_count_sigma``), both scored against the same gradient render.
 
     python benchmarks/quality/uncertainty_table.py                       # all cases, print the table
-    python benchmarks/quality/uncertainty_table.py --write-docs          # ... and write docs/RESULTS.md's section
+    python benchmarks/quality/uncertainty_table.py --write-docs          # ... and its section of docs/results/paper-tables.md
     python benchmarks/quality/uncertainty_table.py --cases cotton_s2_gt,fountain_0005
-    python benchmarks/quality/uncertainty_table.py --overhead            # time with / without, 768², 8 sources
 
 JSON per case and the sparsification plots go to ``--out`` (default out/uncertainty, git-ignored).
+A fountain case whose Spearman ρ falls below :data:`SPEARMAN_FLOOR` makes the run exit 1 with a
+one-line reason. The time σ costs: ``benchmarks/perf/bench_uncertainty_overhead.py``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import shlex
 import sys
@@ -41,7 +41,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import RESULTS, ROOT, cotton_neighbours, data_dir, replace_block  # noqa: E402
+
+#: the generated page whose uncertainty section this script writes (--write-docs)
+PAGE = RESULTS / "paper-tables.md"
+#: the lowest Spearman ρ between σ and the error on a fountain view
+SPEARMAN_FLOOR = 0.4
 
 VARIANTS = ("model", "spread", "model+spread", "model+spread+hole", "model+spread+views+hole")
 CHOSEN = "model+spread+views+hole"  # vibr.render.uncertainty.TERMS
@@ -50,21 +56,9 @@ FOUNTAIN_PARAMS = dict(alpha=0.1, gamma=1.0, lam=0.002)
 PAPER_SETTINGS = [False]  # --paper-settings: the two dicts above instead of the defaults
 
 
-def data_dir(arg) -> Path:
-    d = Path(arg or os.environ.get("VIBR_DATA") or ROOT.parent / "shared" / "data")
-    if not d.is_dir():
-        sys.exit(f"data folder not found: {d}")
-    return d
-
-
 def all_cases():
     out = [f"cotton_s{s}_{d}" for s in (1, 2, 4) for d in ("gt", "estimated", "planar")]
     return out + [f"fountain_{v}" for v in ("0002", "0005", "0008")]
-
-
-def cotton_neighbours(scene, s):
-    inv = {rc: n for n, rc in scene.meta["grid_pos"].items()}
-    return [inv[(4 + dr * s, 4 + dc * s)] for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
 
 def prepared(case, data, scenes, cache=None):
@@ -100,7 +94,7 @@ def prepared(case, data, scenes, cache=None):
 
 def run_case(case, data, scenes, log, cache=None):
     from vibr.geometry import compute_samples
-    from vibr.metrics import pixel_error, sparsification, ause, spearman
+    from vibr.metrics import ause, pixel_error, sparsification, spearman
     from vibr.render import render
     from vibr.render.uncertainty import sample_spread_sigma, view_count_sigma
 
@@ -182,25 +176,25 @@ def variant_table(reports):
 
 
 def targets(reports):
-    """The issue's two targets, checked on the reports given."""
+    """The two targets, checked on the reports given."""
     best, fountain = [], []
     for rep in reports:
         r = rep["rows"]
         v = r[f"vibr[{CHOSEN}]"]
         best.append(v["ause"] < min(r["baseline: sample spread"]["ause"], r["baseline: 1/views"]["ause"]))
         if rep["case"].startswith("fountain"):
-            fountain.append(f"{rep['case']} {v['spearman']:.2f} ({'met' if v['spearman'] >= 0.4 else '**not met**'})")
+            fountain.append(f"{rep['case']} {v['spearman']:.2f} ({'met' if v['spearman'] >= SPEARMAN_FLOOR else '**not met**'})")
     return (f"Targets: vibr's σ has the lowest AUSE on {sum(best)} of {len(best)} cases; Spearman ρ ≥ 0.4 on "
             f"fountain: {', '.join(fountain) or 'no fountain case run'}.")
 
 
-SECTION = "## Uncertainty: calibration of the per-pixel σ (issue 28)"
+SECTION = "## Uncertainty: calibration of the per-pixel σ"
 BEGIN, END = "<!-- uncert:begin -->", "<!-- uncert:end -->"
 
 
 def write_docs(reports, cmd, seconds):
-    path = ROOT / "docs" / "RESULTS.md"
-    text = path.read_text()
+    """Write the section between :data:`BEGIN` and :data:`END` of :data:`PAGE` (the rest of the
+    page, paper_tables.py's, is kept)."""
     body = (f"{SECTION}\n\nMade by `{cmd}` ({seconds / 60:.0f} min on a shared 2-core machine; "
             "method, metrics and baselines in the script's docstring and docs/explanation/renderer.md \"Uncertainty\"). "
             "AUSE: area between the normalised sparsification curve and the oracle's (50 fractions; lower is "
@@ -211,17 +205,7 @@ def write_docs(reports, cmd, seconds):
             + "); the ULR columns against a ULR render.\n\n"
             f"{table(reports)}\n\nThe terms of vibr's σ² (the choice: `{CHOSEN}`), AUSE / ρ:\n\n"
             f"{variant_table(reports)}\n\n{targets(reports)}\n")
-    body = f"{BEGIN}\n{body}{END}\n"
-    if BEGIN in text and END in text:
-        pre, rest = text.split(BEGIN, 1)
-        text = pre + body + rest.split(END, 1)[1].lstrip("\n")
-    elif SECTION in text:
-        pre, post = text.split(SECTION, 1)
-        nxt = re.search(r"^## ", post, flags=re.M)
-        text = pre + body + ("\n" + post[nxt.start():] if nxt else "")
-    else:
-        text = text.rstrip("\n") + "\n\n" + body
-    path.write_text(text)
+    replace_block(PAGE, BEGIN, END, f"{BEGIN}\n{body}{END}", title="Reproducing the paper's tables")
 
 
 def planar_figure(path, size=256):
@@ -232,12 +216,11 @@ def planar_figure(path, size=256):
     from PIL import Image, ImageDraw
 
     from vibr._runtime.atomic import atomic_path
+    from vibr.eval.sigma_figures import _nice_ceiling, sigma_figure
     from vibr.metrics import pixel_error, uncertainty_metrics
+    from vibr.pipeline import prepare
     from vibr.render import render
     from vibr.synthetic import make_scene
-    from vibr.eval.sigma_figures import _nice_ceiling, sigma_figure
-
-    from vibr.pipeline import prepare
 
     src, tg = prepare(make_scene("grid", width=size, height=size, seed=0), 4, depth="planar")
     r = render(src, tg, "gradient", uncertainty=True)
@@ -262,46 +245,6 @@ def planar_figure(path, size=256):
     print(f"wrote {path}: PSNR {r.metrics['psnr']:.2f} dB, AUSE {m['ause']:.3f}, Spearman {m['spearman']:.2f}")
 
 
-def overhead(size=768, repeat=5):
-    """Render time with and without ``uncertainty=True`` on benchmarks/perf/bench_render.py's scene
-    (synthetic 3×3 grid, centre target from 8 sources), alternating, same samples; medians
-    and (min, max) over ``repeat`` pairs after one warm-up pair."""
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    from bench_render import centre_index, grid_scene
-    from vibr.geometry import compute_samples
-    from vibr.render import render_samples
-
-    scene = grid_scene(3, 3, size)
-    sources, target = scene.split(centre_index(scene))
-    t0 = time.perf_counter()
-    S = compute_samples(sources, target.camera)
-    t_geo = time.perf_counter() - t0
-    ts = {False: [], True: []}
-    t_unc = []
-    for rep in range(repeat + 1):
-        for flag in ((False, True) if rep % 2 == 0 else (True, False)):
-            t = time.perf_counter()
-            r = render_samples(S, "gradient", uncertainty=flag)
-            dt = time.perf_counter() - t
-            if rep:
-                ts[flag].append(dt)
-                if flag:
-                    t_unc.append(r.times["uncertainty"])
-    med = {k: float(np.median(v)) for k, v in ts.items()}
-    ratios = [b / a for a, b in zip(ts[False], ts[True])]
-    print(f"# uncertainty overhead: {size}x{size}, {len(sources)} sources, {len(S)} samples, geometry "
-          f"{t_geo:.2f} s (once); {repeat} alternating pairs after a warm-up, shared machine")
-    print("| | median s | min | max |\n|---|---|---|---|")
-    for k, name in ((False, "render_samples, uncertainty=False"), (True, "render_samples, uncertainty=True")):
-        print(f"| {name} | {med[k]:.3f} | {min(ts[k]):.3f} | {max(ts[k]):.3f} |")
-    print(f"| the uncertainty step alone (times['uncertainty']) | {np.median(t_unc):.3f} | {min(t_unc):.3f} | "
-          f"{max(t_unc):.3f} |")
-    print(f"ratio with / without per pair: median {np.median(ratios):.3f} (min {min(ratios):.3f}, max "
-          f"{max(ratios):.3f}); uncertainty step / render without: {np.median(t_unc) / med[False]:.3f}; "
-          f"with geometry counted in the render time: {(med[True] + t_geo) / (med[False] + t_geo):.3f}")
-    return {"with": ts[True], "without": ts[False], "step": t_unc, "geometry": t_geo}
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", default=",".join(all_cases()), help="comma-separated cases (default: all)")
@@ -309,10 +252,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(ROOT / "out" / "uncertainty"))
     ap.add_argument("--cache", metavar="DIR",
                     help="keep each case's prepared scene (sources with depth) as DIR/CASE.pkl and reuse it")
-    ap.add_argument("--write-docs", action="store_true", help="write the table into docs/RESULTS.md")
-    ap.add_argument("--overhead", action="store_true",
-                    help="only measure the time overhead at 768², 8 sources (bench_render's scene)")
-    ap.add_argument("--repeat", type=int, default=5, help="--overhead: alternating pairs (default 5)")
+    ap.add_argument("--write-docs", action="store_true", help="write the table into docs/results/paper-tables.md")
     ap.add_argument("--from-json", metavar="DIR",
                     help="rebuild the tables (and with --write-docs the section) from the CASE.json reports "
                          "a previous run wrote to DIR, without rendering")
@@ -323,9 +263,6 @@ def main(argv=None):
     PAPER_SETTINGS[0] = a.paper_settings
     if a.figure:
         planar_figure(a.figure)
-        return
-    if a.overhead:
-        overhead(repeat=a.repeat)
         return
     data = data_dir(a.data)
     out = Path(a.out)
@@ -356,7 +293,11 @@ def main(argv=None):
                    "(processes in parallel, one per group of cases; CACHE keeps the prepared scenes), then `"
                    f"{cmd} --from-json {a.from_json}")
         write_docs(reports, cmd, time.perf_counter() - t0)
-        print("wrote docs/RESULTS.md")
+        print(f"wrote {PAGE.relative_to(ROOT)}")
+    low = [f"{r['case']} ρ {r['rows'][f'vibr[{CHOSEN}]']['spearman']:.2f}" for r in reports
+           if r["case"].startswith("fountain") and r["rows"][f"vibr[{CHOSEN}]"]["spearman"] < SPEARMAN_FLOOR]
+    if low:
+        sys.exit(f"uncertainty_table.py: BELOW floor (Spearman ρ ≥ {SPEARMAN_FLOOR:g} on fountain): " + ", ".join(low))
 
 
 if __name__ == "__main__":

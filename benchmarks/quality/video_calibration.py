@@ -121,9 +121,9 @@ def _calibrate(name, video, scene, per_view, out: Path, dst: Path):
 
 def reading_speed(data: Path, out: Path) -> int:
     """Time :func:`extract_frames` on a 1080p video (three runs)."""
+    from vibr.calib.video_frames import extract_frames
     from vibr.io import load_scene
     from vibr.io.video import write_video
-    from vibr.calib.video_frames import extract_frames
 
     scene = load_scene(data / "strecha_fountain-P11", scale=0.625)  # 1920×1280
     frames = [scene.views[k // 22 % len(scene)].image[100 + k % 7:1180 + k % 7, :1920] for k in range(240)]

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
-import shared_depth_error as Z  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
+from _common import STUDY_SETS, run_study, study_sources  # noqa: E402
 
 VALUES = (0.0, 1.1, 1.25, 1.5, 2.0)
 TIE = 0.005
@@ -39,7 +39,7 @@ def run_case(cache, case) -> dict:
     from vibr.metrics import psnr
     from vibr.render import shared_geometry
 
-    src, tv = Z._sources(cache, case)
+    src, tv = study_sources(cache, case)
     geo = shared_geometry(src, tv)
     P = lambda m, **kw: float(psnr(geo.render(m, **kw).image, tv.image, border=2))  # noqa: E731
     res = {"ULR": P("ulr"), "BVS": P("bvs", lam=0.1) if case["set"] == "sweep" else P("bvs")}  # the sweep's BVS lam
@@ -54,7 +54,7 @@ def _summary(reps, labs):
     mean = lambda sel, k: float(np.mean([r["psnr"][k] for r in sel]))  # noqa: E731
     print("\n| mean | cases | " + " | ".join(labs) + " |\n|---|---|" + "---|" * len(labs))
     for sp in ("choose", "report"):
-        for s in (*Z.SETS, "all"):
+        for s in (*STUDY_SETS, "all"):
             sel = [r for r in reps if r["split"] == sp and s in ("all", r["set"])]
             print(f"| {sp}, {s} | {len(sel)} | " + " | ".join(f"{mean(sel, k):.3f}" for k in labs) + " |")
     ties = [k for k in labs if k.startswith("tie")]
@@ -70,4 +70,4 @@ def _summary(reps, labs):
 
 
 if __name__ == "__main__":
-    Z.main(run_case=run_case, summary=_summary, doc=__doc__)
+    run_study(run_case, _summary, __doc__)

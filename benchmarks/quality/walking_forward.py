@@ -8,10 +8,14 @@ depth range and kept fraction and the PSNR of ULR and the default.
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
 
 
-def main():
+def main(argv=None):
+    argparse.ArgumentParser(description=__doc__,
+                            formatter_class=argparse.RawDescriptionHelpFormatter).parse_args(argv)
     from vibr.camera import Camera
     from vibr.pipeline import prepare
     from vibr.render import render
