@@ -13,40 +13,17 @@ import argparse
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
-
-def make_photos(folder: Path) -> dict:
-    from PIL import Image
-
-    from vibr import synthetic
-    from vibr.camera import Camera
-
-    world = synthetic.default_world(0)
-    truth = {}
-    for i, c in enumerate(synthetic.arc_cameras(10, arc_deg=40, width=480, height=360)):
-        zoom = 1.0 if i % 2 == 0 else 1.5
-        K = c.K.copy()
-        K[:2, :2] *= zoom
-        img, _ = synthetic.render_view(world, Camera(K, c.R, c.t, c.width, c.height))
-        im = Image.fromarray((img * 255 + 0.5).astype(np.uint8))
-        ex = im.getexif()
-        ex[0x010F], ex[0x0110] = "Acme", "Zoomer"
-        ex.get_ifd(0x8769)[0x920A] = 24.0 * zoom
-        im.save(folder / f"v{i:02d}.jpg", exif=ex.tobytes(), quality=95)
-        truth[f"v{i:02d}"] = float(K[0, 0])
-    return truth
-
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--work", help="folder for the photos (default: a temporary one)")
     a = ap.parse_args(argv)
     import vibr.calib.colmap as C
+    from vibr.synthetic import zoom_photos
 
     folder = Path(a.work or tempfile.mkdtemp(prefix="vibr-zoom-"))
     folder.mkdir(parents=True, exist_ok=True)
-    truth = make_photos(folder)
+    truth = zoom_photos(folder)
     lens_keys = C._lens_keys
     for label, keys in (("one camera per photo (EXIF)", lens_keys), ("one shared camera", lambda f: [None] * len(f))):
         C._lens_keys = keys
