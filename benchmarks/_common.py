@@ -214,7 +214,8 @@ def sweep_cases():
                                   for s in (1, 2, 4)]
     fam["fountain"] = [dict(kind="fountain", target=t, name=f"fountain {t}") for t in ("0002", "0005", "0008")]
     fam["other"] = ([dict(kind="temple", name="temple 0004")]
-                    + [dict(kind="synthetic", layout=lo, name=f"synthetic {lo}") for lo in ("grid", "arc", "free", "handheld")])
+                    + [dict(kind="synthetic", layout=lo, name=f"synthetic {lo}")
+                       for lo in ("grid", "arc", "free", "handheld")])
     # every other view a source (what vibr eval does by default): cotton's 80, temple's 15
     fam["all views"] = [dict(kind="cotton", depth="gt", stride=0, name="cotton gt all 80"),
                         dict(kind="temple", all=True, name="temple 0004 all 15")]

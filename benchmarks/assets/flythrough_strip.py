@@ -23,7 +23,9 @@ from vibr.synthetic import make_scene
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--output", default=str(Path(__file__).resolve().parents[2] / "docs" / "img" / "flythrough_strip.png"))
+    ap.add_argument(
+        "-o", "--output", default=str(Path(__file__).resolve().parents[2] / "docs" / "img" / "flythrough_strip.png")
+    )
     ap.add_argument("--size", type=int, default=160)
     ap.add_argument("--frames", type=int, default=6)
     a = ap.parse_args()

@@ -72,17 +72,24 @@ def main(argv=None) -> int:
     errs = {a: pose_errors([est[n].camera for n in names], [ref[n] for n in names], align=a)
             for a in ("poses", "centres")}
     print(f"baseline span (GT) {errs['poses']['span']:.3f} m")
-    print(f"{'view':>6} {'rot° (pose-fit)':>16} {'centre % (pose-fit)':>20} {'rot° (centre-fit)':>18} {'centre % (centre-fit)':>22}")
+    print(
+        f"{'view':>6} {'rot° (pose-fit)':>16} {'centre % (pose-fit)':>20} {'rot° (centre-fit)':>18} "
+        f"{'centre % (centre-fit)':>22}"
+    )
     for i, n in enumerate(names):
-        print(f"{n:>6} {errs['poses']['rot_deg'][i]:>16.4f} {100 * errs['poses']['centre_rel'][i]:>20.4f}"
-              f" {errs['centres']['rot_deg'][i]:>18.4f} {100 * errs['centres']['centre_rel'][i]:>22.4f}")
+        print(
+            f"{n:>6} {errs['poses']['rot_deg'][i]:>16.4f} {100 * errs['poses']['centre_rel'][i]:>20.4f}"
+            f" {errs['centres']['rot_deg'][i]:>18.4f} {100 * errs['centres']['centre_rel'][i]:>22.4f}"
+        )
     for a, e in errs.items():
         print(f"max ({a}-fit): rotation {e['rot_deg'].max():.4f}°, centre {100 * e['centre_rel'].max():.4f} % of span")
     f_est = est.views[0].camera.K
     f_ref = ref[names[0]].K
-    print(f"K calibrated (undistorted {est.views[0].camera.width}x{est.views[0].camera.height}): "
-          f"f {f_est[0, 0]:.2f}, c ({f_est[0, 2]:.2f}, {f_est[1, 2]:.2f}); GT: f ({f_ref[0, 0]:.2f}, {f_ref[1, 1]:.2f}),"
-          f" c ({f_ref[0, 2]:.2f}, {f_ref[1, 2]:.2f})")
+    print(
+        f"K calibrated (undistorted {est.views[0].camera.width}x{est.views[0].camera.height}): "
+        f"f {f_est[0, 0]:.2f}, c ({f_est[0, 2]:.2f}, {f_est[1, 2]:.2f}); GT: f ({f_ref[0, 0]:.2f}, {f_ref[1, 1]:.2f}),"
+        f" c ({f_ref[0, 2]:.2f}, {f_ref[1, 2]:.2f})"
+    )
     sys.stdout.flush()
 
     if args.e2e:
@@ -90,8 +97,7 @@ def main(argv=None) -> int:
         from vibr.render import render
         from vibr.stereo import estimate_depth
 
-        paths = [("calibrated", scene_dir, args.e2e_scale),
-                 ("ground truth", fountain, args.scale * args.e2e_scale)]
+        paths = [("calibrated", scene_dir, args.e2e_scale), ("ground truth", fountain, args.scale * args.e2e_scale)]
         for label, path, scale in paths[: 1 if args.e2e_only_calibrated else 2]:
             sc = load_scene(path, scale=scale)
             t0 = time.perf_counter()
@@ -105,9 +111,11 @@ def main(argv=None) -> int:
             cov = res.coverage
             p_cov = psnr(res.image, target.image, mask=cov, border=2)
             p_all = psnr(res.image, target.image, border=2)
-            print(f"e2e {label:>12}: {target.camera.width}x{target.camera.height}, view {target.name} from "
-                  f"{len(sources)}; PSNR {p_cov:.2f} dB on covered pixels ({100 * cov.mean():.1f} %), "
-                  f"{p_all:.2f} dB on all; depth {t_depth:.0f} s, render {t_render:.0f} s")
+            print(
+                f"e2e {label:>12}: {target.camera.width}x{target.camera.height}, view {target.name} from "
+                f"{len(sources)}; PSNR {p_cov:.2f} dB on covered pixels ({100 * cov.mean():.1f} %), "
+                f"{p_all:.2f} dB on all; depth {t_depth:.0f} s, render {t_render:.0f} s"
+            )
             sys.stdout.flush()
     return 0
 

@@ -264,7 +264,8 @@ def _defaults() -> dict:
     from vibr.stereo import DepthOptions
 
     opt = DepthOptions()
-    return {k: getattr(opt, k) for k in ("step_px", "max_planes", "refine_iter", "median_radius", "sweep_scale", "coarse_iter")}
+    keys = ("step_px", "max_planes", "refine_iter", "median_radius", "sweep_scale", "coarse_iter")
+    return {k: getattr(opt, k) for k in keys}
 
 
 def main(argv=None) -> None:

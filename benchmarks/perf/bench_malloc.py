@@ -93,8 +93,17 @@ def main():
         order = list(SETTINGS) if r % 2 == 0 else list(SETTINGS)[::-1]
         for name in order:
             js = out / f"render_{r}.json"
-            child([py, str(REPO / "benchmarks" / "perf" / "bench_render.py"), "--repeat", str(a.repeat), "--json", str(js)],
-                  envs[name])
+            child(
+                [
+                    py,
+                    str(REPO / "benchmarks" / "perf" / "bench_render.py"),
+                    "--repeat",
+                    str(a.repeat),
+                    "--json",
+                    str(js),
+                ],
+                envs[name],
+            )
             rep = json.loads(js.read_text())
             res[name]["render_total"].append(rep["total"])
             res[name]["render_peak"].append(rep["peak_rss_mb"])
@@ -103,17 +112,24 @@ def main():
             res[name]["path_sys"].append(sys_s)
             res[name]["path_peak"].append(peak)
             digests.add(frames_digest(frames))
-            print(f"round {r + 1} {name}: render total {rep['total']:.3f} s, fly-through {wall:.1f} s "
-                  f"(sys {sys_s:.1f} s, peak {peak:.0f} MB)", flush=True)
+            print(
+                f"round {r + 1} {name}: render total {rep['total']:.3f} s, fly-through {wall:.1f} s "
+                f"(sys {sys_s:.1f} s, peak {peak:.0f} MB)",
+                flush=True,
+            )
 
     print(f"\n{a.rounds} rounds, alternating; medians (min–max)\n")
-    print(f"| allocator | bench_render total s (768², median of {a.repeat}) | bench_render peak MB "
-          f"| fly-through {a.frames} frames, wall s | its system CPU s | its peak MB |")
+    print(
+        f"| allocator | bench_render total s (768², median of {a.repeat}) | bench_render peak MB "
+        f"| fly-through {a.frames} frames, wall s | its system CPU s | its peak MB |"
+    )
     print("|---|---|---|---|---|---|")
     for name, r in res.items():
-        print(f"| {name} | {spread(r['render_total'])} | {spread(r['render_peak'], '{:.0f}')} | "
-              f"{spread(r['path_wall'], '{:.1f}')} | {spread(r['path_sys'], '{:.1f}')} | "
-              f"{spread(r['path_peak'], '{:.0f}')} |")
+        print(
+            f"| {name} | {spread(r['render_total'])} | {spread(r['render_peak'], '{:.0f}')} | "
+            f"{spread(r['path_wall'], '{:.1f}')} | {spread(r['path_sys'], '{:.1f}')} | "
+            f"{spread(r['path_peak'], '{:.0f}')} |"
+        )
     print(f"\nframes byte-identical across all {2 * a.rounds} fly-through runs: {len(digests) == 1}")
     (out / "results.json").write_text(json.dumps(res, indent=1))
     return 0 if len(digests) == 1 else 1

@@ -27,7 +27,8 @@ Medians with min and max; the machine is shared and noisy (say so when reporting
 
     python benchmarks/perf/bench_view.py [--updates 7] [--skip-fountain] [--skip-synthetic] [--numba-threads default]
                                     [--client chromium|remote] [--max-points N] [--drag N]
-    python benchmarks/perf/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared | --browser-cpu | --browser-timeline | --ab-arena
+    python benchmarks/perf/bench_view.py --encode | --ab-settings | --ab-overhead | --ab-prepared
+                                           | --browser-cpu | --browser-timeline | --ab-arena
                                            (A/B comparisons, alternating in one process)
 """
 
@@ -294,7 +295,8 @@ def synthetic(updates: int, points: str = "while moving", browser_nice: int | No
                 if drag > 1 else []
             more = (f"; {worker.submitted - r0} camera updates, {viewer.abandoned - a0} renders abandoned, "
                     f"{toggles[0] - t0} point show/hide messages"
-                    + (f", the last camera's preview {pf[0].seconds:.2f} s" if pf else ", no preview of the last camera")
+                    + (f", the last camera's preview {pf[0].seconds:.2f} "
+                       f"s" if pf else ", no preview of the last camera")
                     if drag > 1 else "")
             print(f"  update {k}: preview {p.camera.width}x{p.camera.height} {p.seconds:.2f} s "
                   f"(render {p.render_seconds:.2f} s), "
@@ -835,7 +837,9 @@ def main(argv=None) -> int:
     rows = []
     if not a.skip_synthetic:
         s = synthetic(a.updates, a.points, a.browser_nice, a.client, a.drag)
-        print(f"client: {a.client}; point cloud: {a.points}, {'default' if a.max_points is None else a.max_points} points; browser nice: {a.browser_nice}", flush=True)
+        print(f"client: {a.client}; point cloud: {a.points}, "
+              f"{'default' if a.max_points is None else a.max_points} points; "
+              f"browser nice: {a.browser_nice}", flush=True)
         rows += [("synthetic 768², 8 sources: preview (256²), update → sent", _stats(s["preview"]), "≤ 0.3 s"),
                  ("  the preview's render itself (vibr.render + source choice)", _stats(s["preview_render"]), ""),
                  ("synthetic 768², 8 sources: full (768²), update → sent", _stats(s["full"]), "≤ 1.5 s"),
@@ -848,8 +852,10 @@ def main(argv=None) -> int:
                   f"{f['warm']['first_full_s']:6.1f} s  (depth {f['warm']['depth_s']:.2f} s)", "< 10 s")]
         for label in ("cold", "warm"):
             print(f"\nfountain start, {label}: " + ", ".join(f"{k} {v:.2f} s" for k, v in f[label]["stages"].items()))
-            print("  process CPU seconds (all threads): " + ", ".join(f"{k} {v:.2f}" for k, v in f[label]["cpu"].items()))
-            print(f"  kernels compiled in that process (not loaded from numba's cache): {f[label]['compiled_at_start']}")
+            print("  process CPU seconds (all threads): "
+                  "" + ", ".join(f"{k} {v:.2f}" for k, v in f[label]["cpu"].items()))
+            print(f"  kernels compiled in that process (not loaded from numba's cache): "
+                  f"{f[label]['compiled_at_start']}")
     print("\n| measurement | median (spread) | target |\n|---|---|---|")
     for r in rows:
         print(f"| {r[0]} | {r[1].strip()} | {r[2]} |")

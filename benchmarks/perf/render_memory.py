@@ -1,8 +1,10 @@
 """Memory of a render against vibr.render.checks.render_memory's estimate (docs/reference/errors-and-limits.md), and
-the 4K render of issue 25.
+the time and memory of a 4K render.
 
     python3 benchmarks/perf/render_memory.py [SIZE]                 # synthetic grid, SIZE² from 8 views
     /usr/bin/time -v python3 benchmarks/perf/render_memory.py 3840 2160 --once [--json out.json]
+
+``--json FILE`` writes the figures either way (benchmarks/perf/run_all.py reads them).
 
 Default: renders once to warm up, then measures how far the peak resident memory of a
 second render rises above the resident memory before it (Linux ru_maxrss), and prints the
@@ -71,11 +73,14 @@ def main() -> None:
         print(f"scene made in {t_scene:.1f} s; render (geometry + solve) {t_render:.1f} s; "
               f"{r.n_samples} samples; PSNR {q:.2f} dB (covered pixels); peak resident memory of the process "
               f"{peak / 2**30:.2f} GiB")
-        if a.json:
-            with open(a.json, "w") as f:
-                json.dump({"width": W, "height": H, "render_s": t_render, "scene_s": t_scene, "psnr": q,
-                           "samples": r.n_samples, "peak_rss_mb": peak / 2**20, "estimate_mb": est / 2**20,
-                           "times": r.times}, f, indent=2)
+    if a.json:
+        rep = {"width": W, "height": H, "once": a.once, "render_s": t_render, "scene_s": t_scene,
+               "samples": r.n_samples, "peak_rss_mb": peak / 2**20, "estimate_mb": est / 2**20,
+               "resident_before_mb": rss0 / 2**20, "growth_mb": max(0, peak - rss0) / 2**20, "times": r.times}
+        if a.once:
+            rep["psnr"] = q
+        with open(a.json, "w") as f:
+            json.dump(rep, f, indent=2)
 
 
 if __name__ == "__main__":

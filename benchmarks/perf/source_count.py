@@ -113,8 +113,11 @@ def table(work: Path, names) -> str:
             cells = []
             for k in ks:
                 v = load(case_file(work, name, t, k))
-                cells.append("" if v is None else
-                             f"{v['default']:.2f} / {v['ulr']:.2f} / {v['bvs']:.2f} ({v['n']} views, {v['depth']:.0f} s)")
+                cells.append(
+                    ""
+                    if v is None
+                    else f"{v['default']:.2f} / {v['ulr']:.2f} / {v['bvs']:.2f} ({v['n']} views, {v['depth']:.0f} s)"
+                )
                 if v is not None:
                     # K = 16 is every view of a scene with at most 16 others
                     for kk in {k} | ({"16"} if k == "all" and v["n"] <= 16 else set()):
@@ -125,9 +128,12 @@ def table(work: Path, names) -> str:
         common = set.intersection(*[set(by_k.get(k, {})) for k in ("8", "16")]) if by_k else set()
         if not common:
             continue
-        parts = [f"K = {k}: default {np.mean([by_k[k][c]['default'] for c in common]):.2f}, "
-                 f"ULR {np.mean([by_k[k][c]['ulr'] for c in common]):.2f}, "
-                 f"BVS {np.mean([by_k[k][c]['bvs'] for c in common]):.2f} dB" for k in ("8", "16")]
+        parts = [
+            f"K = {k}: default {np.mean([by_k[k][c]['default'] for c in common]):.2f}, "
+            f"ULR {np.mean([by_k[k][c]['ulr'] for c in common]):.2f}, "
+            f"BVS {np.mean([by_k[k][c]['bvs'] for c in common]):.2f} dB"
+            for k in ("8", "16")
+        ]
         lines.append(f"* {half} half, mean of {len(common)} cases: " + "; ".join(parts))
     return "\n".join(lines)
 

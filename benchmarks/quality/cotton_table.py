@@ -75,7 +75,10 @@ def main(argv=None):
     print("|---|---|" + "---|" * len(SETTINGS))
     for s in [int(x) for x in a.strides.split(",")]:
         bp, bd, bp0 = baseline(scene, s)
-        print(f"| {s} | baseline (plain avg through centre GT disparity) | {bp:.2f} / {bd:.0f} (no border: {bp0:.2f}) |", flush=True)
+        print(
+            f"| {s} | baseline (plain avg through centre GT disparity) | {bp:.2f} / {bd:.0f} (no border: {bp0:.2f}) |",
+            flush=True,
+        )
         for depth in a.depth.split(","):
             src, _ = prepare(scene.subset(neighbours(scene, s) + ["input_Cam040"]), tgt.name, depth=depth)
             S = compute_samples(src, tgt.camera)
@@ -88,8 +91,12 @@ def main(argv=None):
                 p = psnr(r.image, tgt.image, mask=r.coverage, border=2)
                 d = dssim(r.image, tgt.image, mask=r.coverage, border=2)
                 cells.append(f"{p:.2f} / {d:.0f}")
-                print(f"#   stride {s} {depth} {m} {kw}: {p:.3f} dB, DSSIM {d:.1f}, {dt:.1f} s, "
-                      f"{len(r.energy)} iterations", file=sys.stderr, flush=True)
+                print(
+                    f"#   stride {s} {depth} {m} {kw}: {p:.3f} dB, DSSIM {d:.1f}, {dt:.1f} s, "
+                    f"{len(r.energy)} iterations",
+                    file=sys.stderr,
+                    flush=True,
+                )
             print(f"| {s} | {'GT' if depth == 'gt' else 'planar'} | " + " | ".join(cells) + " |", flush=True)
 
 

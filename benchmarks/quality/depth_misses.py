@@ -207,7 +207,8 @@ def run(seed: int, size: int, args) -> None:
         m = tex & (seen == k)
         if m.any():
             print(f"    k={k}: {100 * m.sum() / n:5.2f} % of tex., within 1 % {100 * ok[m].mean():5.1f}, "
-                  f"misses {100 * (miss & m).sum() / n:.2f} (unknown {100 * (miss & m & ~np.isfinite(d)).sum() / n:.2f})")
+                  f"misses {100 * (miss & m).sum() / n:.2f} "
+                  f"(unknown {100 * (miss & m & ~np.isfinite(d)).sum() / n:.2f})")
     g = np.where(fin, gt, 1e3)
     edge = np.zeros(gt.shape, bool)
     jx = np.abs(np.diff(g, axis=1)) > 0.05 * np.minimum(g[:, 1:], g[:, :-1])
@@ -220,8 +221,10 @@ def run(seed: int, size: int, args) -> None:
     print("  distance to a depth edge (> 5 % jump between 4-neighbours of the exact depth):")
     for lo, hi in ((0, 1.5), (1.5, 3.5), (3.5, 5.5), (5.5, np.inf)):
         m = tex & (dist >= lo) & (dist < hi)
-        print(f"    {lo}-{hi} px: {100 * m.sum() / n:5.1f} % of tex., within 1 % {100 * ok[m].mean():5.1f}, "
-              f"misses {100 * (miss & m).sum() / n:.2f}")
+        print(
+            f"    {lo}-{hi} px: {100 * m.sum() / n:5.1f} % of tex., within 1 % {100 * ok[m].mean():5.1f}, "
+            f"misses {100 * (miss & m).sum() / n:.2f}"
+        )
     views_ok = ok0.copy()
     for Dv, cv in zip(nb_depths, nb_cams):
         views_ok |= _within(_splat(Dv, cv, cam), gt)
@@ -229,8 +232,10 @@ def run(seed: int, size: int, args) -> None:
     for wp, _, _ in rec["planes"]:
         with np.errstate(divide="ignore"):
             planes_ok |= _within(1.0 / wp, gt)
-    print(f"  oracles on the depth before the check: any partner's depth map within 1 % "
-          f"{100 * views_ok[tex].mean():.2f} %; any plane 3 px away within 1 % {100 * planes_ok[tex].mean():.2f} %")
+    print(
+        f"  oracles on the depth before the check: any partner's depth map within 1 % "
+        f"{100 * views_ok[tex].mean():.2f} %; any plane 3 px away within 1 % {100 * planes_ok[tex].mean():.2f} %"
+    )
     _check_breakdown(d0, d, gt, tex, cam, nb_depths, nb_cams)
 
 
@@ -260,10 +265,12 @@ def _check_breakdown(d0, d, gt, tex, cam, nb_depths, nb_cams, rel_tol: float = 0
     print("  dropped by the consistency check (% of textured pixels), by what the partners say:")
     for name, sel in (("right before the check", right), ("wrong before the check", ~right)):
         m = tex & dropped & sel
-        print(f"    {name}: {100 * m.sum() / n:.2f} = depth agrees but round trip fails "
-              f"{100 * (m & agree).sum() / n:.2f}, a partner sees farther {100 * (m & ~agree & farther).sum() / n:.2f}, "
-              f"only nearer (occlusion possible) {100 * (m & ~agree & ~farther & nearer).sum() / n:.2f}, "
-              f"no depth there {100 * (m & ~agree & ~farther & ~nearer).sum() / n:.2f}")
+        print(
+            f"    {name}: {100 * m.sum() / n:.2f} = depth agrees but round trip fails "
+            f"{100 * (m & agree).sum() / n:.2f}, a partner sees farther {100 * (m & ~agree & farther).sum() / n:.2f}, "
+            f"only nearer (occlusion possible) {100 * (m & ~agree & ~farther & nearer).sum() / n:.2f}, "
+            f"no depth there {100 * (m & ~agree & ~farther & ~nearer).sum() / n:.2f}"
+        )
 
 
 def main(argv=None) -> None:

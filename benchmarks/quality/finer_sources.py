@@ -188,9 +188,12 @@ def main(argv=None):
     if a.coarser:
         print("# sources coarser than the target; PSNR dB against the target's photograph, all pixels, border 2; "
               "s: the sources' median pixel size on the target; g: the coarser grid of auto")
-        print("| case | sources → target | s | g | ulr own grid | ulr auto | bvs own grid | bvs auto | gradient own grid, "
-              "gamma as is | gradient own grid, gamma / s² | gradient auto | covered % own / auto | gradient s, "
-              "own grid / auto |")
+        print(
+            "| case | sources → target | s | g | ulr own grid | ulr auto | bvs own grid | bvs auto | "
+            "gradient own grid, "
+            "gamma as is | gradient own grid, gamma / s² | gradient auto | covered % own / auto | gradient s, "
+            "own grid / auto |"
+        )
         print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for c in a.cases.split(","):
             run_coarser(c, factors)

@@ -70,9 +70,15 @@ def main(argv=None) -> None:
               + ", ".join(f"{k} {np.mean([r['psnr'][k] for r in sel]):.3f}" for k in labs))
     grad = [lab for lab, m, _ in STUDIES[a.study] if m == "gradient"]
     best = max(grad, key=lambda k: np.mean([r["psnr"][k] for r in reps if r["split"] == "choose"]))
-    print(f"\nbest on choose: {best}; cases where it trails ULR or BVS: "
-          + (", ".join(r["name"] for r in reps if r["psnr"][best] < max(r["psnr"].get("ULR", -1), r["psnr"].get("BVS", -1)))
-             or "none"))
+    print(
+        f"\nbest on choose: {best}; cases where it trails ULR or BVS: "
+        + (
+            ", ".join(
+                r["name"] for r in reps if r["psnr"][best] < max(r["psnr"].get("ULR", -1), r["psnr"].get("BVS", -1))
+            )
+            or "none"
+        )
+    )
     print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
 
 

@@ -266,8 +266,11 @@ def main():
         step, it, scale, pm_radius = se
         c = cot[se]
         s = " / ".join(f"{syn[(seed, bl) + se][0]:.1f}" for seed, bl in GRIDS)
-        label = (f"{'auto' if step is None else f'{step} px'}, {it}" + (f", coarse {scale}" if scale is not None else "")
-                 + (f", pm_radius {pm_radius}" if pm_radius is not None else ""))
+        label = (
+            f"{'auto' if step is None else f'{step} px'}, {it}"
+            + (f", coarse {scale}" if scale is not None else "")
+            + (f", pm_radius {pm_radius}" if pm_radius is not None else "")
+        )
         print(f"| {label} | {c['t8']:.1f} | {c['badpix']:.2f} / {c['mse']:.3f} | {c['psnr']:.2f} | {s} |")
     print(f"\nload average at the end {os.getloadavg()[0]:.2f}")
 

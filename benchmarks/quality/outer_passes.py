@@ -63,7 +63,11 @@ def main(argv=None):
     for sp in ("choose", "report"):
         sel = [r for r in reps if r["split"] == sp]
         if sel:
-            print(f"| {sp} | {len(sel)} | " + " | ".join(f"{np.mean([r['psnr'][k] for r in sel]):.3f}" for k in labs) + " |")
+            print(
+                f"| {sp} | {len(sel)} | "
+                + " | ".join(f"{np.mean([r['psnr'][k] for r in sel]):.3f}" for k in labs)
+                + " |"
+            )
     print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
 
 

@@ -336,7 +336,8 @@ def fountain_section(reports, large, args):
              f"(parameters in grey levels of 8-bit images) unless marked [0, 1].\n")
     L.append("#### vibr next to the paper (PSNR dB / DSSIM)\n")
     L.append("| view | paper: (1, 0, 0.002) | vibr | paper: (1, 0, 0.003) | vibr | "
-             "paper: (0.1, 1, 0.002) ours | vibr | vibr (0.1, 0.5, 0.002) | vibr ULR | vibr SAVSR λ 0.002 | vibr SAVSR λ 0.003 |")
+             "paper: (0.1, 1, 0.002) ours | vibr | vibr (0.1, 0.5, 0.002) | vibr ULR | vibr SAVSR λ 0.002 | "
+             "vibr SAVSR λ 0.003 |")
     L.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for rep in reports:
         t = rep["target"]
@@ -360,7 +361,8 @@ def fountain_section(reports, large, args):
     L.append("(alpha, gamma, lambda) as in the paper; gamma = 0 is the BVS model (vibr's `gradient` "
              "with gamma 0 is `bvs`), the paper's two baseline columns. Per view: "
              + "; ".join(f"view {int(r['target'])}: {100 * r['evaluated_fraction']:.1f} % of pixels evaluated, "
-                         f"depth {r['depth_seconds']:.0f} s (mean kept {100 * r.get('depth_estimation', {}).get('mean_kept', float('nan')):.0f} %)"
+                         f"depth {r['depth_seconds']:.0f} s (mean kept "
+                         f"{100 * r.get('depth_estimation', {}).get('mean_kept', float('nan')):.0f} %)"
                          for r in reports) + ".\n")
 
     # statements: vibr vs the paper
@@ -387,7 +389,8 @@ def fountain_section(reports, large, args):
     L.append("#### Where the gradient term acts: pixels seen by few source views\n")
     L.append("PSNR (dB) on the evaluated pixels seen by ≤ 2 of the 10 sources (\"few\": occlusion and "
              "image borders, where the paper says the gradient term helps) and by ≥ 3 (\"many\").\n")
-    L.append("| view | few: % of pixels | (1, 0, 0.003) few | (0.1, 1, 0.002) few | (1, 0, 0.003) many | (0.1, 1, 0.002) many |")
+    L.append("| view | few: % of pixels | (1, 0, 0.003) few | (0.1, 1, 0.002) few | (1, 0, 0.003) many | (0.1, "
+             "1, 0.002) many |")
     L.append("|---|---|---|---|---|---|")
     for rep in reports:
         b, o = find(rep, "gradient", "1,0,0.003"), find(rep, "gradient", "0.1,1,0.002")
@@ -400,7 +403,8 @@ def fountain_section(reports, large, args):
 
     # intensity scale
     L.append("#### The intensity scale: the same parameters read on [0, 1]\n")
-    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to (docs/explanation/method.md §9). "
+    L.append("The paper does not say which intensity range (alpha, gamma, lambda) refer to "
+             "(docs/explanation/method.md §9). "
              "vibr reads them on **0..255** (`scale=255`, the renderer's default: lambda in grey levels, "
              "sensor sigma_s = 1 grey level). Two wrong readings: **[0, 1]** = `vibr eval --intensity-scale 1` "
              "as is (every parameter on [0, 1], sigma_s = 1 too: relative to the data term the TV weight is "
@@ -419,7 +423,8 @@ def fountain_section(reports, large, args):
 
     if large:
         L.append("#### A larger image scale\n")
-        L.append("| view | image size | depth time | (1, 0, 0.002) | (1, 0, 0.003) | (0.1, 1, 0.002) | ULR | same view at "
+        L.append("| view | image size | depth time | (1, 0, 0.002) | (1, 0, 0.003) | (0.1, 1, 0.002) | ULR | "
+                 "same view at "
                  f"{W}×{H}: (0.1, 1, 0.002) |")
         L.append("|---|---|---|---|---|---|---|---|")
         for rep in large:
@@ -454,7 +459,8 @@ def floor_failures(reports) -> list[str]:
         floor = FOUNTAIN_FLOOR.get(rep.get("target")) if abs(rep.get("scale", 0) - 0.25) < 1e-9 else None
         ours = find(rep, "gradient", "0.1,1,0.002") if floor else None
         if ours is not None and ours["psnr"] < floor:
-            out.append(f"fountain view {rep['target']}: (0.1, 1, 0.002) {ours['psnr']:.2f} dB BELOW floor {floor:.2f} dB")
+            out.append(f"fountain view {rep['target']}: (0.1, 1, 0.002) {ours['psnr']:.2f} dB BELOW floor "
+                       f"{floor:.2f} dB")
     return out
 
 
@@ -493,7 +499,8 @@ def discussion_section(cotton, fountain, large):
             if "few" in o and "few" in b:
                 L.append(f"  Gradient term by region ((0.1, 1, 0.002) minus {setting_key(g0)}): "
                          f"{o['few']['psnr'] - b['few']['psnr']:+.2f} dB on the pixels seen by ≤ 2 sources "
-                         f"({100 * b['few']['fraction']:.1f} %), {o['many']['psnr'] - b['many']['psnr']:+.2f} dB on the rest.")
+                         f"({100 * b['few']['fraction']:.1f} %), {o['many']['psnr'] - b['many']['psnr']:+.2f} "
+                         f"dB on the rest.")
             sc = [find(rep, "gradient", "0.1,1,0.002", v) for v in ("01",)]
             if sc[0]:
                 L.append(f"  Reading the parameters on [0, 1] moves (0.1, 1, 0.002) by "
@@ -518,7 +525,8 @@ def discussion_section(cotton, fountain, large):
             L.append(f"* {rep['depth']}, stride {rep['stride']}: best {lab} ({ps:.2f} dB); γ = 1, 2, 3 minus BVS "
                      + ", ".join(f"{g - b:+.2f}" for g in gs[1:]) + " dB; PSNR "
                      + ("non-decreasing" if mono else "not monotone") + " in γ = 0…3; ULR minus BVS "
-                     f"{pick(res, 'ulr')['psnr'] - b:+.2f} dB, SAVSR minus BVS {pick(res, 'savsr')['psnr'] - b:+.2f} dB.")
+                     f"{pick(res, 'ulr')['psnr'] - b:+.2f} dB, SAVSR minus BVS "
+                     f"{pick(res, 'savsr')['psnr'] - b:+.2f} dB.")
         L.append("")
     reps = cotton + fountain + large
     if reps:
@@ -585,10 +593,12 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "Gaussian window σ = 1.5, scikit-image's `gaussian_weights=True`), both over the pixels that every "
          "setting of the table reconstructed (the paper's \"reconstructed pixels\"; fraction given per table) "
          "with a 2-pixel border excluded (as the authors' evaluator). The paper's DSSIM column was printed "
-         "by an evaluator with a non-standard SSIM, halved (docs/explanation/method.md §10): compare DSSIM with the paper's only "
+         "by an evaluator with a non-standard SSIM, halved (docs/explanation/method.md §10): compare DSSIM with "
+         "the paper's only "
          "in direction, not in value.",
          f"* **Renderer settings**: vibr's defaults (`vibr.render.methods.DEFAULTS`, as recorded in the reports) "
-         f"except the parameters named in each row: sigma_s = {rp.get('sigma_s', float('nan')):g} grey level, sigma_z from "
+         f"except the parameters named in each row: sigma_s = {rp.get('sigma_s', float('nan')):g} grey level, "
+         f"sigma_z from "
          f"the geometry, {rp.get('n_outer', '?')} outer re-weighting passes (bvs, gradient; 1 for savsr), "
          f"≤ {rp.get('max_iter', '?')} FISTA iterations per pass, stop at a relative energy change "
          f"< {rp.get('tol', float('nan')):g}, TV prox with {rp.get('tv_iter', '?')} warm-started dual iterations, "
@@ -596,7 +606,8 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "in the geometry stage's defaults.",
          "* **Intensity scale**: **255** — all parameters (lambda, sigma_s, the gradient clamp) refer to "
          "intensities in grey levels of 8-bit images (the renderer's documented convention, chosen for the "
-         "authors' sensor sigma of 1 grey level, docs/explanation/method.md §9–10). The same scale is used for both protocols; "
+         "authors' sensor sigma of 1 grey level, docs/explanation/method.md §9–10). The same scale is used for "
+         "both protocols; "
          "the fountain section shows what reading the paper's unstructured settings on [0, 1] does.",
          f"* **Image scale**: cotton at its full 512×512; fountain at {fs:g} × 3072×2048 "
          f"= {fsize} so that the whole "
@@ -629,7 +640,9 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "",
          *cotton_summary(cotton, args),
          "",
-         "Figures, written by the run beside its JSON reports and not committed (they show the dataset photographs; rerun the command to get them) (reference, ULR, SAVSR, BVS, γ = 1, γ = 3 in the top row; the evaluated mask and "
+         "Figures, written by the run beside its JSON reports and not committed (they show the dataset "
+         "photographs; rerun the command to get them) (reference, ULR, SAVSR, BVS, γ = 1, γ = 3 in the top "
+         "row; the evaluated mask and "
          "each method's error map, saturating at 0.1, in the bottom row; `_crops`: the window where the "
          "methods differ most, ×4):",
          "",
@@ -639,7 +652,8 @@ def write_results(path, args, argv, cotton, fountain, large, t_total, started, l
          "## Unstructured protocol: Strecha fountain-P11, views 2, 5, 8 from the 10 others",
          "",
          *fountain_section(fountain, large, args),
-         "Figures, written by the run and not committed (they show the dataset photographs) (reference, ULR, (1, 0, 0.003), (0.1, 1, 0.002); errors below; crops where they "
+         "Figures, written by the run and not committed (they show the dataset photographs) (reference, ULR, "
+         "(1, 0, 0.003), (0.1, 1, 0.002); errors below; crops where they "
          "differ most):",
          "",
          *[f"* `{os.path.relpath(r['figures'][k], Path(path).parent)}`" for r in fountain + large if "figures" in r
@@ -677,7 +691,8 @@ def main(argv=None):
                     help="only rewrite --doc from the JSON reports of the last run in --out")
     ap.add_argument("--check-only", metavar="FILE",
                     help="only check the floors on the JSON report(s) in FILE: exit 1 when one is below")
-    ap.add_argument("--quick", action="store_true", help="smoke run: stride 2, gt+planar, view 5 at 0.0625, no large row")
+    ap.add_argument("--quick", action="store_true",
+                    help="smoke run: stride 2, gt+planar, view 5 at 0.0625, no large row")
     ex = ap.add_mutually_exclusive_group()
     ex.add_argument("--workers", type=int, metavar="N", help="run the cases on N local processes (vibr.executor)")
     ex.add_argument("--dask", metavar="ADDRESS|local", help="run the cases on a Dask scheduler, or 'local' "
@@ -758,7 +773,8 @@ def main(argv=None):
     env = os.environ.get("NUMBA_NUM_THREADS")
     (args.out / "summary.json").write_text(json.dumps({
         "wall_seconds": t_total, "started": started, "load0": list(load0), "log": log_lines, "argv": argv,
-        "env": env, "git": git0, "git_end": git_state(), "cotton": [name(r) for r in cotton], "fountain": [name(r) for r in fountain],
+        "env": env, "git": git0, "git_end": git_state(), "cotton": [name(r) for r in cotton],
+        "fountain": [name(r) for r in fountain],
         "large": [name(r) for r in large]}, indent=2))
     if args.doc:
         write_results(args.doc, args, argv, cotton, fountain, large, t_total, started, load0, log_lines, env=env,

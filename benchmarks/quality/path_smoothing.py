@@ -1,7 +1,8 @@
 """How much ``vibr path interpolate --smooth SIGMA`` calms a hand-held capture.
 
-A steady walk (:func:`vibr.synthetic.walk_cameras`: ``--keys`` keys 0.1 scene units apart along x, turning 1° a key, as one frame a
-second of a walking video would be) is shaken by a hand: every key's centre moved by
+A steady walk (:func:`vibr.synthetic.walk_cameras`: ``--keys`` keys 0.1 scene units apart
+along x, turning 1° a key, as one frame a second of a walking video would be) is shaken by a
+hand: every key's centre moved by
 N(0, ``--jitter``) per axis and its orientation turned by N(0, ``--deg``°) about each axis,
 ``--seeds`` draws. For each SIGMA the path through the shaken keys
 (:func:`vibr.paths.camera_path.interpolate`, ``order="given"``, 10 frames a key) is compared with the
@@ -53,8 +54,10 @@ def main(argv=None) -> int:
             a = np.sqrt(np.mean([angle(x, y) ** 2 for x, y in zip(cams, truth)]))
             turn = np.mean([angle(x, y) for x, y in zip(cams, cams[1:])])
             rows[s].append((d, a, turn))
-    print(f"{args.keys} keys, jitter {args.jitter} scene units and {args.deg}° per axis, {args.seeds} seeds "
-          f"(medians; the steady path turns {np.mean([angle(x, y) for x, y in zip(truth, truth[1:])]):.3f}° a frame)\n")
+    print(
+        f"{args.keys} keys, jitter {args.jitter} scene units and {args.deg}° per axis, {args.seeds} seeds "
+        f"(medians; the steady path turns {np.mean([angle(x, y) for x, y in zip(truth, truth[1:])]):.3f}° a frame)\n"
+    )
     print("| --smooth | RMS distance to the steady path | RMS angle to it ° | mean turn a frame ° |")
     print("|---|---|---|---|")
     for s in sigmas:

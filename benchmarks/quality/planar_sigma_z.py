@@ -83,12 +83,18 @@ def table(reps):
                  + " | ".join(f"{r['results'][c]:.2f}" for c in cols) + " |")
     for name, part in (("mean choose", ch), ("mean report", rp)):
         if part:
-            L.append(f"| {name} | | | | " + " | ".join(f"{np.mean([r['results'][c] for r in part]):.2f}" for c in cols) + " |")
+            L.append(
+                f"| {name} | | | | "
+                + " | ".join(f"{np.mean([r['results'][c] for r in part]):.2f}" for c in cols)
+                + " |"
+            )
     L.append("")
     L.append(f"chosen on *choose*: **{best}**")
     for r in reps:
         d = r["results"][best] - max(r["results"]["ulr"], r["results"]["bvs " + best.split(" ", 1)[1]])
-        L.append(f"* {r['name']} ({r['split']}): {best} {r['results'][best]:.2f} dB, minus the better baseline {d:+.2f} dB")
+        L.append(
+            f"* {r['name']} ({r['split']}): {best} {r['results'][best]:.2f} dB, minus the better baseline {d:+.2f} dB"
+        )
     return "\n".join(L)
 
 
@@ -102,8 +108,14 @@ def main(argv=None):
 
     cases = [c for c in planar_cases() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     t0 = time.perf_counter()
-    reps = run_tasks(run_case, cases, setup=SceneCache, setup_args=(str(data_dir(a.data)),),
-                     executor=a.workers, desc="planar sigma_z")
+    reps = run_tasks(
+        run_case,
+        cases,
+        setup=SceneCache,
+        setup_args=(str(data_dir(a.data)),),
+        executor=a.workers,
+        desc="planar sigma_z",
+    )
     print(f"# {len(reps)} cases in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     print(table(reps))
 

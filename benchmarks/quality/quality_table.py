@@ -15,7 +15,8 @@ border), DSSIM, checkerboard energy of the render over the reference photo's
 (:func:`vibr.metrics.checkerboard_energy`), speckles per 10,000 px of the render minus the
 reference's (:func:`vibr.metrics.speckle_density`), time.
 
-    python benchmarks/quality/quality_table.py cotton --strides 2,4 --settings "bvs" "gradient" "gradient scheme=central"
+    python benchmarks/quality/quality_table.py cotton --strides 2,4 \\
+        --settings "bvs" "gradient" "gradient scheme=central"
     python benchmarks/quality/quality_table.py fountain --settings "ulr" "savsr" "bvs" "gradient"
 """
 
@@ -33,8 +34,12 @@ DATA = ROOT.parent / "shared" / "data"
 
 def parse_setting(text):
     method, *kv = text.split()
-    params = {k: eval(v, {}) if v[:1].isdigit() or v[:1] in "-.[(" or v in ("True", "False", "None")  # noqa: S307
-              else v for k, v in (t.split("=", 1) for t in kv)}
+    params = {
+        k: eval(v, {})
+        if v[:1].isdigit() or v[:1] in "-.[(" or v in ("True", "False", "None")  # noqa: S307
+        else v
+        for k, v in (t.split("=", 1) for t in kv)
+    }
     scheme = params.pop("scheme", None)
     return method, params, scheme
 
@@ -50,8 +55,8 @@ def crop_view(view, n):
     K[0, 2] -= x0
     K[1, 2] -= y0
     c2 = Camera(K, cam.R, cam.t, n, n, cam.source)
-    dep = None if view.depth is None else np.ascontiguousarray(view.depth[y0:y0 + n, x0:x0 + n])
-    return view.replace(image=np.ascontiguousarray(view.image[y0:y0 + n, x0:x0 + n]), camera=c2, depth=dep)
+    dep = None if view.depth is None else np.ascontiguousarray(view.depth[y0 : y0 + n, x0 : x0 + n])
+    return view.replace(image=np.ascontiguousarray(view.image[y0 : y0 + n, x0 : x0 + n]), camera=c2, depth=dep)
 
 
 def cotton_cases(args):
@@ -86,9 +91,15 @@ def fountain_cases(args):
         tgt = scene["0005"]
     else:
         src, tgt = prepare(scene, "0005", depth="estimated")
-        np.savez(cache, names=np.array([v.name for v in src.views]), **{v.name: v.depth for v in src.views},
-                 **{f"sz_{v.name}": np.asarray(v.sigma_z if v.sigma_z is not None else np.nan, np.float32)
-                    for v in src.views})
+        np.savez(
+            cache,
+            names=np.array([v.name for v in src.views]),
+            **{v.name: v.depth for v in src.views},
+            **{
+                f"sz_{v.name}": np.asarray(v.sigma_z if v.sigma_z is not None else np.nan, np.float32)
+                for v in src.views
+            },
+        )
     yield f"fountain 5 @{args.fountain_scale:g}", src, tgt
 
 
@@ -117,14 +128,16 @@ def main(argv=None):
             if scheme not in samples:
                 samples[scheme] = compute_samples(src, tgt.camera, grad_scheme=scheme)
             t0 = time.perf_counter()
-            r = render_samples(samples[scheme], method, source_centres=Cs, target_centre=tgt.camera.centre,
-                               **params)
+            r = render_samples(samples[scheme], method, source_centres=Cs, target_centre=tgt.camera.centre, **params)
             dt = time.perf_counter() - t0
             m = r.coverage
             cb = checkerboard_energy(r.image, m, 2) / checkerboard_energy(ref, m, 2)
             sp = speckle_density(r.image, m, 2) - speckle_density(ref, m, 2)
-            print(f"| {label} | {text} | {psnr(r.image, ref, mask=m, border=2):.2f} | "
-                  f"{dssim(r.image, ref, mask=m, border=2):.0f} | {cb:.2f} | {sp:.1f} | {dt:.1f} |", flush=True)
+            print(
+                f"| {label} | {text} | {psnr(r.image, ref, mask=m, border=2):.2f} | "
+                f"{dssim(r.image, ref, mask=m, border=2):.0f} | {cb:.2f} | {sp:.1f} | {dt:.1f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -116,8 +116,11 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=4, help="synthetic worlds per layout")
     ap.add_argument("--border", type=int, default=15, help="pixels left out at the image border")
     args = ap.parse_args(argv)
-    print("| case | estimator | textured pixels | k = median(|e|/σ)/0.6745 | k_rms | k_rms99 | gross % (all pixels) | within 1σ % | "
-          "within 2σ % | Spearman ρ(σ, |e|) | median |e|/z | median σ/z | s |")
+    print(
+        "| case | estimator | textured pixels | k = median(|e|/σ)/0.6745 | k_rms | k_rms99 | gross % (all pixels) | "
+        "within 1σ % | "
+        "within 2σ % | Spearman ρ(σ, |e|) | median |e|/z | median σ/z | s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
     ks = {}
@@ -126,17 +129,23 @@ def main(argv=None) -> int:
         c = calibration(v.depth, v.sigma_z, zt, textured(v.image), args.border)
         gross_all = calibration(v.depth, v.sigma_z, zt, None, args.border)["gross"]
         ks.setdefault(method, []).append((c["k"], c["k_rms"], c["k_rms99"]))
-        print(f"| {name} | {method} | {c['n']} | {c['k']:.2f} | {c['k_rms']:.2f} | {c['k_rms99']:.2f} | "
-              f"{100 * c['gross']:.2f} ({100 * gross_all:.2f}) | {100 * c['in1']:.1f} | {100 * c['in2']:.1f} | "
-              f"{c['rho']:.2f} | {c['rel_err']:.4f} | {c['rel_sigma']:.4f} | {time.perf_counter() - t:.0f} |",
-              flush=True)
+        print(
+            f"| {name} | {method} | {c['n']} | {c['k']:.2f} | {c['k_rms']:.2f} | {c['k_rms99']:.2f} | "
+            f"{100 * c['gross']:.2f} ({100 * gross_all:.2f}) | {100 * c['in1']:.1f} | {100 * c['in2']:.1f} | "
+            f"{c['rho']:.2f} | {c['rel_err']:.4f} | {c['rel_sigma']:.4f} | {time.perf_counter() - t:.0f} |",
+            flush=True,
+        )
         t = time.perf_counter()
     print()
     for m, v in ks.items():
         v = np.array(v)
-        print(f"* {m}, {len(v)} cases: " + ", ".join(
-            f"{lab} median {np.median(v[:, j]):.2f} (min {v[:, j].min():.2f}, max {v[:, j].max():.2f})"
-            for j, lab in enumerate(("k", "k_rms", "k_rms99"))))
+        print(
+            f"* {m}, {len(v)} cases: "
+            + ", ".join(
+                f"{lab} median {np.median(v[:, j]):.2f} (min {v[:, j].min():.2f}, max {v[:, j].max():.2f})"
+                for j, lab in enumerate(("k", "k_rms", "k_rms99"))
+            )
+        )
     return 0
 
 

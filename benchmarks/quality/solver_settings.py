@@ -39,7 +39,11 @@ def main(argv=None):
     tgt = scene["input_Cam040"]
     variants = [dict(n_outer=2, tv_iter=2), dict(n_outer=3, tv_iter=2), dict(n_outer=2, tv_iter=1),
                 dict(n_outer=2, tv_iter=5)]
-    print("| stride | geometry | method | " + " | ".join(f"n_outer={v['n_outer']}, tv_iter={v['tv_iter']}" for v in variants) + " |")
+    print(
+        "| stride | geometry | method | "
+        + " | ".join(f"n_outer={v['n_outer']}, tv_iter={v['tv_iter']}" for v in variants)
+        + " |"
+    )
     print("|---|---|---|" + "---|" * len(variants))
     for s in (1, 2, 4):
         for depth in ("gt", "planar"):
@@ -49,12 +53,15 @@ def main(argv=None):
                 cells = []
                 for v in variants:
                     r = render_samples(S, m, **{**kw, **v})
-                    cells.append(f"{psnr(r.image, tgt.image, mask=r.coverage, border=2):.3f} / "
-                                 f"{dssim(r.image, tgt.image, mask=r.coverage, border=2):.1f} "
-                                 f"({r.iterations}+{r.power_iterations} it, {r.times['solve']:.2f} s)")
+                    cells.append(
+                        f"{psnr(r.image, tgt.image, mask=r.coverage, border=2):.3f} / "
+                        f"{dssim(r.image, tgt.image, mask=r.coverage, border=2):.1f} "
+                        f"({r.iterations}+{r.power_iterations} it, {r.times['solve']:.2f} s)"
+                    )
                 label = m + "".join(f" {k}={x:g}" for k, x in kw.items())
-                print(f"| {s} | {'GT' if depth == 'gt' else 'planar'} | {label} | " + " | ".join(cells) + " |",
-                      flush=True)
+                print(
+                    f"| {s} | {'GT' if depth == 'gt' else 'planar'} | {label} | " + " | ".join(cells) + " |", flush=True
+                )
 
 
 def tol_outer_table():
@@ -77,8 +84,9 @@ def tol_outer_table():
             for t in tols:
                 r = render_samples(S, m, tol_outer=t)
                 its = [b - a - 1 for a, b in zip(r.outer, r.outer[1:] + [len(r.energy)])]
-                cells.append(f"{psnr(r.image, tgt.image, mask=r.coverage, border=2):.3f} "
-                             f"({' + '.join(map(str, its))} it)")
+                cells.append(
+                    f"{psnr(r.image, tgt.image, mask=r.coverage, border=2):.3f} ({' + '.join(map(str, its))} it)"
+                )
             print(f"| {scene_label} | {geometry} | {m} | " + " | ".join(cells) + " |", flush=True)
 
     scene = load_scene(data_dir() / "hci2016_cotton")

@@ -47,7 +47,8 @@ Metrics: PSNR over all pixels and over the covered pixels (those every setting o
 reconstructed), 2-pixel border excluded. The held-out split is fixed before any number is
 seen: within each family (cotton gt, cotton estimated, cotton planar, fountain, temple +
 synthetic, all views) the cases alternate, in the order listed above, between "choose" (1st, 3rd, ...)
-and "report" (2nd, 4th, ...); in the few-view and no-geometry families seed 0 is "choose", seed 1 "report". The default is the setting with the best mean all-pixel PSNR
+and "report" (2nd, 4th, ...); in the few-view and no-geometry families seed 0 is "choose", seed
+1 "report". The default is the setting with the best mean all-pixel PSNR
 over the "choose" cases; it is reported on the "report" cases beside BVS, ULR, the auto
 weights and the per-case oracle (the best setting of the sweep for that case).
 
@@ -230,15 +231,18 @@ def table(reps, chosen):
          f"D `lam_density={LAM_DENSITY:g}` and `hole_fill=\"push-pull\"` (without D: 0 and \"solve\"). "
          "PSNR dB over all pixels / over the covered pixels (2-px border excluded). *oracle*: the best "
          "gradient setting of the sweep for that case (all pixels). *auto*: `gamma=\"auto\", lam=\"auto\"` "
-         "(its choice; *tune / render*: its tuning time over the median full-size render time of the case's gradient settings).", "",
+         "(its choice; *tune / render*: its tuning time over the median full-size render time of the case's "
+         "gradient settings).", "",
          f"Command: `python3 benchmarks/quality/sweep_defaults.py --workers 2 --write-docs`; "
          f"{len(reps)} cases. Split fixed in "
          "advance: within each family (cotton gt / estimated / planar, fountain, temple + synthetic, all views) "
          "the 1st, 3rd, … case is *choose*, the 2nd, 4th, … *report*; few views (sparse) and no geometry "
          "(synthetic views, depth estimated): seed 0 *choose*, seed 1 *report*. "
-         "The targets below are over the sweep's own cases (not the few-view and no-geometry families). Estimated depth: from the "
+         "The targets below are over the sweep's own cases (not the few-view and no-geometry families). "
+         "Estimated depth: from the "
          "sources only, cached (`vibr.stereo.cache`).", "",
-         "| case | split | ULR | BVS | chosen | auto (γ, λ) | oracle (setting) | chosen − BVS | auto − oracle | tune / render |",
+         "| case | split | ULR | BVS | chosen | auto (γ, λ) | oracle (setting) | chosen − BVS | auto − oracle | "
+         "tune / render |",
          "|---|---|---|---|---|---|---|---|---|---|"]
     f = lambda d: f"{d['all']:.2f} / {d['covered']:.2f}"  # noqa: E731
     for r in reps:
@@ -290,7 +294,8 @@ def _targets(reps, k, labs):
     # "every other case": cotton estimated / planar, fountain, temple; the synthetic scenes
     # reported beside it
     listed = [n for n in R if n not in ("cotton gt s2", "cotton gt s4") and not n.startswith("synthetic")]
-    for what, group in (("worst other case", listed), ("worst synthetic case", [n for n in R if n.startswith("synthetic")])):
+    synthetic = [n for n in R if n.startswith("synthetic")]
+    for what, group in (("worst other case", listed), ("worst synthetic case", synthetic)):
         if group:
             worst = min(group, key=lambda n: R[n][k]["all"] - R[n]["BVS"]["all"])
             d = R[worst][k]["all"] - R[worst]["BVS"]["all"]
@@ -318,7 +323,8 @@ def main(argv=None):
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases() if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
+    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases()
+             if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     fname = lambda c: out / (c["name"].replace(" ", "_") + ".json")  # noqa: E731
     if a.report_only:
         reps = [json.loads(fname(c).read_text()) for c in cases if fname(c).is_file()]

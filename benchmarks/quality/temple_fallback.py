@@ -61,7 +61,9 @@ def main(argv=None):
         fountain = load_scene(data / "strecha_fountain-P11", scale=0.25)
         for t in ("0002", "0005", "0008"):
             raw, tv = prepare(fountain, t, depth="estimated", fallback=False)
-            p = [psnr(render(src, tv.camera, "gradient").image, tv.image, border=2) for src in (raw, fallback_depth(raw))]
+            p = [
+                psnr(render(src, tv.camera, "gradient").image, tv.image, border=2) for src in (raw, fallback_depth(raw))
+            ]
             print(f"| {t} | {_fractions(raw)} | {p[0]:.2f} | {p[1]:.2f} |")
 
 

@@ -66,11 +66,15 @@ def main(argv=None):
     print("|---" * (len(SETTINGS) + 2) + "|")
     print("| all | 100 % | " + " | ".join(f"{psnr(i, tv.image, border=2):.2f}" for i in imgs) + " |")
     groups = [(f"{a}–{c} views", (cnt >= a) & (cnt <= c)) for a, c in ((0, 0), (1, 1), (2, 3), (4, 6), (7, 10))]
-    groups += [(f"best angle {a}–{c}°", (deg >= a) & (deg < c)) for a, c in ((0, 3), (3, 6), (6, 10), (10, 20), (20, 90))]
+    groups += [
+        (f"best angle {a}–{c}°", (deg >= a) & (deg < c)) for a, c in ((0, 3), (3, 6), (6, 10), (10, 20), (20, 90))
+    ]
     for lab, mk in groups:
         mk = mk & inner
         if mk.sum() >= 100:
-            print(f"| {lab} | {mk.mean():.1%} | " + " | ".join(f"{psnr(i, tv.image, mask=mk):.2f}" for i in imgs) + " |")
+            print(
+                f"| {lab} | {mk.mean():.1%} | " + " | ".join(f"{psnr(i, tv.image, mask=mk):.2f}" for i in imgs) + " |"
+            )
 
 
 if __name__ == "__main__":

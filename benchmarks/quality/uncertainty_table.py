@@ -21,7 +21,8 @@ alone (``sample_spread_sigma``) and 1 / number of views seeing the pixel
 (``view_count_sigma``), both scored against the same gradient render.
 
     python benchmarks/quality/uncertainty_table.py                       # all cases, print the table
-    python benchmarks/quality/uncertainty_table.py --write-docs          # ... and its section of docs/results/paper-tables.md
+    python benchmarks/quality/uncertainty_table.py --write-docs          # ... and write its section
+                                                                         # of docs/results/paper-tables.md
     python benchmarks/quality/uncertainty_table.py --cases cotton_s2_gt,fountain_0005
 
 JSON per case and the sparsification plots go to ``--out`` (default out/uncertainty, git-ignored).
@@ -183,7 +184,8 @@ def targets(reports):
         v = r[f"vibr[{CHOSEN}]"]
         best.append(v["ause"] < min(r["baseline: sample spread"]["ause"], r["baseline: 1/views"]["ause"]))
         if rep["case"].startswith("fountain"):
-            fountain.append(f"{rep['case']} {v['spearman']:.2f} ({'met' if v['spearman'] >= SPEARMAN_FLOOR else '**not met**'})")
+            fountain.append(f"{rep['case']} {v['spearman']:.2f} "
+                            f"({'met' if v['spearman'] >= SPEARMAN_FLOOR else '**not met**'})")
     return (f"Targets: vibr's σ has the lowest AUSE on {sum(best)} of {len(best)} cases; Spearman ρ ≥ 0.4 on "
             f"fountain: {', '.join(fountain) or 'no fountain case run'}.")
 
@@ -196,12 +198,14 @@ def write_docs(reports, cmd, seconds):
     """Write the section between :data:`BEGIN` and :data:`END` of :data:`PAGE` (the rest of the
     page, paper_tables.py's, is kept)."""
     body = (f"{SECTION}\n\nMade by `{cmd}` ({seconds / 60:.0f} min on a shared 2-core machine; "
-            "method, metrics and baselines in the script's docstring and docs/explanation/renderer.md \"Uncertainty\"). "
+            "method, metrics and baselines in the script's docstring and docs/explanation/renderer.md "
+            "\"Uncertainty\"). "
             "AUSE: area between the normalised sparsification curve and the oracle's (50 fractions; lower is "
             "better); ρ: Spearman's rank correlation between σ and the per-pixel error; all pixels of the "
             "image with a 2-pixel border excluded (push–pull filled pixels included). vibr σ, sample spread and "
             "1/views are scored against the same `gradient` render ("
-            + ("at the former explicit settings, `--paper-settings`" if PAPER_SETTINGS[0] else "at the library's defaults")
+            + ("at the former explicit settings, "
+               "`--paper-settings`" if PAPER_SETTINGS[0] else "at the library's defaults")
             + "); the ULR columns against a ULR render.\n\n"
             f"{table(reports)}\n\nThe terms of vibr's σ² (the choice: `{CHOSEN}`), AUSE / ρ:\n\n"
             f"{variant_table(reports)}\n\n{targets(reports)}\n")

@@ -11,7 +11,8 @@ diagonal). The video is encoded as H.264 (crf 18) and calibrated twice, alternat
   (``ffmpeg -vf fps=...``) gives, calibrated as a folder with the same sequential matcher.
 
 and, once, the 11 photographs themselves at the same size (no blur, no video coding) as a
-folder with the same matcher: the floor. Each is compared with the ground-truth cameras of the photographs behind its frames
+folder with the same matcher: the floor. Each is compared with the ground-truth cameras of
+the photographs behind its frames
 (:func:`vibr.calib.colmap.pose_errors`, similarity fitted to the poses): registered frames,
 sparse points, reprojection error, largest rotation and centre errors, time.
 
@@ -197,7 +198,8 @@ def main(argv=None) -> int:
         ok = [r for r in rs if "error" not in r]
         print(f"{name}: registered {', '.join(str(r['registered']) for r in rs)} of {len(scene)}; over the "
               f"{len(ok)} runs that made a model, median rotation error "
-              f"{statistics.median(r['rot_deg'] for r in ok):.3f}°, centre {statistics.median(r['centre_pct'] for r in ok):.3f} %"
+              f"{statistics.median(r['rot_deg'] for r in ok):.3f}°, centre "
+              f"{statistics.median(r['centre_pct'] for r in ok):.3f} %"
               if ok else f"{name}: no run made a model")
     return 0
 

@@ -36,7 +36,9 @@ def main(argv=None):
     bare = exact.replace(views=[v.replace(depth=None, sigma_z=None) for v in views])
     src, target = prepare(bare, "f3", cache_dir=False, fallback="never")
     for name, st in src.meta["depth_estimation"]["views"].items():
-        print(f"{name}: depth range {st['depth_range'][0]:.2f}..{st['depth_range'][1]:.2f}, kept {100 * st['kept']:.1f} %")
+        print(
+            f"{name}: depth range {st['depth_range'][0]:.2f}..{st['depth_range'][1]:.2f}, kept {100 * st['kept']:.1f} %"
+        )
     for label, scene in (("estimated depth", bare), ("exact depth", exact)):
         s, t = prepare(scene, "f3", cache_dir=False)
         print(f"{label}: " + ", ".join(f"{m} {render(s, t, m).metrics['psnr']:.2f} dB" for m in ("ulr", "gradient")))
