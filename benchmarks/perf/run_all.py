@@ -79,8 +79,9 @@ def page(a, machine, outputs, render, memory) -> str:
     if rows:
         L += ["## Summary", "", "| measurement | value | command |", "|---|---|---|"]
         L += ["| " + " | ".join(r) + " |" for r in rows] + [""]
-    for title, name, (out, secs) in outputs:
-        L += [f"## {title}", "", f"`{name}`, {secs / 60:.1f} min:", "", out.strip(), ""]
+    for title, name, (out, _secs) in outputs:
+        kept = "\n".join(ln for ln in out.strip().splitlines() if not ln.startswith("wrote "))
+        L += [f"## {title}", "", f"`{name}`:", "", kept, ""]
     return "\n".join(L).rstrip("\n") + "\n"
 
 
