@@ -1,5 +1,5 @@
 """Property-based fuzzing of vibr's loaders (issue 24), shared by tests/test_fuzz_loaders.py
-(fast profile, part of ``pytest -q``) and benchmarks/fuzz_long.py (long profile).
+(fast profile, part of ``pytest -q``) and benchmarks/tools/fuzz_long.py (long profile).
 
 Each *seed* writes a small valid input (a scene folder or one file). A hypothesis strategy
 draws a mutation of one of its files: truncation at an offset of some class (0, 1, a word

@@ -1,56 +1,98 @@
-"""Benchmarks never write tracked files unless asked: paper_tables.py writes docs/RESULTS.md
-only with --write-docs (refused with --quick) or an explicit --doc PATH."""
+"""The benchmarks as a reader meets them: each script answers ``--help``, no script imports
+another (only ``benchmarks/_common.py``), every path the docs and the code cite exists, a
+generator writes no tracked file unless asked, and one below its floor exits 1.
 
-import importlib.util
+Nothing here imports from benchmarks/: the scripts run as subprocesses."""
+
+import ast
+import json
+import os
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "benchmarks"
+SCRIPTS = sorted(p for p in BENCH.glob("*/*.py"))
+PAPER_TABLES = BENCH / "quality" / "paper_tables.py"
 
 
-def _paper_tables():
-    spec = importlib.util.spec_from_file_location("paper_tables", ROOT / "benchmarks" / "paper_tables.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def _run(script, *args, timeout=120):
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    return subprocess.run([sys.executable, str(script), *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, env=env, cwd=ROOT)
 
 
-def test_quick_run_refuses_to_write_the_docs(capsys):
-    pt = _paper_tables()
-    with pytest.raises(SystemExit) as e:
-        pt.main(["--quick", "--write-docs"])
-    assert e.value.code == 2 and "write-docs" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        pt.main(["--report-only"])  # rewriting a markdown file needs a target
+def test_the_layout_is_by_purpose():
+    assert {p.parent.name for p in SCRIPTS} == {"perf", "quality", "assets", "tools"}
+    assert [p.name for p in BENCH.glob("*.py")] == ["_common.py"]
 
 
-def test_no_markdown_by_default(monkeypatch, tmp_path):
-    """Without --write-docs / --doc the run writes no markdown (the tables' runs are
-    replaced by stubs: this checks the plumbing, not the numbers)."""
-    pt = _paper_tables()
-    written = []
-    monkeypatch.setattr(pt, "write_results", lambda path, *a, **k: written.append(path))
-    monkeypatch.setattr(pt, "run_cases", lambda args, data, cases, log: [])
-    monkeypatch.setattr(pt, "data_dir", lambda arg: tmp_path)
-    pt.main(["--quick", "--out", str(tmp_path / "out")])
-    assert written == []
-    pt.main(["--quick", "--out", str(tmp_path / "out"), "--doc", str(tmp_path / "R.md")])
-    assert written == [str(tmp_path / "R.md")]
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_every_script_answers_help(script):
+    r = _run(script, "--help")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.lstrip().startswith("usage:"), r.stdout[:200]
 
 
-def test_write_results_keeps_later_sections_and_generates_the_discussion(tmp_path):
-    """The discussion is rewritten from the reports (a hand-written one does not survive) and
-    what follows it (other scripts' marker sections) is kept byte for byte."""
-    import argparse
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_no_script_imports_another(script):
+    """A script imports vibr, third-party modules and ``_common``, never another script
+    (tools/fuzz_long.py shares tests/_fuzz.py with the fast profile)."""
+    names = {p.stem for p in SCRIPTS}
+    tree = ast.parse(script.read_text())
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            imported.add(node.module.split(".")[0])
+    assert not imported & names, f"{script.name} imports {sorted(imported & names)}"
 
-    pt = _paper_tables()
-    doc = tmp_path / "R.md"
-    later = "## Uncertainty\n\n<!-- uncert:begin -->\n| a | b |\n<!-- uncert:end -->\n"
-    doc.write_text("# old\n\n<!-- BEGIN DISCUSSION -->\nhand-written 12.34 dB\n<!-- END DISCUSSION -->\n\n" + later)
-    args = argparse.Namespace(fountain_scale=0.25, strides=[2], cotton_depths=["gt"], out=tmp_path / "out")
-    pt.write_results(str(doc), args, [], [], [], [], 1.0, "2026-01-01 00:00", (1.0, 1.0, 1.0), [],
-                     git={"commit": "0" * 40, "dirty": ""})
-    text = doc.read_text()
-    assert "hand-written 12.34" not in text and "from this run's JSON" in text
-    assert text.endswith(later) and text.count("<!-- uncert:begin -->") == 1
+
+def test_every_cited_benchmark_exists():
+    """Every ``benchmarks/...`` path in docs/, src/ and tests/ names a file or folder that exists."""
+    cited = {}
+    for folder in ("docs", "src", "tests"):
+        for f in (ROOT / folder).rglob("*"):
+            if f.suffix in (".md", ".py") and f.is_file():
+                for m in re.finditer(r"benchmarks/[A-Za-z0-9_/]+(?:\.py)?", f.read_text(errors="replace")):
+                    cited.setdefault(m.group(0).rstrip("/"), f.relative_to(ROOT))
+    assert cited, "no citation found: the pattern is wrong"
+    missing = {p: str(f) for p, f in cited.items() if not (ROOT / p).exists()}
+    assert not missing, missing
+
+
+def test_quick_run_refuses_to_write_the_docs():
+    r = _run(PAPER_TABLES, "--quick", "--write-docs")
+    assert r.returncode == 2 and "write-docs" in r.stderr
+    r = _run(PAPER_TABLES, "--report-only")  # rewriting a markdown file needs a target
+    assert r.returncode == 2 and "--doc" in r.stderr
+
+
+def _fountain_report(target, psnr, scale=0.25):
+    """A report as paper_tables.py writes it, reduced to what the floor check reads."""
+    return {"target": target, "scale": scale,
+            "results": [{"method": "gradient", "params": {"alpha": 0.1, "gamma": 1.0, "lam": 0.002},
+                         "intensity_scale": 255.0, "psnr": psnr}]}
+
+
+def test_a_result_below_the_floor_exits_1_with_one_line(tmp_path):
+    f = tmp_path / "reports.json"
+    f.write_text(json.dumps([_fountain_report("0002", 30.0), _fountain_report("0005", 29.5)]))
+    r = _run(PAPER_TABLES, "--check-only", f)
+    assert r.returncode == 1
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "BELOW floor" in lines[0] and "0005" in lines[0] and "0002" not in lines[0]
+
+
+def test_a_result_at_the_floor_passes(tmp_path):
+    f = tmp_path / "report.json"
+    f.write_text(json.dumps(_fountain_report("0005", 31.0)))
+    assert _run(PAPER_TABLES, "--check-only", f).returncode == 0
+    # another scale has no floor
+    f.write_text(json.dumps(_fountain_report("0005", 20.0, scale=0.5)))
+    assert _run(PAPER_TABLES, "--check-only", f).returncode == 0

@@ -6,7 +6,6 @@ helpers and the error paths."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -389,16 +388,11 @@ def test_a_zoom_gets_one_camera_per_photo(tmp_path):
     """Photos of one size whose EXIF gives two focal lengths (a zoom): one camera per photo,
     each focal length recovered. With one shared camera (before 2026-11-27; the copies COLMAP
     reads are PNGs without EXIF) both zooms got one focal length, 17 % and 22 % off. The
-    photos are those of benchmarks/calibrate_zoom.py."""
-    import importlib.util
-
+    photos are :func:`vibr.synthetic.zoom_photos` (benchmarks/quality/calibrate_zoom.py's)."""
     from vibr.calib.colmap import _lens_keys, calibrate_scene
+    from vibr.synthetic import zoom_photos
 
-    spec = importlib.util.spec_from_file_location(
-        "calibrate_zoom", Path(__file__).resolve().parents[1] / "benchmarks" / "calibrate_zoom.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    truth = bench.make_photos(tmp_path)
+    truth = zoom_photos(tmp_path)
     assert sorted(set(_lens_keys(sorted(tmp_path.glob("*.jpg"))))) == [("Acme", "Zoomer", 24.0), ("Acme", "Zoomer", 36.0)]
     scene, report = calibrate_scene(tmp_path)
     assert len(scene) == 10 and report.mean_reprojection_error_px < 0.35

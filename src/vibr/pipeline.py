@@ -71,7 +71,7 @@ ESTIMATED_SOURCES = 16
 #: With the planar proxy and neither ``sources`` nor ``n_views`` given, a target is rendered
 #: from this many best views: the plane misplaces a view in proportion to its baseline, and
 #: the gradient term reads every view that lands (the colour term only the view prior's
-#: few). Chosen across scenes with a held-out split (``benchmarks/planar_views.py``,
+#: few). Chosen across scenes with a held-out split (``benchmarks/quality/planar_views.py``,
 #: docs/explanation/renderer.md "The planar proxy's sigma_z"): +1.4 and +1.3 dB over every view on its two halves.
 PLANAR_SOURCES = 4
 #: ``n_views`` that asks for every view as a source (CLI ``--views all``).

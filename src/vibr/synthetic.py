@@ -52,6 +52,7 @@ __all__ = [
     "walk_cameras",
     "degrade_depth",
     "planar_depth",
+    "zoom_photos",
     "TEXTURES",
     "DEFAULT_BBOX",
     "DEFAULT_SIGMA_Z",
@@ -919,3 +920,39 @@ def planar_depth(camera: Camera, z: float, normal=None) -> np.ndarray:
         s = (z - n @ camera.centre) / den
     s[~(s > 0) | ~np.isfinite(s)] = np.nan
     return s.astype(np.float32)
+
+
+def zoom_photos(folder, n: int = 10, zoom: float = 1.5) -> dict[str, float]:
+    """Write ``n`` synthetic 480×360 JPEG photos on a 40° arc, every other one zoomed by
+    ``zoom``, with EXIF make "Acme", model "Zoomer" and focal lengths 24 mm and 24·zoom mm:
+    the input of a calibration with a zoom lens.
+
+    Parameters
+    ----------
+    folder : path-like
+        An existing folder; the photos are ``v00.jpg``, ``v01.jpg``, ...
+
+    Returns
+    -------
+    dict
+        Photo stem -> true focal length in pixels at 480 px width.
+    """
+    from pathlib import Path
+
+    from PIL import Image
+
+    folder = Path(folder)
+    world = default_world(0)
+    truth = {}
+    for i, c in enumerate(arc_cameras(n, arc_deg=40, width=480, height=360)):
+        z = 1.0 if i % 2 == 0 else zoom
+        K = c.K.copy()
+        K[:2, :2] *= z
+        img, _ = render_view(world, Camera(K, c.R, c.t, c.width, c.height))
+        im = Image.fromarray((img * 255 + 0.5).astype(np.uint8))
+        ex = im.getexif()
+        ex[0x010F], ex[0x0110] = "Acme", "Zoomer"
+        ex.get_ifd(0x8769)[0x920A] = 24.0 * z
+        im.save(folder / f"v{i:02d}.jpg", exif=ex.tobytes(), quality=95)
+        truth[f"v{i:02d}"] = float(K[0, 0])
+    return truth

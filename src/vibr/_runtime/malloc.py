@@ -7,7 +7,7 @@ to at most 32 MiB as blocks are freed) with a fresh ``mmap``, and unmaps it agai
 per use. Frame after frame of a fly-through this is the same work again. Keeping those
 blocks in the heap (mmap threshold 256 MiB) and not returning the heap's free top to the
 kernel below 2 GiB (trim threshold) lets the next frame reuse the pages (measured with
-``benchmarks/bench_malloc.py``: docs/explanation/performance.md). The trim threshold was 512 MiB until
+``benchmarks/perf/bench_malloc.py``: docs/explanation/performance.md). The trim threshold was 512 MiB until
 2026-11-28: a viewer's 768² render frees about 600 MiB at the top of the heap, which glibc
 then gave back and the next render faulted in again (docs/explanation/viewer.md, "The heap's top").
 
@@ -16,7 +16,7 @@ viewer's render worker) gets an arena of its own, whose heaps are at most 64 MiB
 array is mapped and unmapped on every use whatever the threshold. One arena
 (``M_ARENA_MAX`` 1) gives every thread the main heap; the few allocations numba's threads
 make inside kernels then share its lock. Both measured with
-``benchmarks/bench_view.py --ab-arena`` and bench_render (docs/explanation/performance.md). The
+``benchmarks/perf/bench_view.py --ab-arena`` and bench_render (docs/explanation/performance.md). The
 user's ``MALLOC_ARENA_MAX`` is kept when set.
 
 Only for processes vibr starts (a library should not change its host's allocator): the

@@ -25,7 +25,7 @@ __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL
 
 #: Default planar-proxy uncertainty: ``sigma_z = max(PROXY_SIGMA_Z_REL · D,
 #: PROXY_SPREAD_REL · (p95 − p5))``, the p the percentiles of the available depth seen from
-#: the target. Chosen across scenes with a held-out split (``benchmarks/planar_sigma_z.py``,
+#: the target. Chosen across scenes with a held-out split (``benchmarks/quality/planar_sigma_z.py``,
 #: docs/explanation/renderer.md, "The planar proxy's sigma_z"): a fifth of the former rule
 #: ``max(0.1 D, ½ (p95 − p5))``, which let TV and the gradient term blur every edge the
 #: plane misplaces.
@@ -35,7 +35,7 @@ PROXY_SPREAD_REL = 0.1
 #: Correlation of the views' depth errors when one proxy stands in for every view's depth
 #: (``meta["proxy"]``: the plane, the sphere): the render's ``z_corr`` for their samples
 #: (:func:`vibr.render.weights.shared_error_beta`). Chosen across scenes with a held-out split
-#: (``benchmarks/shared_depth_error.py``, docs/explanation/renderer.md, "Depth errors the views share");
+#: (``benchmarks/quality/shared_depth_error.py``, docs/explanation/renderer.md, "Depth errors the views share");
 #: per-view depth (ground truth, estimated, files) keeps the paper's independent errors, 0.
 PROXY_Z_CORR = 0.9
 

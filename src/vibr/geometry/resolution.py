@@ -52,7 +52,7 @@ MIN_REDUCED_SIDE = 16
 #: Sources coarser than the target: the grid is coarser by a power of √2 such that a source
 #: pixel is about this many pixels of it (a little finer than the sources: the views' samples
 #: fall at different sub-pixel places; chosen on the *choose* cases of
-#: ``benchmarks/finer_sources.py --coarser``, docs/explanation/renderer.md).
+#: ``benchmarks/quality/finer_sources.py --coarser``, docs/explanation/renderer.md).
 COARSE_GRID_SOURCE_SIZE = math.sqrt(2.0)
 
 

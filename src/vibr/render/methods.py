@@ -21,9 +21,9 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   (``view_k = 4``), the gradient term's consistency weights (``grad_consistency = 24``),
   the TV weight against the data's sum (``lam_density = 3``), the holes filled by push–pull
   and the preconditioned solver (``precond = True``): chosen together by
-  ``benchmarks/sweep_defaults.py``, the best mean all-pixel PSNR over the
+  ``benchmarks/quality/sweep_defaults.py``, the best mean all-pixel PSNR over the
   *choose* half of a sweep across cotton, fountain, temple and the synthetic scenes, reported
-  on the other half (docs/RESULTS.md, the q23b block); gamma forced to 0 for savsr and bvs,
+  on the other half (docs/results/defaults.md); gamma forced to 0 for savsr and bvs,
   which keep their published form (``view_k = 0``, ``precond = False``, ``lam_density = 0``)
   unless given.
   With the view prior the colour term is divided by the prior-weighted density
