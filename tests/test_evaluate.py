@@ -29,7 +29,7 @@ def scene_dir(tmp_path_factory, scene):
 
 
 def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monkeypatch):
-    import vibr.geometry as geometry
+    import vibr.render.api as geometry  # where render's geometry stage calls it
     from vibr.eval.protocol import Setting, evaluate
     from vibr.metrics import psnr
     from vibr.pipeline import prepare

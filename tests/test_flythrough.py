@@ -826,7 +826,7 @@ def test_view_weights_soft_and_continuous(arc_scene):
 def test_depth_cache_estimates_once(tmp_path, monkeypatch):
     """Without depth, the first call estimates and writes the cache; the second loads it
     (estimate_depth not called) and gives the same maps."""
-    import vibr.stereo as stereo
+    import vibr.stereo.cache as stereo  # where the cache calls the estimator
     from vibr.stereo.cache import scene_with_depth
     from vibr.synthetic import make_scene
 
@@ -853,9 +853,7 @@ def test_depth_cache_estimates_once(tmp_path, monkeypatch):
     scene_with_depth(bare, cache_dir=tmp_path)  # other views: another key
     assert len(calls) == 2
     # a newer estimator (its results changed) does not take an older one's maps
-    import vibr.stereo.api as api
-
-    monkeypatch.setattr(api, "ESTIMATOR_VERSION", api.ESTIMATOR_VERSION + 1)
+    monkeypatch.setattr(stereo, "ESTIMATOR_VERSION", stereo.ESTIMATOR_VERSION + 1)
     c = scene_with_depth(bare, cache_dir=tmp_path, exclude=[s.names[0]])
     assert c.meta["depth_source"] == "estimated" and len(calls) == 3
     assert scene_with_depth(s, cache_dir=tmp_path).meta["depth_source"] == "scene"

@@ -110,13 +110,13 @@ def test_prepare_estimates_depth_for_the_best_views_only(monkeypatch):
     a list of sources or known depth keep what they ask, without the line."""
     from _checks import messages_logged
 
-    import vibr.stereo
+    import vibr.stereo.cache
     from vibr.errors import VibrInputError
     from vibr.pipeline import ALL_VIEWS, ESTIMATED_SOURCES, prepare
     from vibr.geometry.selection import select_views
 
     estimated = []
-    monkeypatch.setattr(vibr.stereo, "estimate_depth", lambda src, **kw: estimated.append(len(src)) or src)
+    monkeypatch.setattr(vibr.stereo.cache, "estimate_depth", lambda src, **kw: estimated.append(len(src)) or src)
     scene = _grid_scene()
     assert len(scene) - 1 > ESTIMATED_SOURCES
     rest, tv = scene.split("v22")
