@@ -7,7 +7,7 @@ import logging
 
 from ..eval.protocol import GAMMAS
 from ..metrics import METRIC_BORDER
-from ..render.methods import DEFAULTS, METHODS
+from ..render.methods import DEFAULTS, REGISTRY
 from . import add_quiet
 from ._executor import add_executor_args, executor_from_args
 from ._options import (
@@ -74,8 +74,8 @@ def register(sub) -> None:
                         "--json then holds per-view results and their mean / median")
     add_source_options(p)
     add_depth_options(p)
-    p.add_argument("--method", type=names, default=list(METHODS),
-                   help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
+    p.add_argument("--method", type=names, default=list(REGISTRY),
+                   help=f"comma-separated methods among {', '.join(REGISTRY)} (default: all). {method_help()}")
     p.add_argument("--gamma", type=_floats, default=None,
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)}: the "
                         f"paper's and vibr's default {DEFAULTS['gamma']:g})")
