@@ -1,6 +1,10 @@
 """Image quality metrics, optionally restricted to a mask: PSNR, SSIM and DSSIM; and the
 metrics of a predicted per-pixel uncertainty: sparsification curves, AUSE, Spearman's rho.
 
+The metrics of a rendered view (:func:`view_metrics`, what ``vibr render`` and ``vibr eval``
+report) are a registry users extend: :class:`Metric`, :func:`register_metric`,
+:data:`METRICS` (docs/how-to/extend/add-a-metric.md).
+
 docs/explanation/method.md §8: PSNR over the three channels, SSIM of Wang et al. (2004) with a
 Gaussian window of sigma 1.5, and the paper's DSSIM = 10⁴ · (1 − SSIM); all with an
 optional border excluded and, for rendered views, only over the reconstructed pixels.
@@ -8,11 +12,15 @@ optional border excluded and, for rendered views, only over the reconstructed pi
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 
 from .errors import VibrInputError
 
-__all__ = ["psnr", "ssim", "dssim", "mse", "view_metrics", "METRIC_BORDER", "checkerboard_energy",
+__all__ = ["psnr", "ssim", "dssim", "mse", "view_metrics", "METRIC_BORDER", "Metric", "METRICS", "register_metric",
+           "unregister_metric", "get_metric", "checkerboard_energy",
            "speckle_density", "pixel_error", "sparsification", "ause", "spearman", "uncertainty_metrics"]
 
 
@@ -120,6 +128,81 @@ def dssim(img, ref, mask=None, border: int = 0) -> float:
     return 1e4 * (1.0 - ssim(img, ref, mask, border))
 
 
+@dataclass(frozen=True)
+class Metric:
+    """A metric of a rendered view against its photograph (:func:`view_metrics`).
+
+    Attributes
+    ----------
+    name : str
+        The key in reports (``res.metrics``, ``vibr eval --json``).
+    function : callable
+        ``function(img, ref, mask=None, border=0) -> float``: ``img`` and ``ref`` H×W×3 (or
+        H×W) floats in [0, 1], ``mask`` H×W bool (the pixels measured; None: all) and
+        ``border`` pixels left out at each edge.
+    higher_is_better : bool
+    summary : str
+        One line: what it measures.
+    heading : str
+        Its column's heading in ``vibr eval``'s table; empty: no column.
+    width : int
+        That column's width, in characters.
+    fmt : str
+        Format of a value in that column (``".2f"``).
+    min_side : int
+        The smallest side, less the border on each edge, the metric is defined on (SSIM's
+        window); on a smaller image :func:`view_metrics` gives NaN. 0: no limit.
+    derive : callable, optional
+        ``derive(values) -> float`` from the metrics registered before it (DSSIM from SSIM,
+        not a second SSIM); then :attr:`function` is not called by :func:`view_metrics`.
+    """
+
+    name: str
+    function: Callable[..., float]
+    higher_is_better: bool
+    summary: str
+    heading: str = ""
+    width: int = 8
+    fmt: str = ".4g"
+    min_side: int = 0
+    derive: Callable[[dict], float] | None = None
+
+
+#: The metrics of a rendered view by name, in the order reports list them.
+METRICS: dict[str, Metric] = {}
+
+
+def register_metric(metric: Metric) -> Metric:
+    """Add ``metric`` to :data:`METRICS` (replacing a metric of the same name); returns it."""
+    if not isinstance(metric, Metric):
+        raise TypeError(f"register_metric takes a Metric, got {type(metric).__name__}")
+    METRICS[metric.name] = metric
+    return metric
+
+
+def unregister_metric(name: str) -> Metric:
+    """Remove the metric ``name`` from :data:`METRICS` (tests, a plugin's teardown); returns it."""
+    metric = get_metric(name)
+    del METRICS[name]
+    return metric
+
+
+def get_metric(name: str) -> Metric:
+    """The registered :class:`Metric` named ``name``."""
+    try:
+        return METRICS[name]
+    except (KeyError, TypeError):
+        raise VibrInputError(f"unknown metric {name!r} (choose from {', '.join(METRICS)})") from None
+
+
+register_metric(Metric("psnr", psnr, True, "peak signal-to-noise ratio (dB) over the three channels",
+                       heading="PSNR dB", width=8, fmt=".2f"))
+register_metric(Metric("ssim", ssim, True, "mean structural similarity (Wang et al. 2004), Gaussian window sigma 1.5",
+                       min_side=SSIM_WINDOW))
+register_metric(Metric("dssim", dssim, False, "the paper's DSSIM = 10^4 (1 - SSIM)", heading="DSSIM", width=7,
+                       fmt=".1f", min_side=SSIM_WINDOW, derive=lambda values: 1e4 * (1.0 - values["ssim"])))
+
+
 def _grey_mask(img, mask, border, shrink):
     """Grey image (channel mean) and the pixels counted: ``mask`` minus ``border`` pixels,
     eroded by ``shrink`` (the stencil's reach)."""
@@ -166,17 +249,26 @@ METRIC_BORDER = 2
 
 def view_metrics(img, ref, mask=None, border: int = METRIC_BORDER) -> dict:
     """The metrics of a rendered view against the held-out photograph, by the one rule of
-    ``vibr render`` and ``vibr eval``: ``psnr``, ``ssim`` and ``dssim = 10⁴ · (1 − SSIM)``
-    over the pixels of ``mask`` (the reconstructed pixels) with ``border`` pixels at each
-    edge excluded. ``ssim`` and ``dssim`` are NaN for an image too small for SSIM's window
-    (:func:`check_measurable`): the PSNR of a tiny render is still worth reporting."""
-    s = ssim(img, ref, mask, border) if _measurable(np.shape(img), border) else float("nan")
-    return {"psnr": psnr(img, ref, mask, border), "ssim": s, "dssim": 1e4 * (1.0 - s)}
+    ``vibr render`` and ``vibr eval``: every registered metric (:data:`METRICS`, in order:
+    ``psnr``, ``ssim`` and ``dssim = 10⁴ · (1 − SSIM)``, then any a user registered) over the
+    pixels of ``mask`` (the reconstructed pixels) with ``border`` pixels at each edge
+    excluded. A metric with a ``min_side`` (``ssim`` and ``dssim``) is NaN for an image too
+    small for it (:func:`check_measurable`): the PSNR of a tiny render is still worth
+    reporting."""
+    out = {}
+    for m in METRICS.values():
+        if m.min_side and not _measurable(np.shape(img), border, m.min_side):
+            out[m.name] = float("nan")
+        elif m.derive is not None:
+            out[m.name] = m.derive(out)
+        else:
+            out[m.name] = m.function(img, ref, mask, border)
+    return out
 
 
-def _measurable(shape, border: int) -> bool:
-    """Whether SSIM's window fits in an image of ``shape`` less ``border`` on each edge."""
-    return min(shape[:2]) >= SSIM_WINDOW + 2 * int(border)
+def _measurable(shape, border: int, side: int = SSIM_WINDOW) -> bool:
+    """Whether ``side`` (SSIM's window) fits in an image of ``shape`` less ``border`` on each edge."""
+    return min(shape[:2]) >= side + 2 * int(border)
 
 
 def check_measurable(shape, border: int = METRIC_BORDER, source=None) -> None:

@@ -35,10 +35,24 @@ examples:
   vibr convert SCENE out/                    save any scene as nerfstudio transforms.json
   vibr render SCENE --target 5 -o view.png   render view 5 from the other views
 
-SCENE is a folder in any supported format (HCI light field, Strecha, Middlebury *_par.txt,
-nerfstudio/instant-NGP transforms.json, COLMAP sparse model); the format is detected.
+{formats}
 Run 'vibr COMMAND --help' for each command's options.
 """
+
+
+def scene_formats() -> str:
+    """The registered scene formats (:data:`vibr.io.FORMATS`), in their detection order, for
+    help texts: "nerfstudio/instant-NGP transforms.json, HCI light field, ..."."""
+    from ..io import FORMATS
+
+    return ", ".join(f.summary for f in FORMATS.values())
+
+
+def fill(text: str) -> str:
+    """``text`` wrapped at 90 columns, as the hand-wrapped help paragraphs."""
+    import textwrap
+
+    return textwrap.fill(text, 90, break_long_words=False, break_on_hyphens=False)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -53,7 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="vibr",
         description="Variational image-based rendering with gradient constraints "
         "(Nieto, Devernay & Crowley 2016): novel views from calibrated photos and depth.",
-        epilog=_EPILOG,
+        epilog=_EPILOG.format(formats=fill(f"SCENE is a folder in any supported format ({scene_formats()}); "
+                                           "the format is detected.")),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_global_options(parser, top=True)
@@ -63,9 +78,21 @@ def build_parser() -> argparse.ArgumentParser:
         if importlib.util.find_spec(modname) is None:
             continue
         importlib.import_module(modname).register(sub)
-    for p in dict.fromkeys(sub.choices.values()):  # an alias names the same parser
+    for p in _subparsers(sub):
         add_global_options(p, top=False)
     return parser
+
+
+def _subparsers(sub) -> list:
+    """Every parser below ``sub``, nested ones included (``vibr path KIND``); an alias names
+    the same parser."""
+    out = []
+    for p in dict.fromkeys(sub.choices.values()):
+        out.append(p)
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                out.extend(_subparsers(a))
+    return out
 
 
 #: Title of the argument group of the options every command accepts, before or after its name.

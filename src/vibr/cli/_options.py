@@ -8,7 +8,7 @@ import argparse
 from ..metrics import METRIC_BORDER
 from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES, PLANAR_SOURCES
 from ..render.autotune import AUTO, GAMMA_GRID, LAM_GRID
-from ..render.methods import DEFAULTS, METHODS, PRESETS, PSFS, REGISTRY
+from ..render.methods import DEFAULTS, PRESETS, PSFS, REGISTRY
 
 #: How ``vibr render`` and ``vibr eval`` measure (one rule: vibr.metrics.view_metrics).
 METRIC_RULE = f"reconstructed pixels, {METRIC_BORDER}-px border excluded"
@@ -54,7 +54,7 @@ def method_help() -> str:
 
 def add_method_option(p: argparse.ArgumentParser) -> None:
     """``--method`` (one of the registered methods)."""
-    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=tuple(REGISTRY),  # those registered by now
                    help=f"rendering method (default: {DEFAULT_METHOD}). {method_help()}")
 
 

@@ -7,7 +7,7 @@ import logging
 
 from ..eval.protocol import GAMMAS
 from ..metrics import METRIC_BORDER
-from ..render.methods import DEFAULTS, METHODS
+from ..render.methods import DEFAULTS, REGISTRY
 from ._executor import add_executor_args, executor_from_args
 from ._options import (
     add_depth_options,
@@ -35,10 +35,10 @@ never takes part in depth estimation.
 _EPILOG = """\
 examples:
   vibr eval ../shared/data/hci2016_cotton --target input_Cam040 \\
-    --sources input_Cam030,input_Cam031,input_Cam032,input_Cam039,input_Cam041,input_Cam048,input_Cam049,input_Cam050 \\
-    --depth gt --json cotton.json --figures figs/
+      --sources input_Cam030,input_Cam031,input_Cam032,input_Cam039,input_Cam041,input_Cam048,input_Cam049,input_Cam050 \\
+      --depth gt --json cotton.json --figures figs/
   vibr eval ../shared/data/strecha_fountain-P11 --target 0005 --scale 0.25 --depth estimated \\
-    --method bvs,gradient --alpha 0.1 --gamma 1 --lam 0.002 --intensity-scale 255 --json fountain5.json
+      --method bvs,gradient --alpha 0.1 --gamma 1 --lam 0.002 --intensity-scale 255 --json fountain5.json
 
 --scale is the IMAGE scale (0.25: 3072x2048 -> 768x512); --intensity-scale is the scale of the
 intensities the parameters refer to (255: lam, sigma_s in grey levels). Both are recorded in
@@ -73,8 +73,8 @@ def register(sub) -> None:
                         "--json then holds per-view results and their mean / median")
     add_source_options(p)
     add_depth_options(p)
-    p.add_argument("--method", type=names, default=list(METHODS),
-                   help=f"comma-separated methods among {', '.join(METHODS)} (default: all). {method_help()}")
+    p.add_argument("--method", type=names, default=list(REGISTRY),
+                   help=f"comma-separated methods among {', '.join(REGISTRY)} (default: all). {method_help()}")
     p.add_argument("--gamma", type=_floats, default=None,
                    help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)}: the "
                         f"paper's and vibr's default {DEFAULTS['gamma']:g})")

@@ -4,18 +4,17 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_deprecated_alias
+from . import add_deprecated_alias, fill, scene_formats
 from ._options import names
 
-_DESC = """\
-Load a scene (format detected: HCI light field, Strecha, Middlebury *_par.txt,
-nerfstudio/instant-NGP transforms.json, COLMAP sparse model) and print a summary: format,
-number and size of views, light-field grid, depth coverage and range, sparse points, and one
-line per camera (focal lengths and principal point in pixels with the centre of the top-left
-pixel at (0,0); camera centre in scene units), and photographs taken rolled or sharing a
-pose (which a fly-through path turns upright or leaves out). Use it to check that a dataset
-loads before rendering. Only the images' headers are read (their sizes), not their pixels.
-"""
+_DESC = (
+    "Load a scene (format detected: {formats}) and print a summary: format, number and size of views, "
+    "light-field grid, depth coverage and range, sparse points, and one line per camera (focal lengths and "
+    "principal point in pixels with the centre of the top-left pixel at (0,0); camera centre in scene units), "
+    "and photographs taken rolled or sharing a pose (which a fly-through path turns upright or leaves out). "
+    "Use it to check that a dataset loads before rendering. Only the images' headers are read (their sizes), "
+    "not their pixels."
+)
 
 _EPILOG = """\
 examples:
@@ -28,7 +27,7 @@ examples:
 
 def register(sub) -> None:
     p = sub.add_parser("info", help="summarise a scene (views, sizes, cameras, depth)",
-                       description=_DESC, epilog=_EPILOG,
+                       description=fill(_DESC.format(formats=scene_formats())) + "\n", epilog=_EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scene", metavar="SCENE", help="scene folder, transforms.json or *_par.txt file")
     p.add_argument("--scale", type=float, default=1.0,

@@ -27,6 +27,7 @@ from .._runtime.checkpoint import code_fingerprint
 from ..errors import VibrInputError
 from ..executor import run_tasks
 from ..io import load_scene
+from ..metrics import METRICS
 from .figures import write_evaluation_figures
 from .protocol import Setting, run_evaluation, write_report
 
@@ -179,22 +180,24 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
 
 
 def summarise(reports: Sequence[dict]) -> dict:
-    """Per setting label: ``n`` targets and mean / median of PSNR, SSIM and DSSIM, and of the
+    """Per setting label: ``n`` targets and mean / median of each registered metric
+    (:data:`vibr.metrics.METRICS`: PSNR, SSIM, DSSIM, ...), and of the
     uncertainty's AUSE and Spearman correlation when the reports hold them (``uncertainty``)."""
     by: dict[str, dict[str, list]] = {}
     for rep in reports:
         for r in rep["results"]:
-            d = by.setdefault(r["label"], {"method": r["method"], "psnr": [], "ssim": [], "dssim": [],
+            d = by.setdefault(r["label"], {"method": r["method"], **{k: [] for k in METRICS},
                                            "ause": [], "spearman": []})
-            for k in ("psnr", "ssim", "dssim"):
-                d[k].append(r[k])
+            for k in METRICS:
+                if k in r:  # a report written before a metric was registered
+                    d[k].append(r[k])
             for k in ("ause", "spearman"):
                 if "uncertainty" in r:
                     d[k].append(r["uncertainty"][k])
     out = {}
     for label, d in by.items():
         out[label] = {"method": d["method"], "n": len(d["psnr"])}
-        for k in ("psnr", "ssim", "dssim", "ause", "spearman"):
+        for k in (*METRICS, "ause", "spearman"):
             a = np.asarray(d[k], float)
             a = a[np.isfinite(a)] if k in ("ause", "spearman") else a  # a flat sigma has no rank
             if len(a):

@@ -23,7 +23,7 @@ import numpy as np
 from .._runtime.atomic import atomic_path
 from ..errors import VibrInputError
 from ..geometry.samples import view_counts
-from ..metrics import METRIC_BORDER, check_measurable, dssim, psnr, uncertainty_metrics, view_metrics
+from ..metrics import METRIC_BORDER, METRICS, check_measurable, dssim, psnr, uncertainty_metrics, view_metrics
 from ..pipeline import prepare
 from ..progress import progress
 from ..render import shared_geometry
@@ -395,18 +395,21 @@ def write_report(report: dict, path) -> None:
 
 
 def format_table(report: dict) -> str:
-    """A plain-text table of a report's results (what ``vibr eval`` prints); an LPIPS column
-    appears when the report has LPIPS values."""
+    """A plain-text table of a report's results (what ``vibr eval`` prints): a column per
+    registered metric with a heading (:data:`vibr.metrics.METRICS`: PSNR, DSSIM, then any a
+    user registered); an LPIPS column appears when the report has LPIPS values."""
     has_lp = any("lpips" in r for r in report["results"])
+    cols = [m for m in METRICS.values() if m.heading]
     lines = [f"{report['scene']} / {report['target']}  depth={report['depth']}  "
              f"{report['size'][0]}x{report['size'][1]} (image scale {report.get('scale', 1.0):g}, "
              f"intensity scale {report.get('intensity_scale', 255):g})  mask={report['mask']} "
              f"({100 * report['evaluated_fraction']:.1f}% of pixels), border {report.get('border', 0)}",
-             f"{'setting':<40} {'PSNR dB':>8} {'DSSIM':>7}" + (f" {'LPIPS':>6}" if has_lp else "")
-             + f" {'time s':>7}"]
+             f"{'setting':<40}" + "".join(f" {m.heading:>{m.width}}" for m in cols)
+             + (f" {'LPIPS':>6}" if has_lp else "") + f" {'time s':>7}"]
     for r in report["results"]:
         lp = (f" {r['lpips']:>6.3f}" if "lpips" in r else f" {'':>6}") if has_lp else ""
-        lines.append(f"{r['label']:<40} {r['psnr']:>8.2f} {r['dssim']:>7.1f}{lp} {r['seconds']:>7.2f}")
+        cells = "".join(f" {r[m.name]:>{m.width}{m.fmt}}" if m.name in r else f" {'':>{m.width}}" for m in cols)
+        lines.append(f"{r['label']:<40}{cells}{lp} {r['seconds']:>7.2f}")
     lines.append(f"geometry: depth {report.get('depth_seconds', 0):.1f} s, samples "
                  f"{report.get('samples_seconds', 0):.1f} s (computed once for all settings)")
     return "\n".join(lines)

@@ -22,26 +22,26 @@ from pathlib import Path
 
 from ..errors import VibrInputError
 from .camera_json import read_camera_json, write_camera_json
-from .colmap import find_colmap_model, load_colmap
 from .depthfiles import read_depth, read_pfm, write_depth, write_pfm
 from .entries import select_entries
-from .hci import is_hci_folder, load_hci
+from .formats import FORMATS, Format, get_format, register_format, unregister_format
 from .images import is_image_file, read_image, write_image
-from .middlebury import find_par_file, load_middlebury
-from .strecha import is_strecha_folder, load_strecha
-from .transforms import find_transforms, load_transforms, save_scene
+from .transforms import save_scene
+
+# importing the loaders registers the built-in formats (each beside its loader, vibr.io.formats)
+from . import colmap, hci, middlebury, strecha  # noqa: F401  isort: skip
 
 __all__ = ["load_scene", "select_entries", "save_scene", "detect_format", "read_image", "write_image", "read_depth",
-           "write_depth", "read_pfm", "write_pfm", "read_camera_json", "write_camera_json", "FORMATS"]
-
-FORMATS = ("hci", "strecha", "middlebury", "transforms", "colmap")
+           "write_depth", "read_pfm", "write_pfm", "read_camera_json", "write_camera_json", "FORMATS", "Format",
+           "register_format", "unregister_format", "get_format"]
 
 #: Default of ``load_scene(allow_outside=None)``; the CLI's ``--allow-outside-paths`` sets it.
 ALLOW_OUTSIDE_PATHS = False
 
 
 def detect_format(path) -> str:
-    """Name of the scene format at ``path`` (one of :data:`FORMATS`).
+    """Name of the scene format at ``path``: the first of :data:`FORMATS` (in their
+    detection order, :mod:`vibr.io.formats`) whose ``detect`` recognises it.
 
     Raises :class:`VibrInputError` when the path is missing or nothing is recognised.
     """
@@ -49,24 +49,11 @@ def detect_format(path) -> str:
     p = Path(path)
     if not p.exists():
         raise VibrInputError("file or folder not found", p)
+    for fmt in FORMATS.values():
+        if fmt.detect(p):
+            return fmt.name
     if p.is_file():
-        if p.name.endswith("_par.txt"):
-            return "middlebury"
-        if p.suffix.lower() == ".json":
-            return "transforms"
-        if p.name == "parameters.cfg":
-            return "hci"
         raise VibrInputError("not a scene: give a folder, a transforms.json or a *_par.txt file", p)
-    if find_transforms(p) is not None:
-        return "transforms"
-    if is_hci_folder(p):
-        return "hci"
-    if find_colmap_model(p) is not None:
-        return "colmap"
-    if find_par_file(p) is not None:
-        return "middlebury"
-    if is_strecha_folder(p):
-        return "strecha"
     photos = any(is_image_file(f) for f in p.iterdir())
     # a Blender / NeRF-synthetic folder: transforms_train.json, transforms_test.json, ...
     splits = sorted(f.name for f in p.glob("transforms_*.json") if f.is_file())
@@ -75,13 +62,18 @@ def detect_format(path) -> str:
         hint = f"; found {', '.join(splits)}: give one of these files as SCENE, e.g. {p / splits[0]}"
     elif photos:
         hint = "; photos without cameras are calibrated first: vibr calibrate (COLMAP)"
-    raise VibrInputError(
-        "no supported scene found (looked for transforms.json, input_CamNNN.png light-field views, "
-        "a COLMAP sparse model, a *_par.txt file, or images with .camera files)" + hint, p)
+    raise VibrInputError(f"no supported scene found (looked for {_looked_for()})" + hint, p)
+
+
+def _looked_for() -> str:
+    """What the registered formats look for, as a list in prose ("a, b, or c")."""
+    what = [f.looks_for for f in FORMATS.values() if f.looks_for]
+    return what[0] if len(what) == 1 else ", ".join(what[:-1]) + ", or " + what[-1]
 
 
 def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | None = None, **options):
-    """Load a scene in any supported format (detected by :func:`detect_format`).
+    """Load a scene in any registered format (detected by :func:`detect_format`, read by
+    that :class:`~vibr.io.formats.Format`'s ``load``).
 
     Parameters
     ----------
@@ -99,8 +91,8 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
         folder (refused by default: a scene must not make vibr read arbitrary files).
         None: :data:`ALLOW_OUTSIDE_PATHS`.
     **options
-        Format-specific options, e.g. ``grid=(rows, cols)`` for an HCI folder without
-        ``parameters.cfg``.
+        Format-specific options (:attr:`Format.options <vibr.io.formats.Format.options>`),
+        e.g. ``grid=(rows, cols)`` for an HCI folder without ``parameters.cfg``.
 
     Returns
     -------
@@ -114,24 +106,11 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
         raise VibrInputError(f"scale must be a number, got {scale!r}") from None
     if not (scale > 0 and scale <= 16):
         raise VibrInputError(f"scale must be in (0, 16], got {scale}")
-    fmt = detect_format(path)
+    fmt = get_format(detect_format(path))
     p = Path(path)
-    if fmt == "hci":
-
-        return load_hci(p.parent if p.is_file() else p, scale=scale, views=views, **options)
-    if options:
-        raise VibrInputError(f"options {sorted(options)} do not apply to {fmt} scenes", p)
-    if fmt == "transforms":
-
-        return load_transforms(p, scale=scale, views=views,
-                               allow_outside=ALLOW_OUTSIDE_PATHS if allow_outside is None else allow_outside)
-    if fmt == "colmap":
-
-        return load_colmap(p, scale=scale, views=views)
-    if fmt == "middlebury":
-
-        return load_middlebury(p, scale=scale, views=views)
-
-    return load_strecha(p, scale=scale, views=views)
-
-
+    unknown = sorted(set(options) - set(fmt.options))
+    if unknown:
+        raise VibrInputError(f"options {unknown} do not apply to {fmt.name} scenes", p)
+    if "allow_outside" in fmt.options:
+        options["allow_outside"] = ALLOW_OUTSIDE_PATHS if allow_outside is None else allow_outside
+    return fmt.load(p, scale=scale, views=views, **options)

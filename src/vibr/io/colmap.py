@@ -31,6 +31,7 @@ from .camera_json import as_rotation
 from .colmap_check import check_colmap_model
 from .depthfiles import fit_depth, read_depth
 from .entries import select_entries
+from .formats import Format, register_format
 from .images import build_views
 from .undistort import Distortion, check_lens, pinhole
 from .undistort import summary as undistort_summary
@@ -179,3 +180,13 @@ def _attach_depth(entries: list) -> int:
             e["depth"] = fit_depth(read_depth(dp), shape, dp, f"image {e['name']}")
             n_depth += 1
     return n_depth
+
+
+def is_colmap(path: Path) -> bool:
+    """A COLMAP sparse model: a folder holding one (``sparse/0``, ``sparse``, ...) or the model
+    folder itself (never a file)."""
+    return not path.is_file() and find_colmap_model(path) is not None
+
+
+register_format(Format("colmap", "COLMAP sparse model", is_colmap, load_colmap, looks_for="a COLMAP sparse model",
+                       priority=30))

@@ -48,6 +48,7 @@ from ..errors import VibrInputError
 from ..scene import Scene, depth_from_file_values
 from .depthfiles import read_pfm
 from .entries import select_entries
+from .formats import Format, register_format
 from .images import build_views, image_size
 
 _CAM_RE = re.compile(r"^input_Cam(\d+)\.(png|jpg|jpeg|tif|tiff)$", re.IGNORECASE)
@@ -258,3 +259,18 @@ def _common_size(files: dict, centre_idx: int, cfg, cfg_path: Path) -> tuple[int
         raise VibrInputError(
             f"parameters.cfg says {cfg['res_x']}x{cfg['res_y']} but the views are {W}x{H}", cfg_path)
     return W, H
+
+
+def is_hci(path: Path) -> bool:
+    """An HCI light field: a folder of ``input_CamNNN.png`` views or with ``parameters.cfg``,
+    or that ``parameters.cfg`` file."""
+    return path.name == "parameters.cfg" if path.is_file() else is_hci_folder(path)
+
+
+def _load(path, *, scale: float = 1.0, views=None, **options) -> Scene:
+    p = Path(path)
+    return load_hci(p.parent if p.is_file() else p, scale=scale, views=views, **options)
+
+
+register_format(Format("hci", "HCI light field", is_hci, _load, looks_for="input_CamNNN.png light-field views",
+                       options=("grid",), priority=20))

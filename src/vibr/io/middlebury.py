@@ -19,6 +19,7 @@ from ..errors import VibrInputError
 from ..scene import Scene
 from .camera_json import as_rotation
 from .entries import select_entries
+from .formats import Format, register_format
 from .images import build_views, image_size
 
 
@@ -82,3 +83,12 @@ def load_middlebury(path, *, scale: float = 1.0, views=None) -> Scene:
     name = par.name[: -len("_par.txt")]
     return Scene(vs, name=name, root=root, meta={"format": "Middlebury", "scale": scale,
                                                  "par_file": str(par)})
+
+
+def is_middlebury(path: Path) -> bool:
+    """A Middlebury scene: a ``*_par.txt`` file, or a folder holding one."""
+    return path.name.endswith("_par.txt") if path.is_file() else find_par_file(path) is not None
+
+
+register_format(Format("middlebury", "Middlebury *_par.txt", is_middlebury, load_middlebury,
+                       looks_for="a *_par.txt file", priority=40))

@@ -31,6 +31,7 @@ from ..errors import VibrInputError
 from ..scene import Scene
 from .camera_json import as_rotation
 from .entries import select_entries
+from .formats import Format, register_format
 from .images import build_views, is_image_file
 
 _CAM_DIRS = ("gt_dense_cameras", "cameras", "gt_cameras")
@@ -120,3 +121,7 @@ def load_strecha(path, *, scale: float = 1.0, views=None) -> Scene:
     name = root.name if root.name != "images" else root.parent.name
     return Scene(vs, name=name, root=root, meta={"format": "Strecha", "scale": scale,
                                                  "pixel_convention": "top-left pixel centre at (0,0)"})
+
+
+register_format(Format("strecha", "Strecha", is_strecha_folder, load_strecha, looks_for="images with .camera files",
+                       priority=50))

@@ -63,6 +63,7 @@ from ..scene import Scene
 from .camera_json import ROTATION_TOL, as_scaled_rotation, parse_json
 from .depthfiles import fit_depth, read_depth, write_depth
 from .entries import select_entries
+from .formats import Format, register_format
 from .images import build_views, image_size, read_mask, write_image
 from .outputs import check_not_input, check_replaceable, replace_folder, write_marker
 from .undistort import NERFSTUDIO_FISHEYE, check_lens, from_nerfstudio, pinhole
@@ -601,3 +602,12 @@ def _transforms_doc(scene: Scene, frames: list, tmp: Path) -> dict:
         doc["ply_file_path"] = "sparse_pc.ply"
     doc["frames"] = frames
     return doc
+
+
+def is_transforms(path: Path) -> bool:
+    """A nerfstudio / instant-NGP scene: a ``.json`` file, or a folder with ``transforms.json``."""
+    return path.suffix.lower() == ".json" if path.is_file() else find_transforms(path) is not None
+
+
+register_format(Format("transforms", "nerfstudio/instant-NGP transforms.json", is_transforms, load_transforms,
+                       looks_for="transforms.json", options=("allow_outside",), priority=10))

@@ -46,10 +46,8 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
-           "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED", "PATH_KINDS",
-           "ROLL_MODES", "orient_keys", "turns_text", "grid_loop", "smooth_keys"]
-
-PATH_KINDS = ("interpolate", "orbit", "spiral")
+           "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED",
+           "frame_count", "ROLL_MODES", "orient_keys", "turns_text", "grid_loop", "smooth_keys"]
 
 #: How :func:`interpolate` orients its key cameras about their optical axes (``roll=``;
 #: ``vibr path interpolate --roll``). orbit and spiral look at the scene with its up, as "level".
@@ -447,7 +445,9 @@ def scene_points(scene, max_points: int = 4096) -> np.ndarray | None:
 MAX_FRAMES = 100_000
 
 
-def _frame_count(n_frames, seconds, fps) -> int:
+def frame_count(n_frames, seconds, fps) -> int:
+    """The number of frames of a path: ``n_frames``, or ``seconds × fps`` rounded; checked
+    (at least one, at most :data:`MAX_FRAMES`)."""
     if not (math.isfinite(float(fps)) and float(fps) > 0):
         raise VibrInputError(f"fps must be positive and finite, got {fps}")
     if n_frames is None:
@@ -677,7 +677,7 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     from scipy.spatial.transform import Rotation, RotationSpline
 
     cams, names, closed = _path_keys(scene, views, order)
-    n = _frame_count(n_frames, seconds, fps)
+    n = frame_count(n_frames, seconds, fps)
     X = scene_centre(cams, scene_points(scene))
     cams = _oriented(cams, roll, X)
     w, h = _output_size(cams, width, height, scale)
@@ -860,7 +860,7 @@ def orbit(scene, *, n_frames: int | None = None, seconds: float | None = None, f
     """
     cams = [v.camera for v in scene.views]
     _check_not_one_centre(scene, "an orbit")
-    n = _frame_count(n_frames, seconds, fps)
+    n = frame_count(n_frames, seconds, fps)
     X = scene_centre(cams, scene_points(scene))
     up = scene_up(cams, X)
     w, h, f_rel = _upright_framing(cams, up, width, height, scale)
@@ -920,7 +920,7 @@ def spiral(scene, *, n_frames: int | None = None, seconds: float | None = None, 
 
     cams = [v.camera for v in scene.views]
     _check_not_one_centre(scene, "a spiral")
-    n = _frame_count(n_frames, seconds, fps)
+    n = frame_count(n_frames, seconds, fps)
     X = scene_centre(cams, scene_points(scene))
     up = scene_up(cams, X)
     w, h, f_rel = _upright_framing(cams, up, width, height, scale)

@@ -118,8 +118,8 @@ from .variational import TV_WEIGHTINGS, solve_variational, splat_coverage
 from .weights import ROBUST_LOSSES
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "HOLE_FILLS", "get_method",
-           "method_params", "register_method", "PRESETS", "PAPER_DEFAULTS", "paper_params", "sample_fields",
-           "with_sample_fields", "wants_fine_sources"]
+           "method_params", "register_method", "unregister_method", "PRESETS", "PAPER_DEFAULTS", "paper_params",
+           "sample_fields", "with_sample_fields", "wants_fine_sources"]
 
 #: Defaults shared by the variational methods; see the module docstring for the reasons.
 DEFAULTS = dict(
@@ -225,6 +225,15 @@ def register_method(method: Method) -> Method:
     """Add ``method`` to :data:`REGISTRY` (and :data:`METHODS`)."""
     global METHODS
     REGISTRY[method.name] = method
+    METHODS = tuple(REGISTRY)
+    return method
+
+
+def unregister_method(name: str) -> Method:
+    """Remove the method ``name`` from :data:`REGISTRY` (and :data:`METHODS`); returns it."""
+    global METHODS
+    method = get_method(name)
+    del REGISTRY[name]
     METHODS = tuple(REGISTRY)
     return method
 
