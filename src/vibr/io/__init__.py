@@ -36,6 +36,10 @@ __all__ = ["load_scene", "select_entries", "save_scene", "detect_format", "read_
 
 FORMATS = ("hci", "strecha", "middlebury", "transforms", "colmap")
 
+#: The largest ``scale`` a scene loads at: enlarging photographs adds no detail, and the
+#: memory grows with its square.
+MAX_SCALE = 4.0
+
 #: Default of ``load_scene(allow_outside=None)``; the CLI's ``--allow-outside-paths`` sets it.
 ALLOW_OUTSIDE_PATHS = False
 
@@ -88,7 +92,8 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
     path : str or Path
         A scene folder, ``transforms.json`` or ``*_par.txt`` file.
     scale : float
-        Resize factor applied after reading: images with anti-aliasing
+        Resize factor in (0, :data:`MAX_SCALE`] applied after reading (the memory it needs
+        is checked first, from the image sizes: :func:`vibr.io.images.build_views`): images with anti-aliasing
         (skimage.transform.resize), cameras with :meth:`Camera.scaled`, depth by nearest
         neighbour (never mixes depths across edges).
     views : list of int or str, optional
@@ -112,8 +117,9 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
         scale = float(scale)
     except (TypeError, ValueError):
         raise VibrInputError(f"scale must be a number, got {scale!r}") from None
-    if not (scale > 0 and scale <= 16):
-        raise VibrInputError(f"scale must be in (0, 16], got {scale}")
+    if not (scale > 0 and scale <= MAX_SCALE):
+        raise VibrInputError(f"scale must be in (0, {MAX_SCALE:g}], got {scale:g} (enlarging the photographs adds "
+                             "no detail; a render is supersampled by itself)")
     fmt = detect_format(path)
     p = Path(path)
     if fmt == "hci":
