@@ -207,10 +207,11 @@ def test_a_write_that_fails_is_one_line_and_leaves_nothing(tmp_path):
 ])
 def test_an_output_that_is_a_file_of_the_scene_is_refused(capsys, tmp_path, args, what):
     """`vibr eval SCENE --json SCENE/transforms.json` replaced the scene's cameras with the
-    report (the scene was lost). Every file output is checked against the scene's files."""
+    report (the scene was lost). Every file output is checked against the scene's files, even
+    with --overwrite (without it, a file vibr did not write is refused first)."""
     root = make_transforms(tmp_path / "s", depth=np.full((12, 16), 2.0, np.float32))
     before = {f.name: f.read_bytes() for f in root.iterdir()}
-    code, err = run_cli(capsys, *[a.format(s=root, t=tmp_path) for a in args])
+    code, err = run_cli(capsys, *[a.format(s=root, t=tmp_path) for a in args], "--overwrite")
     assert_one_line_error(code, err, f"{what} would overwrite a file of the input scene")
     assert {f.name: f.read_bytes() for f in root.iterdir()} == before
     assert not (tmp_path / "x.png").exists()

@@ -51,6 +51,7 @@ import os
 import pickle
 import signal
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -297,11 +298,53 @@ def _on_sigterm(signum, frame) -> None:
     os._exit(128 + signum)
 
 
-def _init_process(threads: int, setup, args_file: str) -> None:
-    """Pool initializer: check the numba thread count, then build this process's context once."""
+def _orphaned() -> None:
+    """The end of a worker whose parent is gone: its half-written outputs removed, then out."""
+    remove_partial()
+    os._exit(128 + signal.SIGTERM)
+
+
+def _watch_parent(parent: int, interval_s: float) -> None:
+    """Watchdog thread: end this process once its parent ``parent`` is gone (the process is
+    then re-parented, so ``os.getppid()`` changes). From a thread, through ``os._exit``: it
+    works while the main thread is inside a compiled kernel."""
+    while True:
+        time.sleep(interval_s)
+        if os.getppid() != parent:
+            _orphaned()
+
+
+#: How often a worker checks that its parent is alive (:func:`_watch_parent`).
+PARENT_CHECK_S = 0.5
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this worker process end when ``parent`` (the process that started it) dies,
+    even by ``kill -9``, which gives the parent no chance to stop its pool.
+
+    On Linux the kernel sends SIGTERM at the parent's death (``prctl(PR_SET_PDEATHSIG)``,
+    handled by :func:`_on_sigterm`); everywhere a daemon thread checks ``os.getppid()``
+    every :data:`PARENT_CHECK_S` seconds (:func:`_watch_parent`)."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError, TypeError):
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    if os.getppid() != parent:  # died before the line above
+        _orphaned()
+    threading.Thread(target=_watch_parent, args=(parent, PARENT_CHECK_S), daemon=True,
+                     name="vibr-parent-watchdog").start()
+
+
+def _init_process(threads: int, setup, args_file: str, parent: int | None = None) -> None:
+    """Pool initializer: end with the parent (:func:`die_with_parent`), check the numba thread
+    count, then build this process's context once."""
     global _PROCESS_CONTEXT
     os.environ[_THREADS_VAR] = str(threads)  # already inherited; kept for what imports numba later
     signal.signal(signal.SIGTERM, _on_sigterm)
+    if parent is not None:
+        die_with_parent(parent)
     _prepare_worker()
     with open(args_file, "rb") as f:
         setup_args = pickle.load(f)
@@ -375,7 +418,8 @@ def _run_processes(fn, tasks, setup, setup_args, n, desc, retries):
             while pending:
                 if pool is None:
                     pool = ProcessPoolExecutor(max_workers=min(n, len(pending)), mp_context=ctx,
-                                               initializer=_init_process, initargs=(threads, setup, args_file))
+                                               initializer=_init_process,
+                                               initargs=(threads, setup, args_file, os.getpid()))
                 futs = {pool.submit(_call_in_process, fn, tasks[i]): i for i in pending}
                 pending = []
                 for f in as_completed(futs):

@@ -187,9 +187,23 @@ def _downscale_photos(files: list[Path], out_dir: Path, scale: float) -> list[tu
                     im = im.resize((nw, nh), Image.LANCZOS)
                 im.save(out_dir / f"{f.stem}.png")
                 sizes.append(im.size)
+        except Image.DecompressionBombError as exc:
+            raise VibrInputError(_too_large(exc), f) from None
         except (OSError, ValueError) as exc:
             raise VibrInputError(f"cannot read image: {exc}", f) from None
     return sizes
+
+
+def _too_large(exc) -> str:
+    """The one-line message for a photo Pillow refuses to decode (its decompression-bomb
+    limit): its size in megapixels and the limit, from Pillow's message."""
+    import re
+
+    n = [int(x) for x in re.findall(r"\((\d+) pixels\)|limit of (\d+)", str(exc)) for x in x if x]
+    if len(n) == 2:
+        return (f"image of {n[0] / 1e6:.0f} Mpixels is larger than Pillow decodes safely ({n[1] / 1e6:.0f} "
+                "Mpixels): resize it first")
+    return f"image is larger than Pillow decodes safely ({exc}): resize it first"
 
 
 def _lens_keys(files: list[Path]) -> list[tuple | None]:
@@ -205,7 +219,7 @@ def _lens_keys(files: list[Path]) -> list[tuple | None]:
                 ex = im.getexif()
                 focal = ex.get_ifd(0x8769).get(0x920A)  # Exif IFD: FocalLength
                 key = (ex.get(0x010F), ex.get(0x0110), None if focal is None else round(float(focal), 1))
-        except (OSError, ValueError, TypeError, ZeroDivisionError):
+        except (OSError, ValueError, TypeError, ZeroDivisionError, Image.DecompressionBombError):
             key = None
         keys.append(None if key is None or key == (None, None, None) else key)
     return keys

@@ -12,6 +12,7 @@ from ._executor import add_executor_args, executor_from_args
 from ._options import (
     add_depth_options,
     add_intensity_scale_option,
+    add_overwrite_option,
     add_psf_option,
     add_source_options,
     cache_dir_from_args,
@@ -96,6 +97,7 @@ def register(sub) -> None:
                    help=f"pixels excluded at each image edge (default: {METRIC_BORDER}, as vibr render)")
     add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
+    add_overwrite_option(p, "a --json report vibr did not write")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
     p.add_argument("--uncertainty", action="store_true",
                    help="also score each render's per-pixel std. dev.: AUSE, Spearman rho and the "
@@ -140,7 +142,7 @@ def _refuse_unused_estimate_options(args, scene, estimate_kw: dict) -> None:
 def run(args) -> int:
     from ..eval.protocol import format_table, run_evaluation, write_report
     from ..io import load_scene
-    from ..io.outputs import check_not_scene_file
+    from ..io.outputs import check_not_scene_file, record_file
 
     settings, estimate_kw, executor = _checked_request(args)
     scene = load_scene(args.scene, scale=args.scale)
@@ -161,6 +163,7 @@ def run(args) -> int:
     if args.figures:
         report["figures"] = _write_figures(args, ev)
     write_report(report, args.json)
+    record_file(args.json)  # vibr's: a later evaluation may replace it without --overwrite
     print(format_table(report))
     print(f"wrote {args.json}")
     return 0
@@ -175,7 +178,7 @@ def _checked_request(args):
     from ..render.methods import method_params
     from ..stereo.checks import check_depth_params
 
-    check_output(args.json, "file", what="--json")
+    check_output(args.json, "file", overwrite=args.overwrite, what="--json")
     if args.figures is not None:
         check_output(args.figures, "dir", what="--figures")
     check_depth_args(args)
@@ -213,6 +216,7 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
 
     from ..eval.leave_one_out import evaluate_all, format_all_table, resolve_targets
     from ..eval.protocol import write_report
+    from ..io.outputs import record_file
 
     targets = resolve_targets(scene, args.target)
     # every target has sources of its own, each estimate is used once, and the per-view
@@ -227,6 +231,7 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
                           intensity_scale=args.intensity_scale, cache_dir=cache_dir,
                           render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
     write_report(report, out)
+    record_file(out)
     print(format_all_table(report))
     print(f"wrote {out} (per-view reports in {views_dir}/)")
     return 0

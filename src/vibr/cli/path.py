@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import add_deprecated_alias, count, fill
-from ._options import names
+from ._options import add_overwrite_option, names
 
 _DESC = """\
 Write a camera path for a fly-through of SCENE in nerfstudio's camera_path.json schema
@@ -59,6 +59,7 @@ def _add_kind(kind_parsers, kind) -> None:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     k.add_argument("scene", metavar="SCENE", help="scene folder (any supported format)")
     k.add_argument("-o", "--output", required=True, help="camera path file to write (.json)")
+    add_overwrite_option(k, "an -o file vibr did not write")
     k.add_argument("--frames", type=int, help="number of frames (default: --seconds x --fps)")
     k.add_argument("--seconds", type=float, default=None, help="duration in seconds (default 4 without --frames)")
     k.add_argument("--fps", type=float, default=24.0, help="frames per second (default 24)")
@@ -98,9 +99,9 @@ def run(args) -> int:
 
     if not args.output.lower().endswith(".json"):
         raise VibrInputError("the camera path file must end in .json", args.output)
-    from ..io.outputs import check_not_scene_file, check_output
+    from ..io.outputs import check_not_scene_file, check_output, record_file
 
-    check_output(args.output, "file", what="-o")  # as every command: its folder must exist
+    check_output(args.output, "file", overwrite=args.overwrite, what="-o")  # as every command: its folder must exist
     if args.frames is not None and args.seconds is not None:
         raise VibrInputError("give --frames or --seconds, not both")
     if args.scale <= 0:
@@ -121,6 +122,7 @@ def run(args) -> int:
                               else (None, 1.0))
     P.write_camera_path(args.output, path, dataparser_transforms=args.dataparser_transforms,
                         applied_transform=applied, applied_scale=applied_scale)
+    record_file(args.output)  # vibr's: a later 'vibr path' may replace it without --overwrite
     print(f"wrote {args.output}: {args.kind} path, {count(len(path), 'frame')} of {path.width}x{path.height} "
           f"at {path.fps:g} fps ({path.seconds:.2f} s)")
     return 0

@@ -85,7 +85,9 @@ def _add_path_options(p) -> None:
     g.add_argument("--fps", type=float, help="video frame rate (default: the path file's)")
     g.add_argument("--dataparser-transforms", metavar="JSON",
                    help="nerfstudio's dataparser_transforms.json: the path is in nerfstudio's normalised frame")
-    g.add_argument("--overwrite", action="store_true", help="render frames already written again (default: skip them)")
+    g.add_argument("--overwrite", action="store_true",
+                   help="replace an -o or --uncertainty file vibr did not write, write frames into a folder holding "
+                        "other files; with --path also render frames already written again (default: skip them)")
     g.add_argument("--exclude", type=names, default=(), metavar="VIEW,...",
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
     # frames on local processes or Dask (vibr.executor, docs/explanation/scale-out.md)
@@ -97,7 +99,7 @@ def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import load_scene, write_image
     from ..io.images import check_image_ext
-    from ..io.outputs import check_not_scene_file, check_output
+    from ..io.outputs import check_not_scene_file, check_output, record_file
     from ..pipeline import prepare
     from ..render import render
     from ..render.methods import method_params
@@ -108,10 +110,13 @@ def run(args) -> int:
     if (args.path is None) == (args.target is None):
         raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
     if args.path is not None:
-        check_output(args.output, "file" if is_video(args.output) else "dir", overwrite=True, what="-o")
+        check_output(args.output, "file" if is_video(args.output) else "dir",
+                     overwrite=args.overwrite or not is_video(args.output), what="-o")
         return _run_path(args)
     _refuse_path_options(args)
-    check_output(args.output, "file", what="-o")
+    check_output(args.output, "file", overwrite=args.overwrite, what="-o")
+    if args.uncertainty:
+        check_output(args.uncertainty, "file", overwrite=args.overwrite, what="--uncertainty")
     check_image_ext(args.output, args.bit_depth)  # before the work: out.npy was a TIFF under that name
     check_depth_args(args)
     if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
@@ -125,10 +130,12 @@ def run(args) -> int:
     res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
                  supersample=args.supersample, **render_params(args))  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth or 8)
+    record_file(args.output)  # vibr's: a later render may replace it without --overwrite
     if args.uncertainty:
         from ..eval.sigma_figures import write_sigma
 
         write_sigma(args.uncertainty, res.uncertainty)
+        record_file(args.uncertainty)
         print(f"wrote {args.uncertainty}")
     _report(args.method, res)
     print(f"wrote {args.output}")
@@ -169,7 +176,7 @@ def _report(method: str, res) -> None:
 
 #: the fly-through's options (attribute, flag), refused with --target rather than ignored
 _PATH_ONLY = (("frames_dir", "--frames-dir"), ("crf", "--crf"), ("fps", "--fps"),
-              ("dataparser_transforms", "--dataparser-transforms"), ("overwrite", "--overwrite"),
+              ("dataparser_transforms", "--dataparser-transforms"),
               ("exclude", "--exclude"), ("workers", "--workers"), ("dask", "--dask"))
 
 
@@ -191,7 +198,7 @@ def _path_views(views):
 def _run_path(args) -> int:
     """``--path``: a thin layer over :func:`vibr.paths.flythrough.render_path`."""
     from ..errors import VibrInputError
-    from ..io.outputs import check_output
+    from ..io.outputs import check_output, record_file
     from ..paths.camera_path import read_camera_path, scene_processing_transform
     from ..paths.flythrough import render_path
     from ..pipeline import load_scene_cached
@@ -211,7 +218,7 @@ def _run_path(args) -> int:
         if not is_video(args.uncertainty):
             raise VibrInputError(f"with --path, --uncertainty is a video ({', '.join(VIDEO_FORMATS)})",
                                  args.uncertainty)
-        check_output(args.uncertainty, "file", overwrite=True, what="--uncertainty")
+        check_output(args.uncertainty, "file", overwrite=args.overwrite, what="--uncertainty")
     applied, applied_scale = (scene_processing_transform(args.scene) if args.dataparser_transforms
                               else (None, 1.0))
     cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
@@ -226,6 +233,9 @@ def _run_path(args) -> int:
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
                       crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor,
                       uncertainty=args.uncertainty or None, supersample=args.supersample)
+    for f in (res.video, res.sigma_video):
+        if f:
+            record_file(f)
     t = res.times
     what = f"{res.video} ({count(res.video_frames, 'frame')}, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir

@@ -315,6 +315,11 @@ def compute_samples(sources: Scene, target, *, options: SampleOptions | None = N
                               grad_model)
         del known, proxy, states
     if len(out) == 0:
+        blind = [v.name for v in sources.views if v.depth is None or not np.isfinite(v.depth).any()]
+        if blind and len(blind) == len(sources.views):  # not a matter of where the target looks
+            raise VibrInputError(f"the depth is unknown (all zero in its file) in every source view: "
+                                 f"{', '.join(blind[:8])}{', ...' if len(blind) > 8 else ''}",
+                                 sources.views[0].path or tname)
         raise VibrInputError("no source view sees the target", tname)
     out.meta["counts"] = counts
     out.meta["times"] = times

@@ -35,6 +35,10 @@ __all__ = ["load_scene", "select_entries", "save_scene", "detect_format", "read_
            "write_depth", "read_pfm", "write_pfm", "read_camera_json", "write_camera_json", "FORMATS", "Format",
            "register_format", "unregister_format", "get_format"]
 
+#: The largest ``scale`` a scene loads at: enlarging photographs adds no detail, and the
+#: memory grows with its square.
+MAX_SCALE = 4.0
+
 #: Default of ``load_scene(allow_outside=None)``; the CLI's ``--allow-outside-paths`` sets it.
 ALLOW_OUTSIDE_PATHS = False
 
@@ -80,7 +84,8 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
     path : str or Path
         A scene folder, ``transforms.json`` or ``*_par.txt`` file.
     scale : float
-        Resize factor applied after reading: images with anti-aliasing
+        Resize factor in (0, :data:`MAX_SCALE`] applied after reading (the memory it needs
+        is checked first, from the image sizes: :func:`vibr.io.images.build_views`): images with anti-aliasing
         (skimage.transform.resize), cameras with :meth:`Camera.scaled`, depth by nearest
         neighbour (never mixes depths across edges).
     views : list of int or str, optional
@@ -104,8 +109,9 @@ def load_scene(path, *, scale: float = 1.0, views=None, allow_outside: bool | No
         scale = float(scale)
     except (TypeError, ValueError):
         raise VibrInputError(f"scale must be a number, got {scale!r}") from None
-    if not (scale > 0 and scale <= 16):
-        raise VibrInputError(f"scale must be in (0, 16], got {scale}")
+    if not (scale > 0 and scale <= MAX_SCALE):
+        raise VibrInputError(f"scale must be in (0, {MAX_SCALE:g}], got {scale:g} (enlarging the photographs adds "
+                             "no detail; a render is supersampled by itself)")
     fmt = get_format(detect_format(path))
     p = Path(path)
     unknown = sorted(set(options) - set(fmt.options))

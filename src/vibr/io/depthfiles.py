@@ -18,6 +18,7 @@ Formats
 
 from __future__ import annotations
 
+import logging
 import os
 
 import numpy as np
@@ -26,6 +27,8 @@ from .._runtime.atomic import atomic_path
 from ..errors import VibrInputError, require_file
 from ..geometry.resample import resize_depth
 from ..scene import depth_from_file_values
+
+logger = logging.getLogger(__name__)
 
 DEPTH_EXTS = (".pfm", ".npy", ".png", ".bin")
 
@@ -172,7 +175,24 @@ def fit_depth(depth: np.ndarray, shape, path=None, what: str = "the view") -> np
     return resize_depth(depth, (H, W))
 
 
-def read_depth(path, scale: float | None = None, shape=None) -> np.ndarray:
+def check_depth_content(depth: np.ndarray, path, what: str = "depth") -> None:
+    """Say so when a depth map loads but is unlikely to be what was meant: a warning when it
+    is unknown (0) everywhere (the view then gives the render nothing), a note (the log's
+    info level) when it has one value at every known pixel (a placeholder? a plane facing
+    the camera has it too). A map of another ``what`` (a σ_z map) is only checked for the first."""
+    known = np.isfinite(depth)
+    if not known.any():
+        logger.warning(f"{os.fspath(path)}: the {what} is all zero (unknown at every pixel): this view gives "
+                       "the render no samples")
+    elif what == "depth" and known.sum() > 1:
+        v = depth[known]
+        if v.min() == v.max():
+            # a note, not a warning: a plane facing the camera has it too
+            logger.info(f"{os.fspath(path)}: the depth is {float(v[0]):g} at every known pixel (constant: "
+                        "a placeholder rather than a measurement?)")
+
+
+def read_depth(path, scale: float | None = None, shape=None, what: str = "depth") -> np.ndarray:
     """Read an orthogonal depth map: H×W float32, NaN where unknown (0 in the file).
 
     Parameters
@@ -184,10 +204,16 @@ def read_depth(path, scale: float | None = None, shape=None) -> np.ndarray:
     shape : (H, W), optional
         Expected shape (the image's); a mismatch raises :class:`VibrInputError`.
 
+    what : str
+        What the file holds, in messages (``"sigma_z"``): :func:`check_depth_content` warns
+        about a map that is unknown everywhere (or, for depth, constant).
+
     NaN, inf and negative values in the file raise :class:`VibrInputError`.
     """
     a = read_depth_values(path, scale)
-    return depth_from_file_values(a, a.shape if shape is None else tuple(shape), os.fspath(path))
+    d = depth_from_file_values(a, a.shape if shape is None else tuple(shape), os.fspath(path))
+    check_depth_content(d, path, what)
+    return d
 
 
 def write_depth(path, depth: np.ndarray, scale: float | None = None) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import logging
 import os
 import struct
 import warnings
@@ -29,6 +30,8 @@ from ..scene import (
     check_image,  # NaN, or 0..255 as floats: refused, not clipped to white
 )
 from .undistort import undistort_array
+
+logger = logging.getLogger(__name__)
 
 #: Set by :func:`headers_only`: :func:`build_views` then reads image headers, not pixels.
 _HEADERS_ONLY = contextvars.ContextVar("vibr_headers_only", default=False)
@@ -172,6 +175,35 @@ def _colour_mode(path) -> str | None:
         return None
 
 
+def _require_content(path) -> str:
+    """:func:`vibr.errors.require_file`, and a file of 0 bytes said to be empty (imageio
+    said it found no backend for it)."""
+    p = require_file(path)
+    if os.path.getsize(p) == 0:
+        raise VibrInputError("the image file is empty (0 bytes)", p)
+    return p
+
+
+#: The last chunk of every complete PNG file (length 0, type IEND, its CRC).
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+
+
+def _warn_truncated_png(p: str) -> None:
+    """Warn about a PNG file whose pixels decoded but which lacks its closing IEND chunk: it
+    was cut short (a copy interrupted), and what follows the pixels (their checksum) is lost."""
+    try:
+        with open(p, "rb") as f:
+            if f.read(8) != _PNG_SIG:
+                return
+            f.seek(-len(_PNG_END), os.SEEK_END)
+            end = f.read()
+    except OSError:
+        return
+    if end != _PNG_END:
+        logger.warning(f"{p}: the PNG file is truncated (it does not end with its IEND chunk); its pixels "
+                       "decoded in full, but check the file (an interrupted copy?)")
+
+
 def read_image(path) -> np.ndarray:
     """Read an image file as an H×W×3 float32 array in [0, 1].
 
@@ -181,7 +213,7 @@ def read_image(path) -> np.ndarray:
     """
     import imageio.v3 as iio
 
-    p = require_file(path)
+    p = _require_content(path)
     if png_bit_depth(p) == 16:
         a = decode_png16(p)
     else:
@@ -201,6 +233,7 @@ def read_image(path) -> np.ndarray:
         a = np.repeat(a[..., None], 3, axis=2)
     if a.ndim != 3 or a.shape[2] not in (3, 4) or a.shape[0] == 0 or a.shape[1] == 0:
         raise VibrInputError(f"not an RGB image (array shape {a.shape})", p)
+    _warn_truncated_png(p)
     a = a[..., :3]
     if a.dtype in (np.uint8, np.uint16):
         return np.ascontiguousarray(from_uint(a))
@@ -217,7 +250,7 @@ def image_size(path) -> tuple[int, int]:
     :class:`VibrInputError` naming the file."""
     import imageio.v3 as iio
 
-    p = require_file(path)
+    p = _require_content(path)
     try:
         with warnings.catch_warnings():  # imageio's legacy plugins warn while probing bad files
             warnings.simplefilter("ignore")
@@ -359,9 +392,12 @@ def build_views(entries, scale: float = 1.0, desc: str = "reading images", check
     headers = _HEADERS_ONLY.get()
     if not headers:
 
-        npx = sum(e["camera"].width * e["camera"].height for e in entries)  # float32 RGB + decoding
-        check_memory(16.0 * npx, f"loading {len(entries)} images ({npx / 1e6:.0f} Mpixels)",
-                     "load fewer views (--only) or resize the images first",
+        # float32 RGB + decoding, at the requested scale: checked from the sizes the files
+        # declare (their cameras, compared with each header below) before any image is read
+        npx = sum(e["camera"].width * e["camera"].height for e in entries) * max(1.0, scale * scale)
+        at = f" at scale {scale:g}" if scale != 1.0 else ""
+        check_memory(16.0 * npx, f"loading {len(entries)} images{at} ({npx / 1e6:.0f} Mpixels)",
+                     "load fewer views (--only), a smaller --scale, or resize the images first",
                      entries[0]["path"] if entries else None)
 
     def work(e):

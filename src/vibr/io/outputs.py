@@ -12,11 +12,20 @@ Two rules keep a command from losing the user's data or time:
   that marker and holds nothing else than the files the marker lists (and empty folders),
   and never when it is, or contains, one of the command's inputs. Anything else is refused:
   ``--overwrite`` never deletes what vibr did not write.
+* A single output file (``render -o``, ``path -o``, ``eval --json``, a video) is vibr's when
+  the marker of its folder lists its name with the SHA-256 of its content
+  (:func:`record_file`, :func:`written_by_vibr`): a file changed since is no longer vibr's.
+  :func:`check_output` refuses an existing file that is not vibr's unless ``overwrite``.
+* A folder of fly-through frames (:func:`check_frames_folder`) holds the marker and the
+  frames and σ maps vibr writes; a folder holding anything else is refused unless
+  ``overwrite``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fnmatch
+import hashlib
 import json
 import os
 import shutil
@@ -55,7 +64,8 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
         only with ``overwrite`` (its replacement is then checked by
         :func:`check_replaceable`); its parent must exist and be writable.
     overwrite : bool
-        Whether an existing output may be replaced.
+        Whether an existing output may be replaced. A file vibr wrote (:func:`written_by_vibr`)
+        may always be replaced; a folder never without ``overwrite``.
     what : str
         Name of the output in messages (``"-o"``, ``"--json"``).
 
@@ -77,8 +87,8 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
     if kind == "file":
         if p.is_dir():
             raise VibrInputError(f"{what} is a folder, a file name is expected", p)
-        if p.exists() and not overwrite:
-            raise OutputExists(f"{what} already exists", p)
+        if p.exists() and not overwrite and not written_by_vibr(p):
+            raise OutputExists(f"{what} already exists and vibr did not write it", p)
         if str(os.fspath(path)).endswith(("/", os.sep)):
             raise VibrInputError(f"{what} ends with a path separator, a file name is expected", p)
     else:
@@ -98,31 +108,97 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
 
 
 # ----------------------------------------------------------------------------- marker
-def write_marker(folder, files=None) -> None:
+def write_marker(folder, files=None, sha256=None) -> None:
     """Write the marker into ``folder`` listing ``files`` (relative paths); by default every
-    file now under ``folder`` (use only on a folder vibr has just created)."""
+    file now under ``folder`` (use only on a folder vibr has just created). ``sha256``:
+    name → digest of the single files vibr wrote there (:func:`record_file`)."""
     folder = Path(folder)
     if files is None:
         files = [f.relative_to(folder).as_posix() for f in sorted(folder.rglob("*"))
                  if f.is_file() and f.name != MARKER]
     doc = {"written_by": "vibr", "files": sorted(set(files))}
+    if sha256:
+        doc["sha256"] = dict(sorted(sha256.items()))
     with open(folder / MARKER, "w", encoding="utf-8") as fh:
         json.dump(doc, fh, indent=1)
         fh.write("\n")
 
 
+def _read_marker_doc(folder) -> dict | None:
+    try:
+        with open(Path(folder) / MARKER, encoding="utf-8") as fh:
+            doc = json.load(fh)
+        if doc.get("written_by") != "vibr" or not isinstance(doc["files"], list):
+            return None
+        return doc
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+
+
 def read_marker(folder) -> set[str] | None:
     """The files listed by ``folder``'s marker, or None when it has no valid marker."""
-    m = Path(folder) / MARKER
+    doc = _read_marker_doc(folder)
+    return None if doc is None else {str(f) for f in doc["files"]}
+
+
+# ----------------------------------------------------------------------------- single files
+def file_digest(path) -> str:
+    """SHA-256 of a file's content (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def written_by_vibr(path) -> bool:
+    """Whether the file ``path`` is one vibr wrote: its folder's marker lists its name with
+    the SHA-256 of its present content (:func:`record_file`)."""
+    p = Path(path)
+    if not p.is_file() or p.is_symlink():
+        return False
+    doc = _read_marker_doc(p.absolute().parent)
+    sha = (doc or {}).get("sha256")
+    if not isinstance(sha, dict) or p.name not in sha:
+        return False
     try:
-        with open(m, encoding="utf-8") as fh:
-            doc = json.load(fh)
-        files = doc["files"]
-        if doc.get("written_by") != "vibr" or not isinstance(files, list):
-            return None
-        return {str(f) for f in files}
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
+        return file_digest(p) == sha[p.name]
+    except OSError:
+        return False
+
+
+@contextlib.contextmanager
+def _locked(folder: Path):
+    """An exclusive lock on ``folder``'s marker (POSIX ``flock``; none elsewhere): two vibr
+    commands writing into one folder do not lose each other's entries."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    fd = os.open(folder / MARKER, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def record_file(path) -> None:
+    """Note in the marker of ``path``'s folder that vibr wrote this file (its name and the
+    SHA-256 of its content), so that a later command may replace it without ``--overwrite``.
+    A folder that cannot take the marker is left as it is (the file is then not vibr's)."""
+    p = Path(path).absolute()
+    folder = p.parent
+    try:
+        digest = file_digest(p)
+        with _locked(folder):
+            doc = _read_marker_doc(folder) or {}
+            files = set(doc.get("files", [])) | {p.name}
+            sha = dict(doc.get("sha256") or {}, **{p.name: digest})
+            write_marker(folder, files, sha)
+    except OSError:
+        pass
 
 
 def _inside(a: Path, b: Path) -> bool:
@@ -232,3 +308,29 @@ def replace_folder(tmp, out, *, overwrite: bool) -> None:
         shutil.rmtree(trash, ignore_errors=True)
     else:
         os.replace(tmp, out)
+
+
+# ----------------------------------------------------------------------------- frames folders
+def check_frames_folder(folder, owned, *, overwrite: bool, what: str = "frames folder") -> None:
+    """Refuse, before the work, a folder of numbered outputs (a fly-through's frames) that
+    holds files vibr did not write, unless ``overwrite``.
+
+    ``owned(path)`` says whether a file with one of the names the command writes is vibr's
+    (True / False: a frame with or without vibr's text chunk), None for any other name: such
+    a file is vibr's when ``folder``'s marker lists it. The marker and vibr's half-written
+    temporary files (``.NAME.*.part*``) are vibr's too. A missing or empty folder is accepted.
+    """
+    folder = Path(folder)
+    if not folder.is_dir() or overwrite:
+        return
+    listed = read_marker(folder) or set()
+    for f in sorted(folder.rglob("*")):
+        rel = f.relative_to(folder).as_posix()
+        if (f.is_dir() and not f.is_symlink()) or rel == MARKER:
+            continue
+        mine = owned(f) if f.is_file() and not f.is_symlink() else False
+        if mine is None:
+            mine = rel in listed or fnmatch.fnmatch(f.name, ".*.part*")
+        if not mine:
+            raise OutputExists(f"{what} holds {rel}, which vibr did not write; move it away or choose another "
+                               "folder", folder)

@@ -65,7 +65,7 @@ from .depthfiles import fit_depth, read_depth, write_depth
 from .entries import select_entries
 from .formats import Format, register_format
 from .images import build_views, image_size, read_mask, write_image
-from .outputs import check_not_input, check_replaceable, replace_folder, write_marker
+from .outputs import MARKER, check_not_input, check_replaceable, replace_folder, write_marker
 from .undistort import NERFSTUDIO_FISHEYE, check_lens, from_nerfstudio, pinhole
 from .undistort import summary as undistort_summary
 
@@ -350,6 +350,7 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
         raise VibrInputError("transforms.json must be an object with a non-empty 'frames' list", src)
     base = tf.parent
     entries, grid_pos = _read_frames(meta["frames"], base, src, allow_outside)
+    _refuse_shared_images(entries, base, src)
     entries = select_entries(entries, views, base)
     scaled = []
     for e in entries:
@@ -359,16 +360,17 @@ def load_transforms(path, *, scale: float = 1.0, views=None, allow_outside: bool
                                  "image is not a file", e["path"])
         cam, dist, rot_scale = _frame_camera(fr, meta, e["path"], src, i)
         if abs(rot_scale - 1.0) > ROTATION_TOL:
-            scaled.append(rot_scale)
+            scaled.append((rot_scale, i))
         e["camera"] = cam
         if dist is not None:
             e["distortion"] = dist
         file_shape = cam.shape if dist is None else (dist.height, dist.width)  # depth and sigma_z files
         e.update(_frame_maps(fr, meta, i, file_shape, base, src, allow_outside))
     if scaled:  # a scaled camera object in 3-D software: the rays' lines are the same
+        ss = [x for x, _ in scaled]
         logger.warning(f"{src}: the rotations of {len(scaled)} of {len(entries)} frames carry a uniform scale "
-                       f"({min(scaled):.4g}..{max(scaled):.4g}); vibr uses their rotation, as the scale "
-                       "changes the length of a ray's direction, not its line")
+                       f"({min(ss):.4g}..{max(ss):.4g}, first frame {scaled[0][1]}), not a rigid motion; vibr uses "
+                       "their rotation, as the scale changes the length of a ray's direction, not its line")
     undistorted = undistort_summary(entries)
     vs = build_views(entries, scale, desc="reading images")
     points = None
@@ -432,7 +434,7 @@ def _frame_maps(fr: dict, meta: dict, i: int, file_shape, base: Path, src: str, 
     szp = fr.get("sigma_z_file_path")
     if szp is not None:
         spath = _resolve(base, szp, "sigma_z_file_path", src, i, allow_outside)
-        s = fit_depth(read_depth(spath, 1.0), file_shape, spath, f"frame {i}'s image")  # finite, >= 0
+        s = fit_depth(read_depth(spath, 1.0, what="sigma_z"), file_shape, spath, f"frame {i}'s image")  # finite, >= 0
         out["sigma_z"] = np.nan_to_num(s, nan=0.0)
     elif sz is not None:
         sz = _number(sz, f"frame {i}: sigma_z", src)
@@ -541,7 +543,8 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
             json.dump(doc, f, indent=2)
             f.write("\n")
 
-        write_marker(tmp)
+        kept = _keep_other_files(out, tmp) if in_place else {}
+        write_marker(tmp, sha256=kept)
         replace_folder(tmp, out, overwrite=overwrite)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -551,6 +554,47 @@ def save_scene(scene: Scene, out_dir, *, overwrite: bool = False, in_place: bool
             raise write_failed(exc, out) from exc
         raise
     return out
+
+
+def _refuse_shared_images(entries, base: Path, src) -> None:
+    """Two frames naming the same image file are refused: one photograph has one camera
+    (a copied frame whose ``file_path`` was not edited)."""
+    seen = {}
+    for e in entries:
+        key = os.path.normcase(os.path.realpath(e["path"]))
+        if key in seen:
+            try:
+                name = Path(e["path"]).relative_to(base)
+            except ValueError:
+                name = e["path"]
+            raise VibrInputError(f"frames {seen[key]} and {e['i']} name the same image {name}: one photograph "
+                                 "has one camera (give each frame its own file_path)", src)
+        seen[key] = e["i"]
+
+
+def _keep_other_files(old: Path, new: Path) -> dict:
+    """An in-place update keeps every file of the old folder it does not write itself (a
+    ``calibration.json`` from ``vibr calibrate``, a render vibr wrote there): each is linked
+    (else copied) into the new folder before the swap. Returns the digests the old marker
+    recorded for them (:func:`vibr.io.outputs.record_file`)."""
+    if not old.is_dir():
+        return {}
+    for f in sorted(old.rglob("*")):
+        rel = f.relative_to(old)
+        dst = new / rel
+        if f.name == MARKER or f.is_dir() or dst.exists() or dst.is_symlink():
+            continue
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(f, dst, follow_symlinks=False)
+        except OSError:
+            shutil.copy2(f, dst, follow_symlinks=False)
+    try:
+        with open(old / MARKER, encoding="utf-8") as fh:
+            sha = json.load(fh).get("sha256") or {}
+        return {k: v for k, v in sha.items() if isinstance(k, str) and isinstance(v, str) and (new / k).is_file()}
+    except (OSError, ValueError, AttributeError):
+        return {}
 
 
 def _check_save(scene: Scene, out: Path, overwrite: bool, in_place: bool) -> None:

@@ -38,7 +38,7 @@ from .._runtime.atomic import atomic_path
 from ..camera import Camera, axes_meeting_point, image_side, shared_centre
 from ..errors import VibrInputError
 from ..geometry.selection import depth_points
-from ..io.camera_json import as_rotation, as_scaled_rotation, parse_json
+from ..io.camera_json import ROTATION_TOL, as_rotation, as_scaled_rotation, parse_json
 from ..io.transforms import find_transforms
 from ..stereo.lightfield import grid_positions
 
@@ -316,6 +316,9 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
     frames = d["camera_path"]
     if not isinstance(frames, list) or not frames:
         raise VibrInputError("'camera_path' has no frames", p)
+    if len(frames) > MAX_FRAMES:  # before any camera is built: it would fill the memory
+        raise VibrInputError(f"'camera_path' has {len(frames)} frames, more than the {MAX_FRAMES} vibr reads "
+                             "(and 'vibr path' makes)", p)
     ctype = str(d.get("camera_type", "perspective")).lower()
     if ctype != "perspective":
         raise VibrInputError(f"camera_type {ctype!r} is not supported (only 'perspective')", p)
@@ -326,7 +329,7 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
     if w <= 0 or h <= 0:
         raise VibrInputError(f"render size must be positive, got {w}x{h}", p)
     from_file = _frame_map(dataparser_transforms, applied_transform, applied_scale, p, _unnormalise)
-    cams = []
+    cams, scaled = [], []
     for i, fr in enumerate(frames):
         where = f"{p}: camera_path[{i}]"
         if not isinstance(fr, dict) or "camera_to_world" not in fr or "fov" not in fr:
@@ -339,8 +342,16 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
             raise VibrInputError(f"camera_to_world must hold 16 numbers, got {M.size}", where)
         M = M.reshape(4, 4)
         if np.all(np.isfinite(M)):
+            s = abs(float(np.linalg.det(M[:3, :3]))) ** (1.0 / 3.0)
+            if abs(s - 1.0) > ROTATION_TOL:  # the file's own matrix, before any dataparser scale
+                scaled.append((i, s))
             M = from_file(M)
         cams.append(camera_from_c2w_opengl(M, fr["fov"], w, h, source=where))
+    if scaled:  # usable (the rotation is the camera), but not what a viewer or 'vibr path' writes
+        ss = [s for _, s in scaled]
+        logger.warning(f"{p}: the camera_to_world rotations of {len(scaled)} of {len(frames)} frames carry a "
+                       f"scale ({min(ss):.4g}..{max(ss):.4g}, first camera_path[{scaled[0][0]}]), not a rigid "
+                       "motion; vibr uses their rotation")
     seconds = d.get("seconds")
     fps = d.get("fps")
     try:

@@ -37,6 +37,7 @@ measured in docs/explanation/flythrough.md.
 
 from __future__ import annotations
 
+import fnmatch
 import logging
 import os
 import time
@@ -57,7 +58,7 @@ from ..geometry.resolution import SUPERSAMPLE_MAX, check_supersample
 from ..geometry.selection import depth_points, rank_views, select_views
 from ..io import read_image, write_image
 from ..io.images import read_png_text
-from ..io.outputs import check_not_input
+from ..io.outputs import check_frames_folder, check_not_input, read_marker, write_marker
 from ..io.video import VIDEO_FORMATS, check_video_options, is_video, write_video
 from ..progress import progress as bar
 from ..render import fine_grid, grid_params, render_samples
@@ -499,6 +500,7 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
                                views=views_for_path(scene, cams, o.n_views, o.exclude))
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
+    _mark_frames(fdir, len(cams), o.uncertainty is not None)
     ctx = FrameContext(sources, cams, str(fdir), o.method, dict(o.params or {}), o.n_views, o.blend,
                        o.overwrite, dict(o.geometry_kw or {}), uncertainty=o.uncertainty is not None,
                        supersample=o.supersample)
@@ -520,6 +522,27 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
     return res
 
 
+def _owned_frame_file(path: Path) -> bool | None:
+    """Whether ``path``, named as a frame or a σ map, is one a fly-through wrote: a frame
+    with its key chunk (:data:`FRAME_KEY`), a σ map with its key; None for another name
+    (:func:`vibr.io.outputs.check_frames_folder`)."""
+    if fnmatch.fnmatch(path.name, "frame_[0-9][0-9][0-9][0-9][0-9].png"):
+        return FRAME_KEY in read_png_text(path)
+    if fnmatch.fnmatch(path.name, "sigma_[0-9][0-9][0-9][0-9][0-9].npz"):
+        return _sigma_key(path) is not None
+    return None
+
+
+def _mark_frames(fdir: Path, n: int, uncertainty: bool) -> None:
+    """The frames folder's marker (:data:`vibr.io.outputs.MARKER`), listing every frame (and
+    σ map) of the path, written before the first frame: the folder is then vibr's."""
+    names = [frame_name(i) for i in range(n)] + ([sigma_name(i) for i in range(n)] if uncertainty else [])
+    try:
+        write_marker(fdir, sorted(set(names) | (read_marker(fdir) or set())))
+    except OSError as exc:
+        raise VibrInputError(f"cannot write in the frames folder ({exc.strerror or exc})", fdir) from None
+
+
 def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
     """The frames folder, the video (None: frames only) and the frame rate of a path's
     outputs, every option checked before any frame is rendered."""
@@ -531,6 +554,8 @@ def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
     fdir, video = _frames_dir_for(Path(out), o.frames_dir)
     # frames among the photographs would become views of an image-folder scene (Strecha)
     check_not_input(fdir, [v.path for v in scene.views if v.path] + ([scene.root] if scene.root else []))
+    # a folder holding files vibr did not write (a user's own frame_00002.png) is not written over
+    check_frames_folder(fdir, _owned_frame_file, overwrite=o.overwrite)
     fps = camera_path.fps if o.fps is None else o.fps
     sigma = o.uncertainty
     if sigma is not None and not is_video(sigma):
