@@ -392,7 +392,7 @@ def test_the_cache_keeps_under_its_bound_least_recently_used_first(tmp_path, mon
         (tmp_path / n).write_bytes(bytes(100))
         os.utime(tmp_path / n, (1000 + k, 1000 + k))
     (tmp_path / "notes.txt").write_bytes(bytes(500))
-    dc._used(tmp_path / "depth-a.npz")  # a hit: now the most recent
+    dc.mark_used(tmp_path / "depth-a.npz")  # a hit: now the most recent
     assert dc.prune_cache(tmp_path, keep=[tmp_path / "depth-b.npz"], max_bytes=250) == 200
     assert sorted(p.name for p in tmp_path.iterdir()) == ["depth-a.npz", "depth-b.npz", "notes.txt"]
     monkeypatch.setenv("VIBR_CACHE_MAX_GB", "0")
