@@ -8,12 +8,11 @@ import json
 from dataclasses import replace
 
 import numpy as np
+import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
-pycolmap = pytest.importorskip("pycolmap")
-
-import vibr.calib.pan as pc  # noqa: E402
+import vibr.calib.pan as pc
 
 W, H, F = 320, 240, 300.0
 
@@ -249,7 +248,6 @@ def test_a_failed_fit_leaves_the_mapper_to_it(tmp_path, monkeypatch):
     import vibr.calib.colmap as cal
     import vibr.synthetic as syn
     from _checks import messages_logged
-
     from vibr.io.video import write_video
 
     def broken(*a, **k):

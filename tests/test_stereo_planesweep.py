@@ -762,6 +762,7 @@ def test_estimate_depth_options_and_unknown_keywords():
         estimate_depth(g, views=[4], refine="sweep+tvv")
 
 
+@pytest.mark.optional  # needs two numba threads
 def test_views_side_by_side_bit_identical_to_serial(monkeypatch):
     """The light-field estimate runs VIEW_THREADS views at a time (map_views): the depths
     and sigma_z are those of the one-view-at-a-time loop, bit for bit."""
