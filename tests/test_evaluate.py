@@ -4,6 +4,7 @@ render, the intensity scale reaching the renderer, the JSON report, unseen scene
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -29,25 +30,29 @@ def scene_dir(tmp_path_factory, scene):
 
 
 def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monkeypatch):
-    import vibr.geometry as geometry
+    import vibr.render.api as render_api
     from vibr.eval.protocol import Setting, evaluate
     from vibr.metrics import psnr
     from vibr.pipeline import prepare
     from vibr.render import render
 
     calls = []
-    real = geometry.compute_samples
+    real = render_api.compute_samples  # the name shared_geometry calls
 
     def counting(*a, **kw):
         calls.append(1)
+        time.sleep(0.05)  # samples_seconds must include this
         return real(*a, **kw)
 
-    monkeypatch.setattr(geometry, "compute_samples", counting)
+    monkeypatch.setattr(render_api, "compute_samples", counting)
     settings = [Setting("ulr"), Setting("bvs", {"lam": 0.2}), Setting("gradient", {"gamma": 1.0}),
                 Setting("gradient", {"gamma": 2.0})]
+    t0 = time.perf_counter()
     rep = evaluate(scene, "view_004", settings, depth="gt", render_kw=FAST, use_lpips=False)
+    wall = time.perf_counter() - t0
     assert len(calls) == 1  # one geometry for the four settings
-    assert rep["n_samples"] > 0 and rep["samples_seconds"] >= 0
+    # the time of the samples, in seconds: the call above, within the whole evaluation
+    assert rep["n_samples"] > 0 and 0.05 <= rep["samples_seconds"] <= wall + 1e-3
 
     # the same numbers as rendering directly, geometry recomputed by render itself. Not to
     # the last bit: the solver's fastmath reductions may sum in another order from one call
@@ -259,8 +264,8 @@ def test_view_counts_closed_form():
 
 def test_evaluation_writes_nothing_figures_are_separate(scene, tmp_path):
     """run_evaluation measures and returns the images; only vibr.eval.figures writes files."""
-    from vibr.eval.protocol import Setting, evaluate, run_evaluation
     from vibr.eval.figures import write_evaluation_figures
+    from vibr.eval.protocol import Setting, evaluate, run_evaluation
 
     with pytest.raises(TypeError):
         evaluate(scene, "view_004", [Setting("ulr")], figures=tmp_path)
