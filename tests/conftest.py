@@ -103,3 +103,15 @@ def fountain_dir(data_dir) -> Path:
 @pytest.fixture(scope="session")
 def temple_dir(data_dir) -> Path:
     return data_dir / "middlebury_templeSparseRing"
+
+
+@pytest.fixture(scope="session")
+def grid_scene_dir(tmp_path_factory) -> Path:
+    """A small synthetic light-field grid (9 views of 48 × 40, seed 2) saved as a
+    transforms.json folder, a layout vibr eval never saw; shared: tests must not write in it."""
+    from vibr.io import save_scene
+    from vibr.synthetic import make_scene
+
+    d = tmp_path_factory.mktemp("grid_scene") / "grid"
+    save_scene(make_scene("grid", n_views=9, width=48, height=40, seed=2), d)
+    return d

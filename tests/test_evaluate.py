@@ -19,16 +19,6 @@ def scene():
     return make_scene("grid", n_views=9, width=48, height=40, seed=2)
 
 
-@pytest.fixture(scope="module")
-def scene_dir(tmp_path_factory, scene):
-    """The synthetic scene as a transforms.json folder (a layout vibr eval never saw)."""
-    from vibr.io import save_scene
-
-    d = tmp_path_factory.mktemp("evalscene") / "unseen_scene"
-    save_scene(scene, d)
-    return d
-
-
 def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monkeypatch):
     import vibr.render.api as render_api
     from vibr.eval.protocol import Setting, evaluate
@@ -89,12 +79,12 @@ def test_intensity_scale_reaches_the_renderer(scene, monkeypatch):
     assert rep["results"][0]["psnr"] != rep["results"][1]["psnr"]
 
 
-def test_cli_eval_json_on_an_unseen_scene_folder(scene_dir, tmp_path, capsys):
+def test_cli_eval_json_on_an_unseen_scene_folder(grid_scene_dir, tmp_path, capsys):
     from vibr.cli import main
 
     out = tmp_path / "r.json"
     figs = tmp_path / "figs"
-    code = main(["eval", str(scene_dir), "--target", "view_004", "--method", "ulr,savsr,gradient",
+    code = main(["eval", str(grid_scene_dir), "--target", "view_004", "--method", "ulr,savsr,gradient",
                  "--gamma", "0,1", "--lam", "0.2", "--intensity-scale", "100", "--border", "2",
                  "--json", str(out), "--figures", str(figs), "-q"])
     assert code == 0
@@ -127,17 +117,17 @@ def test_cli_eval_json_on_an_unseen_scene_folder(scene_dir, tmp_path, capsys):
     assert read_image(rep["figures"]["crops"]).shape[0] == 14 + 4 * 16
 
 
-def test_cli_eval_image_scale_and_planar(scene_dir, tmp_path, capsys):
+def test_cli_eval_image_scale_and_planar(grid_scene_dir, tmp_path, capsys):
     from vibr.cli import main
 
     out = tmp_path / "p.json"
-    assert main(["eval", str(scene_dir), "--target", "2", "--scale", "0.5", "--depth", "planar",
+    assert main(["eval", str(grid_scene_dir), "--target", "2", "--scale", "0.5", "--depth", "planar",
                  "--method", "bvs", "--json", str(out), "-q"]) == 0
     rep = json.loads(out.read_text())
     assert rep["scale"] == 0.5 and rep["size"] == [24, 20] and rep["intensity_scale"] == 255.0
     assert rep["depth"] == "planar" and rep["proxy"]["depth"] > 0
     # errors are one line, exit status 2
-    assert main(["eval", str(scene_dir), "--target", "view_004", "--intensity-scale", "0",
+    assert main(["eval", str(grid_scene_dir), "--target", "view_004", "--intensity-scale", "0",
                  "--json", str(tmp_path / "x.json"), "-q"]) == 2
     assert "intensity-scale" in capsys.readouterr().err
 
