@@ -216,6 +216,7 @@ def test_estimate_depth_counts_its_views(monkeypatch):
     assert [ln for ln in buf.getvalue().splitlines() if ln.startswith(f"depth views: {n}/{n} in ")]
 
 
+@pytest.mark.slow
 def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):
     """The temple ring's neighbours are ~22° apart: the half-image parallax limit alone put
     the sweep's near end at 1.17 while the temple lies around 0.5–0.6 from the cameras. The
