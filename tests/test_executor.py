@@ -81,12 +81,12 @@ def test_flythrough_auto_executor(tmp_path, monkeypatch):
     cam = scene.views[0].camera.scaled(16.0)  # 768x640: a large frame
     ctx = FrameContext(scene, [cam] * 40, str(tmp_path))
     monkeypatch.setattr(E, "available_cores", lambda: 2)
-    monkeypatch.setattr("vibr._runtime.memory.available_memory", lambda: 16 * 2**30)
+    monkeypatch.setattr(E, "available_memory", lambda: 16 * 2**30)
     assert auto_executor(ctx, 40) == 2
     assert auto_executor(ctx, 15) is None
     small = FrameContext(scene, [scene.views[0].camera] * 40, str(tmp_path))
     assert auto_executor(small, 40) is None
-    monkeypatch.setattr("vibr._runtime.memory.available_memory", lambda: 2**20)
+    monkeypatch.setattr(E, "available_memory", lambda: 2**20)
     assert auto_executor(ctx, 40) is None
 
 
@@ -417,10 +417,10 @@ def test_eval_all_is_identical_on_every_engine_and_resumes(grid_scene_dir, tmp_p
 
     # a rerun finds the per-view reports and recomputes nothing: the same numbers, bit for bit;
     # the reports are read before any task is made (the progress counts what is left)
-    import vibr.executor as ex
+    import vibr.eval.leave_one_out as loo  # the name the evaluation calls
 
-    real, handed = ex.run_tasks, []
-    monkeypatch.setattr(ex, "run_tasks", lambda fn, tasks, **kw: handed.append(len(tasks)) or real(fn, tasks, **kw))
+    real, handed = loo.run_tasks, []
+    monkeypatch.setattr(loo, "run_tasks", lambda fn, tasks, **kw: handed.append(len(tasks)) or real(fn, tasks, **kw))
     again = _eval_all(grid_scene_dir, tmp_path / "serial.json")
     assert all(v.get("skipped") for v in again["per_view"].values()) and handed == []
     assert results_only(again) == results_only(serial)
@@ -429,13 +429,12 @@ def test_eval_all_is_identical_on_every_engine_and_resumes(grid_scene_dir, tmp_p
     assert handed == [1] and partial["per_view"]["view_000"].get("skipped")
     assert results_only(partial) == results_only(serial)
     # ... but not with other code: the reports are then recomputed
-    import vibr._runtime.checkpoint as ckpt
-
-    monkeypatch.setattr(ckpt, "code_fingerprint", lambda: "other code")
+    monkeypatch.setattr(loo, "code_fingerprint", lambda: "other code")
     other = _eval_all(grid_scene_dir, tmp_path / "serial.json")
     assert not any(v.get("skipped") for v in other["per_view"].values())
 
 
+@pytest.mark.slow
 def test_flythrough_frames_identical_on_every_engine(tmp_path, monkeypatch):
     """vibr render --path: serial, --workers 2 and --dask local write byte-identical PNG frames."""
     from vibr.cli import main
@@ -456,6 +455,7 @@ def test_flythrough_frames_identical_on_every_engine(tmp_path, monkeypatch):
     assert frames["procs"] == frames["serial"] and frames["dask"] == frames["serial"]
 
 
+@pytest.mark.slow
 def test_depth_is_identical_on_every_engine_and_resumes(tmp_path, client):
     """estimate_depth's sweeps on 2 processes and on a Dask cluster give the serial depths bit
     for bit; the workers keep each view in the checkpoint, from which a rerun resumes every
