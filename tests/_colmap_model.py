@@ -7,15 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from _helpers import rot_about
 from vibr.io.images import write_image
-
-
-def _rot(ax, ang):
-    c, s = np.cos(ang), np.sin(ang)
-    R = np.eye(3)
-    i, j = [(1, 2), (0, 2), (0, 1)][ax]
-    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
-    return R
 
 
 def write_colmap_model(root, *, text: bool = False, size=(32, 24)) -> Path:
@@ -32,8 +25,9 @@ def write_colmap_model(root, *, text: bool = False, size=(32, 24)) -> Path:
         rec.add_camera_with_trivial_rig(c)
     rng = np.random.default_rng(0)
     X = rng.uniform([-0.5, -0.4, 2.0], [0.5, 0.4, 3.0], (5, 3))
-    for iid, (cid, R, t) in enumerate([(1, _rot(1, 0.05), [0.1, 0.0, 0.0]), (2, _rot(0, -0.03), [-0.1, 0.05, 0.1]),
-                                       (1, _rot(2, 0.02), [0.0, -0.1, 0.05])], 1):
+    for iid, (cid, R, t) in enumerate([(1, rot_about(1, 0.05), [0.1, 0.0, 0.0]),
+                                       (2, rot_about(0, -0.03), [-0.1, 0.05, 0.1]),
+                                       (1, rot_about(2, 0.02), [0.0, -0.1, 0.05])], 1):
         im = pycolmap.Image(name=f"im{iid}.png", camera_id=cid, image_id=iid)
         im.points2D = [pycolmap.Point2D(rng.uniform(0, w, 2)) for _ in range(len(X))]
         rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(R), np.asarray(t, float)))

@@ -6,20 +6,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vibr.render import autotune
 from vibr.errors import VibrInputError
-from vibr.render import render
+from vibr.render import autotune, render
 from vibr.synthetic import make_scene
 
 
 @pytest.fixture(scope="module")
-def grid():
+def grid_split64():
     sc = make_scene("grid", width=64, height=64)
     return sc.split(4)
 
 
-def test_probe_is_nearest_source_and_scale_keeps_the_budget(grid):
-    src, tv = grid
+def test_probe_is_nearest_source_and_scale_keeps_the_budget(grid_split64):
+    src, tv = grid_split64
     (p,) = autotune.probe_views(src, tv.camera, 1)
     d = [np.linalg.norm(v.camera.centre - tv.camera.centre) for v in src.views]
     assert d[p] == min(d)
@@ -31,11 +30,11 @@ def test_probe_is_nearest_source_and_scale_keeps_the_budget(grid):
     assert s * s * 6 <= 1.0 + 1e-9  # 6 probe renders hold at most the target's pixels
 
 
-def test_auto_picks_the_known_best_gamma(grid):
+def test_auto_picks_the_known_best_gamma(grid_split64):
     """Exact depth on the synthetic grid: the gradient term clearly helps (gamma 0.25 beats
     gamma 0 by more than 0.5 dB on the target); the tuner, which sees only the sources,
     picks 0.25, by a clear margin on its probe."""
-    src, tv = grid
+    src, tv = grid_split64
     on_target = {g: render(src, tv, gamma=g, lam=0.1).metrics["psnr"] for g in (0.0, 0.25)}
     assert on_target[0.25] > on_target[0.0] + 0.5
     t = autotune.tune(src, tv.camera, "gradient", gammas=(0.0, 0.25), lam=0.1)
@@ -43,10 +42,10 @@ def test_auto_picks_the_known_best_gamma(grid):
     assert t.scores[(0.25, 0.1)] < 0.9 * t.scores[(0.0, 0.1)]
 
 
-def test_never_reads_the_target_image(grid, monkeypatch):
+def test_never_reads_the_target_image(grid_split64, monkeypatch):
     """render(gamma="auto") with a target whose image is NaN: the tuner gets the camera only,
     and the result is the same as with the real image."""
-    src, tv = grid
+    src, tv = grid_split64
     seen = []
     real = autotune.tune
 
@@ -55,10 +54,11 @@ def test_never_reads_the_target_image(grid, monkeypatch):
         return real(sources, target, *a, **k)
 
     monkeypatch.setattr(autotune, "tune", spy)
+    import vibr.render.api
 
     nan_target = tv.replace()
     nan_target.image = np.full_like(tv.image, np.nan)  # after the View's checks, which refuse NaN
-    monkeypatch.setattr("vibr.render.api.view_metrics", lambda *a, **k: {})  # no metric of a NaN image
+    monkeypatch.setattr(vibr.render.api, "view_metrics", lambda *a, **k: {})  # no metric of a NaN image
     r1 = render(src, nan_target, gamma="auto", lam="auto")
     r2 = render(src, tv, gamma="auto", lam="auto")
     assert seen[0] == ("Camera", src.names) and tv.name not in seen[0][1]

@@ -9,21 +9,23 @@ import json
 
 import imageio.v3 as iio
 import numpy as np
+import pycolmap
 import pytest
 
-import pycolmap
-
-from vibr.calib.colmap import (align_cameras, calibrate, calibrate_scene, camera_from_colmap, list_photos,
-                               pose_errors, similarity_align)
+from _helpers import rodrigues
+from vibr.calib.colmap import (
+    align_cameras,
+    calibrate,
+    calibrate_scene,
+    camera_from_colmap,
+    list_photos,
+    pose_errors,
+    similarity_align,
+)
 from vibr.camera import Camera  # noqa: E402
 from vibr.errors import VibrInputError  # noqa: E402
 
-
-def _rot(axis, deg):
-    a = np.asarray(axis, float) / np.linalg.norm(axis)
-    th = np.radians(deg)
-    Kx = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(th) * Kx + (1 - np.cos(th)) * Kx @ Kx
+pytestmark = pytest.mark.slow
 
 
 def _write_png(path, img):
@@ -134,7 +136,7 @@ def test_camera_from_colmap_matches_colmap_projection():
     """vibr's K is COLMAP's with the principal point moved by −½ px; the pose is kept."""
     cam = pycolmap.Camera.create_from_model_name(1, "PINHOLE", 500.0, 640, 480)
     cam.params = [500.0, 510.0, 320.0, 240.0]
-    R = _rot([0.3, 1.0, 0.2], 25.0)
+    R = rodrigues([0.3, 1.0, 0.2], 25.0)
     t = np.array([0.1, -0.2, 2.0])
     rig = pycolmap.Rigid3d(pycolmap.Rotation3d(R), t)
     X = np.array([[0.2, 0.1, 1.0], [-0.3, 0.4, 2.5], [0.0, 0.0, 0.5]])
@@ -154,10 +156,10 @@ def test_camera_from_colmap_matches_colmap_projection():
 def test_pose_errors_zero_for_a_similar_copy(align):
     rng = np.random.default_rng(0)
     K = Camera.intrinsics(300.0, 320, 240)
-    ref = [Camera.from_centre(K, _rot(rng.normal(size=3), rng.uniform(5, 40)), rng.normal(size=3), 320, 240)
+    ref = [Camera.from_centre(K, rodrigues(rng.normal(size=3), rng.uniform(5, 40)), rng.normal(size=3), 320, 240)
            for _ in range(6)]
     # est world = similarity⁻¹ of ref world: X_ref = s Rs X_est + t.
-    s, Rs, t = 2.5, _rot([1, 2, 3], 70.0), np.array([1.0, -4.0, 0.5])
+    s, Rs, t = 2.5, rodrigues([1, 2, 3], 70.0), np.array([1.0, -4.0, 0.5])
     est = [Camera.from_centre(K, c.R @ Rs, Rs.T @ (c.centre - t) / s, 320, 240) for c in ref]
     e = pose_errors(est, ref, align=align)
     assert e["rot_deg"].max() < 1e-6
@@ -165,7 +167,7 @@ def test_pose_errors_zero_for_a_similar_copy(align):
     assert np.isclose(e["scale"], s)
     # A perturbed rotation of one view shows up as that view's error.
     bad = list(est)
-    bad[2] = Camera.from_centre(K, _rot([0, 0, 1], 2.0) @ est[2].R, est[2].centre, 320, 240)
+    bad[2] = Camera.from_centre(K, rodrigues([0, 0, 1], 2.0) @ est[2].R, est[2].centre, 320, 240)
     e = pose_errors(bad, ref, align="centres")
     assert abs(e["rot_deg"][2] - 2.0) < 1e-6
 
@@ -173,7 +175,7 @@ def test_pose_errors_zero_for_a_similar_copy(align):
 def test_similarity_align_closed_form():
     rng = np.random.default_rng(3)
     X = rng.normal(size=(10, 3))
-    R = _rot([0.2, -1, 0.5], 33.0)
+    R = rodrigues([0.2, -1, 0.5], 33.0)
     Y = 0.7 * X @ R.T + np.array([3.0, 2.0, 1.0])
     s, Rf, t = similarity_align(X, Y)
     assert np.isclose(s, 0.7) and np.allclose(Rf, R) and np.allclose(t, [3, 2, 1])

@@ -17,6 +17,8 @@ from vibr.errors import VibrInputError
 from vibr.io.video import open_video, write_video
 from vibr.calib.video_frames import extract_frames, sharpness
 
+pytestmark = pytest.mark.slow
+
 
 def _texture(seed, h=120, w=160):
     rng = np.random.default_rng(seed)

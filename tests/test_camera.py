@@ -4,14 +4,14 @@ import pytest
 from vibr import Camera, VibrInputError
 
 
-def _cam(seed=0):
+def _random_cam(seed=0):
     rng = np.random.default_rng(seed)
     K = Camera.intrinsics(120.0, 64, 48)
     return Camera.look_at(rng.normal(size=3) * 3 + [0, 0, -8], [0, 0, 0], [0, -1, 0], K, 64, 48)
 
 
 def test_project_backproject_roundtrip():
-    cam = _cam()
+    cam = _random_cam()
     rng = np.random.default_rng(1)
     xy = rng.uniform(0, 60, size=(100, 2))
     z = rng.uniform(1, 10, size=100)
@@ -22,7 +22,7 @@ def test_project_backproject_roundtrip():
 
 
 def test_centre_projects_to_principal_point_direction():
-    cam = _cam()
+    cam = _random_cam()
     # A point on the optical axis projects to the principal point, at depth = distance.
     X = cam.centre + 5.0 * cam.optical_axis
     xy, z = cam.project(X)
@@ -44,7 +44,7 @@ def test_turned_camera_sees_the_image_turned_clockwise():
     """A point seen at pixel (u, v) by a camera is seen, by the camera turned by one quarter
     turn, where np.rot90(image, -1) puts that pixel: (H - 1 - v, u); four turns are the
     camera itself; the centre and the depth of points do not change."""
-    cam = Camera(np.array([[120.0, 0, 30.2], [0, 118.0, 20.7], [0, 0, 1]]), _cam().R, _cam().t, 64, 48)
+    cam = Camera(np.array([[120.0, 0, 30.2], [0, 118.0, 20.7], [0, 0, 1]]), _random_cam().R, _random_cam().t, 64, 48)
     rng = np.random.default_rng(2)
     X = cam.backproject(rng.uniform(0, 47, size=(50, 2)), rng.uniform(1, 10, size=50))
     (u, v), z = cam.project(X)[0].T, cam.project(X)[1]

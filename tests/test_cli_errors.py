@@ -220,6 +220,7 @@ def test_scale_too_small_is_refused_at_load(capsys, temple_dir):
     assert_one_line_error(code, err, "6x5", "larger --scale")
 
 
+@pytest.mark.slow
 def test_a_view_too_small_to_measure(capsys, tmp_path, temple_dir):
     """eval refuses, before any work, a held-out view on which DSSIM is undefined; render
     writes the image and reports the PSNR, DSSIM n/a."""

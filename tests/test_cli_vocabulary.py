@@ -13,18 +13,18 @@ from vibr.cli.reference import subcommands
 
 
 @pytest.fixture(scope="module")
-def scene_dir(tmp_path_factory):
+def grid48_dir(tmp_path_factory):
     from vibr.io import save_scene
     from vibr.synthetic import make_scene
 
     return save_scene(make_scene("grid", n_views=9, width=48, height=48, seed=2), tmp_path_factory.mktemp("v") / "s")
 
 
-def test_render_bit_depth_and_metric_rule(scene_dir, tmp_path, capsys):
+def test_render_bit_depth_and_metric_rule(grid48_dir, tmp_path, capsys):
     from vibr.io.images import png_bit_depth
 
     out8, out16 = tmp_path / "a.png", tmp_path / "b.png"
-    args = ["render", str(scene_dir), "--target", "view_004", "--method", "ulr", "-q"]
+    args = ["render", str(grid48_dir), "--target", "view_004", "--method", "ulr", "-q"]
     assert main(args + ["-o", str(out8)]) == 0
     txt = capsys.readouterr().out
     assert "2-px border excluded" in txt
@@ -32,43 +32,43 @@ def test_render_bit_depth_and_metric_rule(scene_dir, tmp_path, capsys):
     assert png_bit_depth(out8) == 8 and png_bit_depth(out16) == 16
 
 
-def test_info_reads_headers_only(scene_dir, capsys, monkeypatch):
+def test_info_reads_headers_only(grid48_dir, capsys, monkeypatch):
     import vibr.io.images as images
 
     def no_decode(path):
         raise AssertionError(f"decoded {path}")
 
     monkeypatch.setattr(images, "read_image", no_decode)
-    assert main(["info", str(scene_dir), "--scale", "0.5"]) == 0
+    assert main(["info", str(grid48_dir), "--scale", "0.5"]) == 0
     out = capsys.readouterr().out
     assert "views    9" in out and "24x24" in out
     with images.headers_only():
         from vibr.io import load_scene
 
-        sc = load_scene(scene_dir)
+        sc = load_scene(grid48_dir)
     assert all(v.image is None for v in sc.views) and sc.views[0].camera.shape == (48, 48)
 
 
-def test_overwrite_is_the_name_and_scale_loads(scene_dir, tmp_path, capsys):
+def test_overwrite_is_the_name_and_scale_loads(grid48_dir, tmp_path, capsys):
     from vibr.io import load_scene
 
     out = tmp_path / "c"
-    assert main(["-q", "convert", str(scene_dir), str(out), "--scale", "0.5"]) == 0
-    assert main(["-q", "convert", str(scene_dir), str(out)]) == 2
+    assert main(["-q", "convert", str(grid48_dir), str(out), "--scale", "0.5"]) == 0
+    assert main(["-q", "convert", str(grid48_dir), str(out)]) == 2
     err = capsys.readouterr().err
     assert "already exists" in err and "--overwrite" in err and len(err.strip().splitlines()) == 1
-    assert main(["-q", "convert", str(scene_dir), str(out), "--overwrite"]) == 0
-    assert main(["-q", "convert", str(scene_dir), str(out), "--force"]) == 0  # hidden alias
+    assert main(["-q", "convert", str(grid48_dir), str(out), "--overwrite"]) == 0
+    assert main(["-q", "convert", str(grid48_dir), str(out), "--force"]) == 0  # hidden alias
     assert load_scene(out).views[0].camera.shape == (48, 48)
 
 
-def test_depth_scale_is_the_estimation_scale(scene_dir, tmp_path):
+def test_depth_scale_is_the_estimation_scale(grid48_dir, tmp_path):
     """``vibr depth --scale`` loads the scene at that scale (the output has that size);
     ``--depth-scale`` estimates at a fraction of it."""
     from vibr.io import load_scene
 
     out = tmp_path / "d"
-    assert main(["-q", "depth", str(scene_dir), "-o", str(out), "--scale", "0.5", "--depth-scale", "0.5",
+    assert main(["-q", "depth", str(grid48_dir), "-o", str(out), "--scale", "0.5", "--depth-scale", "0.5",
                  "--targets", "view_004"]) == 0  # a light-field grid: no consistency check to skip
     sc = load_scene(out)
     assert sc["view_004"].camera.shape == (24, 24) and sc["view_004"].depth.shape == (24, 24)
@@ -146,8 +146,8 @@ def test_no_option_is_a_count_in_one_subcommand_and_a_list_in_another():
     (["path", "interpolate", "{scene}", "-o", "{tmp}/p.json", "--frames", "4", "--views", "view_000,view_004"],
      "--through"),
 ])
-def test_old_list_spelling_still_works_with_a_warning(scene_dir, tmp_path, capsys, argv, new):
-    args = [a.format(scene=scene_dir, tmp=tmp_path) for a in argv]
+def test_old_list_spelling_still_works_with_a_warning(grid48_dir, tmp_path, capsys, argv, new):
+    args = [a.format(scene=grid48_dir, tmp=tmp_path) for a in argv]
     assert main(args) == 0
     err = capsys.readouterr().err
     assert f"--views is deprecated and will be removed: use {new}" in err
@@ -162,5 +162,5 @@ def test_old_list_spelling_sets_the_new_option():
     parser = build_parser()
     assert parser.parse_args(["depth", "S", "--views", "a,b"]).targets == ["a", "b"]
     assert parser.parse_args(["info", "S", "--views", "a"]).only == ["a"]
-    assert parser.parse_args(["path", "interpolate", "S", "-o", "p.json", "--views", "a,b"]).through == ["a", "b"]
+    assert parser.parse_args(["path", "interpolate", "S", "-o", "p.json", "--views", "a,b"]).views == ["a", "b"]  # --through fills the path function's views
     assert parser.parse_args(["render", "S", "-o", "o.png", "--views", "3"]).views == 3

@@ -48,6 +48,7 @@ def test_every_imported_name_exists(name, i, block):
                 importlib.import_module(alias.name)
 
 
+@pytest.mark.slow
 def test_readme_example_runs(data_dir, capsys):
     (block,) = _blocks(_REPO / "README.md", "python")
     assert '"../shared/data/hci2016_cotton"' in block

@@ -6,6 +6,10 @@ Measured on the arch-struct branch: PSNR 28.71 dB, DSSIM 1157 (render's metrics:
 pixels, 2-px border); the floor is 1.5 dB below, the DSSIM bound 1.25× above.
 """
 
+import pytest
+
+pytestmark = pytest.mark.slow
+
 
 def test_fountain_small_depth_and_render(fountain_dir):
     import numpy as np

@@ -4,6 +4,7 @@ render, the intensity scale reaching the renderer, the JSON report, unseen scene
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -18,36 +19,30 @@ def scene():
     return make_scene("grid", n_views=9, width=48, height=40, seed=2)
 
 
-@pytest.fixture(scope="module")
-def scene_dir(tmp_path_factory, scene):
-    """The synthetic scene as a transforms.json folder (a layout vibr eval never saw)."""
-    from vibr.io import save_scene
-
-    d = tmp_path_factory.mktemp("evalscene") / "unseen_scene"
-    save_scene(scene, d)
-    return d
-
-
 def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monkeypatch):
-    import vibr.render.api as geometry  # where render's geometry stage calls it
+    import vibr.render.api as render_api
     from vibr.eval.protocol import Setting, evaluate
     from vibr.metrics import psnr
     from vibr.pipeline import prepare
     from vibr.render import render
 
     calls = []
-    real = geometry.compute_samples
+    real = render_api.compute_samples  # the name shared_geometry calls
 
     def counting(*a, **kw):
         calls.append(1)
+        time.sleep(0.05)  # samples_seconds must include this
         return real(*a, **kw)
 
-    monkeypatch.setattr(geometry, "compute_samples", counting)
+    monkeypatch.setattr(render_api, "compute_samples", counting)
     settings = [Setting("ulr"), Setting("bvs", {"lam": 0.2}), Setting("gradient", {"gamma": 1.0}),
                 Setting("gradient", {"gamma": 2.0})]
+    t0 = time.perf_counter()
     rep = evaluate(scene, "view_004", settings, depth="gt", render_kw=FAST, use_lpips=False)
+    wall = time.perf_counter() - t0
     assert len(calls) == 1  # one geometry for the four settings
-    assert rep["n_samples"] > 0 and rep["samples_seconds"] >= 0
+    # the time of the samples, in seconds: the call above, within the whole evaluation
+    assert rep["n_samples"] > 0 and 0.05 <= rep["samples_seconds"] <= wall + 1e-3
 
     # the same numbers as rendering directly, geometry recomputed by render itself. Not to
     # the last bit: the solver's fastmath reductions may sum in another order from one call
@@ -84,12 +79,12 @@ def test_intensity_scale_reaches_the_renderer(scene, monkeypatch):
     assert rep["results"][0]["psnr"] != rep["results"][1]["psnr"]
 
 
-def test_cli_eval_json_on_an_unseen_scene_folder(scene_dir, tmp_path, capsys):
+def test_cli_eval_json_on_an_unseen_scene_folder(grid_scene_dir, tmp_path, capsys):
     from vibr.cli import main
 
     out = tmp_path / "r.json"
     figs = tmp_path / "figs"
-    code = main(["eval", str(scene_dir), "--target", "view_004", "--method", "ulr,savsr,gradient",
+    code = main(["eval", str(grid_scene_dir), "--target", "view_004", "--method", "ulr,savsr,gradient",
                  "--gamma", "0,1", "--lam", "0.2", "--intensity-scale", "100", "--border", "2",
                  "--json", str(out), "--figures", str(figs), "-q"])
     assert code == 0
@@ -122,17 +117,17 @@ def test_cli_eval_json_on_an_unseen_scene_folder(scene_dir, tmp_path, capsys):
     assert read_image(rep["figures"]["crops"]).shape[0] == 14 + 4 * 16
 
 
-def test_cli_eval_image_scale_and_planar(scene_dir, tmp_path, capsys):
+def test_cli_eval_image_scale_and_planar(grid_scene_dir, tmp_path, capsys):
     from vibr.cli import main
 
     out = tmp_path / "p.json"
-    assert main(["eval", str(scene_dir), "--target", "2", "--scale", "0.5", "--depth", "planar",
+    assert main(["eval", str(grid_scene_dir), "--target", "2", "--scale", "0.5", "--depth", "planar",
                  "--method", "bvs", "--json", str(out), "-q"]) == 0
     rep = json.loads(out.read_text())
     assert rep["scale"] == 0.5 and rep["size"] == [24, 20] and rep["intensity_scale"] == 255.0
     assert rep["depth"] == "planar" and rep["proxy"]["depth"] > 0
     # errors are one line, exit status 2
-    assert main(["eval", str(scene_dir), "--target", "view_004", "--intensity-scale", "0",
+    assert main(["eval", str(grid_scene_dir), "--target", "view_004", "--intensity-scale", "0",
                  "--json", str(tmp_path / "x.json"), "-q"]) == 2
     assert "intensity-scale" in capsys.readouterr().err
 
@@ -259,8 +254,8 @@ def test_view_counts_closed_form():
 
 def test_evaluation_writes_nothing_figures_are_separate(scene, tmp_path):
     """run_evaluation measures and returns the images; only vibr.eval.figures writes files."""
-    from vibr.eval.protocol import Setting, evaluate, run_evaluation
     from vibr.eval.figures import write_evaluation_figures
+    from vibr.eval.protocol import Setting, evaluate, run_evaluation
 
     with pytest.raises(TypeError):
         evaluate(scene, "view_004", [Setting("ulr")], figures=tmp_path)

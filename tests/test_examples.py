@@ -10,6 +10,9 @@ from pathlib import Path
 import pytest
 
 import distributed  # noqa: F401  (a plain import: the test extra installs it)
+
+pytestmark = pytest.mark.slow
+
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "slurm_eval.py"
 
 

@@ -13,13 +13,19 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-import _scaleout_tasks as T  # noqa: E402
-
-from vibr.errors import VibrInputError  # noqa: E402
-from vibr.executor import (AUTO_MIN_TASK_PIXELS, AUTO_MIN_TASKS_PER_WORKER, auto_workers,  # noqa: E402
-                           check_scheduler, parse_executor, run_tasks, threads_per_worker)
-
 import distributed
+
+import _scaleout_tasks as T  # noqa: E402
+from vibr.errors import VibrInputError  # noqa: E402
+from vibr.executor import (  # noqa: E402
+    AUTO_MIN_TASK_PIXELS,
+    AUTO_MIN_TASKS_PER_WORKER,
+    auto_workers,
+    check_scheduler,
+    parse_executor,
+    run_tasks,
+    threads_per_worker,
+)
 
 
 def test_parse_executor():
@@ -346,6 +352,7 @@ def test_a_wrong_dask_address_fails_at_once(tmp_path, capsys, server):
     assert not (tmp_path / "r.json").exists()
 
 
+@pytest.mark.slow
 def test_a_render_is_bit_identical_on_1_and_2_numba_threads():
     """The same evaluation (plane-sweep depth, samples, every method's render) in a process
     with 1 numba thread and in one with 2 (as a 2-worker pool and a serial run on 2 cores
@@ -367,47 +374,38 @@ def test_a_render_is_bit_identical_on_1_and_2_numba_threads():
 
 
 # -- vibr eval --target all ------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def scene_dir(tmp_path_factory):
-    from vibr.io import save_scene
-    from vibr.synthetic import make_scene
-
-    d = tmp_path_factory.mktemp("scaleout") / "grid"
-    save_scene(make_scene("grid", n_views=9, width=48, height=40, seed=2), d)
-    return d
-
-
-def _eval_all(scene_dir, out, *extra):
+def _eval_all(grid_scene_dir, out, *extra):
     from vibr.cli import main
 
-    rc = main(["-q", "eval", str(scene_dir), "--target", "view_000,view_008", "--method",
+    rc = main(["-q", "eval", str(grid_scene_dir), "--target", "view_000,view_008", "--method",
                "ulr,gradient", "--gamma", "1", "--json", str(out), *extra])
     assert rc == 0
     return json.loads(Path(out).read_text())
 
 
-def test_eval_of_several_targets_holds_each_out_of_a_listed_pool(scene_dir, tmp_path):
+def test_eval_of_several_targets_holds_each_out_of_a_listed_pool(grid_scene_dir, tmp_path):
     """``--sources`` with several targets is the pool: each target is rendered from the
     others of the list (it used to fail: 'target view ... is also listed as a source')."""
     pool = ["view_000", "view_001", "view_003", "view_004", "view_008"]
-    rep = _eval_all(scene_dir, tmp_path / "p.json", "--sources", ",".join(pool))
+    rep = _eval_all(grid_scene_dir, tmp_path / "p.json", "--sources", ",".join(pool))
     for t in ("view_000", "view_008"):
         assert rep["per_view"][t]["sources"] == [v for v in pool if v != t]
 
 
-def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path, monkeypatch):
+@pytest.mark.slow
+def test_eval_all_is_identical_on_every_engine_and_resumes(grid_scene_dir, tmp_path, monkeypatch):
     """Serial (2 numba threads on 2 cores), --workers 2 and --dask local (1 thread each, other
     targets before this one in the same worker): the same JSON numbers bit for bit."""
     from vibr.eval.leave_one_out import results_only
 
-    serial = _eval_all(scene_dir, tmp_path / "serial.json")
+    serial = _eval_all(grid_scene_dir, tmp_path / "serial.json")
     assert list(serial["per_view"]) == ["view_000", "view_008"]
     for label, s in serial["summary"].items():
         ps = [r["psnr"] for v in serial["per_view"].values() for r in v["results"] if r["label"] == label]
         assert s["n"] == 2 and s["psnr"]["mean"] == pytest.approx(sum(ps) / 2)
         assert s["psnr"]["median"] == pytest.approx(sum(ps) / 2)
-    procs = _eval_all(scene_dir, tmp_path / "procs.json", "--workers", "2")
-    dask = _eval_all(scene_dir, tmp_path / "dask.json", "--dask", "local")
+    procs = _eval_all(grid_scene_dir, tmp_path / "procs.json", "--workers", "2")
+    dask = _eval_all(grid_scene_dir, tmp_path / "dask.json", "--dask", "local")
     assert {v["worker_pid"] for v in dask["per_view"].values()} != {os.getpid()}
     for other in (procs, dask):
         a, b = results_only(other), results_only(serial)
@@ -419,23 +417,24 @@ def test_eval_all_is_identical_on_every_engine_and_resumes(scene_dir, tmp_path, 
 
     # a rerun finds the per-view reports and recomputes nothing: the same numbers, bit for bit;
     # the reports are read before any task is made (the progress counts what is left)
-    import vibr.eval.leave_one_out as ex
+    import vibr.eval.leave_one_out as loo  # the name the evaluation calls
 
-    real, handed = ex.run_tasks, []
-    monkeypatch.setattr(ex, "run_tasks", lambda fn, tasks, **kw: handed.append(len(tasks)) or real(fn, tasks, **kw))
-    again = _eval_all(scene_dir, tmp_path / "serial.json")
+    real, handed = loo.run_tasks, []
+    monkeypatch.setattr(loo, "run_tasks", lambda fn, tasks, **kw: handed.append(len(tasks)) or real(fn, tasks, **kw))
+    again = _eval_all(grid_scene_dir, tmp_path / "serial.json")
     assert all(v.get("skipped") for v in again["per_view"].values()) and handed == []
     assert results_only(again) == results_only(serial)
     (tmp_path / "serial_views" / "view_008.json").unlink()
-    partial = _eval_all(scene_dir, tmp_path / "serial.json")
+    partial = _eval_all(grid_scene_dir, tmp_path / "serial.json")
     assert handed == [1] and partial["per_view"]["view_000"].get("skipped")
     assert results_only(partial) == results_only(serial)
     # ... but not with other code: the reports are then recomputed
-    monkeypatch.setattr(ex, "code_fingerprint", lambda: "other code")
-    other = _eval_all(scene_dir, tmp_path / "serial.json")
+    monkeypatch.setattr(loo, "code_fingerprint", lambda: "other code")
+    other = _eval_all(grid_scene_dir, tmp_path / "serial.json")
     assert not any(v.get("skipped") for v in other["per_view"].values())
 
 
+@pytest.mark.slow
 def test_flythrough_frames_identical_on_every_engine(tmp_path, monkeypatch):
     """vibr render --path: serial, --workers 2 and --dask local write byte-identical PNG frames."""
     from vibr.cli import main
@@ -456,6 +455,7 @@ def test_flythrough_frames_identical_on_every_engine(tmp_path, monkeypatch):
     assert frames["procs"] == frames["serial"] and frames["dask"] == frames["serial"]
 
 
+@pytest.mark.slow
 def test_depth_is_identical_on_every_engine_and_resumes(tmp_path, client):
     """estimate_depth's sweeps on 2 processes and on a Dask cluster give the serial depths bit
     for bit; the workers keep each view in the checkpoint, from which a rerun resumes every

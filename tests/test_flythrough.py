@@ -262,6 +262,7 @@ def _temple_cameras(d):
     return _cameras_only([(n, Camera(K, R, t, 640, 480)) for n, K, R, t in read_par(d / "templeSR_par.txt")])
 
 
+@pytest.mark.slow
 def test_interpolate_through_a_ring_goes_round_it(data_dir):
     """templeSparseRing's file order jumps across the ring: a path in that order crosses the
     ring's inside (where the temple stands). Through all the views the default order is by
@@ -290,6 +291,7 @@ def _up_angles(cameras, up):
     return np.degrees(np.arccos(np.clip([-c.R[1] @ up for c in cameras], -1, 1)))
 
 
+@pytest.mark.slow
 def test_interpolate_through_rolled_photographs_does_not_spin(data_dir):
     """templeSparseRing's photographs are rolled by +90° or −90° (the temple lies on its
     side, upside down from one half of the ring to the other): a path keeping their
@@ -382,6 +384,7 @@ def _turns_and_speeds(p):
     return np.degrees(np.arccos(np.clip(cos, -1, 1))).max(), np.linalg.norm(V, axis=1)
 
 
+@pytest.mark.slow
 def test_interpolate_round_a_light_field_grid(data_dir):
     """Through all of cotton's 81 views in proximity order the path scans the grid row by
     row, the camera turning back by up to 116° between frames; by default it loops round the
@@ -433,6 +436,7 @@ def test_interpolate_level_needs_an_up():
         interpolate(scene, n_frames=5, roll="level")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["fountain", "temple"])
 @pytest.mark.parametrize("kind", ["orbit", "spiral"])
 def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
@@ -573,6 +577,7 @@ def test_path_options_of_another_kind_are_refused(grid_dir, tmp_path, capsys, ki
     assert not pj.exists()
 
 
+@pytest.mark.slow
 def test_path_cli_turns_rolled_photographs_and_says_so(data_dir, tmp_path, capsys):
     """``vibr path interpolate`` on templeSparseRing: the keys turned (a line says how many),
     a portrait frame; ``--roll keep`` the photographs' landscape orientation."""
@@ -749,6 +754,7 @@ def test_sigma_video_has_one_scale_for_all_frames(tmp_path):
             assert np.abs(own - want).mean() > 4 * err
 
 
+@pytest.mark.slow
 def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     """vibr path -> vibr render --path -> MP4 with the right frame count and size (decoded
     back); a rerun skips the frames written, but not those of another path or other

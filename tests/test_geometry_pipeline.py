@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from _helpers import pinhole
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
 from vibr.geometry import Samples, compute_samples
@@ -11,8 +12,9 @@ from vibr.scene import Scene, View
 W, H, F = 40, 30, 50.0
 
 
-def _cam(C, R=np.eye(3), f=F):
-    return Camera.from_centre(Camera.intrinsics(f, W, H), R, np.asarray(C, float), W, H)
+def _cam_at(C, R=np.eye(3), f=F):
+    """The W × H test camera at centre ``C``."""
+    return pinhole(f, W, H, R, C)
 
 
 def _img(seed=0):
@@ -22,8 +24,8 @@ def _img(seed=0):
 def test_translation_plane_samples():
     b, z = 0.2, 2.5
     img = _img()
-    src = View("s", img, _cam([0, 0, 0]), np.full((H, W), z), sigma_z=0.05)
-    tgt = _cam([b, 0, 0])
+    src = View("s", img, _cam_at([0, 0, 0]), np.full((H, W), z), sigma_z=0.05)
+    tgt = _cam_at([b, 0, 0])
     s = compute_samples(Scene([src]), tgt, keep=("jac", "src_xy"))
     assert isinstance(s, Samples) and s.target_shape == (H, W)
     shift = F * b / z  # 4 px
@@ -57,8 +59,8 @@ def test_unknown_depth_is_skipped_or_filled():
     img = np.full((H, W, 3), 0.5, np.float32)
     d = np.full((H, W), 2.0)
     d[10:13, 10:13] = np.nan
-    sc = Scene([View("s", img, _cam([0, 0, 0]), d)])
-    tgt = _cam([0, 0, 0])
+    sc = Scene([View("s", img, _cam_at([0, 0, 0]), d)])
+    tgt = _cam_at([0, 0, 0])
     s = compute_samples(sc, tgt, keep="src_xy")
     assert len(s) == H * W - 9 and s.meta["counts"]["s"]["unknown"] == 9
     assert not np.any((s.src_xy[:, 0] == 11) & (s.src_xy[:, 1] == 11))
@@ -68,12 +70,12 @@ def test_unknown_depth_is_skipped_or_filled():
 
 def test_default_sigma_z_and_map():
     d = np.full((H, W), 4.0)
-    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
-    s = compute_samples(sc, _cam([0, 0, 0]))
+    sc = Scene([View("s", _img(), _cam_at([0, 0, 0]), d)])
+    s = compute_samples(sc, _cam_at([0, 0, 0]))
     np.testing.assert_allclose(s.sigma_z, 0.01 * 4.0)  # DEFAULT_SIGMA_Z_REL · median depth
     smap = np.arange(H * W, dtype=np.float32).reshape(H, W) * 1e-3
-    sc2 = Scene([View("s", _img(), _cam([0, 0, 0]), d, sigma_z=smap)])
-    s2 = compute_samples(sc2, _cam([0, 0, 0]), keep="src_xy")
+    sc2 = Scene([View("s", _img(), _cam_at([0, 0, 0]), d, sigma_z=smap)])
+    s2 = compute_samples(sc2, _cam_at([0, 0, 0]), keep="src_xy")
     np.testing.assert_allclose(s2.sigma_z, smap[s2.src_xy[:, 1], s2.src_xy[:, 0]], rtol=1e-6)
 
 
@@ -81,46 +83,46 @@ def test_inv_det_is_capped():
     # a source with 3× the focal length sees the plane at 3× the target's resolution:
     # det = (1/3)² → 1/det = 9, capped at DEFAULT_MAX_INV_DET = 4 (or what is asked)
     d = np.full((H, W), 2.0)
-    zoom = View("zoom", _img(), _cam([0, 0, 0], f=3 * F), d)
-    s = compute_samples(Scene([zoom]), _cam([0, 0, 0]))
+    zoom = View("zoom", _img(), _cam_at([0, 0, 0], f=3 * F), d)
+    s = compute_samples(Scene([zoom]), _cam_at([0, 0, 0]))
     np.testing.assert_allclose(s.inv_det, 4.0)
-    np.testing.assert_allclose(compute_samples(Scene([zoom]), _cam([0, 0, 0]), max_inv_det=10.0).inv_det, 9.0)
-    np.testing.assert_allclose(compute_samples(Scene([zoom]), _cam([0, 0, 0]), max_inv_det=1.0).inv_det, 1.0)
+    np.testing.assert_allclose(compute_samples(Scene([zoom]), _cam_at([0, 0, 0]), max_inv_det=10.0).inv_det, 9.0)
+    np.testing.assert_allclose(compute_samples(Scene([zoom]), _cam_at([0, 0, 0]), max_inv_det=1.0).inv_det, 1.0)
     # a grazing surface (det → 0) stays bounded too
     y, x = np.mgrid[0:H, 0:W].astype(float)
-    steep = View("steep", _img(), _cam([0, 0, 0]), 2.0 + 5.0 * x)
-    s2 = compute_samples(Scene([steep]), _cam([0.01, 0, 0]))
+    steep = View("steep", _img(), _cam_at([0, 0, 0]), 2.0 + 5.0 * x)
+    s2 = compute_samples(Scene([steep]), _cam_at([0.01, 0, 0]))
     assert np.all(s2.inv_det <= 4.0) and np.all(np.isfinite(s2.inv_det))
 
 
 def test_no_view_sees_the_target_and_degenerate_sources():
     d = np.full((H, W), 2.0)
-    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
+    sc = Scene([View("s", _img(), _cam_at([0, 0, 0]), d)])
     # target behind the plane and facing away from it
     away = Camera.from_centre(Camera.intrinsics(F, W, H), np.diag([-1.0, 1.0, -1.0]), [0, 0, 0], W, H,
                               source="target.json")
     with pytest.raises(VibrInputError, match="target.json.*no source view sees the target"):
         compute_samples(sc, away)
     # a source whose whole depth is behind the target camera yields zero samples, no crash
-    behind = View("behind", _img(1), _cam([0, 0, 0.2]), np.full((H, W), 0.5))  # points at z = 0.7
-    s = compute_samples(Scene([sc.views[0], behind]), _cam([0, 0, 1.0]))
+    behind = View("behind", _img(1), _cam_at([0, 0, 0.2]), np.full((H, W), 0.5))  # points at z = 0.7
+    s = compute_samples(Scene([sc.views[0], behind]), _cam_at([0, 0, 1.0]))
     assert s.meta["counts"]["behind"]["visible"] == 0
     assert s.meta["counts"]["behind"]["behind"] == H * W
     assert np.all(s.view == 0) and len(s) > 0
 
 
 def test_source_without_depth_is_an_input_error():
-    sc = Scene([View("nodepth", _img(), _cam([0, 0, 0]), path="photos/nodepth.png")])
+    sc = Scene([View("nodepth", _img(), _cam_at([0, 0, 0]), path="photos/nodepth.png")])
     with pytest.raises(VibrInputError, match="photos/nodepth.png"):
-        compute_samples(sc, _cam([0, 0, 0]))
+        compute_samples(sc, _cam_at([0, 0, 0]))
 
 
 def test_occluder_hides_the_background():
     # background plane at z = 4 seen by the source, a foreground square at z = 2 in the middle
     d = np.full((H, W), 4.0)
     d[10:20, 15:25] = 2.0
-    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
-    s = compute_samples(sc, _cam([0.1, 0, 0]), keep="src_xy")  # foreground moves 2.5 px, background 1.25 px
+    sc = Scene([View("s", _img(), _cam_at([0, 0, 0]), d)])
+    s = compute_samples(sc, _cam_at([0.1, 0, 0]), keep="src_xy")  # foreground moves 2.5 px, background 1.25 px
     c = s.meta["counts"]["s"]
     assert c["occluded"] > 0
     # the occluded background pixels are just left of the square (covered by its shift)
@@ -161,8 +163,8 @@ def test_fields_of_views_of_two_sizes(threads):
 
     from vibr.geometry.depth import depth_derivatives
     from vibr.geometry.gradient import grad_image
-    from vibr.geometry.warp import warp_view
     from vibr.geometry.resample import scaled_scene
+    from vibr.geometry.warp import warp_view
     from vibr.synthetic import make_scene
 
     sc = make_scene("free", n_views=5, width=48, height=40, seed=1)
@@ -206,9 +208,9 @@ def test_optional_fields_are_computed_only_when_kept():
 
     d = np.full((H, W), 4.0)
     d[10:20, 15:25] = 2.0
-    sc = Scene([View("s", _img(), _cam([0, 0, 0]), d)])
-    lean = compute_samples(sc, _cam([0.1, 0, 0]))
-    full = compute_samples(sc, _cam([0.1, 0, 0]), keep=("jac", "src_xy"))
+    sc = Scene([View("s", _img(), _cam_at([0, 0, 0]), d)])
+    lean = compute_samples(sc, _cam_at([0.1, 0, 0]))
+    full = compute_samples(sc, _cam_at([0.1, 0, 0]), keep=("jac", "src_xy"))
     assert lean.jac is None and lean.src_xy is None
     assert full.jac.shape == (len(full), 2, 2) and full.src_xy.shape == (len(full), 2)
     for f in ("xy", "colour", "grad", "inv_det", "dtau_dz", "sigma_z", "view", "X"):
@@ -220,11 +222,11 @@ def test_optional_fields_are_computed_only_when_kept():
     assert FrameContext(sc, [], "x", params={"psf": "footprint"}).geometry_kw["keep"] == ("jac",)
     assert FrameContext(sc, [], "x", geometry_kw={"keep": ("src_xy",)}).geometry_kw["keep"] == ("src_xy",)
     with pytest.raises(VibrInputError, match="keep"):
-        compute_samples(sc, _cam([0.1, 0, 0]), keep=("normals",))
+        compute_samples(sc, _cam_at([0.1, 0, 0]), keep=("normals",))
     with pytest.raises(VibrInputError, match="Jacobians"):
         render_samples(lean, "bvs", psf="footprint")
     # render() computes what its PSF reads
-    a = render(sc, _cam([0.1, 0, 0]), "bvs", psf="footprint").image
+    a = render(sc, _cam_at([0.1, 0, 0]), "bvs", psf="footprint").image
     b = render_samples(full, "bvs", psf="footprint", source_centres=np.zeros((1, 3)),
                        target_centre=np.array([0.1, 0, 0])).image
     np.testing.assert_array_equal(a, b)

@@ -5,18 +5,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from _helpers import pinhole
 from vibr.camera import Camera
 from vibr.geometry import warp_points, warp_view
 
 
-def _cam(f, W, H, R=np.eye(3), C=(0, 0, 0), cx=None, cy=None):
-    return Camera.from_centre(Camera.intrinsics(f, W, H, cx=cx, cy=cy), R, np.asarray(C, float), W, H)
-
-
 def test_parallel_translation_is_fb_over_z_with_unit_det():
     W, H, f, b, z = 40, 30, 75.0, 0.2, 3.0
-    src = _cam(f, W, H)
-    tgt = _cam(f, W, H, C=(b, 0, 0))  # target shifted by +b along x
+    src = pinhole(f, W, H)
+    tgt = pinhole(f, W, H, C=(b, 0, 0))  # target shifted by +b along x
     r = warp_view(src, tgt, np.full((H, W), z, np.float32))
     grid = src.pixel_grid()
     np.testing.assert_allclose(r["tau"][..., 0], grid[..., 0] - f * b / z, atol=1e-9)
@@ -30,7 +27,7 @@ def test_parallel_translation_is_fb_over_z_with_unit_det():
 
 def test_vertical_baseline_shifts_rows():
     W, H, f, b, z = 20, 20, 50.0, 0.1, 2.0
-    r = warp_view(_cam(f, W, H), _cam(f, W, H, C=(0, -b, 0)), np.full((H, W), z))
+    r = warp_view(pinhole(f, W, H), pinhole(f, W, H, C=(0, -b, 0)), np.full((H, W), z))
     np.testing.assert_allclose(r["tau"][..., 1] - np.arange(H)[:, None], f * b / z, atol=1e-9)
 
 

@@ -6,8 +6,7 @@ import numpy as np
 import pycolmap
 import pytest
 
-from _colmap_model import _rot
-
+from _helpers import rot_about
 from vibr.errors import VibrInputError
 from vibr.io import load_scene
 from vibr.io.depthfiles import write_colmap_bin
@@ -24,7 +23,8 @@ def write_model(root, *, model="PINHOLE", params=(100.0, 110.0, 32.0, 24.0), spa
     poses = {}
     for cam in (cam1, cam2):
         rec.add_camera_with_trivial_rig(cam)
-    for iid, (cid, R, t) in enumerate([(1, _rot(1, 0.1), [0.1, -0.2, 2.0]), (2, _rot(0, -0.05) @ _rot(2, 0.2), [0.3, 0.0, 2.5])], 1):
+    poses_in = [(1, rot_about(1, 0.1), [0.1, -0.2, 2.0]), (2, rot_about(0, -0.05) @ rot_about(2, 0.2), [0.3, 0.0, 2.5])]
+    for iid, (cid, R, t) in enumerate(poses_in, 1):
         name = f"img{iid}.png"
         im = pycolmap.Image(name=name, camera_id=cid, image_id=iid)
         rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(R)), np.asarray(t, float)))

@@ -156,6 +156,7 @@ def test_hci_without_cfg_grid_option(cotton_dir, tmp_path):
     assert _grid_error(s, disp, "input_Cam041", 0, 1) < 0.01
 
 
+@pytest.mark.slow
 def test_a_missing_light_field_view_renders_at_its_grid_position(cotton_dir, tmp_path, capsys):
     """A light field without its centre photograph: input_Cam040 is named in the errors as
     missing, and rendered as a novel view at its grid position; against the real photograph

@@ -186,6 +186,7 @@ def test_transforms_camera_rig_names(tmp_path):
 
 
 # ----------------------------------------------------------------------------- real data
+@pytest.mark.slow
 def test_round_trip_cotton(cotton_dir, tmp_path):
     # Scaled (16-bit-grid images) subset with the depth-carrying centre view.
     s = load_scene(cotton_dir, scale=0.5, views=["input_Cam040", "input_Cam041", "input_Cam000"])
@@ -195,6 +196,7 @@ def test_round_trip_cotton(cotton_dir, tmp_path):
     assert back.grid == (9, 9) and back.meta["grid_pos"]["input_Cam041"] == (4, 5)
 
 
+@pytest.mark.slow
 def test_round_trip_temple(temple_dir, tmp_path):
     s = load_scene(temple_dir, views=[0, 5, 9])  # full resolution: 8-bit images
     save_scene(s, tmp_path / "t")
@@ -204,6 +206,7 @@ def test_round_trip_temple(temple_dir, tmp_path):
     assert_same_scene(s, load_scene(tmp_path / "t"))
 
 
+@pytest.mark.slow
 def test_round_trip_fountain(fountain_dir, tmp_path):
     s = load_scene(fountain_dir, scale=0.125, views=["0004", "0005"])
     assert s.views[0].camera.shape == (256, 384)

@@ -110,6 +110,7 @@ def test_verbosity_levels(restore_vibr_logger):
     assert len([h for h in logging.getLogger("vibr").handlers if getattr(h, "_vibr_cli", False)]) == 1
 
 
+@pytest.mark.slow
 def test_cli_stderr_redirected_has_no_carriage_returns(tmp_path):
     """``vibr demo ... 2>log``: status lines, one per stage, no progress-bar frames."""
     log = tmp_path / "log"

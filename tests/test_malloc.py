@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc",
-                                reason="glibc's allocator only")
+pytestmark = [pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc",
+                                 reason="glibc's allocator only"), pytest.mark.optional]
 
 # mallinfo2 (glibc ≥ 2.33): hblkhd = bytes in mmapped blocks, arena = bytes of the heap
 _MALLINFO = r"""

@@ -16,7 +16,7 @@ from vibr.synthetic import make_scene
 
 
 @pytest.fixture(scope="module")
-def grid():
+def grid96x72():
     return make_scene("grid", n_views=9, width=96, height=72)
 
 
@@ -38,14 +38,15 @@ def _red(img):
 
 
 @pytest.mark.parametrize("method", ["ulr", "gradient"])
-def test_masked_pixels_give_no_sample(grid, method):
+def test_masked_pixels_give_no_sample(grid96x72, method):
     """The red block, unmasked, bleeds into the render of the centre view; masked, its
     colours do not matter: the render equals, bit for bit, that of the clean photograph with
     the same mask (which, having a view fewer there, is 0.4-0.6 dB below the clean scene's,
     as dropping view_003 altogether is)."""
-    tgt = grid["view_004"]
-    cases = (("clean", grid), ("masked", _with_intruder(grid)), ("unmasked", _with_intruder(grid, masked=False)),
-             ("clean, masked", _with_intruder(grid, paint=False)))
+    tgt = grid96x72["view_004"]
+    cases = (("clean", grid96x72), ("masked", _with_intruder(grid96x72)),
+             ("unmasked", _with_intruder(grid96x72, masked=False)),
+             ("clean, masked", _with_intruder(grid96x72, paint=False)))
     srcs = {k: s.replace(views=[v for v in s.views if v.name != "view_004"]) for k, s in cases}
     res = {k: render(s, tgt, method=method) for k, s in srcs.items()}
     psnr = {k: r.metrics["psnr"] for k, r in res.items()}
@@ -54,32 +55,32 @@ def test_masked_pixels_give_no_sample(grid, method):
     assert _red(res["masked"].image) < _red(res["unmasked"].image) - 0.01
 
 
-def test_masked_pixels_hide_nothing(grid):
+def test_masked_pixels_hide_nothing(grid96x72):
     """A masked pixel's depth is unknown to the geometry stage (no z-buffer entry, no
     sample): prepare_depth returns NaN there."""
     from vibr.geometry import prepare_depth
 
-    v = _with_intruder(grid)["view_003"]
+    v = _with_intruder(grid96x72)["view_003"]
     z, _, _ = prepare_depth(v)
     assert np.isnan(z[~v.mask]).all()
     assert np.isnan(z[9, 20:60]).all() and np.isfinite(z[8, 20:60]).all()  # one pixel more: ∇v reads it
     assert np.isfinite(z[:8]).all() and np.isfinite(z[51:]).all()
 
 
-def test_held_out_view_is_measured_on_its_mask(grid):
+def test_held_out_view_is_measured_on_its_mask(grid96x72):
     """The red block in the held-out photograph is not an error of the render."""
     from vibr.eval.protocol import Setting, evaluate
 
     for masked, expect in ((True, lambda p: p > 35), (False, lambda p: p < 20)):
-        sc = _with_intruder(grid, "view_004", masked=masked)
+        sc = _with_intruder(grid96x72, "view_004", masked=masked)
         r = evaluate(sc, "view_004", [Setting("gradient")], use_lpips=False)
         assert expect(r["results"][0]["psnr"]), (masked, r["results"][0]["psnr"])
         if masked:
             assert r["evaluated_fraction"] < 1 - 40 * 40 / (96 * 72) + 1e-9
 
 
-def test_masks_round_trip_through_transforms_json(grid, tmp_path):
-    sc = _with_intruder(grid)
+def test_masks_round_trip_through_transforms_json(grid96x72, tmp_path):
+    sc = _with_intruder(grid96x72)
     save_scene(sc, tmp_path / "s")
     doc = json.loads((tmp_path / "s" / "transforms.json").read_text())
     paths = [f.get("mask_path") for f in doc["frames"]]
@@ -97,8 +98,8 @@ def test_masks_round_trip_through_transforms_json(grid, tmp_path):
     assert np.argwhere(~resize_mask(m, (36, 48))).tolist() == [[5, 10]]
 
 
-def test_mask_file_errors_name_the_file(grid, tmp_path):
-    save_scene(_with_intruder(grid), tmp_path / "s")
+def test_mask_file_errors_name_the_file(grid96x72, tmp_path):
+    save_scene(_with_intruder(grid96x72), tmp_path / "s")
     from vibr.io.images import write_image
 
     write_image(tmp_path / "s" / "masks" / "view_003.png", np.zeros((72, 96), np.float32))
@@ -109,7 +110,7 @@ def test_mask_file_errors_name_the_file(grid, tmp_path):
         load_scene(tmp_path / "s")
 
 
-def test_point_cloud_leaves_masked_pixels_out(grid):
+def test_point_cloud_leaves_masked_pixels_out(grid96x72):
     from vibr.viewer.geometry import point_cloud
 
     sc = make_scene("grid", n_views=4, width=32, height=24)
@@ -121,15 +122,17 @@ def test_point_cloud_leaves_masked_pixels_out(grid):
     assert len(P0) - len(P1) == int((~m & np.isfinite(v.depth)).sum())
 
 
-def test_a_fly_through_frame_is_not_reused_across_masks(grid):
+def test_a_fly_through_frame_is_not_reused_across_masks(grid96x72):
     """A resumed fly-through reuses a frame only when its key matches: a mask added to a
     source photograph changes every frame."""
     from vibr.paths.flythrough import FrameContext, job_key
 
     def key(scene):
-        return job_key(FrameContext(sources=scene, cameras=[grid["view_004"].camera], frames_dir=None))
+        return job_key(FrameContext(sources=scene, cameras=[grid96x72["view_004"].camera], frames_dir=None))
 
-    assert key(grid) != key(_with_intruder(grid, paint=False)) and key(grid) == key(grid)
+    # the key is the content: the same scene built again has it, the mask changes it
+    assert key(grid96x72) == key(make_scene("grid", n_views=9, width=96, height=72))
+    assert key(grid96x72) != key(_with_intruder(grid96x72, paint=False))
 
 
 @pytest.mark.parametrize("layout", ["grid", "handheld"])
@@ -148,7 +151,7 @@ def test_estimated_depth_leaves_masked_pixels_unknown(layout):
     assert np.isnan(d[~m]).all() and np.isfinite(d[m]).mean() > 0.3
 
 
-def test_light_field_matching_reads_the_masks(grid, monkeypatch):
+def test_light_field_matching_reads_the_masks(grid96x72, monkeypatch):
     """The light-field estimate's plane sweep and slanted-plane refinement (coarse and full
     size) are given each source's mask, as the multi-view estimate's are: a masked sample
     does not match (``plane_sweep(src_masks=)``); views without a mask pass None."""
@@ -164,7 +167,7 @@ def test_light_field_matching_reads_the_masks(grid, monkeypatch):
             return _real(*a, **kw)
 
         monkeypatch.setattr(L, name, spy)
-    sc = _with_intruder(grid)
+    sc = _with_intruder(grid96x72)
     sc = sc.replace(views=[u.replace(depth=None, sigma_z=None) for u in sc.views])
     estimate_depth(sc, views=["view_004"])
     assert {n for n, _, _ in seen} == {"plane_sweep", "refine_planes"}

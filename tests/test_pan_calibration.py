@@ -8,12 +8,11 @@ import json
 from dataclasses import replace
 
 import numpy as np
+import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
-pycolmap = pytest.importorskip("pycolmap")
-
-import vibr.calib.pan as pc  # noqa: E402
+import vibr.calib.pan as pc
 
 W, H, F = 320, 240, 300.0
 
@@ -183,6 +182,7 @@ def test_no_fit_where_few_pairs_are_homographies(tmp_path, monkeypatch):
     assert not pc.prefer_one_centre(one, None).one_centre
 
 
+@pytest.mark.slow
 def test_calibrate_a_video_panned_on_the_spot(tmp_path, capsys):
     """36 frames of the synthetic world turning 40° about one point, H.264: ``vibr calibrate
     VIDEO --frames 12`` gives every camera one centre, the focal length within 1 % of the
@@ -219,6 +219,7 @@ def test_calibrate_a_video_panned_on_the_spot(tmp_path, capsys):
     assert "turned on the spot: one centre for every photo" in describe(scene)
 
 
+@pytest.mark.slow
 def test_pan_yes_and_no_are_obeyed(tmp_path):
     """``--pan yes`` gives one centre to a walk without the test (and without the mapper);
     ``--pan no`` keeps the mapper's model without fitting one centre at all."""
@@ -243,13 +244,13 @@ def test_pan_yes_and_no_are_obeyed(tmp_path):
         assert ("one_centre" in info["times_s"]) is (pan == "yes")
 
 
+@pytest.mark.slow
 def test_a_failed_fit_leaves_the_mapper_to_it(tmp_path, monkeypatch):
     """A numerical failure of the one-centre fit is a warning, not the end of the
     calibration: COLMAP's mapper calibrates the walk as before."""
     import vibr.calib.colmap as cal
     import vibr.synthetic as syn
     from _checks import messages_logged
-
     from vibr.io.video import write_video
 
     def broken(*a, **k):

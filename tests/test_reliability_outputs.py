@@ -3,18 +3,16 @@ are checked before the work (one line, exit 2, nothing written)."""
 
 from __future__ import annotations
 
-import json
 import time
 
 import numpy as np
 import pytest
 
+from test_cli_errors import assert_one_line_error, make_transforms, run_cli
 from vibr.cli import main
 from vibr.errors import VibrInputError
 from vibr.io import save_scene
-from vibr.io.outputs import MARKER, check_output, read_marker
-
-from test_cli_errors import assert_one_line_error, make_transforms, run_cli
+from vibr.io.outputs import check_output, read_marker
 
 
 def _tree(p):

@@ -4,7 +4,7 @@ import pytest
 
 
 @pytest.fixture(scope="module")
-def scene_dir(tmp_path_factory):
+def grid64_dir(tmp_path_factory):
     from vibr.io import save_scene
     from vibr.synthetic import make_scene
 
@@ -13,12 +13,12 @@ def scene_dir(tmp_path_factory):
     return d / "s"
 
 
-def test_render_held_out_view(scene_dir, tmp_path, capsys):
+def test_render_held_out_view(grid64_dir, tmp_path, capsys):
     from vibr.cli import main
     from vibr.io import read_image
 
     out = tmp_path / "v4.png"
-    assert main(["render", str(scene_dir), "--target", "view_004", "-o", str(out), "--method", "bvs", "-q"]) == 0
+    assert main(["render", str(grid64_dir), "--target", "view_004", "-o", str(out), "--method", "bvs", "-q"]) == 0
     txt = capsys.readouterr().out
     assert "PSNR" in txt and "DSSIM" in txt
     psnr = float(txt.split("PSNR")[1].split()[0])
@@ -28,21 +28,21 @@ def test_render_held_out_view(scene_dir, tmp_path, capsys):
     assert img.shape == (64, 64, 3)
 
 
-def test_render_camera_file_and_errors(scene_dir, tmp_path, capsys):
+def test_render_camera_file_and_errors(grid64_dir, tmp_path, capsys):
     from vibr.cli import main
     from vibr.io import load_scene, read_image, write_camera_json
 
-    sc = load_scene(scene_dir)
+    sc = load_scene(grid64_dir)
     cam = tmp_path / "cam.json"
     write_camera_json(cam, sc["view_004"].camera)
     out = tmp_path / "novel.png"
-    assert main(["render", str(scene_dir), "--target", str(cam), "-o", str(out), "--method", "ulr",
+    assert main(["render", str(grid64_dir), "--target", str(cam), "-o", str(out), "--method", "ulr",
                  "--sources", "view_000,view_002,view_006,view_008", "-q"]) == 0
     assert read_image(out).shape == (64, 64, 3)
     assert "PSNR" not in capsys.readouterr().out
     # bad input: one line on stderr, exit status 2, no output written
     bad = tmp_path / "bad.png"
-    assert main(["render", str(scene_dir), "--target", "nope", "-o", str(bad), "-q"]) == 2
+    assert main(["render", str(grid64_dir), "--target", "nope", "-o", str(bad), "-q"]) == 2
     err = capsys.readouterr().err
     assert "nope" in err and len(err.strip().splitlines()) == 1
     assert not bad.exists()

@@ -5,19 +5,16 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from vibr.render.operators import Splat, explicit_B, stencil_to_sparse
 from _checks import assert_quadratic_form, dottest
-
-
-def _rot(t):
-    return np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+from _helpers import rot2d
+from vibr.render.operators import Splat, explicit_B, stencil_to_sparse
 
 
 def _random_jacobians(rng, n, big=False):
     """Rotated, sheared, anisotropic Jacobians; bounding boxes ≤ 1 px unless ``big``."""
     J = np.empty((n, 2, 2))
     for i in range(n):
-        M = _rot(rng.uniform(0, 2 * np.pi)) @ np.diag(rng.uniform(0.2, 1.0, 2)) \
+        M = rot2d(rng.uniform(0, 2 * np.pi)) @ np.diag(rng.uniform(0.2, 1.0, 2)) \
             @ np.array([[1.0, rng.uniform(-0.8, 0.8)], [0.0, 1.0]])
         if rng.uniform() < 0.2:
             M[:, 0] *= -1  # a mirrored warp (negative determinant)
@@ -72,7 +69,7 @@ def test_closed_form_cases():
     H, W = 8, 10
     half = 0.5 * np.eye(2)
     shear = np.array([[0.5, 0.5], [0.0, 0.5]])
-    diamond = _rot(np.pi / 4) / np.sqrt(2)  # a square turned 45°, 1×1 bounding box
+    diamond = rot2d(np.pi / 4) / np.sqrt(2)  # a square turned 45°, 1×1 bounding box
     xy = np.array([[5.0, 4.0], [5.5, 4.0], [5.25, 4.0], [5.5, 4.5], [5.0, 4.5], [5.25, 4.0]])
     J = np.stack([half, half, shear, diamond, diamond, diamond])
     s = Splat(xy, (H, W), jac=J, psf="footprint")
@@ -167,7 +164,7 @@ def test_big_footprints_are_shrunk_per_axis():
     assert a.n_shrunk == n and b.n_shrunk == 0
     assert abs(explicit_B(a) - explicit_B(b)).max() < 1e-12
     # a rotated, coarser footprint: its rows scaled by their bounding-box extents
-    J = 1.7 * _rot(0.4) @ np.diag([1.0, 0.6])
+    J = 1.7 * rot2d(0.4) @ np.diag([1.0, 0.6])
     Js = J / np.abs(J).sum(1, keepdims=True)
     big = Splat(xy[:8], (H, W), jac=np.broadcast_to(J, (8, 2, 2)), psf="footprint")
     assert big.n_shrunk == 8

@@ -6,6 +6,8 @@ import pytest
 from vibr.errors import VibrInputError
 from vibr.render.methods import method_params
 
+pytestmark = pytest.mark.slow
+
 
 def test_paper_preset_maps_the_units():
     p = method_params("gradient", preset="paper", alpha=0.1, gamma=3.0, lam=0.002)

@@ -141,6 +141,7 @@ def test_ulr_and_bare_camera_target(synthetic_grid):
     assert psnr(r.image, tgt.image, mask=r.coverage, border=2) > 35.0
 
 
+@pytest.mark.slow
 def test_cotton_stride1_gradient(cotton_dir):
     """Centre view from its 8 neighbours with ground-truth geometry: ≥ 47.9 dB, the plain
     average of the neighbours sampled through the centre's own disparity."""

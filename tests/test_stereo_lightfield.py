@@ -100,6 +100,7 @@ def test_lightfield_coarse_level_within_1pct_and_used_by_default():
     np.testing.assert_array_equal(d, depths[1.0])
 
 
+@pytest.mark.slow
 def test_cotton_centre_from_3x3_block(cotton_dir):
     from vibr.io import load_scene, read_pfm
 

@@ -216,6 +216,7 @@ def test_estimate_depth_counts_its_views(monkeypatch):
     assert [ln for ln in buf.getvalue().splitlines() if ln.startswith(f"depth views: {n}/{n} in ")]
 
 
+@pytest.mark.slow
 def test_default_depth_range_covers_a_wide_baseline_ring(temple_dir):
     """The temple ring's neighbours are ~22° apart: the half-image parallax limit alone put
     the sweep's near end at 1.17 while the temple lies around 0.5–0.6 from the cameras. The
@@ -762,6 +763,7 @@ def test_estimate_depth_options_and_unknown_keywords():
         estimate_depth(g, views=[4], refine="sweep+tvv")
 
 
+@pytest.mark.optional  # needs two numba threads
 def test_views_side_by_side_bit_identical_to_serial(monkeypatch):
     """The light-field estimate runs VIEW_THREADS views at a time (map_views): the depths
     and sigma_z are those of the one-view-at-a-time loop, bit for bit."""

@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
+from _helpers import pinhole
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
-from vibr.scene import View
 from vibr.render.methods import DEFAULTS
+from vibr.scene import View
 
 
 @pytest.fixture(autouse=True)
@@ -20,7 +21,7 @@ def _cache_in_tmp(tmp_path_factory, monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def grid():
+def grid128():
     from vibr.synthetic import make_scene
 
     return make_scene("grid", n_views=9, width=128, height=128, seed=3)
@@ -30,8 +31,9 @@ def _plane_view(cam, z0=5.0):
     return View("v", np.zeros(cam.shape + (3,), np.float32), cam, depth=np.full(cam.shape, z0, np.float32))
 
 
-def _cam(W=64, H=48, f=60.0, C=(0.0, 0.0, 0.0)):
-    return Camera.from_centre(Camera.intrinsics(f, W, H), np.eye(3), np.asarray(C, float), W, H)
+def _front_cam(W=64, H=48, f=60.0, C=(0.0, 0.0, 0.0)):
+    """A camera looking down +z (at a fronto-parallel plane, :func:`_plane_view`)."""
+    return pinhole(f, W, H, C=C)
 
 
 # ------------------------------------------------------------------ closed forms
@@ -41,12 +43,12 @@ def test_pixel_size_closed_forms():
     length → 4; a target looking away → NaN (nothing to measure)."""
     from vibr.geometry.resolution import source_pixel_size
 
-    src = _cam()
+    src = _front_cam()
     v = _plane_view(src)
     assert source_pixel_size(v, src) == pytest.approx(1.0, abs=1e-12)
     assert source_pixel_size(v, src.scaled(0.5)) == pytest.approx(0.5, abs=1e-12)
-    assert source_pixel_size(v, _cam(C=(0, 0, -5.0))) == pytest.approx(0.5, abs=1e-12)
-    assert source_pixel_size(v, _cam(f=240.0)) == pytest.approx(4.0, abs=1e-12)
+    assert source_pixel_size(v, _front_cam(C=(0, 0, -5.0))) == pytest.approx(0.5, abs=1e-12)
+    assert source_pixel_size(v, _front_cam(f=240.0)) == pytest.approx(4.0, abs=1e-12)
     away = Camera.from_centre(src.K, np.diag([1.0, -1.0, -1.0]), np.zeros(3), 64, 48)
     assert math.isnan(source_pixel_size(v, away))
     assert math.isnan(source_pixel_size(View("n", v.image, src), src))  # no depth
@@ -62,14 +64,14 @@ def test_reduction_scale_and_plan():
     for s in (0.01, 0.13, 0.3, 0.49, 0.6):
         r = reduction_scale(s)
         assert s <= r < s * math.sqrt(2) + 1e-12
-    src = _cam(W=160, H=128)
+    src = _front_cam(W=160, H=128)
     scene = _scene([_plane_view(src)])
     for f, k, scales in ((1.0, 1, {}), (0.5, 2, {}), (0.25, 4, {}), (0.125, 4, {}), (0.0625, 4, {"v": 0.25})):
         plan = resolution_plan(scene, src.scaled(f))
         assert plan.supersample == k and plan.scales == pytest.approx(scales)
         assert plan.sizes["v"] == pytest.approx(f, rel=1e-9)
     assert resolution_plan(scene, src.scaled(0.25), supersample=1).scales == {"v": 0.25}
-    assert resolution_plan(_scene([_plane_view(_cam(W=40, H=32))]), _cam(W=40, H=32).scaled(0.125),
+    assert resolution_plan(_scene([_plane_view(_front_cam(W=40, H=32))]), _front_cam(W=40, H=32).scaled(0.125),
                            supersample=1).scales == {}  # 8 px would be too small to warp
     assert resolution_plan(scene, src.scaled(0.5), supersample=3).supersample == 3
 
@@ -112,7 +114,7 @@ def _reference(view, f):
 
 
 @pytest.mark.parametrize("method", ["gradient", "ulr"])
-def test_supersampled_render_beats_the_target_grid(grid, method):
+def test_supersampled_render_beats_the_target_grid(grid128, method):
     """The centre view at half the sources' resolution, against the photograph averaged
     over 2×2 blocks (a pixel-integrating sensor): "auto" renders on the sources' grid and
     averages, and is at least 3 dB closer than rendering on the target's own grid (the
@@ -120,8 +122,8 @@ def test_supersampled_render_beats_the_target_grid(grid, method):
     from vibr.metrics import psnr
     from vibr.render import render
 
-    tgt = grid.views[4]
-    src = grid.subset([v.name for v in grid.views if v.name != tgt.name])
+    tgt = grid128.views[4]
+    src = grid128.subset([v.name for v in grid128.views if v.name != tgt.name])
     cam = tgt.camera.scaled(0.5)
     ref = _reference(tgt, 2)
     auto = render(src, cam, method)
@@ -139,57 +141,57 @@ def test_supersampled_render_beats_the_target_grid(grid, method):
         assert np.array_equal(fine.image, half.image)
 
 
-def test_the_target_at_the_sources_resolution_is_unchanged(grid):
+def test_the_target_at_the_sources_resolution_is_unchanged(grid128):
     """Supersampling never applies to a target at its sources' resolution: the render is
     bit-identical to the target's own grid."""
     from vibr.render import render
 
-    src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
-    a = render(src, grid["view_004"].camera)
-    b = render(src, grid["view_004"].camera, supersample=1)
+    src = grid128.subset([v.name for v in grid128.views if v.name != "view_004"])
+    a = render(src, grid128["view_004"].camera)
+    b = render(src, grid128["view_004"].camera, supersample=1)
     assert a.params["supersample"] == 1 and a.params["reduced_sources"] == {}
     assert np.array_equal(a.image, b.image)
 
 
-def test_footprint_psf_keeps_the_target_grid(grid):
+def test_footprint_psf_keeps_the_target_grid(grid128):
     """The footprint PSF models fine sources itself: "auto" leaves it on the target's grid
     with the sources as they are; an explicit factor still applies, and so does the coarser
     grid for coarser sources (the footprint model shrinks their footprints to a pixel)."""
     from vibr.render import render
 
-    src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
-    cam = grid["view_004"].camera.scaled(0.25)
+    src = grid128.subset([v.name for v in grid128.views if v.name != "view_004"])
+    cam = grid128["view_004"].camera.scaled(0.25)
     r = render(src, cam, psf="footprint")
     assert r.params["supersample"] == 1 and r.params["reduced_sources"] == {}
     assert render(src, cam, psf="footprint", supersample=2).params["supersample"] == 2
-    near = grid["view_004"].camera.scaled(4)  # sources coarser: its footprints shrink to 1 px, a coarser grid
+    near = grid128["view_004"].camera.scaled(4)  # sources coarser: its footprints shrink to 1 px, a coarser grid
     r = render(src, near, psf="footprint")
     assert r.params["coarsen"] == pytest.approx(2 * math.sqrt(2.0)) and r.image.shape[:2] == near.shape
 
 
-def test_far_finer_sources_are_reduced(grid):
+def test_far_finer_sources_are_reduced(grid128):
     """A thumbnail of 8×8 from sources of 128²: the grid is 4× finer (the cap) and the
     sources, still 4× finer than it, are reduced to a quarter of their size first."""
     from vibr.render import render
 
-    src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
-    r = render(src, grid["view_004"].camera.scaled(1 / 16))
+    src = grid128.subset([v.name for v in grid128.views if v.name != "view_004"])
+    r = render(src, grid128["view_004"].camera.scaled(1 / 16))
     assert r.params["supersample"] == 4 and r.image.shape == (8, 8, 3)
     assert set(r.params["reduced_sources"]) == set(src.names)
     assert all(s == pytest.approx(0.25) for s in r.params["reduced_sources"].values())
 
 
-def test_flythrough_frame_at_half_size_matches_render(grid, tmp_path):
+def test_flythrough_frame_at_half_size_matches_render(grid128, tmp_path):
     """A fly-through frame at half the photographs' size is supersampled as `vibr render`
     renders it: the same image within a grey level (the frame is 8-bit); the frame's record
     says so, and the job's key (resumed frames) depends on the factor."""
-    from vibr.paths.flythrough import FrameContext, job_key, render_path
     from vibr.io import read_image
     from vibr.paths.camera_path import CameraPath
+    from vibr.paths.flythrough import FrameContext, job_key, render_path
     from vibr.render import render
 
-    src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
-    cam = grid["view_004"].camera.scaled(0.5)
+    src = grid128.subset([v.name for v in grid128.views if v.name != "view_004"])
+    cam = grid128["view_004"].camera.scaled(0.5)
     res = render_path(src, CameraPath([cam], fps=1.0), tmp_path / "fr", n_views=None, executor=None,
                       progress=False, check_scene=False)
     assert res.frames[0]["supersample"] == 2
@@ -198,7 +200,7 @@ def test_flythrough_frame_at_half_size_matches_render(grid, tmp_path):
     assert np.abs(fr - np.rint(np.clip(ref, 0, 1) * 255) / 255).max() <= 1 / 255 + 1e-6
     keys = {job_key(FrameContext(src, [cam], "d", supersample=k)) for k in ("auto", 1, 2)}
     assert len(keys) == 3
-    big = grid["view_004"].camera.scaled(4)  # a frame four times the photographs' size: a coarser grid
+    big = grid128["view_004"].camera.scaled(4)  # a frame four times the photographs' size: a coarser grid
     res = render_path(src, CameraPath([big], fps=1.0), tmp_path / "big", n_views=None, executor=None,
                       progress=False, check_scene=False)
     assert res.frames[0]["coarsen"] == pytest.approx(2 * math.sqrt(2.0)) and res.frames[0]["supersample"] == 1
@@ -248,15 +250,15 @@ def test_cli_path_says_when_frames_are_supersampled(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------ the gradient's frame
-def test_chain_gradient_is_the_jacobian_transposed_inverse(grid):
+def test_chain_gradient_is_the_jacobian_transposed_inverse(grid128):
     """``grad_model="chain"`` gives every sample ``J⁻ᵀ ∇v`` (J the warp's Jacobian, kept
     with ``keep=("jac",)``), where 1/|det J| is under the cap; "translation" gives ``∇v``
     as it is. Closed form: the target camera for half-size images has J = ½ I, so the
     chain gradients are twice the translation ones."""
     from vibr.geometry import compute_samples
 
-    src = grid.subset([v.name for v in grid.views if v.name != "view_004"])
-    cam = grid["view_004"].camera
+    src = grid128.subset([v.name for v in grid128.views if v.name != "view_004"])
+    cam = grid128["view_004"].camera
     a = compute_samples(src, cam, keep=("jac",))
     b = compute_samples(src, cam, keep=("jac",), grad_model="chain")
     assert a.meta["grad_model"] == "translation" and b.meta["grad_model"] == "chain"

@@ -68,7 +68,7 @@ def test_uncertainty_metrics_mask_border_and_errors():
 
 # ----------------------------------------------------------------------------- renderer
 @pytest.fixture(scope="module")
-def grid():
+def grid_split80():
     from vibr.synthetic import make_scene
 
     sc = make_scene("grid", width=80, height=80, seed=3)
@@ -93,11 +93,11 @@ def _noisy_depth(sources, rel, seed=0):
     return Scene(views, sources.name, sources.root, sources.grid, sources.points, dict(sources.meta))
 
 
-def test_render_fills_uncertainty_only_when_asked(grid):
+def test_render_fills_uncertainty_only_when_asked(grid_split80):
     from vibr.render import render
     from vibr.render.uncertainty import hole_sigma
 
-    src, tg = grid
+    src, tg = grid_split80
     r0 = render(src, tg, "bvs", max_iter=15)
     assert r0.uncertainty is None
     for method in ("gradient", "ulr"):
@@ -112,10 +112,10 @@ def test_render_fills_uncertainty_only_when_asked(grid):
     assert np.allclose(r0.image, r1.image, atol=1e-5)
 
 
-def test_sigma_grows_with_injected_depth_noise(grid):
+def test_sigma_grows_with_injected_depth_noise(grid_split80):
     from vibr.render import render
 
-    src, tg = grid
+    src, tg = grid_split80
     med = []
     for rel in (0.0, 0.005, 0.02):
         s = src if rel == 0 else _noisy_depth(src, rel)
@@ -126,15 +126,15 @@ def test_sigma_grows_with_injected_depth_noise(grid):
     assert med[0][1] < med[1][1] < med[2][1], med
 
 
-def test_sigma_high_where_few_views_and_in_holes(grid):
+def test_sigma_high_where_few_views_and_in_holes(grid_split80):
     """Disoccluded pixels (seen by few of the 8 sources) and push–pull pixels get a larger
     σ than pixels every source sees."""
-    from vibr.geometry.samples import view_counts
     from vibr.geometry import compute_samples
+    from vibr.geometry.samples import view_counts
     from vibr.render import render_samples
     from vibr.render.uncertainty import hole_sigma
 
-    src, tg = grid
+    src, tg = grid_split80
     S = compute_samples(src, tg.camera)
     # cut a hole: drop every sample landing in a 12×12 square
     x, y = S.xy[:, 0], S.xy[:, 1]
@@ -153,7 +153,7 @@ def test_sigma_high_where_few_views_and_in_holes(grid):
     assert np.all(s[hole] == pytest.approx(hole_sigma()))
 
 
-def test_sigma_ranks_the_errors_of_a_planar_proxy(grid):
+def test_sigma_ranks_the_errors_of_a_planar_proxy(grid_split80):
     """With the planar proxy the error sits where the plane is wrong; σ must find it."""
     from vibr.pipeline import prepare
     from vibr.render import render
@@ -170,8 +170,8 @@ def test_sigma_scale_leaves_the_holes_out():
     """The colour scale of a σ figure spans the pixels the sources reach: holes (σ_hole, a
     third of this map, also stored as float16) would otherwise make it 0–100 and put the
     rest, 0–10, in the bottom tenth of the colours."""
-    from vibr.render.uncertainty import hole_sigma
     from vibr.eval.sigma_figures import sigma_scale
+    from vibr.render.uncertainty import hole_sigma
 
     m = np.linspace(0.0, 9.9, 3000)
     m[:1000] = np.float16(hole_sigma())
@@ -239,14 +239,14 @@ def test_cli_eval_uncertainty_report_and_plot(tmp_path):
         assert len(per) == 2 and summ["ause"]["mean"] == pytest.approx(sum(per) / 2)
 
 
-def test_sample_statistics_one_pass_matches_separate_splats(grid):
+def test_sample_statistics_one_pass_matches_separate_splats(grid_split80):
     """The one-pass kernel's splats equal the residual spread, ``(Σ w B)² / Σ w² B``
     and the weighted mean of ``sigma_z² ‖∂tau/∂z‖²`` computed by separate splats."""
     from vibr.geometry import compute_samples
     from vibr.render.operators import Splat
     from vibr.render.uncertainty import sample_statistics
 
-    src, tg = grid
+    src, tg = grid_split80
     S = compute_samples(src, tg.camera)
     sp = Splat(S.xy, S.target_shape)
     rng = np.random.default_rng(0)
@@ -288,7 +288,7 @@ def test_hole_distance():
 
 
 # ----------------------------------------------------------------------------- view offsets
-def test_view_offsets_absorb_an_exposure_change(grid):
+def test_view_offsets_absorb_an_exposure_change(grid_split80):
     """``view_offsets`` is the mean residual of each view's samples; brightening one view by
     δ moves its offset by δ exactly, leaves the offset-free spread unchanged and moves the
     render's offset mix by δ times that view's share of the weight."""
@@ -296,7 +296,7 @@ def test_view_offsets_absorb_an_exposure_change(grid):
     from vibr.render.operators import Splat
     from vibr.render.uncertainty import sample_statistics, view_offsets
 
-    src, tg = grid
+    src, tg = grid_split80
     S = compute_samples(src, tg.camera)
     sp = Splat(S.xy, S.target_shape)
     rng = np.random.default_rng(1)
@@ -351,14 +351,14 @@ def test_view_offset_prior_closed_form():
     assert np.allclose(centre, [0.0, 0.0]) and var == 0
 
 
-def test_sigma_follows_a_source_exposure_change(grid):
+def test_sigma_follows_a_source_exposure_change(grid_split80):
     """One source 20 grey levels brighter than the others and the target, and the only view
     left in a square: there the sources agree (one view) but the render carries its offset.
     The spread of the samples misses that error; the view-offset term predicts it."""
     from vibr.geometry import compute_samples
     from vibr.render import render_samples
 
-    src, tg = grid
+    src, tg = grid_split80
     S = compute_samples(src, tg.camera)
     x, y = S.xy[:, 0], S.xy[:, 1]
     S = S.select(~((x > 20) & (x < 50) & (y > 20) & (y < 50) & (S.view != 0)))

@@ -253,6 +253,7 @@ def test_view_cli_unwritable_path_out(tmp_path):
     assert len(lines) == 1 and "--path-out" in lines[0] and "does not exist" in lines[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("host", ["127.0.0.1", "0.0.0.0"])
 def test_view_cli_serves_and_stops(tiny_scene, tmp_path, host):
     """Serves its page, exits 0 on Ctrl-C with the port freed; on a non-loopback address it
@@ -570,6 +571,7 @@ def test_the_viewer_shows_where_the_render_can_be_trusted(tiny_scene, monkeypatc
         ViewSettings(show="depth")
 
 
+@pytest.mark.slow
 def test_a_click_on_a_rolled_photograph_moves_there_upright(data_dir):
     """templeSparseRing's photographs are rolled by ±90°: a click on one moves the browser's
     camera to its pose turned upright by quarter turns (as a path's keys), with the ring's

@@ -23,6 +23,8 @@ import pytest
 
 from vibr.viewer.browser import free_port
 
+pytestmark = pytest.mark.slow
+
 
 def _need_browser():
     from vibr.viewer.browser import chromium_path
