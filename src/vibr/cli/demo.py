@@ -12,8 +12,8 @@ from ._options import add_bit_depth_option, add_method_option
 
 logger = logging.getLogger(__name__)
 
-#: The demo's fly-through: frames and rate (3.5 s, slow enough to follow the parallax).
-DEMO_FRAMES = 84
+#: The demo's fly-through: frames and rate (3 s, slow enough to follow the parallax).
+DEMO_FRAMES = 72
 DEMO_FPS = 24.0
 
 _DESC = """\
@@ -24,7 +24,7 @@ DSSIM against the true image. This is the quickest check that vibr works on a ma
 
 _EPILOG = """\
 examples:
-  vibr demo                         3x3 light-field grid, 256x256, centre view held out; a 3.5 s loop
+  vibr demo                         3x3 light-field grid, 256x256, centre view held out; a 3 s loop
                                     round the grid's views to vibr-demo.mp4
   vibr demo --layout arc --size 384 -o demo.png
   vibr demo --method bvs            compare with the Bayesian baseline
@@ -43,7 +43,7 @@ def register(sub) -> None:
     p.add_argument("-o", "--output", help="also write the rendered view to this PNG")
     v = p.add_mutually_exclusive_group()
     v.add_argument("--video", default="vibr-demo.mp4",
-                   help="fly-through (3.5 s at 24 fps through the scene's views: a loop round the grid, a sweep "
+                   help="fly-through (3 s at 24 fps through the scene's views: a loop round the grid, a sweep "
                         "along the arc) written to this video, .mp4 or another format by its extension as "
                         "'vibr render --path' (default: vibr-demo.mp4)")
     v.add_argument("--no-video", action="store_true", help="skip the fly-through video")
