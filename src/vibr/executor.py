@@ -40,6 +40,11 @@ The task contract (what makes the engines interchangeable):
 
 Results are identical whatever the engine when ``fn`` is deterministic and does not depend
 on the number of numba threads (docs/explanation/scale-out.md reports what was checked).
+
+Across machines without a scheduler (a job array), :func:`parse_shard` and :func:`shard_of`
+split a job's tasks into ``N`` shards, one per independent process: shard ``I`` takes every
+task ``k`` with ``k % N == I - 1`` (interleaved, so that a path's expensive stretch or a
+scene's large views are spread over the shards rather than given to one).
 """
 
 from __future__ import annotations
@@ -69,6 +74,33 @@ logger = logging.getLogger(__name__)
 DASK_HINT = "pip install 'vibr[dask]'"
 
 _THREADS_VAR = "NUMBA_NUM_THREADS"
+
+
+def parse_shard(text) -> tuple[int, int]:
+    """``"I/N"`` (``--shard``) as ``(I, N)``, 1 ≤ I ≤ N; a one-line :class:`VibrInputError`
+    otherwise. A tuple ``(I, N)`` is checked and returned."""
+    if isinstance(text, tuple):
+        i, n = text
+    else:
+        a, sep, b = str(text).partition("/")
+        try:
+            i, n = int(a), int(b)
+        except ValueError:
+            i = n = 0
+        if not sep:
+            i = n = 0
+    if not (isinstance(i, int) and isinstance(n, int) and 1 <= i <= n):
+        raise VibrInputError(f"a shard is I/N with 1 <= I <= N (e.g. 2/8, I = $SLURM_ARRAY_TASK_ID), got {text!r}")
+    return i, n
+
+
+def shard_of(n_tasks: int, shard) -> list[int]:
+    """The task indices of ``shard`` = ``(I, N)`` among ``n_tasks``: every ``k`` with
+    ``k % N == I - 1`` (module docstring); every index when ``shard`` is None."""
+    if shard is None:
+        return list(range(n_tasks))
+    i, n = parse_shard(shard)
+    return list(range(i - 1, n_tasks, n))
 
 
 def available_cores() -> int:

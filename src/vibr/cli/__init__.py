@@ -13,6 +13,7 @@ import errno
 import importlib
 import importlib.util
 import logging
+import os
 import signal
 import sys
 import threading
@@ -192,6 +193,36 @@ _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG}
 _MACHINE_ERRNOS = _FULL_ERRNOS | {errno.EACCES, errno.EPERM}
 
 
+#: Per command that compiles numba kernels, one kernel it always compiles (module, name):
+#: numba's cache index of that kernel (beside the module, in ``__pycache__/*.nbi``, or where
+#: NUMBA_CACHE_DIR puts it) tells whether the kernels were compiled on this machine yet.
+_KERNEL_PROBES = {"demo": ("vibr.geometry.visibility", "_visibility_kernel"),
+                  "render": ("vibr.geometry.visibility", "_visibility_kernel"),
+                  "eval": ("vibr.geometry.visibility", "_visibility_kernel"),
+                  "view": ("vibr.geometry.visibility", "_visibility_kernel"),
+                  "depth": ("vibr.stereo._kernels", "box_mean_std")}
+
+
+def kernels_cold(command: str) -> bool:
+    """Whether ``command``'s kernels have no numba cache on this machine yet (False when that
+    cannot be told: a command that compiles nothing, another numba)."""
+    probe = _KERNEL_PROBES.get(command)
+    if probe is None:
+        return False
+    try:
+        kernel = getattr(importlib.import_module(probe[0]), probe[1])
+        return not os.path.isfile(kernel._cache._cache_file._index_path)
+    except (AttributeError, ImportError):
+        return False
+
+
+def _note_cold_kernels(command: str) -> None:
+    """One line before the first compilation on a machine (once: the kernels are cached)."""
+    if kernels_cold(command):
+        print("vibr compiles its kernels on first use on this machine (once, a few minutes on 2 cores; "
+              "they are cached for every later run)", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     setup = _BEFORE_NUMBA.get(_command_in(sys.argv[1:] if argv is None else argv))
     if setup is not None:
@@ -209,6 +240,8 @@ def main(argv=None) -> int:
     from .. import io as vio
 
     vio.ALLOW_OUTSIDE_PATHS = bool(getattr(args, "allow_outside_paths", False))
+    if verbosity(args) >= 0:
+        _note_cold_kernels(args.command)
     try:
         return int(args.func(args) or 0)
     except VibrInputError as exc:

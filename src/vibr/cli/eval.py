@@ -103,6 +103,12 @@ def register(sub) -> None:
                    help="also score each render's per-pixel std. dev.: AUSE, Spearman rho and the "
                         "sparsification curves in the report, the sparsification plot in --figures")
     add_executor_args(p)
+    p.add_argument("--shard", metavar="I/N",
+                   help="with several targets: evaluate only shard I of N (targets k with k %% N == I-1, one process "
+                        "of a job array), writing their per-view reports; --assemble writes --json when all are done")
+    p.add_argument("--assemble", action="store_true",
+                   help="with several targets: write --json and the table from the per-view reports the shards "
+                        "wrote (evaluates nothing; an error lists the targets still missing)")
     p.set_defaults(func=run)
 
 
@@ -151,6 +157,11 @@ def run(args) -> int:
     _refuse_unused_estimate_options(args, scene, estimate_kw)
     if args.target.strip().lower() == "all" or "," in args.target:
         return _run_all(args, scene, settings, executor, estimate_kw)
+    if args.shard or args.assemble:
+        from ..errors import VibrInputError
+
+        raise VibrInputError(f"{'--shard' if args.shard else '--assemble'} applies to several targets "
+                             "(--target all or a comma list)")
     if executor is not None:
         logger.warning("--workers and --dask run several targets (--target all or a list) in parallel; "
                        "one target is evaluated here")
@@ -214,22 +225,35 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
     """``--target all`` / a comma list: one leave-one-out task per view (vibr.eval.leave_one_out)."""
     from pathlib import Path
 
-    from ..eval.leave_one_out import evaluate_all, format_all_table, resolve_targets
+    from ..errors import VibrInputError
+    from ..eval.leave_one_out import assemble_all, evaluate_all, format_all_table, resolve_targets
     from ..eval.protocol import write_report
     from ..io.outputs import record_file
+    from ..executor import parse_shard
 
+    if args.shard and args.assemble:
+        raise VibrInputError("--assemble gathers the reports every --shard wrote: give one or the other")
+    shard = None if args.shard is None else parse_shard(args.shard)
     targets = resolve_targets(scene, args.target)
     # every target has sources of its own, each estimate is used once, and the per-view
     # reports already let a rerun resume: the depth cache only with an explicit --cache-dir
     cache_dir = cache_dir_from_args(args) if args.cache_dir is not None else False
     out = Path(args.json)
     views_dir = out.with_name(out.stem + "_views")
-    report = evaluate_all(args.scene, targets, settings, views_dir=views_dir, scale=args.scale,
-                          executor=executor, sources=args.sources, depth=args.depth,
-                          depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
-                          border=args.border, figures=args.figures, estimate_kw=estimate_kw or None,
-                          intensity_scale=args.intensity_scale, cache_dir=cache_dir,
-                          render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
+    eval_kw = dict(sources=args.sources, depth=args.depth, depth_files=args.depth_files, n_views=args.views,
+                   mask=args.mask, fallback=args.fallback, border=args.border, figures=args.figures,
+                   estimate_kw=estimate_kw or None, intensity_scale=args.intensity_scale, cache_dir=cache_dir,
+                   render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
+    if args.assemble:
+        report = assemble_all(args.scene, targets, settings, views_dir=views_dir, scale=args.scale, **eval_kw)
+    else:
+        report = evaluate_all(args.scene, targets, settings, views_dir=views_dir, scale=args.scale,
+                              executor=executor, shard=shard, **eval_kw)
+    if shard:
+        print(f"shard {shard[0]}/{shard[1]}: {len(report['targets'])} of {len(targets)} targets "
+              f"({', '.join(report['targets']) or 'none'}); per-view reports in {views_dir}/")
+        print("when every shard is done, write the report: the same command with --assemble instead of --shard")
+        return 0
     write_report(report, out)
     record_file(out)
     print(format_all_table(report))

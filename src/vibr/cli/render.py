@@ -68,6 +68,10 @@ def register(sub) -> None:
                    help="also write the per-pixel standard deviation (grey levels of 255): a colour-mapped "
                         "PNG with a scale bar, or the raw float32 array (.npy); with --path a video of every "
                         "frame's, on one colour scale")
+    p.add_argument("--depth-out", metavar="DEPTH.npy|.pfm|.png|DIR",
+                   help="also write the rendered view's depth (orthogonal, scene units, 0 where no source "
+                        "surface lands), as vibr reads depth maps: .npy or .pfm (float32) or a 16-bit .png "
+                        "(1 level = 0.001 scene units); with --path a folder of depth_00000.npy, ... (one per frame)")
     p.set_defaults(func=run)
 
 
@@ -90,6 +94,12 @@ def _add_path_options(p) -> None:
                         "other files; with --path also render frames already written again (default: skip them)")
     g.add_argument("--exclude", type=names, default=(), metavar="VIEW,...",
                    help="views never used (neither as sources nor for depth estimation), e.g. a held-out view")
+    g.add_argument("--shard", metavar="I/N",
+                   help="render only shard I of N (frames f with f %% N == I-1; one process of a job array, "
+                        "e.g. --shard $SLURM_ARRAY_TASK_ID/N), no video: --assemble encodes it when all are done")
+    g.add_argument("--assemble", action="store_true",
+                   help="encode the video -o from the complete frames folder the shards wrote (renders nothing; "
+                        "an error lists the frames still missing)")
     # frames on local processes or Dask (vibr.executor, docs/explanation/scale-out.md)
     add_executor_args(g, default="auto: one process per core for a long path of large frames, "
                                   "else here (vibr.executor.auto_workers)")
@@ -118,12 +128,14 @@ def run(args) -> int:
     if args.uncertainty:
         check_output(args.uncertainty, "file", overwrite=args.overwrite, what="--uncertainty")
     check_image_ext(args.output, args.bit_depth)  # before the work: out.npy was a TIFF under that name
+    _check_depth_out(args)
     check_depth_args(args)
     if args.uncertainty and os.path.splitext(args.uncertainty)[1].lower() not in (".png", ".npy"):
         raise VibrInputError("--uncertainty output must end in .png or .npy", args.uncertainty)
     scene = load_scene(args.scene, scale=args.scale)
     check_not_scene_file(args.output, scene, "-o")  # before the work, as every output check
     check_not_scene_file(args.uncertainty, scene, "--uncertainty")
+    check_not_scene_file(args.depth_out, scene, "--depth-out")
     sources, target = prepare(scene, _target(args, scene), sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views, fallback=args.fallback,
                               cache_dir=cache_dir_from_args(args))
@@ -137,9 +149,41 @@ def run(args) -> int:
         write_sigma(args.uncertainty, res.uncertainty)
         record_file(args.uncertainty)
         print(f"wrote {args.uncertainty}")
+    if args.depth_out:
+        _write_depth_out(args.depth_out, res.depth)
     _report(args.method, res)
     print(f"wrote {args.output}")
     return 0
+
+
+#: What --depth-out writes for one view (vibr.io.depthfiles.write_depth), read back by vibr.
+_DEPTH_OUT_EXTS = (".npy", ".pfm", ".png")
+
+
+def _check_depth_out(args) -> None:
+    """--depth-out of one view: a file vibr reads depth from, not there yet."""
+    from ..errors import VibrInputError
+    from ..io.outputs import check_output
+
+    if args.depth_out is None:
+        return
+    if os.path.splitext(args.depth_out)[1].lower() not in _DEPTH_OUT_EXTS:
+        raise VibrInputError(f"--depth-out must end in {', '.join(_DEPTH_OUT_EXTS)} (a folder with --path only)",
+                             args.depth_out)
+    check_output(args.depth_out, "file", what="--depth-out")
+
+
+def _write_depth_out(path, depth) -> None:
+    """The render's depth to ``path`` (:func:`vibr.io.depthfiles.write_depth`): a depth too
+    far for a 16-bit PNG's range is a one-line error naming the formats that hold it."""
+    from ..errors import VibrInputError
+    from ..io.depthfiles import write_depth
+
+    try:
+        write_depth(path, depth)
+    except ValueError as exc:
+        raise VibrInputError(f"{exc}: write .npy or .pfm (float32) instead", path) from None
+    print(f"wrote {path} (depth, scene units)")
 
 
 def _target(args, scene):
@@ -177,7 +221,8 @@ def _report(method: str, res) -> None:
 #: the fly-through's options (attribute, flag), refused with --target rather than ignored
 _PATH_ONLY = (("frames_dir", "--frames-dir"), ("crf", "--crf"), ("fps", "--fps"),
               ("dataparser_transforms", "--dataparser-transforms"),
-              ("exclude", "--exclude"), ("workers", "--workers"), ("dask", "--dask"))
+              ("exclude", "--exclude"), ("workers", "--workers"), ("dask", "--dask"), ("shard", "--shard"),
+              ("assemble", "--assemble"))
 
 
 def _refuse_path_options(args) -> None:
@@ -219,10 +264,13 @@ def _run_path(args) -> int:
             raise VibrInputError(f"with --path, --uncertainty is a video ({', '.join(VIDEO_FORMATS)})",
                                  args.uncertainty)
         check_output(args.uncertainty, "file", overwrite=args.overwrite, what="--uncertainty")
+    shard = _check_shard_args(args)
     applied, applied_scale = (scene_processing_transform(args.scene) if args.dataparser_transforms
                               else (None, 1.0))
     cpath = read_camera_path(args.path, dataparser_transforms=args.dataparser_transforms,
                              applied_transform=applied, applied_scale=applied_scale)
+    if args.assemble:
+        return _assemble(args, cpath)
     executor = executor_from_args(args, default="auto")  # a bad scheduler fails before the work
     cache_dir = cache_dir_from_args(args)
     scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
@@ -232,13 +280,16 @@ def _run_path(args) -> int:
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,
                       cache_dir=cache_dir, exclude=args.exclude, frames_dir=args.frames_dir,
                       crf=18 if args.crf is None else args.crf, fps=args.fps, executor=executor,
-                      uncertainty=args.uncertainty or None, supersample=args.supersample)
+                      uncertainty=args.uncertainty or None, supersample=args.supersample, shard=shard,
+                      depth_out=args.depth_out)
     for f in (res.video, res.sigma_video):
         if f:
             record_file(f)
     t = res.times
     what = f"{res.video} ({count(res.video_frames, 'frame')}, {res.video_size[0]}x{res.video_size[1]})" if res.video \
         else res.frames_dir
+    if shard:
+        what += f" (shard {shard[0]}/{shard[1]}: {count(len(res.frames), 'frame')} of {res.n_frames})"
     per = f", {res.seconds_per_frame:.2f} s per frame" if res.rendered else ""
     print(f"rendered {count(res.rendered, 'frame')} ({res.skipped} already there) in {t['frames']:.1f} s {res.engine}"
           f"{per}; total {t['total']:.1f} s (depth: {res.depth_source} "
@@ -251,6 +302,46 @@ def _run_path(args) -> int:
     if gs:
         print(f"the photographs are coarser than the frames: rendered on a grid {'-'.join(f'{g:.3g}' for g in gs)}x "
               "coarser and enlarged (--supersample 1: on the frames' own grid)")
+    if res.sigma_video:
+        print(f"wrote {res.sigma_video} (sigma of every frame, 0 to {res.sigma_vmax:g} grey levels)")
+    if res.depth_dir:
+        print(f"wrote the frames' depth to {res.depth_dir}/ (depth_00000.npy, ...; scene units)")
+    if shard and is_video(out):
+        print("when every shard is done, encode the video: the same command with --assemble instead of --shard")
+    return 0
+
+
+def _check_shard_args(args):
+    """``--shard`` as ``(I, N)`` (None without it); --shard with --assemble, and --assemble
+    to a folder or with --overwrite, refused."""
+    from ..errors import VibrInputError
+    from ..executor import parse_shard
+
+    if args.assemble and args.shard:
+        raise VibrInputError("--assemble encodes the frames every --shard wrote: give one or the other")
+    if args.assemble and not is_video(args.output):
+        raise VibrInputError(f"--assemble writes a video ({', '.join(VIDEO_FORMATS)})", args.output)
+    if args.assemble and args.overwrite:
+        raise VibrInputError("--assemble renders nothing: --overwrite does not apply")
+    if args.depth_out is not None and os.path.splitext(args.depth_out)[1]:
+        raise VibrInputError("with --path, --depth-out is a folder (depth_00000.npy, ... one per frame)",
+                             args.depth_out)
+    return None if args.shard is None else parse_shard(args.shard)
+
+
+def _assemble(args, cpath) -> int:
+    """``--path ... --assemble``: the video from the frames folder (vibr.paths.flythrough.assemble_path)."""
+    from ..io.outputs import record_file
+    from ..paths.flythrough import assemble_path
+
+    res = assemble_path(cpath, args.output, frames_dir=args.frames_dir, fps=args.fps,
+                        crf=18 if args.crf is None else args.crf, uncertainty=args.uncertainty or None,
+                        depth_out=args.depth_out)
+    for f in (res.video, res.sigma_video):
+        if f:
+            record_file(f)
+    print(f"assembled {count(res.video_frames, 'frame')} from {res.frames_dir} in {res.times['total']:.1f} s; "
+          f"wrote {res.video} ({res.video_size[0]}x{res.video_size[1]})")
     if res.sigma_video:
         print(f"wrote {res.sigma_video} (sigma of every frame, 0 to {res.sigma_vmax:g} grey levels)")
     return 0

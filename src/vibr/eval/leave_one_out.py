@@ -9,6 +9,12 @@ files and skips their targets. The driver gathers the per-target reports into on
 in the spirit of 3D Gaussian Splatting's ``per_view.json`` / ``results.json``: ``per_view``
 (target → report) and ``summary`` (per setting: mean and median PSNR, SSIM and DSSIM over
 the targets).
+
+Independent processes (a job array) can share the targets: with ``shard=(I, N)``
+:func:`evaluate_all` evaluates only the targets ``k`` (in the order given) with ``k % N == I - 1``
+(:func:`vibr.executor.shard_of`) and writes their reports; :func:`assemble_all` then builds the
+report from the per-target files, refusing while any is missing. A target's report does not
+depend on the other targets, so the assembled report holds the numbers one process gives.
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ import numpy as np
 
 from .._runtime.checkpoint import code_fingerprint
 from ..errors import VibrInputError
-from ..executor import run_tasks
+from ..executor import parse_shard, run_tasks, shard_of
 from ..io import load_scene
 from ..metrics import METRICS
 from .figures import write_evaluation_figures
@@ -117,8 +123,19 @@ def evaluate_target(scene, task: dict) -> dict:
     return rep
 
 
+def _tasks(scene_path: str, targets, settings, views_dir: Path, scale: float, eval_kw: dict) -> list[dict]:
+    """One task per target (:func:`evaluate_target`), with its report file and config key."""
+    tasks = []
+    for t in targets:
+        task = {"scene": scene_path, "scale": float(scale), "target": t, "settings": settings,
+                "eval_kw": dict(eval_kw), "report": str(views_dir / f"{t}.json")}
+        task["config"] = _config_key(task)
+        tasks.append(task)
+    return tasks
+
+
 def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting], *, views_dir,
-                 scale: float = 1.0, executor=None, retries: int = 2, **eval_kw) -> dict:
+                 scale: float = 1.0, executor=None, retries: int = 2, shard=None, **eval_kw) -> dict:
     """Leave-one-out evaluation of every view in ``targets`` (module docstring).
 
     Parameters
@@ -132,6 +149,9 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
         Folder of the per-target reports ``TARGET.json`` (kept: a rerun skips them).
     executor
         :func:`vibr.executor.run_tasks`'s engine: None, N processes, "local", an address.
+    shard : (I, N) or "I/N", optional
+        Evaluate only shard ``I`` of ``N`` of ``targets`` (module docstring); the report then
+        covers those targets (``"shard": [I, N]``): :func:`assemble_all` makes the whole one.
     **eval_kw
         Keyword arguments of :func:`vibr.eval.protocol.evaluate` (depth, n_views, mask, ...).
 
@@ -142,16 +162,12 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
         ``summary`` (:func:`summarise`), ``wall_seconds``.
     """
 
-    targets = list(targets)
     settings = list(settings)
     views_dir = Path(views_dir)
     scene_path = str(Path(scene_path).resolve())
-    tasks = []
-    for t in targets:
-        task = {"scene": scene_path, "scale": float(scale), "target": t, "settings": settings,
-                "eval_kw": dict(eval_kw), "report": str(views_dir / f"{t}.json")}
-        task["config"] = _config_key(task)
-        tasks.append(task)
+    shard = None if shard is None else parse_shard(shard)
+    targets = [list(targets)[k] for k in shard_of(len(targets), shard)]
+    tasks = _tasks(scene_path, targets, settings, views_dir, scale, eval_kw)
     t0 = time.perf_counter()
     # the targets already evaluated are read here, so that the tasks and the progress line
     # (its time left) are the targets still to do
@@ -166,8 +182,40 @@ def evaluate_all(scene_path, targets: Sequence[str], settings: Sequence[Setting]
     skipped = sum(bool(r.get("skipped")) for r in reports)
     if skipped:
         logger.info("%d of %d targets were already evaluated (%s)", skipped, len(targets), views_dir)
+    return _report(reports, scene_path, scale, targets, settings, views_dir, t0) | (
+        {"shard": list(shard)} if shard else {})
+
+
+def assemble_all(scene_path, targets: Sequence[str], settings: Sequence[Setting], *, views_dir,
+                 scale: float = 1.0, **eval_kw) -> dict:
+    """The report of :func:`evaluate_all` over ``targets``, from the per-target reports its
+    shards wrote in ``views_dir`` (same arguments as theirs, ``executor`` and ``shard`` aside).
+
+    Raises
+    ------
+    VibrInputError
+        One line naming every target without a report made with these settings and this code.
+    """
+    settings = list(settings)
+    views_dir = Path(views_dir)
+    scene_path = str(Path(scene_path).resolve())
+    t0 = time.perf_counter()
+    tasks = _tasks(scene_path, list(targets), settings, views_dir, scale, eval_kw)
+    reports = [_report_done(t) for t in tasks]
+    missing = [t["target"] for t, r in zip(tasks, reports) if r is None]
+    if missing:
+        raise VibrInputError(f"{len(missing)} of {len(tasks)} targets have no report with these settings in "
+                             f"{views_dir}: {', '.join(missing)}; evaluate them (their shards again) before "
+                             "assembling")
+    # read from the shards' files: none was skipped by the shard that wrote it
+    reports = [{k: v for k, v in r.items() if k != "skipped"} for r in reports]
+    return _report(reports, scene_path, scale, list(targets), settings, views_dir, t0)
+
+
+def _report(reports, scene_path, scale, targets, settings, views_dir, t0) -> dict:
+    """The leave-one-out report (:func:`evaluate_all`'s Returns) of the per-target reports."""
     return {
-        "scene": reports[0]["scene"],
+        "scene": reports[0]["scene"] if reports else Path(scene_path).name,
         "scene_path": scene_path,
         "scale": float(scale),
         "targets": targets,

@@ -21,13 +21,13 @@ from .depth import (
 )
 from .proxy import FALLBACK_MODES, apply_fallback, fallback_depth, planar_proxy, plane_depth, sphere_proxy
 from .samples import Samples
-from .sampling import SampleOptions, compute_samples, prepare_depth
+from .sampling import SampleOptions, compute_samples, prepare_depth, target_depth
 from .transfer import ensure_source_depth, transfer_depth
 from .visibility import new_zbuffers, reduce_zbuffers, splat_mesh, splat_zbuffer, visibility_mask
 from .warp import warp_constants, warp_points, warp_view
 
 __all__ = [
-    "Samples", "compute_samples", "SampleOptions", "prepare_depth", "ensure_source_depth", "transfer_depth",
+    "Samples", "compute_samples", "SampleOptions", "prepare_depth", "target_depth", "ensure_source_depth", "transfer_depth",
     "planar_proxy", "plane_depth", "sphere_proxy", "fallback_depth", "apply_fallback", "FALLBACK_MODES", "depth_derivatives", "disparity_to_depth", "fill_depth_holes",
     "radial_to_orthogonal", "radial_to_orthogonal_derivatives", "warp_constants", "warp_points",
     "warp_view", "new_zbuffers", "splat_zbuffer", "splat_mesh", "reduce_zbuffers", "visibility_mask",

@@ -265,7 +265,9 @@ def compute_samples(sources: Scene, target, *, options: SampleOptions | None = N
         ``fill_holes`` / ``edge_rel``: target-independent, computed once per source by
         callers rendering many targets (:mod:`vibr.paths.flythrough`).
     return_zbuffer : bool
-        Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``.
+        Put the target depth map z_u (+inf where empty) in ``samples.meta["zbuffer"]``, and
+        the fallback proxy's where no known surface lands in ``meta["zbuffer_fallback"]``
+        (when a view has a fallback; :func:`target_depth` combines them).
     stop : callable, optional
         Polled after the z-buffer and after the visibility test; True raises
         :class:`vibr.errors.RenderStopped` (:func:`vibr.render.render`'s ``stop``).
@@ -295,6 +297,7 @@ def compute_samples(sources: Scene, target, *, options: SampleOptions | None = N
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
         known, proxy = _split_fallback(_prepare_views(sources, cam, o.fill_holes, o.edge_rel, prepared), o.edge_rel)
+    zproxy = None
     with _Timer(times, cpu, "zbuffer"):
         zbuf = _target_zbuffer(known, cam.shape, o.max_quad_px, o.splat_mode)
         if proxy:
@@ -334,7 +337,23 @@ def compute_samples(sources: Scene, target, *, options: SampleOptions | None = N
     out.meta["target_centre"] = np.asarray(cam.centre, np.float64)
     if return_zbuffer:
         out.meta["zbuffer"] = zbuf
+        if zproxy is not None:
+            out.meta["zbuffer_fallback"] = zproxy
     return out
+
+
+def target_depth(samples: Samples) -> np.ndarray | None:
+    """The target's depth map as the geometry stage computed it: its z-buffer (orthogonal
+    depth in scene units of the nearest source surface at each pixel centre, the known
+    geometry first, the fallback proxy where none lands), float32, NaN where no surface
+    lands. None when ``samples`` were computed without ``return_zbuffer``."""
+    z = samples.meta.get("zbuffer")
+    if z is None:
+        return None
+    zf = samples.meta.get("zbuffer_fallback")
+    if zf is not None:
+        z = np.where(np.isfinite(z), z, zf)
+    return np.where(np.isfinite(z), z, np.nan).astype(np.float32)
 
 
 def _checked_fields(grad_scheme, grad_model, keep):

@@ -23,7 +23,11 @@ Per frame (:func:`render_frame`, a top-level function of ``(context, frame index
    with a key (:func:`frame_key`: the camera, the sources, the method and its parameters,
    vibr's code) in a text chunk. A frame already there with the same key is skipped unless
    ``overwrite``; one rendered for another path or other settings is rendered again.
-4. with ``uncertainty``, the frame's σ map (:mod:`vibr.render.uncertainty`, grey levels)
+4. with ``depth_dir``, the frame's depth (:func:`vibr.geometry.target_depth`, the
+   geometry stage's z-buffer brought to the frame's pixels as :attr:`vibr.render.RenderResult.depth`)
+   as ``depth_NNNNN.npy`` (float32, scene units, 0 where no surface: what
+   :func:`vibr.io.depthfiles.read_depth` reads), written before the frame;
+5. with ``uncertainty``, the frame's σ map (:mod:`vibr.render.uncertainty`, grey levels)
    as ``sigma_NNNNN.npz`` beside it (float16, with the frame's key); the σ video is drawn
    once every frame is there, on one colour scale for the whole path
    (:func:`write_sigma_video`), so that its colours mean the same in every frame.
@@ -33,6 +37,12 @@ the sources' depth, the world points of every source used to rank views (a strid
 subsample of each depth map, backprojected) and each source's depth slopes
 (:func:`vibr.geometry.prepare_depth`, passed to :func:`compute_samples` as ``prepared``);
 measured in docs/explanation/flythrough.md.
+
+A path can be split over independent processes (a job array): with ``shard=(I, N)`` a
+process renders only the frames ``f`` with ``f % N == I - 1`` (:func:`vibr.executor.shard_of`)
+and writes no video; :func:`assemble_path` then encodes the video from the complete frames
+folder. The frames do not depend on the shard: each is a function of the path, the sources
+and the settings only, so the assembled video is the one a single process makes.
 """
 
 from __future__ import annotations
@@ -51,12 +61,13 @@ from .._runtime.checkpoint import code_fingerprint, digest
 from ..camera import Camera
 from ..errors import VibrInputError
 from ..eval.sigma_figures import sigma_figure, sigma_scale
-from ..executor import auto_workers, parse_executor, run_tasks
-from ..geometry import compute_samples, prepare_depth
+from ..executor import auto_workers, parse_executor, parse_shard, run_tasks, shard_of
+from ..geometry import compute_samples, prepare_depth, target_depth
 from ..geometry.depth import DEFAULT_EDGE_REL
 from ..geometry.resolution import SUPERSAMPLE_MAX, check_supersample
 from ..geometry.selection import depth_points, rank_views, select_views
 from ..io import read_image, write_image
+from ..io.depthfiles import write_depth
 from ..io.images import read_png_text
 from ..io.outputs import check_frames_folder, check_not_input, read_marker, write_marker
 from ..io.video import VIDEO_FORMATS, check_video_options, is_video, write_video
@@ -71,10 +82,15 @@ from .camera_path import scene_centre, scene_points
 logger = logging.getLogger(__name__)
 
 __all__ = ["FrameContext", "FlyOptions", "FlyResult", "render_path", "render_frame", "view_weights", "auto_executor",
-           "frame_name", "sigma_name", "check_path_sees_scene", "write_sigma_video"]
+           "frame_name", "sigma_name", "depth_name", "check_path_sees_scene", "write_sigma_video", "assemble_path"]
 
 FRAME_PATTERN = "frame_{:05d}.png"
 SIGMA_PATTERN = "sigma_{:05d}.npz"
+DEPTH_PATTERN = "depth_{:05d}.npy"
+
+
+def depth_name(i: int) -> str:
+    return DEPTH_PATTERN.format(i)
 
 
 def sigma_name(i: int) -> str:
@@ -110,6 +126,7 @@ class FrameContext:
     job_key: str = ""  # what every frame depends on besides its camera (:func:`job_key`)
     uncertainty: bool = False  # also each frame's σ map (sigma_NNNNN.npz)
     supersample: object = "auto"  # sources finer than a frame (vibr.render.fine_grid)
+    depth_dir: str = ""  # also each frame's depth (depth_NNNNN.npy) in this folder
 
     def __post_init__(self):
         # the optional sample fields the method reads (the footprint PSF's Jacobians), once
@@ -181,6 +198,8 @@ def frame_done(ctx: FrameContext, i: int, key: str | None = None) -> bool:
 
     key = frame_key(ctx, i) if key is None else key
     if read_png_text(os.path.join(ctx.frames_dir, frame_name(i))).get(FRAME_KEY) != key:
+        return False
+    if ctx.depth_dir and not os.path.isfile(os.path.join(ctx.depth_dir, depth_name(i))):
         return False
     return not ctx.uncertainty or _sigma_key(os.path.join(ctx.frames_dir, sigma_name(i))) == key
 
@@ -264,6 +283,8 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     if not ctx.overwrite and frame_done(ctx, i, key):
         return {"index": i, "skipped": True, "seconds": 0.0}
     t0 = time.perf_counter()
+    if ctx.depth_dir:  # a frame on disk says its depth is its own: the stale frame goes first
+        _remove_stale_frame(out)
     cam = ctx.cameras[i]
     tm = {}
     w = view_weights(ctx.sources, cam, ctx.n_views, blend=ctx.blend,
@@ -277,7 +298,8 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     try:
         sub, fine, prepared, plan = fine_grid(sub, cam, ctx.supersample, ctx.prepared or None,
                                               [(ctx.method, ctx.params)])
-        samples = compute_samples(sub, fine, prepared=prepared, **ctx.geometry_kw)
+        samples = compute_samples(sub, fine, prepared=prepared, return_zbuffer=bool(ctx.depth_dir),
+                                  **ctx.geometry_kw)
     except VibrInputError as exc:
         return {"index": i, "skipped": False, "seconds": 0.0, "failed": f"{exc.problem} (camera {cam})"}
     tm["geometry"] = -t + (t := time.perf_counter())
@@ -286,8 +308,12 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
     res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
                          target_centre=cam.centre, uncertainty=ctx.uncertainty,
-                         **grid_params(ctx.method, ctx.params, plan)).on_target(plan, cam.shape)
+                         **grid_params(ctx.method, ctx.params, plan))
+    res.depth = target_depth(samples)
+    res = res.on_target(plan, cam.shape)
     tm["render"] = -t + (t := time.perf_counter())
+    if ctx.depth_dir:
+        write_depth(os.path.join(ctx.depth_dir, depth_name(i)), res.depth)
     if ctx.uncertainty:  # first: a colour frame on disk with its key says the frame is done
         _write_sigma_frame(os.path.join(ctx.frames_dir, sigma_name(i)), res.uncertainty, key)
     write_image(out, res.image, bits=8, text={FRAME_KEY: key})
@@ -298,6 +324,12 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
             "coarsen": plan.coarsen,
             "views": [v.name for v in views], "weights": ws.tolist(), "times": tm, "samples": len(samples),
             "coverage": float(res.coverage.mean()), "iterations": res.iterations}
+
+
+def _remove_stale_frame(path) -> None:
+    """Remove a frame vibr wrote (it carries a frame key) before it is rendered again."""
+    if os.path.isfile(path) and FRAME_KEY in read_png_text(path):
+        os.remove(path)
 
 
 def _same(x):
@@ -321,6 +353,8 @@ class FlyResult:
     times: dict = field(default_factory=dict)
     frames: list = field(default_factory=list)
     engine: str = "in this process"  # where the frames ran: "on N processes", "on Dask (ADDRESS)", ...
+    shard: tuple | None = None  # (I, N): this process rendered shard I of N, no video
+    depth_dir: str | None = None  # where each frame's depth went (depth_NNNNN.npy)
 
     @property
     def seconds_per_frame(self) -> float:
@@ -444,6 +478,11 @@ class FlyOptions:
         the engine is named (not on "auto").
     progress : bool
         A bar per frame (on a terminal, :func:`vibr.progress.progress`).
+    shard : (I, N) or "I/N", optional
+        Render only shard ``I`` of ``N`` (frames ``f % N == I - 1``, module docstring) and
+        write no video: :func:`assemble_path` encodes it once every shard is done.
+    depth_out : path, optional
+        A folder for each frame's depth, ``depth_NNNNN.npy`` (module docstring, step 4).
     check_scene : bool
         Refuse a path whose cameras see none of the scene (:func:`check_path_sees_scene`).
     """
@@ -466,6 +505,8 @@ class FlyOptions:
     executor: object = "auto"
     progress: bool = True
     check_scene: bool = True
+    shard: object = None
+    depth_out: object = None
 
 
 def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = None, **kw) -> FlyResult:
@@ -486,7 +527,8 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
 
     t_start = time.perf_counter()
     o = replace(options or FlyOptions(), **kw)
-    o = replace(o, supersample=check_supersample(o.supersample))
+    o = replace(o, supersample=check_supersample(o.supersample),
+                shard=None if o.shard is None else parse_shard(o.shard))
     fdir, video, fps = _checked_outputs(scene, camera_path, out, o)
     cams = list(camera_path.cameras)
     if o.check_scene:
@@ -501,20 +543,25 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
     t_depth = time.perf_counter() - t0
     fdir.mkdir(parents=True, exist_ok=True)
     _mark_frames(fdir, len(cams), o.uncertainty is not None)
+    if o.depth_out is not None:
+        Path(o.depth_out).mkdir(parents=True, exist_ok=True)
     ctx = FrameContext(sources, cams, str(fdir), o.method, dict(o.params or {}), o.n_views, o.blend,
                        o.overwrite, dict(o.geometry_kw or {}), uncertainty=o.uncertainty is not None,
-                       supersample=o.supersample)
+                       supersample=o.supersample, depth_dir="" if o.depth_out is None else os.fspath(o.depth_out))
     prepare_sources(ctx)
     t_first = time.perf_counter() - t_start
     t0 = time.perf_counter()
-    frames, engine = _run_frames(ctx, len(cams), o.executor, o.progress)
+    mine = shard_of(len(cams), o.shard)
+    frames, engine = _run_frames(ctx, mine, o.executor, o.progress)
     t_frames = time.perf_counter() - t0
     _check_frames_rendered(frames, fdir, camera_path.meta.get("file"))
     rendered = sum(not f["skipped"] for f in frames)
-    res = FlyResult(len(cams), rendered, len(cams) - rendered, str(fdir), None,
-                    depth_source=sources.meta.get("depth_source", ""), frames=frames, engine=engine)
+    res = FlyResult(len(cams), rendered, len(mine) - rendered, str(fdir), None,
+                    depth_source=sources.meta.get("depth_source", ""), frames=frames, engine=engine,
+                    shard=o.shard, depth_dir=None if o.depth_out is None else os.fspath(o.depth_out))
     t0 = time.perf_counter()
-    _write_videos(res, fdir, len(cams), video, o.uncertainty, fps, o.crf)
+    if o.shard is None:  # a shard's frames are encoded by assemble_path
+        _write_videos(res, fdir, len(cams), video, o.uncertainty, fps, o.crf)
     t_video = time.perf_counter() - t0
     res.times = {"depth": t_depth, "to_first_frame": t_first, "frames": t_frames, "video": t_video,
                  "total": time.perf_counter() - t_start,
@@ -541,6 +588,67 @@ def _mark_frames(fdir: Path, n: int, uncertainty: bool) -> None:
         write_marker(fdir, sorted(set(names) | (read_marker(fdir) or set())))
     except OSError as exc:
         raise VibrInputError(f"cannot write in the frames folder ({exc.strerror or exc})", fdir) from None
+
+
+def assemble_path(camera_path, out, *, frames_dir=None, fps: float | None = None, crf: int = 18,
+                  uncertainty=None, depth_out=None) -> FlyResult:
+    """The video of a path whose frames were rendered by shards (:class:`FlyOptions`'s
+    ``shard``): every frame of ``camera_path`` read from the frames folder and encoded.
+
+    Parameters
+    ----------
+    camera_path : vibr.paths.camera_path.CameraPath
+        The path the shards rendered (its number of frames and frame rate).
+    out : path
+        The video (:data:`vibr.io.video.VIDEO_FORMATS`).
+    frames_dir, fps, crf, uncertainty
+        As :class:`FlyOptions` (the frames folder defaults to ``OUT_frames/``).
+    depth_out : path, optional
+        The folder of the frames' depth: checked complete too.
+
+    Raises
+    ------
+    VibrInputError
+        One line naming every frame (σ map, depth map) not in the folder, or a frame there
+        that vibr did not render (no frame key); nothing is written then.
+    """
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    if not is_video(out):
+        raise VibrInputError(f"the assembled output is a video ({', '.join(VIDEO_FORMATS)})", out)
+    fdir, video = _frames_dir_for(out, frames_dir)
+    n = len(camera_path.cameras)
+    fps = camera_path.fps if fps is None else fps
+    for v in (video, uncertainty):
+        if v is not None:
+            check_video_options(v, fps=fps, crf=crf)
+    wanted = [(fdir / frame_name(i), i) for i in range(n)]
+    if uncertainty is not None:
+        wanted += [(fdir / sigma_name(i), i) for i in range(n)]
+    if depth_out is not None:
+        wanted += [(Path(depth_out) / depth_name(i), i) for i in range(n)]
+    missing = sorted({i for p, i in wanted if not p.is_file()
+                      or (p.suffix == ".png" and FRAME_KEY not in read_png_text(p))})
+    if missing:
+        raise VibrInputError(f"{len(missing)} of {n} frames are missing in {fdir}: {_index_runs(missing)}; "
+                             "render them (their shards again, or the whole path) before assembling",
+                             camera_path.meta.get("file"))
+    res = FlyResult(n, 0, n, str(fdir), None, frames=[], engine="assembled from the frames folder",
+                    depth_dir=None if depth_out is None else os.fspath(depth_out))
+    _write_videos(res, fdir, n, video, uncertainty, fps, crf)
+    res.times = {"depth": 0.0, "frames": 0.0, "video": time.perf_counter() - t0, "total": time.perf_counter() - t0}
+    return res
+
+
+def _index_runs(idx) -> str:
+    """Sorted indices as runs: ``0, 3-5, 9``."""
+    runs, start = [], idx[0]
+    for a, b in zip(idx, list(idx[1:]) + [None]):
+        if b != a + 1:
+            runs.append(str(a) if a == start else f"{start}-{a}")
+            start = b
+    return ", ".join(runs)
 
 
 def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
@@ -588,13 +696,8 @@ def _check_frames_rendered(frames: list, fdir, source) -> None:
     if not bad:
         return
     idx = [f["index"] for f in bad]
-    runs, start = [], idx[0]
-    for a, b in zip(idx, idx[1:] + [None]):
-        if b != a + 1:
-            runs.append(str(a) if a == start else f"{start}-{a}")
-            start = b
     raise VibrInputError(f"{len(bad)} of {len(frames)} frames saw nothing: frame{'s' if len(bad) > 1 else ''} "
-                         f"{', '.join(runs)} (frame {idx[0]}: {bad[0]['failed']}){_SEES_NOTHING}; the other "
+                         f"{_index_runs(idx)} (frame {idx[0]}: {bad[0]['failed']}){_SEES_NOTHING}; the other "
                          f"frames are in {fdir}", source)
 
 
@@ -621,12 +724,12 @@ def auto_executor(ctx: FrameContext, n_todo: int):
     return n if n > 1 else None
 
 
-def _run_frames(ctx: FrameContext, n: int, executor, progress: bool) -> tuple[list, str]:
+def _run_frames(ctx: FrameContext, indices: list, executor, progress: bool) -> tuple[list, str]:
     """The frames' summaries in frame order, and where they ran (:attr:`FlyResult.engine`).
     Frames already on disk with their key are skipped here, before any task is made: the
     progress line and its time left then count only the frames still to render."""
-    done = [] if ctx.overwrite else [i for i in range(n) if frame_done(ctx, i)]
-    todo = sorted(set(range(n)) - set(done))
+    done = [] if ctx.overwrite else [i for i in indices if frame_done(ctx, i)]
+    todo = sorted(set(indices) - set(done))
     skipped = [{"index": i, "skipped": True, "seconds": 0.0} for i in done]
     if executor == "auto":
         executor = auto_executor(ctx, len(todo))

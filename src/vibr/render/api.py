@@ -10,7 +10,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import VibrInputError, check_stop
-from ..geometry import compute_samples, ensure_source_depth
+from ..geometry import compute_samples, ensure_source_depth, target_depth
 from ..geometry.resample import scaled_view
 from ..geometry.resolution import ResolutionPlan, check_supersample, resolution_plan
 from ..geometry.samples import Samples
@@ -154,7 +154,7 @@ def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample, sto
     src, grid, gkw["prepared"], plan = fine_grid(src, cam, supersample, gkw.get("prepared"), [(m, params)])
     check_render_memory([v.camera.shape for v in src.views], grid.shape, cam.source,  # before allocating
                         keep=gkw["keep"], output_shape=cam.shape)
-    return src, compute_samples(src, grid, stop=stop, **gkw), plan
+    return src, compute_samples(src, grid, stop=stop, return_zbuffer=True, **gkw), plan
 
 
 def render(sources: Scene, target: View | Camera, method="gradient", *,
@@ -252,6 +252,7 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
                          verbose=verbose, uncertainty=uncertainty, stop=stop, **params)
+    res.depth = target_depth(samples)
     res = res.on_target(plan, cam.shape)
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..geometry.resample import resize_image, resize_mask
+from ..geometry.resample import resize_depth, resize_image, resize_mask
 
 __all__ = ["RenderResult"]
 
@@ -49,6 +49,13 @@ class RenderResult:
     uncertainty : (H, W) float32 or None
         Per-pixel standard deviation, grey levels of ``scale``, when rendered with
         ``uncertainty=True`` (:mod:`vibr.render.uncertainty`; docs/explanation/renderer.md).
+    depth : (H, W) float32 or None
+        The target's depth in scene units (orthogonal, as vibr's depth maps): the geometry
+        stage's z-buffer (:func:`vibr.geometry.sampling.target_depth`), NaN where no source
+        surface lands; None when the render was given its samples. From a finer grid, each
+        pixel's block's nearest depth; from a coarser one, the nearest grid pixel's
+        (:func:`vibr.geometry.resample.resize_depth`): a depth edge never makes an
+        in-between depth.
     """
 
     image: np.ndarray
@@ -65,6 +72,7 @@ class RenderResult:
     iterations: int = 0
     power_iterations: int = 0
     uncertainty: np.ndarray | None = None
+    depth: np.ndarray | None = None
 
     def box_reduced(self, k: int) -> "RenderResult":
         """The result of a render on a grid ``k`` times finer, brought back to the target's
@@ -82,8 +90,11 @@ class RenderResult:
 
         mean = lambda a: None if a is None else blocks(a).astype(np.float64).mean(axis=(1, 3)).astype(np.float32)  # noqa: E731
         unc = None if self.uncertainty is None else np.sqrt(mean(np.square(self.uncertainty, dtype=np.float64)))
+        # the nearest surface of each block (fmin skips NaN; NaN where the block saw none)
+        depth = None if self.depth is None else np.fmin.reduce(np.fmin.reduce(blocks(self.depth), axis=3), axis=1)
         return replace(self, image=mean(self.image), init=mean(self.init), coverage=blocks(self.coverage).all(axis=(1, 3)),
-                       uncertainty=None if unc is None else unc.astype(np.float32), params=dict(self.params))
+                       uncertainty=None if unc is None else unc.astype(np.float32), params=dict(self.params),
+                       depth=depth)
 
     def enlarged(self, shape) -> "RenderResult":
         """The result of a render on a coarser grid brought to ``shape = (h, w)`` (the grid of
@@ -100,8 +111,9 @@ class RenderResult:
             return None if a is None else np.clip(resize_image(a, shape, order=3, quantise=False), 0.0, 1.0)
 
         unc = None if self.uncertainty is None else resize_image(self.uncertainty, shape, quantise=False)
+        depth = None if self.depth is None else resize_depth(self.depth, shape)
         return replace(self, image=cubic(self.image), init=cubic(self.init), coverage=resize_mask(self.coverage, shape),
-                       uncertainty=unc, params=dict(self.params))
+                       uncertainty=unc, params=dict(self.params), depth=depth)
 
     def on_target(self, plan, shape) -> "RenderResult":
         """The result of a render on ``plan``'s grid (:func:`vibr.render.fine_grid`; None: the
