@@ -104,9 +104,18 @@ def test_global_options_after_the_subcommand(tmp_path, capsys):
     assert parser.parse_args(["path", "orbit", "S", "-o", "p.json"]).verbose is False
 
 
+def _all_subcommands(parser):
+    """Every subcommand's parser, nested ones (``vibr path KIND``) included."""
+    out = {}
+    for name, sub in subcommands(parser).items():
+        out[name] = sub
+        out.update({f"{name} {k}": s for k, s in _all_subcommands(sub).items()})
+    return out
+
+
 def test_scene_is_spelt_scene_in_every_usage():
     seen = 0
-    for name, sub in subcommands(build_parser()).items():
+    for name, sub in _all_subcommands(build_parser()).items():
         scenes = [a for a in sub._actions if not a.option_strings and a.dest == "scene"]
         words = sub.format_usage().split()
         assert "scene" not in words, name
@@ -127,7 +136,7 @@ def _kind(action) -> str | None:
 
 def test_no_option_is_a_count_in_one_subcommand_and_a_list_in_another():
     kinds: dict[str, dict[str, str]] = {}
-    for name, sub in subcommands(build_parser()).items():
+    for name, sub in _all_subcommands(build_parser()).items():
         for action in sub._actions:
             if action.help is argparse.SUPPRESS or _kind(action) is None:  # a deprecated alias is hidden
                 continue
@@ -136,7 +145,7 @@ def test_no_option_is_a_count_in_one_subcommand_and_a_list_in_another():
     mixed = {flag: by for flag, by in kinds.items() if len(set(by.values())) > 1}
     assert not mixed, mixed
     assert set(kinds["--views"].values()) == {"count"} and len(kinds["--views"]) == 3  # render, eval, view
-    assert {kinds[f][c] for f, c in (("--sources", "render"), ("--through", "path"), ("--targets", "depth"),
+    assert {kinds[f][c] for f, c in (("--sources", "render"), ("--through", "path interpolate"), ("--targets", "depth"),
                                      ("--only", "info"), ("--only", "convert"), ("--exclude", "depth"))} == {"list"}
 
 
