@@ -99,3 +99,16 @@ def test_howto_commands_run(page, howto_inputs, tmp_path):
         r = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, env=env, capture_output=True, text=True,
                            timeout=900)
         assert r.returncode == 0, f"{page.name} python block {i} failed:\n{r.stderr[-2000:]}"
+
+
+def test_every_relative_link_resolves():
+    """A link of the README, the contributors' pages or docs/ to a file of the repository
+    names one that exists (a page moved or renamed breaks no reader's path)."""
+    pages = [_REPO / "CONTRIBUTING.md", _REPO / "CHANGELOG.md", _REPO / "benchmarks" / "README.md", *_DOCS]
+    bad = []
+    for page in pages:
+        for m in re.finditer(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", page.read_text(encoding="utf-8")):
+            target = m.group(1)
+            if not target.startswith(("http://", "https://", "mailto:")) and not (page.parent / target).exists():
+                bad.append(f"{page.relative_to(_REPO)}: {target}")
+    assert not bad, "links to missing files:\n" + "\n".join(bad)
