@@ -12,6 +12,15 @@ process, and writes their figures with a description of the machine that ran the
     python3 benchmarks/perf/run_all.py                     # prints the page (writes no tracked file)
     python3 benchmarks/perf/run_all.py --write-docs        # docs/results/performance.md
     python3 benchmarks/perf/run_all.py --size 256 --repeat 1 --only render,memory   # a quick check
+    python3 benchmarks/perf/run_all.py --check             # hold this machine to the recorded ratios
+
+``--write-docs`` also records the run's machine-independent figures in
+docs/results/performance.json: the solve's and the whole render's time over the memory-traffic
+floor measured in the same process (a ratio, so that a machine of other bandwidth compares),
+the peak memory of the render and the memory a render adds. ``--check`` runs the benchmarks
+again and exits 1, in one line per figure, when a ratio exceeds the recorded one by more than
+``--tolerance`` (1.5: a shared machine's noise within one run is well under that) or a memory
+figure differs from the recorded one by more than 15 %.
 
 Takes minutes (numba compiles the kernels on a first run). A benchmark that fails makes the
 run exit 1 with a one-line reason, and no page is written.
@@ -31,8 +40,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the
 from _common import RESULTS, ROOT, data_dir, machine_description  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-#: the generated page (--write-docs)
+#: the generated page (--write-docs) and the figures --check holds
 PAGE = RESULTS / "performance.md"
+RECORD = RESULTS / "performance.json"
+#: how far a memory figure may move from the recorded one (--check)
+MEMORY_TOLERANCE = 0.15
 TOOLS = ("render", "depth", "memory")
 
 
@@ -85,13 +97,47 @@ def page(a, machine, outputs, render, memory) -> str:
     return "\n".join(L).rstrip("\n") + "\n"
 
 
+def figures(render, memory) -> dict:
+    """The figures ``--check`` holds: ratios to the floor measured in the same run, memory."""
+    out = {}
+    if render:
+        m = render["main"]
+        out["solve_over_floor"] = float(render["solve_over_floor"])
+        out["total_over_floor"] = float(m["total"]) / float(m["floor_s"])
+        out["peak_rss_mb"] = float(render["peak_rss_mb"])
+    if memory:
+        out["memory_growth_mb"] = float(memory["growth_mb"])
+    return out
+
+
+def check(now: dict, recorded: dict, tolerance: float) -> list[str]:
+    """One line per figure outside its tolerance (ratios may only grow by ``tolerance``;
+    memory may move by :data:`MEMORY_TOLERANCE` either way)."""
+    bad = []
+    for k, ref in recorded.items():
+        if k not in now:
+            continue
+        v = now[k]
+        if k.endswith("_over_floor"):
+            if v > ref * tolerance:
+                bad.append(f"{k} {v:.2f} exceeds the recorded {ref:.2f} by more than {tolerance:g}x")
+        elif abs(v - ref) > MEMORY_TOLERANCE * ref:
+            bad.append(f"{k} {v:.0f} differs from the recorded {ref:.0f} by more than {MEMORY_TOLERANCE:.0%}")
+    return bad
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", type=int, default=512, help="target side of the render and memory runs (default 512)")
     ap.add_argument("--repeat", type=int, default=3, help="timed repetitions of each (default 3)")
     ap.add_argument("--only", default=",".join(TOOLS), help=f"comma list among {', '.join(TOOLS)} (default all)")
     ap.add_argument("--out", default=str(ROOT / "out" / "perf"), help="JSON reports (default out/perf)")
-    ap.add_argument("--write-docs", action="store_true", help="write docs/results/performance.md")
+    ap.add_argument("--write-docs", action="store_true",
+                    help="write docs/results/performance.md and the figures --check holds (performance.json)")
+    ap.add_argument("--check", action="store_true",
+                    help="exit 1 when a ratio or memory figure is outside its tolerance of the recorded one")
+    ap.add_argument("--tolerance", type=float, default=1.5,
+                    help="how far a time-over-floor ratio may grow in --check (default 1.5x)")
     a = ap.parse_args(argv)
     a.only = [x for x in a.only.split(",") if x]
     bad = sorted(set(a.only) - set(TOOLS))
@@ -117,7 +163,19 @@ def main(argv=None) -> None:
         memory = json.loads(js.read_text())
         outputs.append(("Memory", f"render_memory.py {a.size}", (f"```\n{res[0].strip()}\n```", res[1])))
     text = page(a, machine_description(), outputs, render, memory)
+    if a.check:
+        if not RECORD.is_file():
+            sys.exit(f"run_all.py: no recorded figures ({RECORD.relative_to(ROOT)}): run --write-docs first")
+        recorded = json.loads(RECORD.read_text())
+        if recorded.get("size") != a.size:
+            sys.exit(f"run_all.py: the figures were recorded at --size {recorded.get('size')}, not {a.size}")
+        bad = check(figures(render, memory), recorded["figures"], a.tolerance)
+        for line in bad:
+            print(f"run_all.py: {line}", file=sys.stderr)
+        print(f"{len(bad)} of {len(recorded['figures'])} figures outside their tolerance", file=sys.stderr)
+        sys.exit(1 if bad else 0)
     if a.write_docs:
+        RECORD.write_text(json.dumps({"size": a.size, "figures": figures(render, memory)}, indent=1) + "\n")
         PAGE.parent.mkdir(parents=True, exist_ok=True)
         PAGE.write_text(text)
         print(f"wrote {PAGE.relative_to(ROOT)}", file=sys.stderr)
