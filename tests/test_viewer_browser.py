@@ -107,8 +107,10 @@ def test_viewer_in_chromium(small_scene, tmp_path):
                 # arrives once the browser echoed it (earlier renders: its default camera)
                 cam0 = small_scene.views[0].camera
                 deadline = time.monotonic() + 30
+                # (and, once the panel has collapsed to its rail, at the canvas's 4:3)
                 while not (np.allclose(rec.camera.R, cam0.R, atol=1e-4)
-                           and np.allclose(rec.camera.centre, cam0.centre, atol=1e-4)):
+                           and np.allclose(rec.camera.centre, cam0.centre, atol=1e-4)
+                           and (rec.camera.width, rec.camera.height) == (128, 96)):
                     assert time.monotonic() < deadline, f"no render at view 0's camera: last {rec.camera}"
                     rec = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=30)
                     assert rec is not None

@@ -453,9 +453,8 @@ class Viewer:
     # ------------------------------------------------------------------ GUI
     def _add_gui(self) -> None:
         """The control panel, docked at the right so that it never covers the render (the
-        canvas is what is left of the window) and collapsed until the user opens it (at
-        1280 × 800 it took a quarter of the render), its rarely used controls in closed
-        folders."""
+        canvas is what is left of the window) and collapsed until the user opens it, its
+        rarely used controls in closed folders."""
         gui = self.server.gui
         s = self.settings
         g = self.gui

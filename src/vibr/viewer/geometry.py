@@ -235,8 +235,8 @@ def drag_gains(bounds: CameraBounds, fov: float) -> DragGains:
     """The gains that make the browser's camera moves fit the scene (``fov``: vertical, radians).
 
     viser's orbit controls turn the camera by 2π per canvas height dragged, about a look-at
-    point the viewer keeps at the scene's depth, whatever the scene: on a light field with a
-    baseline of a hundredth of its depth, 30 pixels turned the view by 13°. Here
+    point the viewer keeps at the scene's depth, whatever the scene: a drag of a few pixels
+    carried the camera out of a small-baseline capture. Here
 
     * a drag of the canvas height moves the camera across the capture (2 × spread): it
       travels ``spread / π`` per radian of the browser's orbit;
