@@ -19,11 +19,19 @@ import numpy as np
 import pytest
 
 from vibr.camera import Camera
-from vibr.viewer import (CameraState, LatestRequestWorker, Viewer, ViewerOptions, ViewSettings,
-                         camera_from_viser, image_size, viser_pose_from_camera)
+from vibr.viewer import (
+    CameraState,
+    LatestRequestWorker,
+    Viewer,
+    ViewerOptions,
+    ViewSettings,
+    camera_from_viser,
+    image_size,
+    viser_pose_from_camera,
+)
+from vibr.viewer.browser import free_port
 from vibr.viewer.convert import matrix_to_quat, quat_to_matrix
 from vibr.viewer.geometry import point_cloud
-from vibr.viewer.browser import free_port
 
 _SRC = str(Path(__file__).resolve().parents[1] / "src")
 
@@ -376,9 +384,8 @@ def test_point_cloud_shown_while_the_camera_moves(tiny_scene, monkeypatch, mode)
     follow the camera."""
     from types import SimpleNamespace
 
-    from vibr.viewer import app
-    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
     from vibr.errors import VibrInputError
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings, app
     from vibr.viewer.worker import Request
 
     monkeypatch.setattr(app, "send_background", lambda client, img, kind: None)
@@ -516,8 +523,7 @@ def test_a_camera_that_sees_nothing_is_said_in_the_panel(tiny_scene, monkeypatch
     from types import SimpleNamespace
 
     from vibr.camera import Camera
-    from vibr.viewer import app
-    from vibr.viewer import Viewer, ViewerOptions, ViewSettings
+    from vibr.viewer import Viewer, ViewerOptions, ViewSettings, app
     from vibr.viewer.worker import Request
 
     monkeypatch.setattr(app, "send_background", lambda client, img, kind: None)
@@ -541,8 +547,8 @@ def test_the_viewer_shows_where_the_render_can_be_trusted(tiny_scene, monkeypatc
     scale; the render itself is the same with or without it."""
     from types import SimpleNamespace
 
-    from vibr.render import render
     from vibr.eval.sigma_figures import colourise, sigma_scale
+    from vibr.render import render
     from vibr.viewer import app
     from vibr.viewer.renderer import ViewRenderer
     from vibr.viewer.worker import Request
@@ -620,3 +626,107 @@ def test_a_preview_is_rendered_in_one_outer_pass(tiny_scene):
     for method in ("savsr", "ulr"):
         st = ViewSettings(method=method, n_views=3)
         assert np.array_equal(r.render(cam, st, preview=True).image, r.render(cam, st).image)
+
+
+# ------------------------------------------------------------------ camera governor
+def _orbit(P, L, axis, angle):
+    """viser's orbit: the camera at ``P`` turned by ``angle`` about ``L`` (Rodrigues)."""
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    v = P - L
+    return L + v * np.cos(angle) + np.cross(a, v) * np.sin(angle) + a * (a @ v) * (1 - np.cos(angle))
+
+
+def _bounds(spread, depth=1.0):
+    from vibr.viewer.geometry import CameraBounds
+
+    return CameraBounds(np.zeros(3), spread, depth, np.array([0.0, 0.0, depth]), 0.4)
+
+
+@pytest.mark.parametrize("spread", [0.01, 0.05, 0.3])
+def test_a_drag_moves_the_scene_as_far_as_the_cursor(spread):
+    """A drag of 10 % of a 640 × 480 canvas (viser turns 2π per canvas height about its
+    look-at point, kept at the scene's depth) moves the scene's centre by 10 % of the width
+    whatever the baseline, and the camera by a fraction of the capture; a drag of the canvas
+    height crosses the capture and stops at its edge (ROOM × spread)."""
+    from vibr.viewer.geometry import ROOM, drag_gains, govern_move, look_at_wxyz
+
+    b = _bounds(spread)
+    fov, W, H = math.radians(50), 640, 480
+    g = drag_gains(b, fov)
+    assert 0 < g.orbit <= 1 and 0 < g.pan <= 1 and 0 < g.dolly <= 1
+    up, P0, L0 = np.array([0.0, -1.0, 0.0]), np.zeros(3), np.array([0.0, 0.0, 1.0])
+
+    def centre_x(P, f):
+        cam = camera_from_viser(look_at_wxyz(P, P + f, up), P, fov, W / H, W)
+        return cam.project(b.target[None])[0][0, 0]
+
+    P1 = _orbit(P0, L0, up, 2 * np.pi * 0.1 * W / H)
+    P, f, held = govern_move((P0, L0), (P1, L0), P0, L0, g, b)
+    assert not held
+    assert abs(abs(centre_x(P, f) - centre_x(P0, L0)) / W - 0.10) < 0.01
+    assert 0.1 * spread < np.linalg.norm(P - P0) < 0.5 * spread
+    # the canvas height in 100 reports: the camera goes across and stays at the edge
+    raw, p, f = (P0, L0), P0, L0
+    for _ in range(100):
+        nxt = (_orbit(raw[0], raw[1], up, 2 * np.pi / 100), raw[1])
+        p, f, held = govern_move(raw, nxt, p, f, g, b)
+        raw = nxt
+    assert held and np.linalg.norm(p) == pytest.approx(ROOM * spread)
+
+
+def test_pan_and_dolly_move_at_the_capture_scale():
+    """A pan of the canvas height (viser: 2 depth tan(fov/2) at its look-at point) moves
+    the camera across the capture (2 × spread); a dolly all the way to the look-at point
+    (depth) too; a wide capture keeps viser's own moves."""
+    from vibr.viewer.geometry import drag_gains, govern_move
+
+    b, fov = _bounds(0.02, depth=2.0), math.radians(40)
+    g = drag_gains(b, fov)
+    P0, L0, f0 = np.zeros(3), np.array([0.0, 0.0, 2.0]), np.array([0.0, 0.0, 1.0])
+    shift = np.array([2 * 2.0 * math.tan(fov / 2) / 4, 0.0, 0.0])  # a quarter of the height
+    P, f, held = govern_move((P0, L0), (P0 + shift, L0 + shift), P0, f0, g, b)
+    assert np.allclose(P, [0.02 / 2, 0, 0]) and np.allclose(f, f0) and not held
+    P, f, held = govern_move((P0, L0), (P0 + 0.25 * (L0 - P0), L0), P0, f0, g, b)
+    assert np.allclose(P, [0, 0, 0.25 * 2 * 0.02]) and not held
+    wide = drag_gains(_bounds(5.0), fov)
+    assert (wide.orbit, wide.pan, wide.dolly) == (1.0, 1.0, 1.0)
+
+
+def test_the_camera_is_kept_near_the_capture_and_facing_the_scene():
+    """clamp_to_bounds puts a far position back on the ball of ROOM × spread and leaves one
+    inside; clamp_turn turns a view that looks away back to max_turn from the scene's
+    centre; look_at_wxyz poses a camera with no roll about up."""
+    from vibr.viewer.convert import quat_to_matrix
+    from vibr.viewer.geometry import ROOM, clamp_to_bounds, clamp_turn, look_at_wxyz
+
+    b = _bounds(0.1)
+    p, held = clamp_to_bounds([0.05, 0.0, 0.0], b)
+    assert not held and np.allclose(p, [0.05, 0, 0])
+    p, held = clamp_to_bounds([3.0, 4.0, 0.0], b)
+    assert held and np.allclose(p, np.array([0.6, 0.8, 0.0]) * ROOM * 0.1)
+    f, held = clamp_turn(np.zeros(3), np.array([0.0, 0.0, 1.0]), b)
+    assert not held
+    f, held = clamp_turn(np.zeros(3), np.array([1.0, 0.0, 0.0]), b)
+    assert held and math.isclose(math.acos(f @ [0, 0, 1]), b.max_turn) and f[0] > 0
+    up = np.array([0.0, -1.0, 0.0])
+    R = quat_to_matrix(look_at_wxyz([0, 0, 0], [1.0, -0.5, 2.0], up))
+    assert np.allclose(R[:, 2], np.array([1.0, -0.5, 2.0]) / np.linalg.norm([1.0, -0.5, 2.0]))
+    assert abs(R[:, 0] @ up) < 1e-12 and R[:, 1] @ up < 0  # no roll, upright
+
+
+def test_camera_bounds_of_a_scene(tiny_scene):
+    """camera_bounds: the cameras' mean centre, their largest distance from it, the points'
+    depth and median, and the input cameras' least half vertical field of view."""
+    from vibr.viewer.geometry import camera_bounds, scene_scale
+
+    P, _ = point_cloud(tiny_scene, 5000)
+    b = camera_bounds(tiny_scene, P)
+    C = np.array([v.camera.centre for v in tiny_scene.views])
+    assert np.allclose(b.centre, C.mean(axis=0))
+    assert b.spread == pytest.approx(np.max(np.linalg.norm(C - C.mean(axis=0), axis=1)))
+    assert b.depth == scene_scale(tiny_scene, P)
+    assert np.allclose(b.target, np.median(P.astype(np.float64), axis=0))
+    cam = tiny_scene.views[0].camera
+    assert b.max_turn == pytest.approx(math.atan2(cam.height / 2, cam.K[1, 1]))
+    moved = camera_bounds(tiny_scene, P, origin=C.mean(axis=0))
+    assert np.allclose(moved.centre, 0) and np.allclose(moved.target, b.target - C.mean(axis=0))

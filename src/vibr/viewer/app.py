@@ -27,14 +27,26 @@ from ..paths.camera_path import interpolate, orient_keys, write_camera_path
 from ..render.methods import METHODS
 from ..scene import Scene, View
 from .convert import camera_from_viser, viser_pose_from_camera
-from .geometry import display_origin, frustum_size, point_cloud, scene_scale, thumbnail, world_up
+from .geometry import (
+    CameraBounds,
+    camera_bounds,
+    display_origin,
+    drag_gains,
+    frustum_size,
+    govern_move,
+    look_at_wxyz,
+    point_cloud,
+    scene_scale,
+    thumbnail,
+    world_up,
+)
 from .renderer import SHOW, ViewRenderer, ViewSettings
 from .worker import LatestRequestWorker, Request
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "POINT_MODES", "check_port_free", "encode_png",
-           "send_background"]
+__all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "POINT_MODES", "HINTS", "check_port_free",
+           "encode_png", "send_background"]
 
 #: When the point cloud is drawn: while the camera moves (hidden once the preview of the
 #: camera's resting place is shown, or when the full-size render starts if no preview came
@@ -45,6 +57,16 @@ POINT_MODES = ("while moving", "always", "never")
 #: 0.004 until 2026-11-28; a browser without a GPU rasterises every point of the frames it
 #: draws after a move, which overlap the full render (docs/explanation/viewer.md, "The heap's top")
 POINT_SIDE = 0.002
+
+#: What each render control does, said in the panel when the pointer rests on it.
+HINTS = {
+    "gamma": "γ, the weight of the sources' gradients (method gradient). Up: sharper edges and "
+             "texture, and stronger ghost edges where sources disagree. Down: softer, smoother.",
+    "lam": "λ, the weight of total variation (grey levels 0-255). Up: less noise and fewer small "
+           "artefacts, flatter regions, fine texture lost. Down: more detail, more noise.",
+    "n_views": "the input views blended, the best ones for this camera. Up: fewer holes, slower, "
+               "blurrier where far views join in. Down: faster, more holes at the borders.",
+}
 
 _SOURCE_COLOUR = (255, 96, 0)
 _FRUSTUM_COLOUR = (60, 60, 60)
@@ -90,14 +112,34 @@ class CameraState:
 
     @classmethod
     def of(cls, cam) -> "CameraState":
+        """The state of viser's camera handle ``cam`` (or of one of its reports)."""
+        cam = getattr(cam, "_state", cam)  # one report: viser replaces it whole on the next
+        aspect = cam.image_width / cam.image_height if hasattr(cam, "image_width") else cam.aspect
         return cls(tuple(map(float, cam.wxyz)), tuple(map(float, cam.position)), float(cam.fov),
-                   float(cam.aspect))
+                   float(aspect))
 
     def camera(self, long_side: int, origin=None) -> Camera:
         """The vibr camera of this viewport, its long side ``long_side`` pixels; ``origin``:
         the world point the viewer's positions are relative to (:func:`display_origin`)."""
         pos = self.position if origin is None else np.add(self.position, origin)
         return camera_from_viser(self.wxyz, pos, self.fov, self.aspect, long_side)
+
+
+@dataclass
+class _Steer:
+    """The viewer's camera for one client, governed (:meth:`Viewer._govern`): ``position`` and
+    ``forward`` (display coordinates), the browser's last reported (position, look-at)
+    ``raw``, and the correction sent to the browser that it has not yet applied: the far
+    plane value ``pending`` that marks it and the (position, look-at) ``sent``."""
+
+    position: np.ndarray
+    forward: np.ndarray
+    raw: tuple | None = None
+    pending: float | None = None
+    sent: tuple | None = None
+    sent_at: float = 0.0
+    clamped: bool = False
+    jump: bool = False  # the pending correction is a jump (to an input camera): moves before it are void
 
 
 @dataclass
@@ -208,6 +250,9 @@ class Viewer:
         self._frustum_size = 0.1
         self.origin = display_origin(scene)  # positions in the browser are relative to it
         self.gui: dict[str, object] = {}
+        self.bounds: CameraBounds | None = None  # where the camera may go (display coordinates)
+        self._steers: dict[int, _Steer] = {}
+        self._markers = 0
         self._sent_event = threading.Condition()
         self.abandoned = 0  # renders stopped early because a newer camera arrived
 
@@ -293,6 +338,7 @@ class Viewer:
                                               precision="float32")
         else:
             self._points = None
+        self.bounds = camera_bounds(self.scene, P.astype(np.float64) + self.origin, self.origin)
         fsize = frustum_size(self.scene, size)
         self._frustum_size = fsize
         for v in self.scene.views:
@@ -321,44 +367,133 @@ class Viewer:
         (camera,), _ = orient_keys([camera], "snap", self.up)
         wxyz, pos, fov, _ = viser_pose_from_camera(camera)
         pos = pos - self.origin
+        forward = np.asarray(camera.optical_axis, np.float64)
+        look = pos + self._depth() * forward  # the orbit's centre: the scene, not a point near the camera
+        with self._lock:
+            marker = self._next_marker()
+            self._steers[getattr(client, "client_id", None)] = _Steer(pos, forward, pending=marker, sent=(pos, look),
+                                                                      sent_at=time.perf_counter(), jump=True)
         with client.atomic():
+            client.camera.far = marker
             client.camera.fov = fov
             client.camera.up_direction = tuple(self.up)
             client.camera.position = pos
             client.camera.wxyz = wxyz
+            client.camera.look_at = look
+        client.flush()
+
+    # ------------------------------------------------------------------ camera governor
+    def _depth(self) -> float:
+        return self.bounds.depth if self.bounds is not None else self._scale
+
+    def _next_marker(self) -> float:
+        """A far-plane value that marks the next correction sent to a browser (the browser
+        reports its far plane with every camera): two values taken in turn, far beyond the
+        scene, distinct from viser's default."""
+        self._markers += 1
+        return max(1000.0, 100.0 * self._depth()) * (1.0 + 1e-4 * (1 + self._markers % 2))
+
+    def _govern(self, cid: int, report) -> tuple["CameraState", tuple | None]:
+        """The camera to render for a client's camera report, and the correction to send it.
+
+        viser's orbit controls move at a fixed rate whatever the scene (2π per canvas height
+        dragged). Each reported move is scaled by :func:`.geometry.drag_gains` and kept
+        within :attr:`bounds` (:func:`.geometry.govern_move`); the browser is then moved to
+        the result, so its drawing of the cameras and points matches the render. A browser
+        keeps moving from its own camera until the correction arrives: its moves are counted
+        from its previous report until a report carries the correction's far-plane marker,
+        then from the correction. Returns (state, (position, look-at, marker) or None)."""
+        raw_state = CameraState.of(report)
+        if self.bounds is None or getattr(report, "look_at", None) is None:
+            return raw_state, None
+        P1 = np.asarray(report.position, np.float64)
+        L1 = np.asarray(report.look_at, np.float64)
+        if not np.all(np.isfinite(L1)) or np.allclose(L1, P1):
+            return raw_state, None
+        up = np.asarray(report.up_direction, np.float64)
+        t = time.perf_counter()
+        with self._lock:
+            sv = self._steers.get(cid)
+            if sv is None:
+                sv = self._steers[cid] = _Steer(P1, (L1 - P1) / np.linalg.norm(L1 - P1))
+            if sv.raw is not None or sv.pending is not None:
+                base = sv.raw
+                if sv.pending is not None and abs(float(report.far) - sv.pending) <= 1e-9 * sv.pending:
+                    base, sv.pending, sv.jump = sv.sent, None, False  # the browser moved to the correction
+                elif sv.pending is not None and t - sv.sent_at > 2.0:
+                    sv.pending, sv.jump = None, False  # lost: the browser's own camera from now on
+                elif sv.jump:
+                    base = None  # the browser's moves before it reached the input camera
+                if base is not None:
+                    gains = drag_gains(self.bounds, float(report.fov))
+                    sv.position, sv.forward, sv.clamped = govern_move(base, (P1, L1), sv.position, sv.forward,
+                                                                      gains, self.bounds)
+            sv.raw = (P1, L1)
+            f1 = (L1 - P1) / np.linalg.norm(L1 - P1)
+            if (np.linalg.norm(sv.position - P1) <= 1e-6 * self.bounds.depth
+                    and np.linalg.norm(sv.forward - f1) <= 1e-6):
+                sv.position, sv.forward = P1, f1  # in step with the browser
+                return raw_state, None
+            look = sv.position + self.bounds.depth * sv.forward
+            state = CameraState(tuple(map(float, look_at_wxyz(sv.position, look, up))),
+                                tuple(map(float, sv.position)), raw_state.fov, raw_state.aspect)
+            if sv.pending is not None:
+                return state, None
+            sv.pending, sv.sent, sv.sent_at = self._next_marker(), (sv.position, look), t
+            return state, (sv.position, look, sv.pending)
+
+    def _send_pose(self, client, correction) -> None:
+        position, look, marker = correction
+        with client.atomic():
+            client.camera.far = marker
+            client.camera.position = position
+            client.camera.look_at = look
         client.flush()
 
     # ------------------------------------------------------------------ GUI
     def _add_gui(self) -> None:
+        """The control panel, docked at the right so that it never covers the render (the
+        canvas is what is left of the window) and collapsed until the user opens it, its
+        rarely used controls in closed folders."""
         gui = self.server.gui
         s = self.settings
         g = self.gui
         n = len(self.scene)
-        g["method"] = gui.add_dropdown("method", METHODS, initial_value=s.method)
-        g["gamma"] = gui.add_slider("gamma", 0.0, 5.0, 0.05, s.gamma, hint="gradient-term weight")
-        g["lam"] = gui.add_number("lambda", s.lam, min=0.0, max=100.0, step=0.01, hint="TV weight ([0,255] scale)")
-        g["n_views"] = gui.add_slider("source views", 1, n, 1, min(s.n_views, n))
-        g["preview"] = gui.add_slider("preview size", 64, 768, 32, s.preview_long_side, hint="long side (px) while moving")
-        g["full"] = gui.add_number("full size", s.full_long_side, min=16, max=4096, step=16, hint="long side (px) when still")
-        g["show"] = gui.add_dropdown("show", tuple(SHOW), initial_value=s.show,
-                                     hint="; ".join(f"{k}: {v}" for k, v in SHOW.items()))
+        gui.main_panel.dock_right()
+        gui.main_panel.minimize()
+        g["status"] = gui.add_markdown("waiting for a camera")
+        with gui.add_folder("render"):
+            g["method"] = gui.add_dropdown("method", METHODS, initial_value=s.method,
+                                           hint="how the source views are blended (docs: explanation/method)")
+            g["gamma"] = gui.add_slider("edge sharpness (γ)", 0.0, 5.0, 0.05, s.gamma, hint=HINTS["gamma"])
+            g["lam"] = gui.add_number("smoothing (λ)", s.lam, min=0.0, max=100.0, step=0.01, hint=HINTS["lam"])
+            g["n_views"] = gui.add_slider("source views", 1, n, 1, min(s.n_views, n), hint=HINTS["n_views"])
+            g["show"] = gui.add_dropdown("show", tuple(SHOW), initial_value=s.show,
+                                         hint="; ".join(f"{k}: {v}" for k, v in SHOW.items()))
+        with gui.add_folder("display", expand_by_default=False):
+            g["preview"] = gui.add_slider("preview size", 64, 768, 32, s.preview_long_side,
+                                          hint="long side (px) while moving: up, sharper and slower previews")
+            g["full"] = gui.add_number("full size", s.full_long_side, min=16, max=4096, step=16,
+                                       hint="long side (px) when still: up, more detail, slower")
+            g["show_sources"] = gui.add_checkbox("show sources used", True,
+                                                 hint="the input cameras of the render drawn in orange")
+            g["points"] = gui.add_dropdown("points", POINT_MODES, initial_value=self.options.points,
+                                           hint="when the point cloud is drawn over the render")
+            g["show_cameras"] = gui.add_checkbox("show cameras", True, hint="the input cameras' frustums")
         for key in ("method", "gamma", "lam", "n_views", "preview", "full", "show"):
             g[key].on_update(lambda _e: self._settings_changed())
-        g["show_sources"] = gui.add_checkbox("show sources used", True)
         g["show_sources"].on_update(lambda _e: self._colour_sources(None))
-        g["points"] = gui.add_dropdown("points", POINT_MODES, initial_value=self.options.points,
-                                       hint="when the point cloud is drawn over the render")
         g["points"].on_update(lambda _e: self._set_visible("points"))
-        g["show_cameras"] = gui.add_checkbox("show cameras", True)
         g["show_cameras"].on_update(lambda _e: self._set_visible("cameras"))
-        g["status"] = gui.add_markdown("waiting for a camera")
-        g["add_keyframe"] = gui.add_button("add keyframe")
-        g["add_keyframe"].on_click(lambda e: self.add_keyframe(e.client))
-        out = Path(self.options.path_out)
-        g["path_out"] = gui.add_text("path file", out.name, hint=f"file name, written in {out.parent.resolve()}")
-        g["export"] = gui.add_button("export path")
-        g["export"].on_click(lambda e: self._export_clicked(e.client))
-        g["keyframes"] = gui.add_markdown("0 keyframes")
+        with gui.add_folder("camera path", expand_by_default=False):
+            g["add_keyframe"] = gui.add_button("add keyframe", hint="record the current camera")
+            g["add_keyframe"].on_click(lambda e: self.add_keyframe(e.client))
+            out = Path(self.options.path_out)
+            g["path_out"] = gui.add_text("path file", out.name,
+                                         hint=f"file name, written in {out.parent.resolve()}")
+            g["export"] = gui.add_button("export path", hint="a smooth path through the keyframes, for vibr render --path")
+            g["export"].on_click(lambda e: self._export_clicked(e.client))
+            g["keyframes"] = gui.add_markdown("0 keyframes")
 
     def _settings_changed(self) -> None:
         g = self.gui
@@ -417,7 +552,10 @@ class Viewer:
     def add_keyframe(self, client_or_state) -> Camera:
         """Append the camera of a client (or of a :class:`CameraState`) at the full render
         size; every keyframe keeps the first one's image size (its vertical fov kept)."""
-        st = client_or_state if isinstance(client_or_state, CameraState) else CameraState.of(client_or_state.camera)
+        if isinstance(client_or_state, CameraState):
+            st = client_or_state
+        else:  # the camera the client sees rendered (governed), else its own
+            st = self._states.get(client_or_state.client_id) or CameraState.of(client_or_state.camera)
         if self.keyframes:
             w, h = self.keyframes[0].width, self.keyframes[0].height
             cam = st.camera(max(w, h), self.origin)
@@ -494,14 +632,17 @@ class Viewer:
         with self._lock:
             w = self._workers.pop(client.client_id, None)
             self._states.pop(client.client_id, None)
+            self._steers.pop(client.client_id, None)
             self._moving.discard(client.client_id)
         if w is not None:
             w.stop(timeout=0.1)
 
     def _on_camera(self, cam) -> None:
         t = time.perf_counter()
-        st = CameraState.of(cam)
         cid = cam.client.client_id
+        st, correction = self._govern(cid, getattr(cam, "_state", cam))
+        if correction is not None:
+            self._send_pose(cam.client, correction)
         with self._lock:
             same = self._states.get(cid) == st
             self._states[cid] = st
@@ -560,8 +701,10 @@ class Viewer:
             del lst[:-64]
             self._sent_event.notify_all()
         self._colour_sources(out.sources)
+        sv = self._steers.get(client.client_id)
+        edge = "; kept near the input cameras" if sv is not None and sv.clamped else ""
         self.gui["status"].content = (f"{kind} {cam.width}×{cam.height}, {settings.method}, "
-                                      f"{len(out.sources)} sources, {dt:.2f} s{what}")
+                                      f"{len(out.sources)} sources, {dt:.2f} s{what}{edge}")
 
     def wait_for_image(self, client_id=None, kind: str = "full", after_seq: int = 0,
                        timeout: float = 30.0) -> SentImage | None:
