@@ -16,8 +16,9 @@ _DESC = """\
 Serve an interactive viewer of SCENE on http://HOST:PORT (viser): the input cameras as
 frustums with thumbnails (click one to move there), a point cloud from the depth maps, and
 vibr's render of the browser's view (a small preview while the camera moves, full size once
-it is still). Controls: method, gamma, lambda, number of source views, preview size; "add
-keyframe" and "export path" write a camera_path.json (nerfstudio's schema) that
+it is still). The camera moves at the scale of the scene and stays near the input cameras.
+Controls (a panel docked at the right, collapsed at first): method, edge sharpness (gamma),
+smoothing (lambda), source views, preview size; "add keyframe" and "export path" write a camera_path.json (nerfstudio's schema) that
 'vibr render --path' renders. A scene without depth maps gets them estimated once at start.
 The server listens on 127.0.0.1 only unless --host says otherwise. Stop with Ctrl-C.
 Renders run on two numba threads per core that sleep between kernels, so that a browser
