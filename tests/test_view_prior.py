@@ -177,8 +177,9 @@ def test_prepare_applies_the_fallback_when_asked():
     sc = sc.replace(views=views)
     src, _ = prepare(sc, 0, depth="gt", fallback="never")
     assert all(np.isnan(v.depth).any() for v in src.views)
-    src, _ = prepare(sc, 0, depth="gt")  # auto: 6 % unknown, textured, is not a backdrop
-    assert all(np.isnan(v.depth).any() for v in src.views)
+    src, _ = prepare(sc, 0, depth="gt")  # auto: 6 % unknown, textured, is not a backdrop: completed
+    assert not any(np.isnan(v.depth).any() for v in src.views)
+    assert all(0 < src.meta["fallback"][v.name]["completed"] == v.fallback.mean() for v in src.views)
     src, _ = prepare(sc, 0, depth="gt", fallback=True)
     assert not any(np.isnan(v.depth).any() for v in src.views)
     assert set(src.meta["fallback"]) == {v.name for v in src.views}
@@ -282,8 +283,9 @@ def test_cli_render_and_eval_take_the_fallback(tmp_path):
 
 def test_auto_fallback_plane_for_mostly_unknown_views():
     """``fallback="auto"``: a view at least FALLBACK_MIN_FRACTION unknown (a backdrop) gets the
-    plane at every unknown pixel; a view with a few unknown patches of texture keeps them;
-    "never" leaves both, "always" gives both the plane."""
+    plane at every unknown pixel; a view with a few unknown patches of texture has them
+    completed from its known depth (:func:`vibr.geometry.proxy.complete_depth`); "never"
+    leaves both, "always" gives both the plane."""
     from vibr.geometry import apply_fallback
     from vibr.geometry.proxy import FALLBACK_MIN_FRACTION, fallback_depth
 
@@ -306,11 +308,13 @@ def test_auto_fallback_plane_for_mostly_unknown_views():
         if unknown.mean() >= FALLBACK_MIN_FRACTION:
             np.testing.assert_array_equal(v.fallback, unknown)
             assert np.all(v.depth[unknown] == np.float32(out.meta["fallback"][v.name]["depth"]))
-        else:
-            assert np.isnan(v.depth[unknown]).all() and v.fallback is None
-    assert set(out.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
-    views_only = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION)  # neither flat pixels nor background
-    assert all(np.array_equal(a.depth, b.depth, equal_nan=True) for a, b in zip(views_only.views, out.views))
+        else:  # the textured unknown rows are completed from the view's depth, as fallback pixels
+            np.testing.assert_array_equal(v.fallback, unknown)
+            assert np.isfinite(v.depth[unknown]).all()
+            assert out.meta["fallback"][v.name]["completed"] == pytest.approx(unknown.mean())
+    views_only = fallback_depth(sc, min_fraction=FALLBACK_MIN_FRACTION)  # neither flat pixels nor completion
+    assert set(views_only.meta["fallback"]) == {v.name for i, v in enumerate(sc.views) if i % 2 == 0}
+    assert all(np.isnan(v.depth).any() for i, v in enumerate(views_only.views) if i % 2 == 1)
     assert all(np.isnan(v.depth).any() for v in apply_fallback(sc, "never").views)
     always = apply_fallback(sc, "always")
     for v in always.views:
@@ -321,7 +325,7 @@ def test_auto_fallback_plane_for_mostly_unknown_views():
 def test_auto_fallback_takes_the_flat_unknown_pixels_of_any_view():
     """In a view mostly known, the unknown pixels whose photograph is flat (a plain wall
     stereo cannot match) get the plane, and the textured ones do not (stereo failures on a
-    surface: they stay unknown)."""
+    surface: without ``complete`` they stay unknown)."""
     from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth, flat_pixels
 
     rng = np.random.default_rng(1)

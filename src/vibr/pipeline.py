@@ -21,9 +21,10 @@ chosen geometry:
     behind its farthest known depth, with a large sigma_z), so that they still take part
     where no known surface hides them: by default (``fallback="auto"``) in the views that
     are mostly unknown (a backdrop: it wins on the temple ring) and, in the others, where
-    the photograph is flat (a plain wall or sky, which stereo cannot match), not where
-    stereo missed textured patches of the object (it loses on fountain); docs/explanation/renderer.md
-    "Fallback proxy".
+    the photograph is flat (a plain wall or sky, which stereo cannot match); the textured
+    patches of the object that stereo missed take a depth completed from their view's, with
+    a sigma_z as large as that depth varies around them (:func:`vibr.geometry.proxy.complete_depth`);
+    docs/explanation/renderer.md "Fallback proxy".
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the
     paper's coarsest proxy, with one depth uncertainty for every view (``max(0.02 D,
@@ -123,8 +124,9 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Give source pixels of unknown depth the fallback proxy
         (:func:`vibr.geometry.apply_fallback`): "auto" (default) in the views at least
         :data:`vibr.geometry.proxy.FALLBACK_MIN_FRACTION` unknown and at the flat unknown
-        pixels of the others (:func:`vibr.geometry.proxy.flat_pixels`), "always" (True) at
-        every unknown pixel, "never" (False).
+        pixels of the others (:func:`vibr.geometry.proxy.flat_pixels`), their textured
+        unknown pixels completed (:func:`vibr.geometry.proxy.complete_depth`), "always"
+        (True) the plane at every unknown pixel, "never" (False).
     cache_dir : path, None or False
         Estimated depth through the on-disk cache of :func:`vibr.stereo.cache.estimated_depth`
         (keyed by the sources, their images and cameras, ``estimate_kw`` and vibr's code):

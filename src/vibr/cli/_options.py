@@ -172,7 +172,8 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                    help="source pixels of unknown depth (a black backdrop, the sky) get a plane "
                         "behind the view's known depth with a large sigma_z instead of being dropped: "
                         f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown and, in the others, "
-                        "where the photograph is flat (auto, the default), at every unknown pixel (always), "
+                        "where the photograph is flat, the other unknown pixels of those taking a depth completed "
+                        "from their view's (auto, the default), at every unknown pixel (always), "
                         "or never (docs/explanation/renderer.md \"Fallback proxy\")")
     add_cache_options(p)
 

@@ -19,7 +19,7 @@ from ..errors import VibrInputError
 from ..scene import Scene, View
 from .depth import DEFAULT_SIGMA_Z_REL
 
-__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "FALLBACK_MODES",
+__all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "complete_depth", "FALLBACK_MODES",
            "FALLBACK_MIN_FRACTION", "FALLBACK_FLAT_STD", "FALLBACK_FACTOR",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
@@ -205,7 +205,8 @@ FALLBACK_MIN_FRACTION = 0.5
 FALLBACK_FLAT_STD = 0.02
 FLAT_RADIUS = 3
 #: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown, and the flat unknown pixels of
-#: the others), ``"always"`` (every unknown pixel), ``"never"``.
+#: the others; their textured unknown pixels completed from the view's known depth,
+#: :func:`complete_depth`), ``"always"`` (the plane at every unknown pixel), ``"never"``.
 FALLBACK_MODES = ("auto", "always", "never")
 
 
@@ -229,10 +230,77 @@ def flat_pixels(image, radius: int = FLAT_RADIUS, max_std: float = FALLBACK_FLAT
     return worst < float(max_std)
 
 
+def _push_pull(vals: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Push–pull (Gortler et al. 1996) of ``vals`` (H, W, C) with weights ``weight`` (H, W)
+    in [0, 1]: 2×2 weighted means down a pyramid (weights summed, clamped to 1), then each
+    level blended with the bilinear enlargement of the coarser one, ``c ← w c + (1 − w)
+    up(c')``. Every output is a convex combination of the weighted inputs, the same one for
+    every channel; float64."""
+    from scipy.ndimage import zoom
+
+    cs, ws = [np.asarray(vals, np.float64)], [np.asarray(weight, np.float64)]
+    while max(ws[-1].shape) > 1:
+        c, w = cs[-1], ws[-1]
+        H, W = w.shape
+        h, wd = (H + 1) // 2, (W + 1) // 2
+        wp = np.zeros((2 * h, 2 * wd))
+        wp[:H, :W] = w
+        cp = np.zeros((2 * h, 2 * wd, c.shape[2]))
+        cp[:H, :W] = c * w[..., None]
+        wsum = wp.reshape(h, 2, wd, 2).sum(axis=(1, 3))
+        csum = cp.reshape(h, 2, wd, 2, -1).sum(axis=(1, 3))
+        cs.append(csum / np.maximum(wsum, 1e-300)[..., None])
+        ws.append(np.minimum(wsum, 1.0))
+    for lev in range(len(cs) - 2, -1, -1):
+        H, W = ws[lev].shape
+        up = zoom(cs[lev + 1], (2, 2, 1), order=1, mode="nearest", grid_mode=True)[:H, :W]
+        w = ws[lev][..., None]
+        cs[lev] = w * cs[lev] + (1.0 - w) * up
+    return cs[0]
+
+
+def complete_depth(depth: np.ndarray, sigma_z=None) -> tuple[np.ndarray, np.ndarray]:
+    """Depth and sigma_z for every pixel of a depth map, its unknown (NaN) pixels completed
+    from the known ones around them.
+
+    The inverse depth ``w = 1/z`` and its square are filled by push–pull
+    (:func:`_push_pull`): an unknown pixel takes a weighted mean ``E[w]`` of the known
+    depths around it, drawn from a neighbourhood as wide as the hole (coarser pyramid
+    levels inside large holes). Its uncertainty says how much that neighbourhood's depths
+    disagree: the spread ``√(E[w²] − E[w]²)``, carried to depth by ``dz = z² dw``, added in
+    quadrature to the pixel's own ``sigma_z`` (what stereo gives an unknown pixel: its
+    view's largest), so a hole beside a depth edge is far less certain than one in a wall.
+
+    Parameters
+    ----------
+    depth : (H, W) array
+        Orthogonal depth, NaN unknown; at least one pixel known.
+    sigma_z : (H, W) array or float, optional
+        The map's own uncertainty (default 0).
+
+    Returns
+    -------
+    z, sigma : (H, W) float32
+        Known pixels keep their depth and ``sigma_z``.
+    """
+    z = np.asarray(depth, np.float64)
+    known = np.isfinite(z) & (z > 0)
+    if not known.any():
+        raise VibrInputError("complete_depth needs at least one known depth")
+    w = np.where(known, 1.0 / np.where(known, z, 1.0), 0.0)
+    m = _push_pull(np.stack([w, w * w], axis=-1), known.astype(np.float64))
+    zf = 1.0 / np.maximum(m[..., 0], 1e-300)
+    spread = zf * zf * np.sqrt(np.maximum(m[..., 1] - m[..., 0] ** 2, 0.0))
+    own = np.broadcast_to(np.asarray(0.0 if sigma_z is None else sigma_z, np.float64), z.shape)
+    sig = np.where(known, own, np.sqrt(spread ** 2 + np.nan_to_num(own) ** 2))
+    return np.where(known, z, zf).astype(np.float32), sig.astype(np.float32)
+
+
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
-                   min_fraction: float = 0.0, flat_std: float | None = None) -> Scene:
+                   min_fraction: float = 0.0, flat_std: float | None = None,
+                   complete: bool = False) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -251,14 +319,17 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
     largest ``D_k``. In views with less than ``min_fraction`` of their pixels unknown, only
     the unknown pixels :func:`flat_pixels` finds flat at ``flat_std`` get the plane (none
-    when ``flat_std`` is None); the others stay unknown. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
+    when ``flat_std`` is None); the others stay unknown, or with ``complete`` take the depth
+    :func:`complete_depth` gives them from the view's known depth and its large sigma_z
+    (also marked as fallback). The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
     sample wherever a known surface lands in the target, whatever their depths (known
     geometry wins: a source facing the target has its plane in front of the object); other
     placements measured in docs/explanation/renderer.md.
 
     Returns the scene with each such view's ``fallback`` mask (:class:`vibr.scene.View`) set
     to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,
-    "fraction": f_k}}`` for the views that have such pixels (``f_k`` their fraction).
+    "fraction": f_k}}`` for the views that have such pixels (``f_k`` their fraction; with
+    ``complete``, ``"completed"``: the fraction completed rather than given the plane).
     """
 
     dsr = DEFAULT_SIGMA_Z_REL if default_sigma_rel is None else float(default_sigma_rel)
@@ -274,11 +345,13 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         unknown = ~np.isfinite(z)
         if v.mask is not None:  # masked pixels stay out of the render (prepare_depth)
             unknown &= v.mask
+        textured = np.zeros_like(unknown)
         if unknown.any() and unknown.mean() < min_fraction:
             # a view mostly known: its unknown textured pixels are stereo failures on a surface
             flat = flat_pixels(v.image, max_std=flat_std) if flat_std is not None else np.zeros_like(unknown)
+            textured = unknown & ~flat if complete else textured
             unknown = unknown & flat
-        if not unknown.any():
+        if not (unknown.any() or textured.any()):
             views.append(v)
             continue
         D = max(far.values()) if common else far.get(v.name, max(far.values()))
@@ -287,9 +360,15 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
             s = np.broadcast_to(np.asarray(v.sigma_z, np.float32), z.shape).copy()
         else:
             s = np.full(z.shape, dsr * float(np.median(z[known])) if known.any() else 0.0, np.float32)
+        z = np.where(unknown, np.float32(D), z)
         s[unknown] = sigma_rel * D
-        views.append(v.replace(depth=np.where(unknown, np.float32(D), z), sigma_z=s, fallback=unknown))
-        info[v.name] = {"depth": D, "fraction": float(unknown.mean())}
+        if textured.any():  # a surface stereo missed: its neighbourhood's depth, and how much that varies
+            zc, sc = complete_depth(np.where(known, z, np.nan), s)
+            z, s = np.where(textured, zc, z), np.where(textured, sc, s)
+        views.append(v.replace(depth=z, sigma_z=s, fallback=unknown | textured))
+        info[v.name] = {"depth": D, "fraction": float((unknown | textured).mean())}
+        if complete:
+            info[v.name]["completed"] = float(textured.mean())
     return sources.replace(views=views, meta=dict(sources.meta, fallback=info))
 
 
@@ -304,4 +383,4 @@ def apply_fallback(sources: Scene, mode="auto") -> Scene:
         return sources
     if mode == "always":
         return fallback_depth(sources)
-    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD)
+    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD, complete=True)

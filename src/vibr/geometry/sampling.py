@@ -32,6 +32,7 @@ from .samples import Samples
 from .visibility import (
     DEFAULT_MAX_QUAD_PX,
     DEFAULT_VIS_THRESHOLD,
+    OCCLUDED,
     VISIBLE,
     new_zbuffers,
     reduce_zbuffers,
@@ -231,6 +232,14 @@ class SampleOptions:
         Optional fields to compute (:data:`OPTIONAL_FIELDS`): ``"jac"`` (the footprint PSF
         reads it; :func:`vibr.render.methods.sample_fields` says what a render needs),
         ``"src_xy"``; the others are None.
+    same_ray_px : float
+        A source pixel that the target sees along its own ray, to within this many target
+        pixels (:func:`same_ray`: at the view's own camera, every pixel), shows what the
+        target sees there: it is placed with the known geometry even when it is a fallback
+        pixel (:attr:`vibr.scene.View.fallback`), and no other view's surface hides it.
+        Half a pixel: the sample stays in its target pixel whatever its depth, from the
+        nearest its view sees to its own plus sigma_z. 0: the layers and the visibility
+        test decide alone.
     """
 
     vis_threshold: float = DEFAULT_VIS_THRESHOLD
@@ -243,6 +252,7 @@ class SampleOptions:
     grad_scheme: str | None = None
     grad_model: str | None = None
     keep: tuple = ()
+    same_ray_px: float = 0.5
 
 
 def compute_samples(sources: Scene, target, *, options: SampleOptions | None = None,
@@ -296,7 +306,8 @@ def compute_samples(sources: Scene, target, *, options: SampleOptions | None = N
     times = {"depth": 0.0, "zbuffer": 0.0, "visibility": 0.0, "assembly": 0.0}
     cpu = dict(times)  # process CPU time (all threads), less sensitive to a shared machine
     with _Timer(times, cpu, "depth"):
-        known, proxy = _split_fallback(_prepare_views(sources, cam, o.fill_holes, o.edge_rel, prepared), o.edge_rel)
+        known, proxy = _split_fallback(_prepare_views(sources, cam, o.fill_holes, o.edge_rel, prepared), o.edge_rel,
+                                       o.same_ray_px)
     zproxy = None
     with _Timer(times, cpu, "zbuffer"):
         zbuf = _target_zbuffer(known, cam.shape, o.max_quad_px, o.splat_mode)
@@ -306,7 +317,7 @@ def compute_samples(sources: Scene, target, *, options: SampleOptions | None = N
             zproxy[np.isfinite(zbuf)] = -np.inf
     check_stop(stop)
     with _Timer(times, cpu, "visibility"):
-        states, counts = _visibility(known, zbuf, o.vis_threshold)
+        states, counts = _visibility(known, zbuf, o.vis_threshold, o.same_ray_px)
         if proxy:
             st, cnt = _visibility(proxy, zproxy, o.vis_threshold)
             states += st
@@ -400,15 +411,54 @@ def _prepare_views(sources: Scene, cam: Camera, fill_holes, edge_rel, prepared=N
     return prepped
 
 
-def _split_fallback(prepped, edge_rel) -> tuple[list, list]:
+def same_ray(view: View, z: np.ndarray, M: np.ndarray, c: np.ndarray, ys, xs, max_px: float) -> np.ndarray:
+    """Whether the target sees the pixels ``(ys, xs)`` of ``view`` (depth ``z``, warp
+    constants ``M``, ``c`` into the target) along the view's own ray: bool, True where the
+    landing point moves less than ``max_px`` target pixels as the depth runs from the
+    nearest depth the view sees (its smallest known one; the camera itself where the
+    pixel's depth less its sigma_z is nearer) to the pixel's depth plus its sigma_z, every
+    point in front of the target.
+
+    Such a pixel is placed whatever its depth in that range, and whatever could hide it
+    from the target lies on the view's own ray in front of it, where the photograph would
+    show it: the photograph's colour is what the target sees. At the view's own camera
+    every pixel is; the farther the target, the fewer."""
+    zc = np.asarray(z[ys, xs], np.float64)
+    out = np.zeros(zc.shape, bool)
+    fin = np.isfinite(z) if view.fallback is None else np.isfinite(z) & ~view.fallback
+    if not max_px > 0 or not len(zc) or not fin.any():
+        return out
+    near = float(np.min(z[fin]))
+    sz = np.zeros_like(zc) if view.sigma_z is None else \
+        np.broadcast_to(np.asarray(view.sigma_z, np.float64), z.shape)[ys, xs]
+    q = M @ np.stack([xs, ys, np.ones_like(xs)]).astype(np.float64)
+
+    def land(d):
+        p = d * q + c[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return p[:2] / p[2], (p[2] > 0) & (d > 0)
+
+    # from the nearest depth (or, if a sigma_z reaches past the camera, from the camera itself)
+    lo = np.maximum(np.minimum(near, zc - sz), 1e-9 * zc)
+    (u0, ok0), (u1, ok1), (u2, ok2) = land(zc), land(lo), land(zc + sz)
+    move = np.maximum(np.hypot(*(u1 - u0)), np.hypot(*(u2 - u0)))  # the landing point is monotone in depth
+    return np.isfinite(zc) & ok0 & ok1 & ok2 & (move < max_px)
+
+
+def _split_fallback(prepped, edge_rel, same_ray_px: float = 0.0) -> tuple[list, list]:
     """The layers warped into the target: each view's known depth, and apart, the fallback
     proxy of the views that have one (:attr:`vibr.scene.View.fallback`), each NaN where the
     other has depth and with its own slopes: the known layer is the view as it would be
-    without the proxy."""
+    without the proxy. The fallback pixels the target sees along their own ray to within
+    ``same_ray_px`` (:func:`same_ray`) join the known layer."""
     known, proxy = [], []
     for k, v, z, zx, zy, M, c in prepped:
         m = v.fallback
-        if m is None:
+        if m is not None and same_ray_px > 0:
+            ys, xs = np.nonzero(m)
+            m = m.copy()
+            m[ys, xs] = ~same_ray(v, z, M, c, ys, xs, same_ray_px)
+        if m is None or not m.any():
             known.append((k, v, z, zx, zy, M, c))
             continue
         for layers, part in ((known, np.where(m, np.nan, z)), (proxy, np.where(m, z, np.nan))):
@@ -424,11 +474,20 @@ def _target_zbuffer(layers, shape, max_quad_px, splat_mode) -> np.ndarray:
     return reduce_zbuffers(bufs)
 
 
-def _visibility(layers, zbuf, vis_threshold):
-    """Per layer: ``(state, visible pixels per row)``, and the counts per state by view name."""
+def _visibility(layers, zbuf, vis_threshold, same_ray_px: float = 0.0):
+    """Per layer: ``(state, visible pixels per row)``, and the counts per state by view name.
+    An occluded pixel that the target sees along its own ray (:func:`same_ray`, to within
+    ``same_ray_px``) is visible: what hides it is not on the ray the photograph saw."""
     states, counts = [], {}
     for k, v, z, zx, zy, M, c in layers:
         state, row_counts = visibility_mask(M, c, z, zx, zy, zbuf, vis_threshold, return_counts=True)
+        if same_ray_px > 0:
+            ys, xs = np.nonzero(state == OCCLUDED)
+            seen = same_ray(v, z, M, c, ys, xs, same_ray_px)
+            if seen.any():
+                state[ys[seen], xs[seen]] = VISIBLE
+                np.subtract.at(row_counts[:, OCCLUDED], ys[seen], 1)
+                np.add.at(row_counts[:, VISIBLE], ys[seen], 1)
         hist = row_counts.sum(axis=0)
         counts[v.name] = {"unknown": int(hist[0]), "behind": int(hist[1]), "outside": int(hist[2]),
                           "occluded": int(hist[3]), "visible": int(hist[4])}
