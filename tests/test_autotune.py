@@ -55,11 +55,11 @@ def test_never_reads_the_target_image(grid, monkeypatch):
         return real(sources, target, *a, **k)
 
     monkeypatch.setattr(autotune, "tune", spy)
-    import vibr.metrics
-
     nan_target = tv.replace()
     nan_target.image = np.full_like(tv.image, np.nan)  # after the View's checks, which refuse NaN
-    monkeypatch.setattr(vibr.metrics, "view_metrics", lambda *a, **k: {})  # no metric of a NaN image
+    import vibr.render.api
+
+    monkeypatch.setattr(vibr.render.api, "view_metrics", lambda *a, **k: {})  # no metric of a NaN image
     r1 = render(src, nan_target, gamma="auto", lam="auto")
     r2 = render(src, tv, gamma="auto", lam="auto")
     assert seen[0] == ("Camera", src.names) and tv.name not in seen[0][1]
