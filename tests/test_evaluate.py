@@ -30,6 +30,7 @@ def scene_dir(tmp_path_factory, scene):
 
 def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monkeypatch):
     import vibr.geometry as geometry
+    import vibr.render.api as api
     from vibr.eval.protocol import Setting, evaluate
     from vibr.metrics import psnr
     from vibr.pipeline import prepare
@@ -42,7 +43,7 @@ def test_evaluate_computes_samples_once_and_matches_a_direct_render(scene, monke
         calls.append(1)
         return real(*a, **kw)
 
-    monkeypatch.setattr(geometry, "compute_samples", counting)
+    monkeypatch.setattr(api, "compute_samples", counting)  # the name render's geometry stage calls
     settings = [Setting("ulr"), Setting("bvs", {"lam": 0.2}), Setting("gradient", {"gamma": 1.0}),
                 Setting("gradient", {"gamma": 2.0})]
     rep = evaluate(scene, "view_004", settings, depth="gt", render_kw=FAST, use_lpips=False)
@@ -71,7 +72,7 @@ def test_intensity_scale_reaches_the_renderer(scene, monkeypatch):
     real = vr.render
 
     def spy(*a, **kw):
-        seen.append(kw.get("scale"))
+        seen.append(kw["params"].scale)  # a RenderParams
         return real(*a, **kw)
 
     monkeypatch.setattr(vr, "render", spy)
