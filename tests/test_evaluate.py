@@ -66,7 +66,7 @@ def test_intensity_scale_reaches_the_renderer(scene, monkeypatch):
     real = vr.render
 
     def spy(*a, **kw):
-        seen.append(kw.get("scale"))
+        seen.append(kw["params"].scale)  # a RenderParams
         return real(*a, **kw)
 
     monkeypatch.setattr(vr, "render", spy)

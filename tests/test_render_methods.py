@@ -178,9 +178,9 @@ def test_ignored_params_are_really_ignored(name):
     ("render", ["--method", "bvs", "--grad-consistency", "4"], "--grad-consistency does not apply to --method bvs"),
     ("render", ["--method", "savsr", "--sigma-z", "0.01"], "--sigma-z does not apply to --method savsr"),
     ("render", ["--method", "savsr", "--z-corr", "0.5"], "--z-corr does not apply to --method savsr"),
-    ("eval", ["--method", "ulr,bvs", "--gamma", "0.5"], "--gamma applies to gradient only, not to --method ulr,bvs"),
-    ("eval", ["--method", "ulr", "--lam", "1"], "--lam applies to savsr, bvs, gradient only, not to --method ulr"),
-    ("eval", ["--method", "ulr", "--psf", "footprint"], "--psf applies to savsr, bvs, gradient only, not to --method ulr"),
+    ("eval", ["--method", "ulr,bvs", "--gamma", "0.5"], "--gamma does not apply to --method ulr,bvs (only to gradient)"),
+    ("eval", ["--method", "ulr", "--lam", "1"], "--lam does not apply to --method ulr (only to savsr, bvs, gradient)"),
+    ("eval", ["--method", "ulr", "--psf", "footprint"], "--psf does not apply to --method ulr (only to savsr, bvs, gradient)"),
 ])
 def test_cli_refuses_a_parameter_the_methods_ignore(tmp_path, capsys, cmd, extra, msg):
     """``vibr render`` (one method) and ``vibr eval`` (a grid: no method of the list reads it)."""

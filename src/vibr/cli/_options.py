@@ -7,8 +7,9 @@ import argparse
 
 from ..metrics import METRIC_BORDER
 from ..pipeline import ALL_VIEWS, DEPTH_MODES, ESTIMATED_SOURCES, PLANAR_SOURCES
-from ..render.autotune import AUTO, GAMMA_GRID, LAM_GRID
-from ..render.methods import DEFAULTS, PRESETS, PSFS, REGISTRY
+from ..render.autotune import GAMMA_GRID, LAM_GRID
+from ..render.methods import REGISTRY
+from ..render.params import AUTO, PRESETS, default_text, param_fields, range_text
 
 #: How ``vibr render`` and ``vibr eval`` measure (one rule: vibr.metrics.view_metrics).
 METRIC_RULE = f"reconstructed pixels, {METRIC_BORDER}-px border excluded"
@@ -16,25 +17,10 @@ METRIC_RULE = f"reconstructed pixels, {METRIC_BORDER}-px border excluded"
 DEFAULT_METHOD = "gradient"
 
 
-def _d(key) -> str:
-    v = DEFAULTS[key]
-    return "the geometry's" if v is None else f"{v:g}" if isinstance(v, float) else str(v)
-
-
 def method_default(key) -> str:
-    """The default of ``key`` and the methods that override it, e.g. "2; ulr: 0, savsr: 1"."""
-    over = [f"{m.name}: {m.overrides[key]:g}" for m in REGISTRY.values() if key in m.overrides]
-    return _d(key) + (f"; {', '.join(over)}" if over else "")
-
-
-def _weight(text: str):
-    """A non-negative number, or "auto" (:mod:`vibr.render.autotune`)."""
-    if text.strip().lower() == AUTO:
-        return AUTO
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number or {AUTO!r}, got {text!r}") from None
+    """The default of ``key`` and the methods that override it, e.g. "2 (ulr: 0, savsr: 1)"."""
+    f = next(f for f in param_fields() if f.name == key)
+    return default_text(f, {m.name: m.overrides for m in REGISTRY.values()})
 
 
 def _supersample(text: str):
@@ -58,59 +44,98 @@ def add_method_option(p: argparse.ArgumentParser) -> None:
                    help=f"rendering method (default: {DEFAULT_METHOD}). {method_help()}")
 
 
-def add_psf_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--psf", choices=PSFS, default=None,
-                   help=f"image-formation model of the variational methods (default: {DEFAULTS['psf']}): "
-                        "bilinear, or footprint (the source pixel's parallelogram: sources finer than the "
-                        "target, on the target's own grid)")
+#: The grids ``auto`` searches, per parameter (:mod:`vibr.render.autotune`).
+_AUTO_GRIDS = {"gamma": GAMMA_GRID, "lam": LAM_GRID}
 
 
-def add_intensity_scale_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--intensity-scale", type=float, default=None, metavar="S",
-                   help="INTENSITY scale the render parameters (lam, sigma_s, ...) refer to: 255 "
-                        "means grey levels of 8-bit images, 1 means [0, 1] intensities "
-                        f"(default: {_d('scale')})")
+def method_option_fields() -> tuple:
+    """The :class:`~vibr.render.params.RenderParams` fields given on the command line (those
+    with a ``flag`` in their metadata), in the order of ``--help``."""
+    return tuple(f for f in param_fields() if f.metadata["flag"])
 
 
-def add_render_params(p: argparse.ArgumentParser) -> None:
-    """The renderer's parameters for one render (defaults from ``DEFAULTS``)."""
-    p.add_argument("--alpha", type=float, help=f"colour-term weight (default {_d('alpha')})")
-    p.add_argument("--gamma", type=_weight, metavar="G|" + AUTO,
-                   help=f"gradient-term weight, method gradient only, or {AUTO}: chosen per scene by "
-                        f"leave-one-source-out on the sources over {', '.join(map(str, GAMMA_GRID))} "
-                        f"(default {_d('gamma')})")
-    p.add_argument("--lam", type=_weight, metavar="L|" + AUTO,
-                   help=f"TV weight, on the --intensity-scale, or {AUTO} (over {', '.join(map(str, LAM_GRID))}) "
-                        f"(default {method_default('lam')})")
-    p.add_argument("--grad-consistency", type=float, metavar="C",
-                   help="gradient-term samples that the other views' gradients do not confirm weigh "
-                        "1 / (1 + (residual / C)^2), C on the --intensity-scale per pixel; 0: every sample "
-                        f"at full weight, the paper's term (default {_d('grad_consistency')}; method gradient only)")
-    p.add_argument("--grad-coverage", type=float, metavar="N",
-                   help="with --grad-consistency, a gradient-term sample landing where fewer than N samples "
-                        "land weighs (samples there) / N; 0: full weight (default "
-                        f"{_d('grad_coverage')}; method gradient only)")
-    p.add_argument("--sigma-s", type=float, help=f"sensor noise, grey levels (default {_d('sigma_s')})")
-    p.add_argument("--sigma-z", type=float,
-                   help="depth std. dev., scene units (default: the scene's, else 1%% of the depth)")
-    p.add_argument("--z-corr", type=float, metavar="RHO",
-                   help="correlation in [0, 1] of the views' depth errors at a target pixel: the colour "
-                        "term's weights then favour views whose misregistrations cancel; 0: independent, the "
-                        "paper's model (default: the geometry's, 0.9 for a proxy such as --depth planar, "
-                        "else 0; bvs: 0)")
-    add_intensity_scale_option(p)
-    p.add_argument("--outer", type=int, help=f"weight re-estimation passes (default {method_default('n_outer')})")
-    p.add_argument("--iterations", type=int, help=f"FISTA iterations per pass at most (default {_d('max_iter')})")
-    over = [m.name for m in REGISTRY.values() if m.solve and not m.overrides.get("precond", DEFAULTS["precond"])]
-    p.add_argument("--precond", action=argparse.BooleanOptionalAction, default=None,
-                   help="diagonally preconditioned FISTA, or plain FISTA with --no-precond (default: "
-                        f"{'on' if DEFAULTS['precond'] else 'off'}" + (f"; off for {', '.join(over)}" if over else "")
-                        + ")")
-    p.add_argument("--preset", choices=tuple(PRESETS), default=None,
+#: the command-line flag of each render parameter given on the command line
+PARAM_FLAGS = {f.name: f.metadata["flag"] for f in method_option_fields()}
+
+
+def _dest(f) -> str:
+    return f.metadata["flag"][2:].replace("-", "_")
+
+
+def _scalar_type(f):
+    m = f.metadata
+    base = int if m["kind"] == "int" else float
+    if not m["auto"]:
+        return base
+
+    def weight(text: str):
+        """A number, or "auto" (:mod:`vibr.render.autotune`)."""
+        if text.strip().lower() == AUTO:
+            return AUTO
+        try:
+            return base(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number or {AUTO!r}, got {text!r}") from None
+
+    return weight
+
+
+def _list_type(scalar):
+    def values(text: str) -> list:
+        """Comma-separated values of ``scalar``."""
+        out = [scalar(x) for x in text.split(",") if x.strip()]
+        if not out:
+            raise argparse.ArgumentTypeError(f"expected comma-separated values, got {text!r}")
+        return out
+
+    return values
+
+
+def _option_help(f, default: str | None = None) -> str:
+    """A method option's help: description, units, range, default (and the methods that
+    override it), the methods that read it."""
+    m = f.metadata
+    units = f"{m['units']}; " if m["units"] else ""
+    text = f"{m['description']} ({units}{range_text(f)}; default {default or method_default(f.name)})"
+    if m["auto"]:
+        text += (f"; {AUTO}: chosen per scene by leave-one-source-out on the sources over "
+                 f"{', '.join(f'{v:g}' for v in _AUTO_GRIDS[f.name])}")
+    users = [x.name for x in REGISTRY.values() if f.name not in x.ignored_params()]
+    if len(users) < len(REGISTRY):
+        text += f"; method{'s' if len(users) > 1 else ''} {', '.join(users)} only"
+    return text.replace("%", "%%")
+
+
+def add_method_options(p: argparse.ArgumentParser, lists=(), defaults: dict | None = None) -> None:
+    """The renderer's parameters, from :class:`~vibr.render.params.RenderParams`' fields and
+    their metadata (flag, type, units, range, default), and ``--preset``: the same options
+    for every command that renders. ``lists``: the fields that take comma-separated values
+    (``vibr eval``'s settings grid); ``defaults``: a field's default as that command shows it."""
+    g = p.add_argument_group("method options (docs/reference/parameters.md)")
+    for f in method_option_fields():
+        m = f.metadata
+        kw = dict(dest=_dest(f), default=None, help=_option_help(f, (defaults or {}).get(f.name)))
+        if m["kind"] == "bool":
+            g.add_argument(m["flag"], action=argparse.BooleanOptionalAction, **kw)
+            continue
+        if m["kind"] == "choice":
+            kw["choices"] = m["choices"]
+        else:
+            kw["type"] = _scalar_type(f)
+            kw["metavar"] = m["metavar"] or _dest(f).upper()
+        if f.name in lists:
+            kw["type"] = _list_type(kw.pop("type", str))
+            kw["metavar"] = kw.get("metavar", _dest(f).upper()) + ",..."
+            kw["help"] = "comma-separated: one setting each. " + kw["help"]
+        g.add_argument(m["flag"], **kw)
+    g.add_argument("--preset", choices=tuple(PRESETS), default=None,
                    help="read --alpha/--gamma/--lam in these units: paper = the paper's symbols as the "
                         "authors' code applies them (gamma x 0.1/4, lam x 255 on [0, 1] intensities, "
                         "gradient term weighted by W, spatially varying TV; docs/explanation/renderer.md)")
-    add_psf_option(p)
+
+
+def add_supersample_option(p: argparse.ArgumentParser) -> None:
+    """``--supersample`` (:func:`vibr.render.render`'s ``supersample``)."""
     from ..geometry.resolution import SUPERSAMPLE_MAX
 
     p.add_argument("--supersample", type=_supersample, default=AUTO, metavar="K|" + AUTO,
@@ -120,38 +145,37 @@ def add_render_params(p: argparse.ArgumentParser) -> None:
                         "1: the target's own grid)")
 
 
-def render_params(args) -> dict:
-    """The keyword arguments of :func:`vibr.render.render` given on the command line (None:
-    the method's default)."""
-    params = dict(alpha=args.alpha, gamma=args.gamma, lam=args.lam, sigma_s=args.sigma_s,
-                  scale=args.intensity_scale, n_outer=args.outer, max_iter=args.iterations,
-                  precond=args.precond, psf=args.psf, grad_consistency=args.grad_consistency,
-                  grad_coverage=args.grad_coverage, z_corr=args.z_corr)
+def add_render_params(p: argparse.ArgumentParser) -> None:
+    """The options of one render: :func:`add_method_options` and ``--supersample``."""
+    add_method_options(p)
+    add_supersample_option(p)
+
+
+def render_params(args, skip=()) -> dict:
+    """The keyword arguments of :meth:`vibr.render.params.RenderParams.from_kwargs` given on
+    the command line (None: the method's default; ``preset`` when given), but the fields ``skip``."""
+    params = {f.name: getattr(args, _dest(f), None) for f in method_option_fields() if f.name not in skip}
     if getattr(args, "preset", None) is not None:
         params["preset"] = args.preset
-    if args.sigma_z is not None:
-        params["sigma_z"] = args.sigma_z
     return params
 
 
-#: the command-line flag of each render parameter (:func:`render_params`)
-PARAM_FLAGS = {"alpha": "--alpha", "gamma": "--gamma", "lam": "--lam", "sigma_s": "--sigma-s",
-               "sigma_z": "--sigma-z", "n_outer": "--outer", "max_iter": "--iterations",
-               "precond": "--precond", "psf": "--psf", "grad_consistency": "--grad-consistency",
-               "grad_coverage": "--grad-coverage", "z_corr": "--z-corr"}
-
-
-def refuse_ignored_params(args) -> None:
-    """A render parameter given for a method that does not read it
-    (:meth:`vibr.render.methods.Method.ignored_params`) is an error, not a silent no-op."""
+def refuse_ignored_params(args, methods=None) -> None:
+    """A render parameter given for methods that none of them reads
+    (:meth:`vibr.render.methods.Method.ignored_params`) is an error, not a silent no-op.
+    ``methods``: the names rendered (default ``[args.method]``)."""
     from ..errors import VibrInputError
     from ..render.methods import get_method
 
-    ignored = get_method(args.method).ignored_params()
-    given = [PARAM_FLAGS[k] for k, v in render_params(args).items() if v is not None and k in ignored]
+    names = [args.method] if methods is None else list(methods)
+    specs = [get_method(m) for m in names]  # an unknown name gives get_method's error
+    given = [k for k, v in render_params(args).items() if k != "preset" and v is not None
+             and all(k in m.ignored_params() for m in specs)]
     if given:
-        raise VibrInputError(f"{', '.join(given)} {'do' if len(given) > 1 else 'does'} not apply to "
-                             f"--method {args.method}")
+        flags = [PARAM_FLAGS[k] for k in given]
+        users = [m.name for m in REGISTRY.values() if any(k not in m.ignored_params() for k in given)]
+        raise VibrInputError(f"{', '.join(flags)} {'do' if len(flags) > 1 else 'does'} not apply to "
+                             f"--method {','.join(names)}" + (f" (only to {', '.join(users)})" if users else ""))
 
 
 def add_depth_options(p: argparse.ArgumentParser) -> None:

@@ -7,20 +7,23 @@ import logging
 
 from ..eval.protocol import GAMMAS
 from ..metrics import METRIC_BORDER
-from ..render.methods import DEFAULTS, REGISTRY
+from ..render.methods import REGISTRY
 from ._executor import add_executor_args, executor_from_args
 from ._options import (
     add_depth_options,
-    add_intensity_scale_option,
+    add_method_options,
     add_overwrite_option,
-    add_psf_option,
     add_source_options,
     cache_dir_from_args,
     check_depth_args,
-    method_default,
     method_help,
     names,
+    refuse_ignored_params,
+    render_params,
 )
+
+#: The method options that take comma lists: one setting (a row of the table) per value.
+GRID = ("alpha", "gamma", "lam")
 
 logger = logging.getLogger(__name__)
 
@@ -54,16 +57,6 @@ variational method, and default to the renderer's documented defaults.
 
 
 
-def _floats(s):
-    try:
-        out = [float(x) for x in s.split(",") if x.strip()]
-    except ValueError:
-        out = []
-    if not out:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {s!r}")
-    return out
-
-
 def register(sub) -> None:
     p = sub.add_parser("eval", help="render held-out views and measure PSNR / DSSIM (paper protocol)",
                        description=_DESC, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -76,14 +69,10 @@ def register(sub) -> None:
     add_depth_options(p)
     p.add_argument("--method", type=names, default=list(REGISTRY),
                    help=f"comma-separated methods among {', '.join(REGISTRY)} (default: all). {method_help()}")
-    p.add_argument("--gamma", type=_floats, default=None,
-                   help=f"gradient-term weights (default: {','.join(f'{g:g}' for g in GAMMAS)}: the "
-                        f"paper's and vibr's default {DEFAULTS['gamma']:g})")
-    p.add_argument("--alpha", type=_floats, help=f"colour-term weights (default: {DEFAULTS['alpha']:g})")
-    p.add_argument("--lam", type=_floats, help=f"TV weights (default: {method_default('lam')})")
+    add_method_options(p, lists=GRID, defaults={"gamma": f"{','.join(f'{g:g}' for g in GAMMAS)}: the paper's and "
+                                                          "vibr's default"})
     p.add_argument("--scale", type=float, default=1.0,
                    help="IMAGE scale the scene is loaded at, e.g. 0.25 (default: 1)")
-    add_intensity_scale_option(p)
     p.add_argument("--step-px", type=float, default=None,
                    help="--depth estimated: parallax step between sweep planes, px (default: the estimator's)")
     p.add_argument("--max-planes", type=int, default=None,
@@ -95,7 +84,6 @@ def register(sub) -> None:
                    help="pixels the metrics are taken over (default: reconstructed)")
     p.add_argument("--border", type=int, default=METRIC_BORDER,
                    help=f"pixels excluded at each image edge (default: {METRIC_BORDER}, as vibr render)")
-    add_psf_option(p)
     p.add_argument("--json", required=True, metavar="REPORT.json", help="where to write the report")
     add_overwrite_option(p, "a --json report vibr did not write")
     p.add_argument("--figures", metavar="DIR", help="write comparison figures (PNG) here")
@@ -112,18 +100,11 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _refuse_unused_grid(args) -> None:
-    """A parameter that none of the --method methods reads (Method.ignored_params: --gamma
-    without the gradient term; --alpha, --lam, --psf with ulr alone): refused, not ignored."""
-    from ..errors import VibrInputError
-    from ..render.methods import REGISTRY, get_method
-
-    specs = [get_method(m) for m in args.method]  # an unknown name gives get_method's error
-    for flag, param, value in (("--gamma", "gamma", args.gamma), ("--alpha", "alpha", args.alpha),
-                               ("--lam", "lam", args.lam), ("--psf", "psf", args.psf)):
-        if value is not None and all(param in m.ignored_params() for m in specs):
-            users = ", ".join(m.name for m in REGISTRY.values() if param not in m.ignored_params())
-            raise VibrInputError(f"{flag} applies to {users} only, not to --method {','.join(args.method)}")
+def render_kw(args) -> dict | None:
+    """The method options given, but the settings grid (:data:`GRID`) and the intensity scale
+    (``EvalOptions.intensity_scale``): ``EvalOptions.render_kw``."""
+    kw = {k: v for k, v in render_params(args, skip=GRID + ("scale",)).items() if v is not None}
+    return kw or None
 
 
 def _refuse_unused_estimate_options(args, scene, estimate_kw: dict) -> None:
@@ -169,7 +150,7 @@ def run(args) -> int:
                         depth_files=args.depth_files, n_views=args.views, mask=args.mask, fallback=args.fallback,
                         border=args.border, estimate_kw=estimate_kw or None,
                         intensity_scale=args.intensity_scale, cache_dir=cache_dir_from_args(args),
-                        render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
+                        render_kw=render_kw(args), uncertainty=args.uncertainty)
     report = ev.report
     if args.figures:
         report["figures"] = _write_figures(args, ev)
@@ -184,22 +165,21 @@ def _checked_request(args):
     """``(settings, estimate_kw, executor)``, every option checked before the scene is
     loaded: the outputs, the depth options, each setting's parameters, the scheduler."""
     from ..errors import VibrInputError
-    from ..eval.protocol import settings_grid
+    from ..eval.protocol import setting_params, settings_grid
     from ..io.outputs import check_output
-    from ..render.methods import method_params
     from ..stereo.checks import check_depth_params
 
     check_output(args.json, "file", overwrite=args.overwrite, what="--json")
     if args.figures is not None:
         check_output(args.figures, "dir", what="--figures")
     check_depth_args(args)
-    _refuse_unused_grid(args)
+    refuse_ignored_params(args, args.method)
     settings = settings_grid(args.method, list(GAMMAS) if args.gamma is None else args.gamma, args.alpha, args.lam)
     if args.intensity_scale is not None and not args.intensity_scale > 0:
         raise VibrInputError(f"--intensity-scale must be > 0, got {args.intensity_scale:g}")
     executor = executor_from_args(args)
     for st in settings:
-        method_params(st.method, **dict(st.params, scale=args.intensity_scale, psf=args.psf))
+        setting_params(st, args.intensity_scale, render_kw(args))
     estimate_kw = {k: v for k, v in (("step_px", args.step_px), ("max_planes", args.max_planes),
                                      ("depth_range", args.depth_range)) if v is not None}
     check_depth_params(**estimate_kw)
@@ -243,7 +223,7 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
     eval_kw = dict(sources=args.sources, depth=args.depth, depth_files=args.depth_files, n_views=args.views,
                    mask=args.mask, fallback=args.fallback, border=args.border, figures=args.figures,
                    estimate_kw=estimate_kw or None, intensity_scale=args.intensity_scale, cache_dir=cache_dir,
-                   render_kw={"psf": args.psf} if args.psf else None, uncertainty=args.uncertainty)
+                   render_kw=render_kw(args), uncertainty=args.uncertainty)
     if args.assemble:
         report = assemble_all(args.scene, targets, settings, views_dir=views_dir, scale=args.scale, **eval_kw)
     else:

@@ -111,18 +111,17 @@ def run(args) -> int:
     from ..io.images import check_image_ext
     from ..io.outputs import check_not_scene_file, check_output, record_file
     from ..pipeline import prepare
-    from ..render import render
-    from ..render.methods import method_params
+    from ..render import RenderParams, render
 
     refuse_ignored_params(args)
     # every parameter checked before the work ("auto" is resolved by render())
-    method_params(args.method, **{k: None if v == "auto" else v for k, v in render_params(args).items()})
+    params = RenderParams.from_kwargs(args.method, **render_params(args))
     if (args.path is None) == (args.target is None):
         raise VibrInputError("give exactly one of --target VIEW|CAMERA.json and --path PATH.json")
     if args.path is not None:
         check_output(args.output, "file" if is_video(args.output) else "dir",
                      overwrite=args.overwrite or not is_video(args.output), what="-o")
-        return _run_path(args)
+        return _run_path(args, params)
     _refuse_path_options(args)
     check_output(args.output, "file", overwrite=args.overwrite, what="-o")
     if args.uncertainty:
@@ -139,8 +138,8 @@ def run(args) -> int:
     sources, target = prepare(scene, _target(args, scene), sources=args.sources, depth=args.depth,
                               depth_files=args.depth_files, n_views=args.views, fallback=args.fallback,
                               cache_dir=cache_dir_from_args(args))
-    res = render(sources, target, args.method, progress_bar=True, uncertainty=bool(args.uncertainty),
-                 supersample=args.supersample, **render_params(args))  # -v: per pass
+    res = render(sources, target, args.method, params=params, progress_bar=True,
+                 uncertainty=bool(args.uncertainty), supersample=args.supersample)  # -v: per pass
     write_image(args.output, res.image, bits=args.bit_depth or 8)
     record_file(args.output)  # vibr's: a later render may replace it without --overwrite
     if args.uncertainty:
@@ -240,7 +239,7 @@ def _path_views(views):
     return 8 if views is None else (None if views == ALL_VIEWS else views)
 
 
-def _run_path(args) -> int:
+def _run_path(args, params) -> int:
     """``--path``: a thin layer over :func:`vibr.paths.flythrough.render_path`."""
     from ..errors import VibrInputError
     from ..io.outputs import check_output, record_file
@@ -274,7 +273,6 @@ def _run_path(args) -> int:
     executor = executor_from_args(args, default="auto")  # a bad scheduler fails before the work
     cache_dir = cache_dir_from_args(args)
     scene = load_scene_cached(args.scene, scale=args.scale, cache_dir=cache_dir)
-    params = {k: v for k, v in render_params(args).items() if v is not None}
     res = render_path(scene, cpath, out, method=args.method,
                       n_views=_path_views(args.views), params=params,
                       overwrite=args.overwrite, depth="gt" if args.depth == "given" else args.depth,

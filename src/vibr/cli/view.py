@@ -8,7 +8,14 @@ import math
 import time
 
 from . import count
-from ._options import add_cache_options, add_method_option, cache_dir_from_args
+from ._options import (
+    add_cache_options,
+    add_method_option,
+    add_method_options,
+    cache_dir_from_args,
+    refuse_ignored_params,
+    render_params,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +49,7 @@ def register(sub) -> None:
                    help="address to listen on (default 127.0.0.1; 0.0.0.0 exposes the viewer to the network)")
     p.add_argument("--scale", type=float, default=1.0, help="image scale of the scene, e.g. 0.5 (default 1)")
     add_method_option(p)
+    add_method_options(p)  # the GUI starts from --gamma / --lam and renders with the others
     p.add_argument("--views", type=int, default=8, metavar="K",
                    help="initial number of source views: the K best for the view shown (default 8)")
     from ..viewer.app import POINT_MODES, ViewerOptions
@@ -71,6 +79,21 @@ def _hint_large_views(scene, scale: float) -> None:
                        "render seconds at this size; --scale %g keeps the viewer interactive", w, h, s)
 
 
+def _settings(args, settings_cls):
+    """The viewer's first :class:`~vibr.viewer.ViewSettings`: the method options given (gamma
+    and lam start the GUI's controls; with --preset and without them, the preset's own)."""
+    from ..errors import VibrInputError
+    from ..render.params import AUTO, PRESET_DEFAULTS
+
+    refuse_ignored_params(args)
+    kw = {k: v for k, v in render_params(args).items() if v is not None}
+    weights = {k: kw.pop(k) for k in ("gamma", "lam") if k in kw}
+    if AUTO in weights.values():
+        raise VibrInputError("--gamma/--lam auto does not apply to vibr view: the viewer's controls set them")
+    start = {k: v for k, v in PRESET_DEFAULTS.get(kw.get("preset"), {}).items() if k in ("gamma", "lam")}
+    return settings_cls(method=args.method, n_views=args.views, params=kw, **{**start, **weights})
+
+
 def run(args) -> int:
     from ..errors import VibrInputError
     from ..pipeline import load_scene_cached
@@ -80,7 +103,7 @@ def run(args) -> int:
         raise VibrInputError(f"--port must be in 0..65535, got {args.port}")
     if args.views < 1 or args.max_points < 0:
         raise VibrInputError("--views must be >= 1 and --max-points >= 0")
-    settings = ViewSettings(method=args.method, n_views=args.views)
+    settings = _settings(args, ViewSettings)
     from ..io.outputs import check_not_scene_file, check_output
 
     if args.path_out is not None:  # given: checked now, not at the first 'export path'

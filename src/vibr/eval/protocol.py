@@ -28,6 +28,7 @@ from ..pipeline import prepare
 from ..progress import progress
 from ..render import shared_geometry
 from ..render.methods import DEFAULTS, METHODS, get_method
+from ..render.params import AUTO, RenderParams
 from ..scene import Scene
 
 logger = logging.getLogger(__name__)
@@ -66,9 +67,9 @@ def settings_grid(methods: Sequence[str] = METHODS, gammas: Sequence[float] = GA
             if a is not None:
                 p["alpha"] = float(a)
             if g is not None:
-                p["gamma"] = float(g)
+                p["gamma"] = g if g == AUTO else float(g)
             if l is not None:
-                p["lam"] = float(l)
+                p["lam"] = l if l == AUTO else float(l)
             out.append(Setting(m, p))
     return out
 
@@ -181,13 +182,14 @@ def run_evaluation(scene: Scene, target: int | str, settings: Sequence[Setting],
     if tview.image is None:
         raise VibrInputError(f"target view {tview.name} has no image to compare with", scene.root)
     t0 = time.perf_counter()
-    geo = shared_geometry(src, tview, [(s.method, {**(o.render_kw or {}), **s.params}) for s in settings],
-                          geometry_kw=o.geometry_kw, supersample=o.supersample)
+    params = [setting_params(s, intensity_scale, o.render_kw) for s in settings]
+    geo = shared_geometry(src, tview, [(p.method, p) for p in params], geometry_kw=o.geometry_kw,
+                          supersample=o.supersample)
     src, samples = geo.sources, geo.samples
     t_samples = time.perf_counter() - t0
     logger.info(f"eval: {tview.name} from {len(src)} views, depth={o.depth} ({t_depth:.1f} s), "
                 f"{len(samples)} samples ({t_samples:.1f} s)")
-    rows = _render_settings(geo, tview, settings, intensity_scale, o.render_kw, o.depth, o.uncertainty)
+    rows = _render_settings(geo, tview, settings, params, o.depth, o.uncertainty)
     cover = np.ones(tview.shape, bool) if tview.mask is None else tview.mask.copy()
     if o.mask == "reconstructed":
         for _, res, _ in rows:
@@ -257,14 +259,21 @@ def _checked_settings(settings, mask: str, intensity_scale):
     return settings, intensity_scale
 
 
-def _render_settings(geo, tview, settings, intensity_scale, render_kw, depth, uncertainty=False):
-    """Render the target once per setting from the shared geometry ``geo``
-    (:func:`vibr.render.shared_geometry`): ``[(setting, result, seconds)]``."""
+def setting_params(s: Setting, intensity_scale=None, render_kw: dict | None = None) -> RenderParams:
+    """The :class:`~vibr.render.params.RenderParams` a setting renders with: ``render_kw``
+    (keyword arguments of :meth:`RenderParams.from_kwargs`, ``preset`` included) for every
+    setting, the setting's own params winning, on the intensity scale ``intensity_scale``
+    unless they give ``scale``."""
+    return RenderParams.from_kwargs(s.method, **{"scale": intensity_scale, **(render_kw or {}), **s.params})
+
+
+def _render_settings(geo, tview, settings, params, depth, uncertainty=False):
+    """Render the target once per setting (with its :func:`setting_params` ``params``) from the
+    shared geometry ``geo`` (:func:`vibr.render.shared_geometry`): ``[(setting, result, seconds)]``."""
     rows = []
-    for s in progress(settings, desc=f"render {tview.name} ({depth})"):
+    for s, p in zip(progress(settings, desc=f"render {tview.name} ({depth})"), params):
         t = time.perf_counter()
-        res = geo.render(s.method, uncertainty=uncertainty,
-                         **{"scale": intensity_scale, **(render_kw or {}), **s.params})
+        res = geo.render(p.method, params=p, uncertainty=uncertainty)
         rows.append((s, res, time.perf_counter() - t))
     return rows
 

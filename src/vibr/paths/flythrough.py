@@ -74,7 +74,8 @@ from ..io.video import VIDEO_FORMATS, check_video_options, is_video, write_video
 from ..progress import progress as bar
 from ..render import fine_grid, grid_params, render_samples
 from ..render.checks import check_render_memory, render_memory
-from ..render.methods import METHODS, with_sample_fields
+from ..render.methods import METHODS, as_params, with_sample_fields
+from ..render.params import RenderParams
 from ..scene import Scene
 from ..stereo.cache import scene_with_depth
 from .camera_path import scene_centre, scene_points
@@ -116,7 +117,7 @@ class FrameContext:
     cameras: list
     frames_dir: str
     method: str = "gradient"
-    params: dict = field(default_factory=dict)
+    params: RenderParams | dict = field(default_factory=dict)  # a dict: keyword arguments, made a RenderParams
     n_views: int | None = 8
     blend: float = 0.25
     overwrite: bool = False
@@ -129,6 +130,7 @@ class FrameContext:
     depth_dir: str = ""  # also each frame's depth (depth_NNNNN.npy) in this folder
 
     def __post_init__(self):
+        self.params = as_params(self.method, self.params)
         # the optional sample fields the method reads (the footprint PSF's Jacobians), once
         # for every frame
         self.geometry_kw = with_sample_fields(self.geometry_kw, (self.method, self.params))
@@ -175,7 +177,8 @@ def job_key(ctx: FrameContext) -> str:
     its parameters, the source selection and the sources (names, cameras, images, depth,
     sigma_z, fallback masks, photograph masks)."""
 
-    parts = [code_fingerprint(), ctx.method, ctx.params, ctx.n_views, ctx.blend, ctx.geometry_kw, str(ctx.supersample)]
+    parts = [code_fingerprint(), ctx.method, ctx.params.as_dict(), ctx.n_views, ctx.blend, ctx.geometry_kw,
+             str(ctx.supersample)]
     for v in ctx.sources.views:
         c = v.camera
         parts += [v.name, c.K, c.R, c.t, list(c.shape), v.image, v.depth,
@@ -306,9 +309,9 @@ def render_frame(ctx: FrameContext, i: int) -> dict:
     ws = w[idx]
     if np.any(ws < 1.0):
         samples.meta["sample_weight"] = ws[samples.view].astype(np.float32)
-    res = render_samples(samples, ctx.method, source_centres=np.array([v.camera.centre for v in views]),
-                         target_centre=cam.centre, uncertainty=ctx.uncertainty,
-                         **grid_params(ctx.method, ctx.params, plan))
+    res = render_samples(samples, ctx.method, params=grid_params(ctx.method, ctx.params, plan),
+                         source_centres=np.array([v.camera.centre for v in views]), target_centre=cam.centre,
+                         uncertainty=ctx.uncertainty)
     res.depth = target_depth(samples)
     res = res.on_target(plan, cam.shape)
     tm["render"] = -t + (t := time.perf_counter())
@@ -447,8 +450,10 @@ class FlyOptions:
 
     Attributes
     ----------
-    method, params : str, dict
-        The render method and its parameters (:func:`vibr.render.render`).
+    method, params : str, RenderParams or dict
+        The render method and its parameters (a :class:`vibr.render.params.RenderParams`, or
+        keyword arguments of :meth:`~vibr.render.params.RenderParams.from_kwargs`, ``preset``
+        included); "auto" weights are refused (each frame would need its own tuning).
     n_views : int or None
         K best sources per frame (soft weights, module docstring); None: all.
     blend : float
@@ -488,7 +493,7 @@ class FlyOptions:
     """
 
     method: str = "gradient"
-    params: dict | None = None
+    params: RenderParams | dict | None = None
     n_views: int | None = 8
     blend: float = 0.25
     geometry_kw: dict | None = None
@@ -545,7 +550,7 @@ def render_path(scene: Scene, camera_path, out, *, options: FlyOptions | None = 
     _mark_frames(fdir, len(cams), o.uncertainty is not None)
     if o.depth_out is not None:
         Path(o.depth_out).mkdir(parents=True, exist_ok=True)
-    ctx = FrameContext(sources, cams, str(fdir), o.method, dict(o.params or {}), o.n_views, o.blend,
+    ctx = FrameContext(sources, cams, str(fdir), o.method, as_params(o.method, o.params), o.n_views, o.blend,
                        o.overwrite, dict(o.geometry_kw or {}), uncertainty=o.uncertainty is not None,
                        supersample=o.supersample, depth_dir="" if o.depth_out is None else os.fspath(o.depth_out))
     prepare_sources(ctx)
@@ -657,6 +662,8 @@ def _checked_outputs(scene: Scene, camera_path, out, o: FlyOptions):
 
     if o.method not in METHODS:
         raise VibrInputError(f"unknown method {o.method!r} (choose from {', '.join(METHODS)})")
+    if as_params(o.method, o.params).auto:  # every parameter checked before the work
+        raise VibrInputError("gamma/lam 'auto' does not apply to a camera path: give numbers")
     if o.n_views is not None and o.n_views < 1:
         raise VibrInputError(f"n_views must be at least 1, got {o.n_views}")
     fdir, video = _frames_dir_for(Path(out), o.frames_dir)

@@ -18,24 +18,20 @@ from ..metrics import view_metrics
 from ..scene import Scene, View
 from .autotune import resolve_auto
 from .checks import check_render_memory
-from .methods import DEFAULTS, get_method, render_samples, wants_fine_sources, with_sample_fields
+from .methods import as_params, get_method, render_samples, wants_fine_sources, with_sample_fields
+from .params import RenderParams
 from .result import RenderResult
 
-__all__ = ["RenderResult", "render", "render_samples", "fine_grid", "grid_params", "SharedGeometry",
-           "shared_geometry"]
+__all__ = ["RenderResult", "RenderParams", "render", "render_samples", "fine_grid", "grid_params",
+           "SharedGeometry", "shared_geometry"]
 
 logger = logging.getLogger(__name__)
 
 
-def _resolve_auto(src: Scene, cam: Camera, m, params: dict) -> dict:
+def _resolve_auto(src: Scene, cam: Camera, params: RenderParams) -> RenderParams:
     """``gamma`` / ``lam`` = "auto" replaced by the leave-one-source-out choice of
     :func:`vibr.render.autotune.tune` (only the target's camera is passed: never its image)."""
-
-    given = [DEFAULTS[k] if params.get(k) is None else params[k] for k in ("gamma", "lam")]
-    if "auto" not in given:
-        return params
-
-    return resolve_auto(src, cam, m.name, params)
+    return resolve_auto(src, cam, params) if params.auto else params
 
 
 def _ready_sources(sources: Scene, target) -> Scene:
@@ -77,7 +73,8 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
 
     supersample = check_supersample(supersample)
     plan = resolution_plan(sources, camera, supersample)
-    if supersample == "auto" and plan.coarsen == 1 and any(wants_fine_sources(m, **p) for m, p in renders):
+    if supersample == "auto" and plan.coarsen == 1 and any(wants_fine_sources(m, as_params(m, p))
+                                                           for m, p in renders):
         return sources, camera, prepared, ResolutionPlan()
     if plan.scales:
 
@@ -91,19 +88,20 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
     return sources, plan.grid_camera(camera), prepared, plan
 
 
-def grid_params(method, params: dict, plan) -> dict:
-    """``params`` for a render of ``method`` on ``plan``'s grid (the variational methods):
+def grid_params(method, params, plan):
+    """``params`` (a :class:`RenderParams` or a dict of keyword arguments; the same type
+    returned) for a render of ``method`` on ``plan``'s grid (the variational methods):
     ``grid_factor`` = its supersampling factor (lam / k there) and ``grid_source_size`` = the
     median size of a source pixel on it (gamma / s² where the sources are coarser), see
     :mod:`vibr.render.methods`."""
     if plan is None or not get_method(method).solve:
         return params
-    out = dict(params)
+    out = {}
     if plan.supersample > 1:
         out["grid_factor"] = plan.supersample
     if plan.grid_source_size > 1.0:
         out["grid_source_size"] = plan.grid_source_size
-    return out
+    return params.replace(**out) if isinstance(params, RenderParams) else {**params, **out}
 
 
 @dataclass(frozen=True)
@@ -120,12 +118,15 @@ class SharedGeometry:
     plan: ResolutionPlan
     target: Camera
 
-    def render(self, method="gradient", *, uncertainty: bool = False, **params) -> RenderResult:
-        """What :func:`render` gives for ``method`` and ``params`` (the grid's ``grid_factor``
-        and ``grid_source_size`` included, "auto" weights tuned for the target's camera, the
-        result brought back to the target's size), from the shared samples."""
-        params = grid_params(method, _resolve_auto(self.sources, self.target, get_method(method), params), self.plan)
-        res = render(self.sources, self.camera, method, samples=self.samples, uncertainty=uncertainty, **params)
+    def render(self, method=None, *, params: RenderParams | None = None, uncertainty: bool = False,
+               **kw) -> RenderResult:
+        """What :func:`render` gives for ``method`` and ``params`` / ``kw`` (the grid's
+        ``grid_factor`` and ``grid_source_size`` included, "auto" weights tuned for the
+        target's camera, the result brought back to the target's size), from the shared samples."""
+        rp = RenderParams.coerce(method, params, **kw)
+        m = get_method(rp.method if method is None else method)
+        rp = grid_params(m, _resolve_auto(self.sources, self.target, rp), self.plan)
+        res = render(self.sources, self.camera, m, params=rp, samples=self.samples, uncertainty=uncertainty)
         return res.on_target(self.plan, self.target.shape)
 
 
@@ -134,8 +135,9 @@ def shared_geometry(sources: Scene, target: View | Camera, renders=(("gradient",
     """The geometry stage of :func:`render` done once for every ``(method, params)`` of
     ``renders``: the sources made ready as :func:`render` makes them, the grid
     :func:`fine_grid` chooses for them and the samples on it, with the fields any of them
-    reads (:func:`vibr.render.methods.with_sample_fields`). ``SharedGeometry.render(method,
-    **params)`` then equals ``render(sources, target, method, **params)`` without computing
+    reads (:func:`vibr.render.methods.with_sample_fields`); ``params`` of each a
+    :class:`RenderParams` or a dict of keyword arguments. ``SharedGeometry.render(method,
+    params=...)`` then equals ``render(sources, target, method, params=...)`` without computing
     the samples again."""
 
     cam = target.camera if isinstance(target, View) else target
@@ -157,10 +159,10 @@ def _fine_samples(sources, target, cam, m, params, geometry_kw, supersample, sto
     return src, compute_samples(src, grid, stop=stop, return_zbuffer=True, **gkw), plan
 
 
-def render(sources: Scene, target: View | Camera, method="gradient", *,
+def render(sources: Scene, target: View | Camera, method=None, *, params: RenderParams | None = None,
            samples: Samples | None = None, callback=None, progress_bar: bool = False,
            verbose: bool = False, geometry_kw: dict | None = None, uncertainty: bool = False,
-           supersample="auto", stop=None, **params) -> RenderResult:
+           supersample="auto", stop=None, **kw) -> RenderResult:
     """Render the view of ``target`` from ``sources`` (Nieto, Devernay & Crowley 2016).
 
     Minimises (docs/explanation/method.md §5, paper eq. energy_final)
@@ -181,8 +183,12 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         the target is held out and depth transferred from the views that have it.
     target : View or Camera
         A held-out view (its image is the reference for ``metrics``) or a bare camera.
-    method : str or Method
-        A name of :data:`vibr.render.methods.METHODS` ("gradient", "bvs", "savsr", "ulr").
+    method : str or Method, optional
+        A name of :data:`vibr.render.methods.METHODS` ("gradient", "bvs", "savsr", "ulr");
+        default ``params.method``, else "gradient".
+    params : RenderParams, optional
+        The render's parameters (:class:`vibr.render.params.RenderParams`, for ``method``);
+        default the method's. Keyword arguments ``**kw`` change them.
     samples : Samples, optional
         Skip the geometry stage (the sources are then used as given).
     callback : callable, optional
@@ -209,29 +215,19 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
         first). Not with ``samples`` given; "auto" does nothing with ``psf="footprint"``, which
         models fine sources itself. ``RenderResult.params`` records ``supersample`` and
         ``reduced_sources``.
-    **params
-        The defaults are :data:`vibr.render.methods.DEFAULTS` with the method's overrides:
-        alpha, gamma (gradient only), lam, sigma_s (grey levels),
-        sigma_z (None: the geometry's), scale (255: the intensity scale all these refer to;
-        images are [0, 1] internally), n_outer, max_iter, tol (relative
-        energy change), tv_iter, coupled_tv, grad_weighting ("visibility" | "none" | "W"),
-        grad_max (grey levels / px), precond, hole_threshold, ulr_k, ulr_beta_res,
-        psf ("bilinear" | "footprint": the image-formation model ``v_k = B_k u``, paper
-        §4.1 eq. normal; with "footprint" ``B_kmp = area(P_km ∩ p) / area(P_km)``,
-        ``P_km = tau_k(x_m) + ∂tau_k/∂x_m·[-½, ½]²`` the source pixel's parallelogram,
-        footprints larger than one target pixel shrunk per axis to 1 px; ulr ignores it),
-        grad_consistency (grey levels / px; 0: the paper's gradient term), grad_coverage
-        (samples; with the consistency weights, a gradient sample landing where fewer land
-        weighs coverage / grad_coverage; 0: not), z_corr (the correlation of the views'
-        depth errors at a target pixel, [0, 1]; 0: independent, the paper's model; None:
-        the geometry's, ``samples.meta["z_corr"]``: PROXY_Z_CORR for a proxy, else 0). See
-        :mod:`vibr.render.methods`.
+    **kw
+        Render parameters by name (a field of :class:`~vibr.render.params.RenderParams`, None:
+        the method's default), applied to ``params``, and ``preset`` (``"paper"``: alpha,
+        gamma and lam in the paper's units, :data:`vibr.render.params.PRESETS`). E.g.
+        ``render(src, tgt, "gradient", gamma=0.5)``. Every parameter's meaning, units, range
+        and default: docs/reference/parameters.md.
 
     Returns
     -------
     RenderResult
     """
-    m = get_method(method)
+    rp = RenderParams.coerce(method, params, **kw)
+    m = get_method(rp.method if method is None else method)
     t_all = time.perf_counter()
     cam = target.camera if isinstance(target, View) else target
     if not isinstance(cam, Camera):
@@ -243,15 +239,15 @@ def render(sources: Scene, target: View | Camera, method="gradient", *,
     t0 = time.perf_counter()
     src, plan = sources, None
     if samples is None:
-        src, samples, plan = _fine_samples(sources, target, cam, m, params, geometry_kw, supersample, stop)
+        src, samples, plan = _fine_samples(sources, target, cam, m, rp, geometry_kw, supersample, stop)
     elif isinstance(target, View) and target.name in sources.names:
         src = sources.replace(views=[v for v in sources.views if v.name != target.name])
     t_geo = time.perf_counter() - t0
     check_stop(stop)
-    params = grid_params(m, _resolve_auto(src, cam, m, params), plan)
-    res = render_samples(samples, m, source_centres=np.array([v.camera.centre for v in src.views]),
+    rp = grid_params(m, _resolve_auto(src, cam, rp), plan)
+    res = render_samples(samples, m, params=rp, source_centres=np.array([v.camera.centre for v in src.views]),
                          target_centre=cam.centre, callback=callback, progress_bar=progress_bar,
-                         verbose=verbose, uncertainty=uncertainty, stop=stop, **params)
+                         verbose=verbose, uncertainty=uncertainty, stop=stop)
     res.depth = target_depth(samples)
     res = res.on_target(plan, cam.shape)
     res.times["geometry"] = t_geo

@@ -27,15 +27,14 @@ from ..geometry import compute_samples
 from ..geometry.resample import scaled_scene
 from ..metrics import mse
 from ..scene import Scene
-from .methods import DEFAULTS, get_method, render_samples, sample_fields
+from .methods import get_method, render_samples, sample_fields
+from .params import AUTO, DEFAULTS, RenderParams
 
 logger = logging.getLogger("vibr.render.autotune")
 
 __all__ = ["AUTO", "GAMMA_GRID", "LAM_GRID", "Tuned", "probe_views", "probe_scale", "tune",
            "resolve_auto"]
 
-#: The value that asks for self-tuning (``gamma="auto"``, ``lam="auto"``, CLI ``--gamma auto``).
-AUTO = "auto"
 #: Candidate gradient-term weights (vibr's units, :mod:`vibr.render.methods`).
 GAMMA_GRID = (0.0, 0.1, 0.2, 0.5, 1.0)
 #: Candidate TV weights (grey levels of 255).
@@ -92,22 +91,24 @@ def _probe_cases(sources: Scene, probes, s: float, keep=()):
     return out
 
 
-def _score(cases, method: str, params: dict) -> float:
+def _score(cases, params: RenderParams) -> float:
     """Mean over the probes of the MSE of their renders (all pixels of their masks, border
     excluded)."""
 
     errs = []
     for samples, centres, cam, img, mask in cases:
-        r = render_samples(samples, method, source_centres=centres, target_centre=cam.centre, **params)
+        r = render_samples(samples, params.method, params=params, source_centres=centres, target_centre=cam.centre)
         errs.append(mse(r.image, img, mask, BORDER))
     return float(np.mean(errs))
 
 
 def tune(sources: Scene, target: Camera, method: str = "gradient", *, gamma=AUTO, lam=AUTO,
-         gammas=GAMMA_GRID, lams=LAM_GRID, n_probe: int = 1, budget: float = 1.0, **params) -> Tuned:
+         gammas=GAMMA_GRID, lams=LAM_GRID, n_probe: int = 1, budget: float = 1.0,
+         params: RenderParams | None = None, **kw) -> Tuned:
     """Choose ``gamma`` and/or ``lam`` (those given as ``"auto"``) for rendering ``target``
     (a :class:`~vibr.camera.Camera`: its image is never needed) from ``sources`` (views with
-    depth), by leave-one-source-out on the sources (module docstring). ``params``: the other
+    depth), by leave-one-source-out on the sources (module docstring). ``params`` (a
+    :class:`RenderParams` for ``method``) and/or the keyword arguments ``kw``: the other
     render parameters, used as given in every probe render."""
     if isinstance(target, Scene) or not isinstance(target, Camera):
         raise VibrInputError("tune: the target must be a Camera (its image is never used)")
@@ -126,12 +127,13 @@ def tune(sources: Scene, target: Camera, method: str = "gradient", *, gamma=AUTO
     probes = probe_views(sources, target, n_probe)
     s = probe_scale(sources, target, probes, max(n_renders, 1), budget)
 
-    cases = _probe_cases(sources, probes, s, sample_fields(method, **params))
+    rp = RenderParams.coerce(method, params, **kw).replace(gamma=g0, lam=l0)
+    cases = _probe_cases(sources, probes, s, sample_fields(method, rp))
     scores: dict = {}
 
     def run(g, l):
         if (g, l) not in scores:
-            scores[(g, l)] = _score(cases, method, {**params, "gamma": g, "lam": l})
+            scores[(g, l)] = _score(cases, rp.replace(gamma=g, lam=l))
         return scores[(g, l)]
 
     best_g, best_l = g0, l0
@@ -148,20 +150,16 @@ def tune(sources: Scene, target: Camera, method: str = "gradient", *, gamma=AUTO
     return out
 
 
-def resolve_auto(sources: Scene, target: Camera, method: str, params: dict) -> dict:
-    """``params`` with ``gamma`` / ``lam`` = ``"auto"`` (given, or the default) replaced by
-    :func:`tune`'s choice; unchanged when neither is "auto" or the method has no gradient
-    term (then only an "auto" lam is tuned)."""
+def resolve_auto(sources: Scene, target: Camera, params: RenderParams) -> RenderParams:
+    """``params`` with ``gamma`` / ``lam`` = :data:`AUTO` replaced by :func:`tune`'s choice;
+    unchanged when neither is "auto" (for a method without the gradient term only an "auto"
+    lam is tuned; a direct blend, ulr, has neither weight)."""
 
-    m = get_method(method)
-    g = DEFAULTS["gamma"] if params.get("gamma") is None else params["gamma"]
-    lam = DEFAULTS["lam"] if params.get("lam") is None else params["lam"]
-    if not m.gradient:
-        g = 0.0
-    if AUTO not in (g, lam):
+    m = get_method(params.method)
+    g = params.gamma if m.gradient else 0.0
+    if AUTO not in (g, params.lam):
         return params
-    if not m.solve:  # a direct blend (ulr) has neither weight
-        return {**params, "gamma": 0.0, "lam": float(LAM_GRID[len(LAM_GRID) // 2])}
-    rest = {k: v for k, v in params.items() if k not in ("gamma", "lam")}
-    t = tune(sources, target, m.name, gamma=g, lam=lam, **rest)
-    return {**params, "gamma": t.gamma if m.gradient else params.get("gamma"), "lam": t.lam}
+    if not m.solve:
+        return params.replace(gamma=0.0, lam=float(LAM_GRID[len(LAM_GRID) // 2]))
+    t = tune(sources, target, m.name, gamma=g, lam=params.lam, params=params)
+    return params.replace(gamma=t.gamma if m.gradient else params.gamma, lam=t.lam)

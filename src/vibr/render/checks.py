@@ -1,14 +1,8 @@
-"""Checks of the render's parameters and memory, at the API boundary, before any work.
+"""Checks of the render's memory, at the API boundary, before any work.
 
-A NaN weight, an infinite one or zero iterations do not fail inside the solver: they make
-it return the initial blend, and ``sigma_s = 0`` divides by zero. :func:`check_render_params`
-(called by :func:`vibr.render.methods.method_params` on the filled parameters, paper names,
-eq. energy_final) refuses such values with a one-line :class:`~vibr.errors.VibrInputError`
-naming the parameter, its value and the allowed range: ``alpha``, ``gamma``, ``lam`` ≥ 0,
-``sigma_s`` > 0 (grey levels), ``sigma_z`` > 0 (scene units) or None, ``scale`` (the
-intensity scale) > 0, all finite; ``max_iter`` ≥ 1, ``n_outer`` ≥ 0, ``tv_iter`` ≥ 1,
-``ulr_k`` ≥ 1 integers. :func:`check_render_memory` refuses a render whose estimated peak
-(:func:`render_memory`) exceeds the memory available.
+:func:`check_render_memory` refuses a render whose estimated peak (:func:`render_memory`)
+exceeds the memory available. The render's parameters are checked by
+:meth:`vibr.render.params.RenderParams.validate`, on every RenderParams made.
 """
 
 from __future__ import annotations
@@ -16,39 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._runtime.memory import check_memory
-from ..errors import check_int, check_real
 from ..geometry.samples import Samples
 from ..geometry.sampling import OPTIONAL_FIELDS
-
-
-def check_render_params(p: dict) -> dict:
-    """Check a filled render-parameter dict (see the module docstring); returns it."""
-    for k in ("alpha", "gamma", "lam", "d_floor", "ulr_beta_res", "tol", "grad_consistency",
-              "grad_coverage"):
-        if k in p:
-            check_real(k, p[k], lo=0.0)
-    for k in ("sigma_s", "scale", "grad_max"):
-        if k in p:
-            check_real("intensity_scale (scale)" if k == "scale" else k, p[k], lo=0.0, lo_open=True)
-    if "grid_source_size" in p:
-        check_real("grid_source_size", p["grid_source_size"], lo=0.0, lo_open=True)
-    if "lam_density" in p:
-        check_real("lam_density", p["lam_density"], lo=0.0, none_ok=True)
-    if "tol_outer" in p:
-        check_real("tol_outer", p["tol_outer"], lo=0.0, none_ok=True)
-    if "sigma_z" in p:
-        check_real("sigma_z", p["sigma_z"], lo=0.0, lo_open=True, none_ok=True)
-    if "view_tie" in p:
-        check_real("view_tie", p["view_tie"], lo=0.0)
-    if "z_corr" in p:
-        check_real("z_corr", p["z_corr"], lo=0.0, hi=1.0, none_ok=True)
-    if "hole_threshold" in p:
-        check_real("hole_threshold", p["hole_threshold"], lo=0.0, hi=1.0)
-    for k, lo in (("max_iter", 1), ("n_outer", 0), ("min_iter", 0), ("tv_iter", 1), ("ulr_k", 1), ("grid_factor", 1)):
-        if k in p:
-            check_int("iterations (max_iter)" if k == "max_iter" else k, p[k], lo=lo)
-    return p
-
 
 # ----------------------------------------------------------------------------- memory
 #: Estimated bytes per target pixel of a variational render besides its samples: the

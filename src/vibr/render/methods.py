@@ -108,33 +108,30 @@ import numpy as np
 
 from ..errors import VibrInputError
 from ..geometry.samples import Samples
-from .checks import check_render_params
 from .operators import PSFS as _PSFS
+from .params import (
+    AUTO,
+    DEFAULTS,
+    GRAD_WEIGHTINGS,
+    HOLE_FILLS,
+    METHOD_REGISTRY,
+    PAPER_DEFAULTS,
+    PAPER_GAMMA_FACTOR,
+    PAPER_LAM_FACTOR,
+    PRESETS,
+    RenderParams,
+    paper_params,
+)
 from .pushpull import push_pull
 from .result import RenderResult
 from .ulr import ulr_blend
 from .uncertainty import ulr_sigma
-from .variational import TV_WEIGHTINGS, solve_variational, splat_coverage
-from .weights import ROBUST_LOSSES
+from .variational import solve_variational, splat_coverage
 
 __all__ = ["Method", "REGISTRY", "METHODS", "DEFAULTS", "PSFS", "GRAD_WEIGHTINGS", "HOLE_FILLS", "get_method",
-           "method_params", "register_method", "unregister_method", "PRESETS", "PAPER_DEFAULTS", "paper_params",
-           "sample_fields", "with_sample_fields", "wants_fine_sources"]
-
-#: Defaults shared by the variational methods; see the module docstring for the reasons.
-DEFAULTS = dict(
-    alpha=1.0, gamma=0.3, lam=0.8, sigma_s=1.0, sigma_z=None, scale=255.0,
-    n_outer=2, max_iter=60, tol=1e-4, tol_outer=None, min_iter=3, tv_iter=2, coupled_tv=True,
-    grad_weighting="visibility", grad_max=64.0, grad_consistency=24.0, grad_coverage=1.5, z_corr=None, precond=True,
-    d_floor=0.05, hole_threshold=0.5, normalise=True, ulr_k=4, ulr_beta_res=0.1, psf="bilinear",
-    robust="none", robust_c=3.0, tv_weighting="uniform", view_k=4, view_tie=1.1, lam_density=3.0, grid_factor=1,
-    grid_source_size=1.0, hole_fill="push-pull",
-)
-
-#: How the variational methods fill the holes (pixels no sample covers, ``Bᵀ1 < hole_threshold``).
-HOLE_FILLS = ("push-pull", "solve")
-
-GRAD_WEIGHTINGS = ("visibility", "none", "W")
+           "method_params", "register_method", "unregister_method", "PRESETS", "PAPER_DEFAULTS", "PAPER_GAMMA_FACTOR",
+           "PAPER_LAM_FACTOR", "paper_params", "sample_fields", "with_sample_fields", "wants_fine_sources",
+           "RenderParams", "AUTO", "as_params"]
 
 #: Image-formation models, named once by :class:`vibr.render.operators.Splat`.
 PSFS = _PSFS
@@ -218,7 +215,7 @@ def _render_ulr(method: Method, samples, p, source_centres, target_centre, uncer
 
 
 #: The methods by name, in the order shown to users.
-REGISTRY: dict[str, Method] = {}
+REGISTRY: dict[str, Method] = METHOD_REGISTRY
 
 
 def register_method(method: Method) -> Method:
@@ -260,7 +257,6 @@ METHOD_OVERRIDES = {name: m.overrides for name, m in REGISTRY.items()}
 
 def get_method(method: "str | Method") -> Method:
     """The registered :class:`Method` named ``method`` (a Method passes through)."""
-
     if isinstance(method, Method):
         return method
     try:
@@ -269,131 +265,68 @@ def get_method(method: "str | Method") -> Method:
         raise VibrInputError(f"unknown method {method!r} (choose from {', '.join(REGISTRY)})") from None
 
 
-#: The paper's (alpha, gamma, lam) when ``preset="paper"`` is given without them: the
-#: light-field setting of the authors' experiments (docs/explanation/method.md §10: lambda = 0.001 on [0, 1]).
-PAPER_DEFAULTS = dict(alpha=1.0, gamma=1.0, lam=0.001)
-
-#: Paper gamma → vibr gamma: the authors apply ``dt_beta × gradient_step`` (0.1) to the
-#: compact Laplacian divided by 4, i.e. ``γ·0.1/4 · Dᵀ D`` with vibr's forward differences.
-PAPER_GAMMA_FACTOR = 0.1 / 4
-#: Paper lambda → vibr lam: the paper's lambda is on [0, 1] intensities against a data
-#: term normalised per pixel to unit weight; vibr's lam is on its ``scale`` (255) with a
-#: data term of unit weight per grey level² (sigma_s = 1): lam = 255 · lambda.
-PAPER_LAM_FACTOR = 255.0
-
-
-def paper_params(params: dict) -> dict:
-    """The paper's units → vibr's (docs/explanation/renderer.md, "The paper's units"): ``alpha`` kept,
-    ``gamma·0.1/4`` (forward differences), ``lam·255`` (scale 255), the gradient term
-    weighted by W (``grad_weighting="W"``, the authors' ``gw_type 1``), the spatially
-    varying TV (``tv_weighting="samples"``), no view prior, every gradient sample at full
-    weight (``grad_consistency=0``), independent depth errors (``z_corr=0``), lam against the
-    per-pixel normalised data term (``lam_density=0``), the energy's minimiser in the holes too
-    (``hole_fill="solve"``) and plain FISTA unless given.
-    ``params`` holds the paper's alpha / gamma / lam (None: :data:`PAPER_DEFAULTS`) and any
-    other vibr parameter."""
-    out = dict(params)
-    paper = {k: PAPER_DEFAULTS[k] if params.get(k) is None else float(params[k]) for k in PAPER_DEFAULTS}
-    if params.get("scale") not in (None, 255.0):
-
-        raise VibrInputError("preset 'paper' fixes the intensity scale to 255")
-    out.update(alpha=paper["alpha"], gamma=paper["gamma"] * PAPER_GAMMA_FACTOR,
-               lam=paper["lam"] * PAPER_LAM_FACTOR)
-    for k, v in (("grad_weighting", "W"), ("tv_weighting", "samples"), ("view_k", 0), ("precond", False),
-                 ("grad_consistency", 0.0), ("grad_coverage", 0.0), ("z_corr", 0.0), ("lam_density", 0.0),
-                 ("hole_fill", "solve")):
-        if out.get(k) is None:
-            out[k] = v
-    return out
-
-
-#: Parameter presets by name: a function of the given parameters returning vibr's.
-PRESETS = {"paper": paper_params}
-
-
 def method_params(method: str, preset: str | None = None, **params) -> dict:
-    """Defaults for ``method`` updated with ``params`` (None values keep the default;
-    gamma is forced to 0 for the methods without the gradient term). Unknown keyword
-    arguments raise TypeError. ``preset`` (a name of :data:`PRESETS`, e.g. ``"paper"``)
-    reads ``params`` in that preset's units first."""
-
-    m = get_method(method)
-    if preset is not None:
-        if preset not in PRESETS:
-            raise VibrInputError(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
-        params = PRESETS[preset](params)
-    unknown = set(params) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown render parameter(s): {', '.join(sorted(unknown))}")
-    p = dict(DEFAULTS)
-    p.update(m.overrides)
-    for k, v in params.items():
-        if v is not None or k == "sigma_z":
-            if k == "gamma" and not m.gradient:
-                continue
-            p[k] = v
-    if p["psf"] not in PSFS:
-        raise VibrInputError(f"psf must be one of {PSFS}, got {p['psf']!r}")
-
-    if p["robust"] not in ROBUST_LOSSES:
-        raise VibrInputError(f"robust must be one of {ROBUST_LOSSES}, got {p['robust']!r}")
-
-    if p["tv_weighting"] not in TV_WEIGHTINGS:
-        raise VibrInputError(f"tv_weighting must be one of {TV_WEIGHTINGS}, got {p['tv_weighting']!r}")
-    if p["hole_fill"] not in HOLE_FILLS:
-        raise VibrInputError(f"hole_fill must be one of {HOLE_FILLS}, got {p['hole_fill']!r}")
-    if p["grad_weighting"] not in GRAD_WEIGHTINGS:
-        raise VibrInputError(f"grad_weighting must be one of {GRAD_WEIGHTINGS}, got {p['grad_weighting']!r}")
-
-    return check_render_params(p)
+    """The filled parameters of ``method`` as a dict: ``RenderParams.from_kwargs(method,
+    preset, **params).as_dict()`` (:class:`vibr.render.params.RenderParams`; None values keep
+    the method's default, unknown names raise TypeError, every value is checked)."""
+    return RenderParams.from_kwargs(method, preset, **params).as_dict()
 
 
-def sample_fields(method="gradient", **params) -> tuple:
+def as_params(method, params) -> RenderParams:
+    """``params`` (a :class:`RenderParams`, or a dict of keyword arguments of
+    :meth:`RenderParams.from_kwargs`, ``preset`` included) as a RenderParams for ``method``."""
+    if isinstance(params, RenderParams):
+        return RenderParams.coerce(method, params)
+    return RenderParams.from_kwargs(method, **dict(params or {}))
+
+
+def sample_fields(method="gradient", params: RenderParams | None = None, **kw) -> tuple:
     """The optional sample fields (:data:`vibr.geometry.sampling.OPTIONAL_FIELDS`) a render
-    of ``method`` with ``params`` reads, for :func:`vibr.geometry.compute_samples`'s
-    ``keep``: ``("jac",)`` with the footprint PSF, else none. ``params`` as
-    :func:`method_params` takes them ("auto" values allowed)."""
-    return ("jac",) if wants_fine_sources(method, **params) else ()
+    of ``method`` with ``params`` (or the keyword arguments ``kw``) reads, for
+    :func:`vibr.geometry.compute_samples`'s ``keep``: ``("jac",)`` with the footprint PSF,
+    else none."""
+    return ("jac",) if wants_fine_sources(method, params, **kw) else ()
 
 
-def wants_fine_sources(method="gradient", **params) -> bool:
+def wants_fine_sources(method="gradient", params: RenderParams | None = None, **kw) -> bool:
     """True where the render models sources finer than the target itself (the footprint
     PSF, ``psf="footprint"``, reads the warps' Jacobians): then
     :func:`vibr.render.api.reduce_sources` leaves the sources at their resolution."""
-    p = method_params(method, **{k: v for k, v in params.items() if not isinstance(v, str) or v != "auto"})
-    return p["psf"] == "footprint"
+    return RenderParams.coerce(method, params, **kw).psf == "footprint"
 
 
 def with_sample_fields(geometry_kw: dict | None, *renders) -> dict:
     """``geometry_kw`` (arguments of :func:`vibr.geometry.compute_samples`) with its
     ``keep`` extended by the :func:`sample_fields` of every render ``(method, params)`` the
-    samples are for: the one place that decides what the geometry computes."""
+    samples are for (``params`` a :class:`RenderParams` or a dict of keyword arguments):
+    the one place that decides what the geometry computes."""
     keep = set((geometry_kw or {}).get("keep", ()))
     for method, params in renders:
-        keep |= set(sample_fields(method, **params))
+        keep |= set(sample_fields(method, as_params(method, params)))
     return {**(geometry_kw or {}), "keep": tuple(sorted(keep))}
 
 
-def render_samples(samples: Samples, method="gradient", *, source_centres=None,
-                   target_centre=None, callback=None, progress_bar: bool = False,
-                   verbose: bool = False, uncertainty: bool = False, stop=None, **params) -> RenderResult:
+def render_samples(samples: Samples, method="gradient", *, params: RenderParams | None = None,
+                   source_centres=None, target_centre=None, callback=None, progress_bar: bool = False,
+                   verbose: bool = False, uncertainty: bool = False, stop=None, **kw) -> RenderResult:
     """Render from precomputed :class:`~vibr.geometry.Samples` (see :func:`render` for the
     parameters) with the registered method (:mod:`vibr.render.methods`).
+    ``params`` (a :class:`RenderParams` for ``method``) and/or the keyword arguments ``kw``
+    of :meth:`RenderParams.from_kwargs` (``preset`` included) give the parameters.
     ``source_centres`` (K, 3) and ``target_centre`` (3,) are needed by ulr and the view prior
     (``view_k``); None takes those :func:`vibr.geometry.compute_samples` stored in
     ``samples.meta``."""
     m = get_method(method)
-    if "auto" in (params.get("gamma"), params.get("lam")):
+    rp = RenderParams.coerce(m, params, **kw)
+    if rp.auto:
         raise VibrInputError("gamma/lam 'auto' tunes on the source views: use vibr.render.render "
                              "(render_samples has only the samples)")
-    p = method_params(m.name, **params)
     if len(samples) == 0:
         raise VibrInputError("no source sample lands in the target view")
     if source_centres is None:
         source_centres = samples.meta.get("source_centres")
     if target_centre is None:
         target_centre = samples.meta.get("target_centre")
-    return m.render(samples, p, source_centres=source_centres, target_centre=target_centre,
+    return m.render(samples, rp.as_dict(), source_centres=source_centres, target_centre=target_centre,
                     callback=callback, progress_bar=progress_bar, verbose=verbose, uncertainty=uncertainty,
                     stop=stop)
-

@@ -498,10 +498,10 @@ class Viewer:
     def _settings_changed(self) -> None:
         g = self.gui
         try:
-            self.settings = ViewSettings(method=str(g["method"].value), gamma=float(g["gamma"].value),
-                                         lam=float(g["lam"].value), n_views=int(g["n_views"].value),
-                                         preview_long_side=int(g["preview"].value),
-                                         full_long_side=int(g["full"].value), show=str(g["show"].value))
+            self.settings = self.settings.replace(method=str(g["method"].value), gamma=float(g["gamma"].value),
+                                                  lam=float(g["lam"].value), n_views=int(g["n_views"].value),
+                                                  preview_long_side=int(g["preview"].value),
+                                                  full_long_side=int(g["full"].value), show=str(g["show"].value))
         except VibrInputError as exc:
             g["status"].content = f"invalid setting: {exc}"
             return

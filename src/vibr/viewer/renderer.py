@@ -20,7 +20,8 @@ from ..geometry import prepare_depth
 from ..geometry.resample import scaled_scene as _scaled
 from ..geometry.selection import select_views
 from ..render import render
-from ..render.methods import DEFAULTS, METHODS, method_params
+from ..render.methods import DEFAULTS, METHODS
+from ..render.params import RenderParams
 from ..scene import Scene
 from ..stereo.cache import scene_with_depth as _with_depth
 from .geometry import point_cloud, points_in_view
@@ -56,6 +57,9 @@ class ViewSettings:
         :data:`vibr.render.methods.DEFAULTS`' gamma, as ``vibr render``: a path composed in
         the viewer renders to video with the same settings)
     lam : TV weight, for intensities on [0, 255] (default: DEFAULTS' lam)
+    params : the other render parameters, keyword arguments of
+        :meth:`vibr.render.params.RenderParams.from_kwargs` (``preset`` included: gamma and
+        lam are then read in its units), applied to whichever method the GUI selects
     n_views : number of source views (the best for the camera)
     preview_long_side : long side of the preview image while the camera moves (px)
     full_long_side : long side of the image once the camera is still (px); None: the
@@ -71,6 +75,7 @@ class ViewSettings:
     preview_long_side: int = 256
     full_long_side: int | None = None
     show: str = "image"
+    params: dict = field(default_factory=dict)
 
     def __post_init__(self):
 
@@ -82,6 +87,13 @@ class ViewSettings:
             raise VibrInputError("gamma and lam must be >= 0")
         if self.show not in SHOW:
             raise VibrInputError(f"show must be one of {', '.join(SHOW)}, got {self.show!r}")
+        if {"gamma", "lam"} & set(self.params):
+            raise VibrInputError("ViewSettings: gamma and lam are fields of their own, not params")
+        self.render_params()  # every parameter checked here, not at the first render
+
+    def render_params(self) -> RenderParams:
+        """The :class:`~vibr.render.params.RenderParams` of a render with these settings."""
+        return RenderParams.from_kwargs(self.method, **self.params, gamma=self.gamma, lam=self.lam)
 
     def replace(self, **changes) -> "ViewSettings":
         return replace(self, **changes)
@@ -202,11 +214,11 @@ class ViewRenderer:
         scene = self.scene_for(camera)
         src = scene.subset(idx)
         prepared = self.prepared_for(scene, idx)
-        passes = {}
-        if preview and method_params(settings.method)["n_outer"] > PREVIEW_OUTER:
-            passes["n_outer"] = PREVIEW_OUTER
-        res = render(src, camera, settings.method, gamma=settings.gamma, lam=settings.lam, stop=should_stop,
-                     geometry_kw={"prepared": prepared}, uncertainty=settings.show == "sigma", **passes)
+        params = settings.render_params()
+        if preview and params.n_outer > PREVIEW_OUTER:
+            params = params.replace(n_outer=PREVIEW_OUTER)
+        res = render(src, camera, params=params, stop=should_stop, geometry_kw={"prepared": prepared},
+                     uncertainty=settings.show == "sigma")
         dt = time.perf_counter() - t0
         return ViewImage(res.image, camera, [v.name for v in src.views], dt, dict(res.times), res.iterations,
                          res.uncertainty)
