@@ -1,4 +1,4 @@
-"""Property-based fuzzing of vibr's loaders (issue 24), shared by tests/test_fuzz_loaders.py
+"""Property-based fuzzing of vibr's loaders, shared by tests/test_fuzz_loaders.py
 (fast profile, part of ``pytest -q``) and benchmarks/tools/fuzz_long.py (long profile).
 
 Each *seed* writes a small valid input (a scene folder or one file). A hypothesis strategy

@@ -1,4 +1,4 @@
-"""gamma="auto" / lam="auto" (vibr.render.autotune, issue 23): leave-one-source-out on the sources,
+"""gamma="auto" / lam="auto" (vibr.render.autotune): leave-one-source-out on the sources,
 never the target's image; the right choice where the answer is clear."""
 
 from __future__ import annotations

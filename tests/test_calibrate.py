@@ -1,4 +1,4 @@
-"""Calibration from raw photos (issue 8): a synthetic scene whose cameras are known is
+"""Calibration from raw photos: a synthetic scene whose cameras are known is
 photographed, calibrated through ``vibr calibrate`` (pycolmap, CPU) and compared with the
 truth after a similarity alignment; plus the COLMAP → vibr camera conversion, the alignment
 helpers and the error paths."""

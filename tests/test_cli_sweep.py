@@ -1,4 +1,4 @@
-"""Issue 24: every subcommand with invalid numeric options, unwritable outputs and missing
+"""Every subcommand with invalid numeric options, unwritable outputs and missing
 inputs exits with status 2, one line on stderr, no traceback, and writes nothing."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Fly-throughs (issue 21): camera paths (nerfstudio schema), path generators, depth cache,
+"""Fly-throughs: camera paths (nerfstudio schema), path generators, depth cache,
 ``vibr path`` / ``vibr render --path``, MP4 output."""
 
 import json

@@ -1,4 +1,4 @@
-"""Issue 24: property-based fuzzing of every loader (fast profile; the long profile is
+"""Property-based fuzzing of every loader (fast profile; the long profile is
 benchmarks/tools/fuzz_long.py). See tests/_fuzz.py for the mutations and the property."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 24, items 2 and 4-8: truncated COLMAP models, parameters checked at the API
+"""Truncated COLMAP models, parameters checked at the API
 boundary, memory and coverage limits, paths kept inside the scene, messages without
 internals, bit-identical renders."""
 

@@ -1,4 +1,4 @@
-"""Issue 24, items 1 and 3: --overwrite never deletes what vibr did not write, and outputs
+"""--overwrite never deletes what vibr did not write, and outputs
 are checked before the work (one line, exit 2, nothing written)."""
 
 from __future__ import annotations

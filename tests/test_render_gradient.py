@@ -1,4 +1,4 @@
-"""One image gradient for both sides of the gradient term (issue 22): adjoint, sources'
+"""One image gradient for both sides of the gradient term: adjoint, sources'
 ∇v = the operator applied to the source image (borders included), and no checkerboard."""
 
 import numpy as np

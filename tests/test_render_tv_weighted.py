@@ -1,4 +1,4 @@
-"""Spatially varying TV (issue 22, METHOD §10): the weighted prox, the weighted energy, the
+"""Spatially varying TV (docs/explanation/method.md §10): the weighted prox, the weighted energy, the
 weight map and the solver's monotone energy with it on."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Per-pixel uncertainty of a render (issue 28): metrics in closed form, σ on a synthetic
+"""Per-pixel uncertainty of a render: metrics in closed form, σ on a synthetic
 scene with exact and perturbed depth, the CLI outputs."""
 
 import numpy as np

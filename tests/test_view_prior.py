@@ -1,4 +1,4 @@
-"""What ULR knows in the variational weights (issue 23): the view prior (angle and resolution
+"""What ULR knows in the variational weights: the view prior (angle and resolution
 penalties, the k best views per pixel) and the fallback proxy for unknown source depth."""
 
 import warnings

@@ -1,4 +1,4 @@
-"""Calibration benchmark on Strecha fountain-P11 (issue 8).
+"""Calibration benchmark on Strecha fountain-P11.
 
 1. ``vibr.calib.colmap.calibrate`` on the scene's ``images/`` only (11 photos, 3072×2048),
    resized by ``--scale`` (default 0.5 → 1536×1024): registration count, per-stage times,

@@ -1,4 +1,4 @@
-"""Depth-estimation benchmark (issue 5): HCI cotton metrics and Strecha fountain MVS.
+"""Depth-estimation benchmark: HCI cotton metrics and Strecha fountain MVS.
 
 Usage::
 

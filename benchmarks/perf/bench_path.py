@@ -1,4 +1,4 @@
-"""Fly-through benchmark (issue 21): `vibr path interpolate` then `vibr render --path` on fountain.
+"""Fly-through benchmark: `vibr path interpolate` then `vibr render --path` on fountain.
 
     python3 benchmarks/perf/bench_path.py [--data ../shared/data] [--scale 0.25] [--frames 60]
                                      [--views 8] [--out /tmp/bench_path] [--hard] [--workers N]

@@ -1,4 +1,4 @@
-"""Rendering speed: a 768×768 view from 8 sources of a synthetic scene (issue 7).
+"""Rendering speed: a 768×768 view from 8 sources of a synthetic scene.
 
 Prints, as medians over ``--repeat`` runs (after one warm-up run that loads the compiled
 kernels):

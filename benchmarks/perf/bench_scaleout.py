@@ -1,4 +1,4 @@
-"""Scale-out benchmark (issue 26): the same job serially, with --workers N and with --dask local;
+"""Scale-out benchmark: the same job serially, with --workers N and with --dask local;
 wall times, and whether the engines give the same output (docs/explanation/scale-out.md).
 
 Fly-through (default): the fountain path of docs/explanation/flythrough.md (`vibr path interpolate`

@@ -1,6 +1,6 @@
 """Where MVS depth misses on the hand-held synthetic scenes, and what would recover them.
 
-Issue 5 asks for >= 95 % of textured pixels within 1 % of the exact depth on a free camera
+The target is >= 95 % of textured pixels within 1 % of the exact depth on a free camera
 layout. This script takes the reference view (view 0) of ``make_scene("handheld")`` scenes,
 runs :func:`vibr.stereo.estimate_depth` on every view (as ``bench_depth.py synthetic``
 does), and splits the misses:

@@ -1,4 +1,4 @@
-"""Light-field depth: plane step and refinement iterations against time and accuracy (issue 25).
+"""Light-field depth: plane step and refinement iterations against time and accuracy.
 
 The light-field estimator (:func:`vibr.stereo.lightfield.lightfield_depth`) sweeps planes
 ``step`` px of disparity apart and refines the winners with ``pm_iter`` slanted-plane

@@ -1,4 +1,4 @@
-"""Quality of the renders (issue 22): PSNR, checkerboard energy and speckles, per setting.
+"""Quality of the renders: PSNR, checkerboard energy and speckles, per setting.
 
 Scenes:
 

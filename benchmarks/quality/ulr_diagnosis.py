@@ -1,4 +1,4 @@
-"""Why ULR beats the variational methods on fountain (issue 23): PSNR per pixel group, by the
+"""Why ULR beats the variational methods on fountain: PSNR per pixel group, by the
 number of source views that land on a pixel and by the angle of the best view (between the
 target's and the source's rays to the sample's point), for ULR and `gradient` with and
 without the view prior (`view_k`, docs/explanation/renderer.md "What ULR knows").

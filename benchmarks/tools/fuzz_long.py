@@ -1,4 +1,4 @@
-"""Long fuzz profile of vibr's loaders (issue 24): N hypothesis-drawn mutations per loader,
+"""Long fuzz profile of vibr's loaders: N hypothesis-drawn mutations per loader,
 each run in a forked child under a time and memory budget (tests/_fuzz.py).
 
     python3 benchmarks/tools/fuzz_long.py                 # 1000 cases per loader
