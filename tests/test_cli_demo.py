@@ -2,7 +2,10 @@
 
 import re
 
+import pytest
 
+
+@pytest.mark.slow
 def test_demo_default_renders_the_held_out_view(tmp_path, capsys):
     from vibr.cli import main
     from vibr.io import read_image
@@ -14,9 +17,9 @@ def test_demo_default_renders_the_held_out_view(tmp_path, capsys):
     psnr = [float(x) for x in re.findall(r"PSNR\s+([\d.]+) dB", txt)]
     dssim = float(re.search(r"DSSIM\s+([\d.]+)", txt).group(1))
     cover = float(re.search(r"([\d.]+)% of the image", txt).group(1))
-    # measured with the defaults (grid, 256x256, gradient): 42.57 dB on the reconstructed
-    # pixels (99.3 %), DSSIM 60.9, 42.28 dB on all pixels
-    assert psnr[0] > 41.0 and psnr[1] > 40.8 and dssim < 85 and cover > 98.0, txt
+    # what the demo prints with the defaults (grid, 256x256, gradient): 44.72 dB on the
+    # reconstructed pixels (99.3 %), DSSIM 32.7, 43.58 dB on all pixels; held within 1 dB
+    assert psnr[0] > 43.72 and psnr[1] > 42.58 and dssim < 40 and cover > 99.0, txt
     assert read_image(out).shape == (256, 256, 3)
     # the quick start's fly-through: 3 s at 24 fps round the grid, decoded back
     from vibr.io.video import read_video_info

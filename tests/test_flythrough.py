@@ -806,9 +806,13 @@ def test_path_to_mp4_resume_and_decode(grid_dir, tmp_path, capsys):
     assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 0
     txt = capsys.readouterr().out
     assert "rendered 0 frames (5 already there)" in txt and "per frame" not in txt  # nothing to divide
-    write_image(frames[1], read_image(frames[1]), bits=8)  # the same pixels, no key
-    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 0
-    assert "rendered 1 frame (4 already there)" in capsys.readouterr().out
+    write_image(frames[1], read_image(frames[1]), bits=8)  # the same pixels, no key: not vibr's
+    before = frames[1].read_bytes()
+    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q"]) == 2
+    assert "which vibr did not write" in capsys.readouterr().err and frames[1].read_bytes() == before
+    assert main(["render", str(grid_dir), "--path", str(pj2), "-o", str(out), "--views", "3", "-q",
+                 "--overwrite"]) == 0  # asked for: every frame rendered again
+    assert "rendered 5 frames (0 already there)" in capsys.readouterr().out
 
 
 def test_view_weights_soft_and_continuous(arc_scene):

@@ -306,7 +306,6 @@ def test_uncertainty_with_the_shared_depth_error_reads_the_independent_weights(m
     independent errors' weights of the last estimate, assembled once more after the solve;
     the image is the one rendered without σ, bit for bit, and σ is finite and positive where
     the samples cover."""
-    import vibr.render.uncertainty as U
     import vibr.render.variational as V
     from vibr.geometry import compute_samples
     from vibr.pipeline import prepare
@@ -319,7 +318,7 @@ def test_uncertainty_with_the_shared_depth_error_reads_the_independent_weights(m
     assert S.meta["z_corr"] > 0
     plain = render(src, tv.camera, "gradient", samples=S)
     calls, seen = [], []
-    wn, vs = V.weighted_normal, U.variational_sigma
+    wn, vs = V.weighted_normal, V.variational_sigma
 
     def spy_wn(*a, **k):
         out = wn(*a, **k)
@@ -331,7 +330,7 @@ def test_uncertainty_with_the_shared_depth_error_reads_the_independent_weights(m
         return vs(model, splat, weight, *a, **k)
 
     monkeypatch.setattr(V, "weighted_normal", spy_wn)
-    monkeypatch.setattr(U, "variational_sigma", spy_vs)
+    monkeypatch.setattr(V, "variational_sigma", spy_vs)  # the name the solve calls
     r = render(src, tv.camera, "gradient", samples=S, uncertainty=True)
     assert [z for z, _ in calls] == [S.meta["z_corr"]] * 2 + [0.0]
     assert seen[0] is calls[-1][1]
