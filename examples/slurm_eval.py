@@ -59,8 +59,8 @@ def slurm_cluster(args):
 def main(argv=None, cluster_factory=slurm_cluster) -> int:
     from distributed import Client
 
-    from vibr.eval.protocol import settings_grid, write_report
     from vibr.eval.leave_one_out import evaluate_all, format_all_table, resolve_targets
+    from vibr.eval.protocol import settings_grid, write_report
     from vibr.io import load_scene
 
     args = parse_args(argv)

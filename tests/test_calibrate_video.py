@@ -9,13 +9,13 @@ import subprocess
 
 import numpy as np
 import pytest
-from _checks import messages_logged
 from scipy import ndimage
 
+from _checks import messages_logged
 from vibr.calib.colmap import pose_errors
+from vibr.calib.video_frames import extract_frames, sharpness
 from vibr.errors import VibrInputError
 from vibr.io.video import open_video, write_video
-from vibr.calib.video_frames import extract_frames, sharpness
 
 pytestmark = pytest.mark.slow
 

@@ -7,9 +7,8 @@ import importlib.util
 import json
 from pathlib import Path
 
-import pytest
-
 import distributed  # noqa: F401  (a plain import: the test extra installs it)
+import pytest
 
 pytestmark = pytest.mark.slow
 

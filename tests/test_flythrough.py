@@ -133,8 +133,8 @@ def test_dataparser_transforms_with_applied_transform_and_scale(arc_scene, tmp_p
     nerfstudio assumes a fixed axis swap): the path maps back to the file's own frame."""
     from scipy.spatial.transform import Rotation
 
-    from vibr.paths import camera_path as P
     from vibr.io.transforms import save_scene as save_scene_transforms
+    from vibr.paths import camera_path as P
 
     scene_dir = tmp_path / "scene"
     save_scene_transforms(arc_scene, scene_dir)
@@ -269,7 +269,6 @@ def test_interpolate_through_a_ring_goes_round_it(data_dir):
     proximity, and the path stays near the ring; the view with the same pose as its
     neighbour by proximity (templeSR0011, templeSR0001's) is left out with a warning."""
     from _checks import messages_logged
-
     from vibr.paths.camera_path import interpolate, scene_centre
 
     scene = _temple_cameras(data_dir / "middlebury_templeSparseRing")
@@ -444,8 +443,8 @@ def test_orbit_and_spiral_look_at_the_object(data_dir, which, kind):
     of every frame, in front of the camera; an orbit stays at the cameras' mean distance.
     The frame is the photographs' turned upright: templeSparseRing's, rolled by 90°, portrait
     with the photographs' horizontal field of view as its vertical one."""
-    from vibr.paths import camera_path as P
     from vibr.camera import axes_meeting_point
+    from vibr.paths import camera_path as P
 
     scene = _fountain_cameras(data_dir / "strecha_fountain-P11") if which == "fountain" \
         else _temple_cameras(data_dir / "middlebury_templeSparseRing")
@@ -693,9 +692,9 @@ def test_path_uncertainty_video_on_one_scale(grid_dir, tmp_path, capsys):
     import imageio.v3 as iio
 
     from vibr.cli import main
-    from vibr.paths.flythrough import sigma_name
-    from vibr.io.video import read_video_info
     from vibr.eval.sigma_figures import sigma_figure
+    from vibr.io.video import read_video_info
+    from vibr.paths.flythrough import sigma_name
 
     pj = tmp_path / "o.json"
     assert main(["path", "orbit", str(grid_dir), "-o", str(pj), "--frames", "6", "--size", "48x32", "-q"]) == 0
@@ -732,8 +731,8 @@ def test_sigma_video_has_one_scale_for_all_frames(tmp_path):
     own, so that a colour means the same σ in every frame; NaN (no value) as the top."""
     import imageio.v3 as iio
 
-    from vibr.paths.flythrough import _write_sigma_frame, write_sigma_video
     from vibr.eval.sigma_figures import sigma_figure
+    from vibr.paths.flythrough import _write_sigma_frame, write_sigma_video
 
     ramp = np.linspace(0, 1, 64 * 48).reshape(48, 64)
     maps = [ramp * 1.0, ramp * 5.0, ramp * 20.0]
@@ -819,9 +818,9 @@ def test_view_weights_soft_and_continuous(arc_scene):
     """Far from a rank swap the K best have weight 1 and the others 0 (select_views' set);
     along a path the weights change continuously (no jump larger than the path's step
     warrants)."""
-    from vibr.paths.flythrough import _source_points, view_weights
-    from vibr.paths.camera_path import interpolate
     from vibr.geometry.selection import select_views
+    from vibr.paths.camera_path import interpolate
+    from vibr.paths.flythrough import _source_points, view_weights
 
     pts = _source_points(arc_scene)
     p = interpolate(arc_scene, n_frames=200, width=32, height=24)
@@ -837,10 +836,9 @@ def test_depth_cache_estimates_once(tmp_path, monkeypatch):
     """Without depth, the first call estimates and writes the cache; the second loads it
     (estimate_depth not called) and gives the same maps."""
     import vibr.stereo.cache as stereo  # where the cache calls the estimator
+    from vibr.scene import Scene
     from vibr.stereo.cache import scene_with_depth
     from vibr.synthetic import make_scene
-
-    from vibr.scene import Scene
 
     s = make_scene("arc", n_views=4, width=48, height=40, seed=3)
     bare = Scene([v.replace(depth=None, sigma_z=None) for v in s.views], s.name, None, None, None, {})
@@ -927,8 +925,8 @@ def test_video_extension_must_be_known(tmp_path):
 def test_depth_only_for_the_views_the_path_uses(tmp_path):
     """A scene of many views without depth: the fly-through estimates depth for the views
     its frames may use (each frame's 2·n_views best, ranked before depth), not for all."""
-    from vibr.paths.flythrough import render_path, views_for_path
     from vibr.paths.camera_path import interpolate
+    from vibr.paths.flythrough import render_path, views_for_path
     from vibr.synthetic import make_scene
 
     s = make_scene("handheld", n_views=16, width=64, height=48, seed=2)
@@ -1103,9 +1101,9 @@ def test_smooth_keys_property():
 def test_render_path_options_and_keywords(tmp_path):
     """render_path's options as a FlyOptions or as keywords over it give the same frames; a
     misspelt option is a TypeError, not a default."""
-    from vibr.paths.flythrough import FlyOptions, render_path
     from vibr.io import read_image
     from vibr.paths.camera_path import interpolate
+    from vibr.paths.flythrough import FlyOptions, render_path
     from vibr.synthetic import make_scene
 
     s = make_scene("grid", n_views=9, width=48, height=40, seed=0)

@@ -6,8 +6,13 @@ import pytest
 
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
-from vibr.geometry import (depth_derivatives, disparity_to_depth, fill_depth_holes,
-                           radial_to_orthogonal, radial_to_orthogonal_derivatives)
+from vibr.geometry import (
+    depth_derivatives,
+    disparity_to_depth,
+    fill_depth_holes,
+    radial_to_orthogonal,
+    radial_to_orthogonal_derivatives,
+)
 
 
 def test_radial_to_orthogonal_matches_camera_geometry():

@@ -2,12 +2,18 @@
 
 import numpy as np
 
-from vibr.camera import Camera
-from vibr.geometry import (compute_samples, new_zbuffers, prepare_depth, reduce_zbuffers,
-                           splat_zbuffer, visibility_mask, warp_constants)
-from vibr.geometry.visibility import BEHIND, OUTSIDE, VISIBLE
-
 import vibr.synthetic as synthetic
+from vibr.camera import Camera
+from vibr.geometry import (
+    compute_samples,
+    new_zbuffers,
+    prepare_depth,
+    reduce_zbuffers,
+    splat_zbuffer,
+    visibility_mask,
+    warp_constants,
+)
+from vibr.geometry.visibility import BEHIND, OUTSIDE, VISIBLE
 
 
 def _zbuffer(views, cam, mode="affine", nbuf=None):

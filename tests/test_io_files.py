@@ -7,12 +7,19 @@ import pytest
 
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
-from vibr.io import (read_camera_json, read_depth, read_image, read_pfm, write_camera_json, write_depth,
-                     write_image, write_pfm)
+from vibr.geometry.resample import quantise16, resize_depth
+from vibr.io import (
+    read_camera_json,
+    read_depth,
+    read_image,
+    read_pfm,
+    write_camera_json,
+    write_depth,
+    write_image,
+    write_pfm,
+)
 from vibr.io.depthfiles import read_colmap_bin, write_colmap_bin
-from vibr.geometry.resample import quantise16
 from vibr.io.images import decode_png16, image_bits, png_bit_depth
-from vibr.geometry.resample import resize_depth
 
 
 def _depth(h=5, w=7, seed=0):

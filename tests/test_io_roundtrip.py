@@ -10,8 +10,8 @@ import pytest
 
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
-from vibr.io import load_scene, save_scene
 from vibr.geometry.resample import quantise16
+from vibr.io import load_scene, save_scene
 from vibr.scene import Scene, View
 
 

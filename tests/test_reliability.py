@@ -12,13 +12,11 @@ import shutil
 import numpy as np
 import pytest
 
+from _colmap_model import write_colmap_model
+from _fuzz import run_case
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
 from vibr.io import load_scene, save_scene
-
-from _colmap_model import write_colmap_model
-from _fuzz import run_case
-
 
 
 # ----------------------------------------------------------------------------- item 2
@@ -123,8 +121,8 @@ def test_negative_view_index_is_an_error():
 # ----------------------------------------------------------------------------- item 5
 def test_render_memory_refused_before_allocating(monkeypatch):
     from vibr.render import render
-    from vibr.synthetic import make_scene
     from vibr.render.checks import render_memory
+    from vibr.synthetic import make_scene
 
     s = make_scene("grid", n_views=4, width=32, height=32, seed=0)
     c = s[0].camera
@@ -236,8 +234,8 @@ def test_depth_killed_midway_resumes(tmp_path, capsys, monkeypatch):
     """A `vibr depth` interrupted after its first view keeps it: the rerun sweeps only the
     others, reads back nothing damaged, and writes the same maps as an uninterrupted run."""
     import vibr.stereo.api as sapi
-    from vibr.cli import main
     from vibr._runtime.checkpoint import resume_folder
+    from vibr.cli import main
     from vibr.synthetic import make_scene
 
     s = make_scene("free", n_views=4, width=40, height=32, seed=2)
@@ -275,9 +273,9 @@ def test_depth_cache_killed_midway_resumes(tmp_path, monkeypatch):
     `vibr depth` does: killed in its second view, the rerun keeps the first, writes the same
     maps as an uninterrupted run, and removes its checkpoint folder once the cache is written."""
     import vibr.stereo.api as sapi
-    from vibr.stereo.cache import scene_with_depth
     from vibr._runtime.checkpoint import resume_folder
     from vibr.scene import Scene
+    from vibr.stereo.cache import scene_with_depth
     from vibr.synthetic import make_scene
 
     s = make_scene("free", n_views=3, width=40, height=32, seed=2)
@@ -359,8 +357,8 @@ def test_eval_and_render_estimate_depth_once_through_the_cache(tmp_path, capsys,
 def test_a_cache_folder_that_cannot_be_written(tmp_path, capsys):
     """--cache-dir that is, or lies under, a file: one line, exit 2, before any work. A
     checkpoint folder that cannot be made (a read-only cache) only costs the resumption."""
-    from vibr.cli import main
     from vibr._runtime.checkpoint import ViewCheckpoint
+    from vibr.cli import main
     from vibr.synthetic import make_scene
 
     s = make_scene("free", n_views=3, width=40, height=32, seed=2)

@@ -53,7 +53,6 @@ def test_preconditioned_power_iteration_equals_the_numpy_steps(H, W):
     """The preconditioned power iteration's fused passes (power_scale, power_unscale) give
     the step size of its numpy formulation bit for bit, and leave the same vector."""
     from _checks import random_model
-
     from vibr.render.operators import dot
 
     model, _ = random_model(H, W, 4, 3, gamma=0.5)
@@ -88,6 +87,7 @@ def test_power_iteration_finds_the_largest_eigenvalue():
     """The one-pass power iteration of QuadraticModel.lipschitz against scipy's eigsh on
     the explicit colour stencil."""
     import scipy.sparse.linalg as spl
+
     from _checks import random_model
 
     H, W = 20, 23

@@ -99,8 +99,8 @@ def test_prepare_is_the_one_depth_vocabulary():
 
 def test_n_views_picks_the_best_of_the_listed_sources():
     """``n_views`` with ``sources``: the K best of that list (a list used to turn it off)."""
-    from vibr.pipeline import prepare
     from vibr.geometry.selection import select_views
+    from vibr.pipeline import prepare
     from vibr.synthetic import make_scene
 
     sc = make_scene("grid", n_views=9, width=24, height=24, seed=0)

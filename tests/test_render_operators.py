@@ -5,8 +5,16 @@ import pytest
 import scipy.sparse as sp
 
 from _checks import assert_quadratic_form, dottest
-from vibr.render.operators import (Splat, div_bwd, explicit_B, grad_central, grad_central_adj,
-                                   grad_fwd, stencil_apply, stencil_to_sparse)
+from vibr.render.operators import (
+    Splat,
+    div_bwd,
+    explicit_B,
+    grad_central,
+    grad_central_adj,
+    grad_fwd,
+    stencil_apply,
+    stencil_to_sparse,
+)
 from vibr.render.pushpull import push_pull
 from vibr.render.tv import TVProx, tv_value
 
@@ -29,6 +37,7 @@ def test_B_matches_explicit_and_adjoint():
     np.testing.assert_allclose(Bm.sum(1).A.ravel(), 1.0, atol=1e-12)  # partition of unity
     Bu = s.apply(u)
     np.testing.assert_allclose(Bu, Bm @ u.reshape(-1, 3), atol=1e-12)
+    np.testing.assert_allclose(s.adjoint(v).reshape(-1, 3), Bm.T @ v, atol=1e-12)  # Bᵀ, explicitly
     # bilinear interpolation of a linear function is exact (up to the fractions' float32:
     # 3e-8 px each)
     lin = (2 * np.arange(W)[None, :] - 3 * np.arange(H)[:, None]).astype(float)

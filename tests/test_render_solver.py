@@ -218,7 +218,6 @@ def test_gershgorin_metric_dominates_the_hessian(gamma, scheme):
     entrywise, d its row sums: √d is an eigenvector of eigenvalue 1), so a metric off by
     any factor fails here."""
     from _checks import random_model
-
     from vibr.render.solver import _metric_and_step
 
     H, W = 7, 9

@@ -108,12 +108,11 @@ def test_prepare_estimates_depth_for_the_best_views_only(monkeypatch):
     rendered from its ESTIMATED_SOURCES best views (one estimate per source: a 9×9 light
     field's 80 took 10 minutes), announced once with the way back ("all"); "all", a count,
     a list of sources or known depth keep what they ask, without the line."""
-    from _checks import messages_logged
-
     import vibr.stereo.cache
+    from _checks import messages_logged
     from vibr.errors import VibrInputError
-    from vibr.pipeline import ALL_VIEWS, ESTIMATED_SOURCES, prepare
     from vibr.geometry.selection import select_views
+    from vibr.pipeline import ALL_VIEWS, ESTIMATED_SOURCES, prepare
 
     estimated = []
     monkeypatch.setattr(vibr.stereo.cache, "estimate_depth", lambda src, **kw: estimated.append(len(src)) or src)
@@ -146,7 +145,6 @@ def test_planar_proxy_renders_from_the_best_views():
     PLANAR_SOURCES best views (the plane misplaces the farther ones), announced once with the
     way back; "all", a count or a list of sources keep what they ask."""
     from _checks import messages_logged
-
     from vibr.pipeline import ALL_VIEWS, PLANAR_SOURCES, prepare
 
     scene = _grid_scene()

@@ -86,8 +86,8 @@ def test_render_without_depth_uses_the_sphere(pan):
 
 
 def test_paths_turn_on_the_spot(pan, tmp_path):
-    from vibr.paths.flythrough import render_path
     from vibr.paths.camera_path import interpolate, orbit, spiral
+    from vibr.paths.flythrough import render_path
 
     p = interpolate(pan, n_frames=9)
     assert p.meta["views"] == [v.name for v in pan.views] or p.meta["views"] == [v.name for v in pan.views][::-1]

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.ndimage import gaussian_filter, shift as nd_shift
+from scipy.ndimage import gaussian_filter
+from scipy.ndimage import shift as nd_shift
 
 from vibr.stereo import _kernels as kern
 from vibr.stereo.lightfield import disparity_model, epi_disparity, lightfield_depth
@@ -53,10 +54,11 @@ def test_tv_l1_denoises_and_keeps_edges():
 
 
 def test_lightfield_synthetic_grid_within_1pct():
-    from vibr.stereo import estimate_depth
-    from vibr.synthetic import make_scene
-    from vibr.stereo.planesweep import to_grey
     from scipy.ndimage import uniform_filter
+
+    from vibr.stereo import estimate_depth
+    from vibr.stereo.planesweep import to_grey
+    from vibr.synthetic import make_scene
 
     s = make_scene("grid", n_views=9, width=128, height=96, seed=0, baseline=0.3)
     e = estimate_depth(s, views=[4], method="lightfield", step=0.05)

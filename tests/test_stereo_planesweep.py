@@ -7,8 +7,14 @@ import pytest
 
 from vibr.camera import Camera
 from vibr.errors import VibrInputError
-from vibr.stereo import (check_consistency, estimate_depth, plane_homographies, plane_sweep,
-                         select_neighbours, upsample_depth)
+from vibr.stereo import (
+    check_consistency,
+    estimate_depth,
+    plane_homographies,
+    plane_sweep,
+    select_neighbours,
+    upsample_depth,
+)
 
 #: the kernels' ``valid`` argument for sources without masks
 NOMASK = np.zeros((0, 1, 1), np.uint8)
@@ -197,11 +203,10 @@ def test_estimate_depth_counts_its_views(monkeypatch):
     """One progress stage over the views (vibr.progress: its count and the time left once it
     has run long): off a terminal, its line names every view estimated."""
     import io
+    import logging
 
     from vibr.progress import configure_logging
     from vibr.synthetic import make_scene
-
-    import logging
 
     lg = logging.getLogger("vibr")
     saved = (list(lg.handlers), lg.level, lg.propagate)

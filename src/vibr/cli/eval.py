@@ -208,8 +208,8 @@ def _run_all(args, scene, settings, executor, estimate_kw) -> int:
     from ..errors import VibrInputError
     from ..eval.leave_one_out import assemble_all, evaluate_all, format_all_table, resolve_targets
     from ..eval.protocol import write_report
-    from ..io.outputs import record_file
     from ..executor import parse_shard
+    from ..io.outputs import record_file
 
     if args.shard and args.assemble:
         raise VibrInputError("--assemble gathers the reports every --shard wrote: give one or the other")
