@@ -111,3 +111,19 @@ def write_and_hang(ctx, task):
             marker.write_text(f"{tmp}\n{os.getpid()}")
             time.sleep(120)
     return task
+
+
+def write_or_always_die(ctx, task):
+    """Write ``out/TASK.txt`` atomically; the task ``victim`` kills its worker every time it
+    runs, as a cluster whose workers all die under a task (the scheduler gives up on it)."""
+    from vibr._runtime.atomic import atomic_path
+
+    folder = Path(ctx)
+    out = folder / f"{task}.txt"
+    if out.exists():
+        return {"task": task, "skipped": True}
+    if task == "victim" and not (folder / "victim.spared").exists():
+        os._exit(17)
+    with atomic_path(out) as tmp:
+        Path(tmp).write_text(task)
+    return {"task": task, "skipped": False}

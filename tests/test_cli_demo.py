@@ -92,3 +92,21 @@ def test_a_cold_kernel_cache_is_announced_in_one_line(monkeypatch, capsys):
         err = capsys.readouterr().err
         assert ("compiles its kernels" in err) == shown, err
         assert sum("compiles its kernels" in line for line in err.splitlines()) == int(shown)
+
+
+def test_demo_never_replaces_a_file_it_did_not_write(tmp_path, capsys, monkeypatch):
+    """A user's own vibr-demo.mp4 (or -o file) is refused before any work, in one line; the
+    files a demo wrote are replaced by the next demo without --overwrite."""
+    from vibr.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    mine = tmp_path / "vibr-demo.mp4"
+    mine.write_bytes(b"the user's own video")
+    args = ["demo", "--size", "32", "--video-frames", "2", "-q"]
+    assert main(args) == 2
+    assert "vibr did not write" in capsys.readouterr().err and mine.read_bytes() == b"the user's own video"
+    assert main([*args, "--overwrite", "-o", "v.png"]) == 0  # asked for
+    assert mine.read_bytes() != b"the user's own video"
+    assert main([*args, "-o", "v.png"]) == 0  # its own outputs: replaced without --overwrite
+    (tmp_path / "u.png").write_bytes(b"not vibr's")
+    assert main([*args, "--no-video", "-o", "u.png"]) == 2 and (tmp_path / "u.png").read_bytes() == b"not vibr's"

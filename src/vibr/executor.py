@@ -61,6 +61,7 @@ import tempfile
 import threading
 import time
 import uuid
+from concurrent.futures import CancelledError
 from typing import Any, Callable, Sequence
 
 from ._runtime.atomic import remove_partial
@@ -574,8 +575,19 @@ def start_local_cluster(n_workers: int = 2):
                             env={_THREADS_VAR: str(threads)}, silence_logs=_logging.ERROR)
 
 
+def _workers_lost(desc: str, exc: BaseException, done: int, n: int) -> VibrInputError:
+    """The one line for a cluster whose workers died under the tasks (every task's output is
+    written by the task itself, atomically: a rerun finds the finished ones and resumes)."""
+    why = ("its tasks were cancelled (workers lost)" if isinstance(exc, CancelledError)
+           else "its workers were killed")
+    return VibrInputError(f"the Dask cluster stopped the {desc} after {done} of {n} tasks: {why}; run the same "
+                          "command again to resume (finished tasks are kept)")
+
+
 def _run_dask(fn, tasks, setup, setup_args, kind, arg, desc, retries):
+    # dask is an optional dependency (the vibr[dask] extra): imported only when asked for
     from distributed import Client, as_completed
+    from distributed.scheduler import KilledWorker
 
     cluster = client = None
     own_client = kind != "dask-client"
@@ -604,6 +616,9 @@ def _run_dask(fn, tasks, setup, setup_args, kind, arg, desc, retries):
                 for f in as_completed(futs):
                     results[index[f.key]] = f.result()
                     bar.update(1)
+            except (CancelledError, KilledWorker) as exc:
+                client.cancel(futs)
+                raise _workers_lost(desc, exc, sum(r is not None for r in results), len(tasks)) from None
             except BaseException:
                 client.cancel(futs)
                 raise

@@ -7,7 +7,7 @@ import logging
 import os
 import time
 
-from ._options import add_bit_depth_option, add_method_option
+from ._options import add_bit_depth_option, add_method_option, add_overwrite_option
 
 logger = logging.getLogger(__name__)
 
@@ -50,6 +50,7 @@ def register(sub) -> None:
     p.add_argument("--video-frames", type=int, default=DEMO_FRAMES, help=argparse.SUPPRESS)
     p.add_argument("--frames-dir", help=argparse.SUPPRESS)
     add_bit_depth_option(p)
+    add_overwrite_option(p, "an -o or --video file vibr did not write")
     p.set_defaults(func=run)
 
 
@@ -57,16 +58,18 @@ def run(args) -> int:
     from ..errors import VibrInputError
     from ..io import write_image
     from ..io.images import check_image_ext
-    from ..io.outputs import check_output
+    from ..io.outputs import check_output, record_file
     from ..metrics import dssim, psnr
     from ..render import render
     from ..synthetic import make_scene
 
     if args.output is not None:
-        check_output(args.output, "file", what="-o")
+        check_output(args.output, "file", overwrite=args.overwrite, what="-o")
         check_image_ext(args.output, args.bit_depth)
     elif args.bit_depth is not None:
         raise VibrInputError("--bit-depth applies to the PNG of -o only (the video is 8-bit)")
+    if not args.no_video:  # before the work: a file vibr did not write is not replaced
+        check_output(args.video, "file", overwrite=args.overwrite, what="--video")
     if not 16 <= args.size <= 4096:
         raise VibrInputError(f"--size must be between 16 and 4096 pixels, got {args.size}")
     t0 = time.perf_counter()
@@ -88,6 +91,7 @@ def run(args) -> int:
     print(f"  PSNR  {psnr(res.image, tview.image):6.2f} dB   (all pixels, holes filled by push-pull)")
     if args.output:
         write_image(args.output, res.image, bits=args.bit_depth or 8)
+        record_file(args.output)
         print(f"  wrote {args.output}")
     if not args.no_video:
         _demo_video(scene, args)
@@ -113,6 +117,7 @@ def _demo_video(scene, args) -> None:
     import tempfile
 
     from ..errors import VibrInputError
+    from ..io.outputs import record_file
     from ..io.video import VIDEO_FORMATS, is_video
     from ..paths.flythrough import render_path
 
@@ -129,6 +134,7 @@ def _demo_video(scene, args) -> None:
     finally:
         if not args.frames_dir:
             shutil.rmtree(tmp, ignore_errors=True)
+    record_file(res.video)
     what = "loop round the grid" if path.meta.get("closed") else "sweep through the views"
     print(f"vibr demo: fly-through ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]}, "
           f"{path.seconds:.1f} s {what}) rendered in {time.perf_counter() - t0:.1f} s")

@@ -107,7 +107,7 @@ def run(args) -> int:
     from ..io.outputs import check_not_scene_file, check_output
 
     if args.path_out is not None:  # given: checked now, not at the first 'export path'
-        check_output(args.path_out, "file", overwrite=True, what="--path-out")
+        check_output(args.path_out, "file", overwrite=False, what="--path-out")
     check_port_free(args.host, args.port)  # fail before the (slow) loading
     # the resized photographs and the estimated depth come from the on-disk cache when there
     cache_dir = cache_dir_from_args(args)

@@ -22,7 +22,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import RenderStopped, VibrInputError
 from ..eval.sigma_figures import colourise, sigma_scale
-from ..io.outputs import check_not_scene_file, check_output
+from ..io.outputs import check_not_scene_file, check_output, record_file
 from ..paths.camera_path import interpolate, orient_keys, write_camera_path
 from ..render.methods import METHODS
 from ..scene import Scene, View
@@ -593,7 +593,8 @@ class Viewer:
         if path is None:
             path = self._gui_path_file()
 
-        out = check_output(path, "file", overwrite=True, what="path file")  # said in the panel, not a traceback
+        # said in the panel, not a traceback; a file vibr did not write is never replaced
+        out = check_output(path, "file", overwrite=False, what="path file")
         check_not_scene_file(out, self.scene, "the path file")
         fps = self.options.fps
         if seconds is None:
@@ -605,6 +606,7 @@ class Viewer:
             # the user posed the keyframes: their roll is theirs
             cpath = interpolate(keys, n_frames=max(2, int(round(seconds * fps))), fps=fps, roll="keep")
             write_camera_path(out, cpath.cameras, fps=fps, seconds=seconds)
+        record_file(out)  # vibr's: the next export may replace it
         logger.info("wrote %s (%d keyframes)", out, len(self.keyframes))
         return out
 
