@@ -6,9 +6,11 @@ transforms.json scene with depth, views 0000…0008; ``photos/``: its photograph
 from __future__ import annotations
 
 import ast
+import contextlib
 import importlib
 import os
 import re
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -74,7 +76,7 @@ def howto_inputs(tmp_path_factory):
     from vibr.synthetic import make_scene
 
     root = tmp_path_factory.mktemp("howto")
-    sc = make_scene("grid", width=96, height=96)
+    sc = make_scene("grid", width=64, height=64)
     views = [v.replace(name=f"{i:04d}") for i, v in enumerate(sc.views)]
     meta = {k: v for k, v in sc.meta.items() if k != "grid_pos"}
     save_scene(sc.replace(views=views, meta=meta, grid=None), root / "scene")
@@ -82,6 +84,27 @@ def howto_inputs(tmp_path_factory):
     for v in views:
         write_image(root / "photos" / f"{v.name}.png", v.image)
     return root
+
+
+def _commands(block: str) -> list[str]:
+    """The block's commands, one a line (continuation lines joined, comments dropped)."""
+    joined = re.sub(r"\\\n\s*", " ", block)
+    out = []
+    for line in joined.splitlines():
+        line = re.sub(r"\s+#.*$", "", line).strip()
+        if line and not line.startswith("#"):
+            out.append(line)
+    return out
+
+
+@contextlib.contextmanager
+def _cwd(path):
+    old = os.getcwd()
+    os.chdir(path)
+    try:
+        yield
+    finally:
+        os.chdir(old)
 
 
 @pytest.mark.slow
@@ -97,10 +120,18 @@ def test_howto_commands_run(page, howto_inputs, tmp_path):
     for d in ("scene", "photos"):
         shutil.copytree(howto_inputs / d, tmp_path / d)
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+    from vibr.cli import main
+
     for i, block in enumerate(bash):
-        r = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=tmp_path, env=env,
-                           capture_output=True, text=True, timeout=900)
-        assert r.returncode == 0, f"{page.name} bash block {i} failed:\n{block}\n{r.stderr[-2000:]}"
+        for line in _commands(block):
+            if line.startswith("vibr "):  # in this process: no interpreter and numba start per command
+                with _cwd(tmp_path):
+                    rc = main(shlex.split(line)[1:])
+                assert rc == 0, f"{page.name} bash block {i}: {line} exited {rc}"
+                continue
+            r = subprocess.run(["bash", "-euo", "pipefail", "-c", line], cwd=tmp_path, env=env,
+                               capture_output=True, text=True, timeout=900)
+            assert r.returncode == 0, f"{page.name} bash block {i} failed:\n{line}\n{r.stderr[-2000:]}"
     for i, block in enumerate(python):
         r = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, env=env, capture_output=True, text=True,
                            timeout=900)
