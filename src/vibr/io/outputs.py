@@ -318,9 +318,12 @@ def check_frames_folder(folder, owned, *, overwrite: bool, what: str = "frames f
     ``owned(path)`` says whether a file with one of the names the command writes is vibr's
     (True / False: a frame with or without vibr's text chunk), None for any other name: such
     a file is vibr's when ``folder``'s marker lists it. The marker and vibr's half-written
-    temporary files (``.NAME.*.part*``) are vibr's too. A missing or empty folder is accepted.
+    temporary files (``.NAME.*.part*``) are vibr's too. A missing or empty folder is accepted;
+    a file (or a link to none) in its place is refused, ``overwrite`` or not.
     """
     folder = Path(folder)
+    if os.path.lexists(folder) and not folder.is_dir():
+        raise VibrInputError(f"{what} exists and is not a folder", folder)
     if not folder.is_dir() or overwrite:
         return
     listed = read_marker(folder) or set()
