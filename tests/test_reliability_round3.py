@@ -183,6 +183,23 @@ def test_single_files_need_overwrite_unless_vibr_wrote_them(capsys, scene_dir, t
     assert_one_line_error(code, err, rep, "did not write")
     assert png.read_bytes() == b"not vibr's" and rep.read_text() == "{}"
 
+def test_a_users_link_to_nothing_is_not_replaced(capsys, scene_dir, tmp_path):
+    """(benchmarks/tools/fuzz_outputs.py: a symbolic link to a missing file at -o did not
+    "exist", and the output replaced it without --overwrite.)"""
+    for name in ("p.json", "out"):
+        (tmp_path / name).symlink_to(tmp_path / "missing")
+    code, err = run_cli(capsys, "path", "orbit", scene_dir, "-o", tmp_path / "p.json", "--frames", "3")
+    assert_one_line_error(code, err, "p.json", "did not write", "--overwrite")
+    code, err = run_cli(capsys, "convert", scene_dir, tmp_path / "out", "--overwrite")
+    assert_one_line_error(code, err, "exists and is not a folder")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "p.json"]
+    assert all(os.readlink(tmp_path / n) == str(tmp_path / "missing") for n in ("out", "p.json"))
+    assert run_cli(capsys, "path", "orbit", scene_dir, "-o", tmp_path / "p.json", "--frames", "3",
+                   "--overwrite")[0] == 0  # asked: the link is replaced, never written through
+    assert (tmp_path / "p.json").is_file() and not (tmp_path / "p.json").is_symlink()
+    assert not (tmp_path / "missing").exists()
+
+
 
 def test_record_file_keeps_other_entries(tmp_path):
     from vibr.io.outputs import record_file, written_by_vibr

@@ -87,12 +87,12 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
     if kind == "file":
         if p.is_dir():
             raise VibrInputError(f"{what} is a folder, a file name is expected", p)
-        if p.exists() and not overwrite and not written_by_vibr(p):
+        if os.path.lexists(p) and not overwrite and not written_by_vibr(p):  # a link to nothing too
             raise OutputExists(f"{what} already exists and vibr did not write it", p)
         if str(os.fspath(path)).endswith(("/", os.sep)):
             raise VibrInputError(f"{what} ends with a path separator, a file name is expected", p)
     else:
-        if p.exists() and not p.is_dir():
+        if os.path.lexists(p) and not p.is_dir():
             raise VibrInputError(f"{what} exists and is not a folder", p)
         if p.is_dir() and not overwrite:
             raise OutputExists(f"{what} folder already exists", p)
