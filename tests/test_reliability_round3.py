@@ -200,6 +200,17 @@ def test_a_users_link_to_nothing_is_not_replaced(capsys, scene_dir, tmp_path):
     assert not (tmp_path / "missing").exists()
 
 
+def test_an_output_named_as_the_marker_is_refused(capsys, scene_dir, tmp_path):
+    """(benchmarks/tools/fuzz_outputs.py: `render -o .vibr-output` and `eval --json
+    .vibr-output` wrote their output, then the marker over it, and said "wrote".)"""
+    for cmd in (["render", scene_dir, "--target", "4", "-o", tmp_path / MARKER],
+                ["eval", scene_dir, "--target", "4", "--method", "gradient", "--json", tmp_path / MARKER],
+                ["convert", scene_dir, tmp_path / MARKER]):
+        code, err = run_cli(capsys, *cmd, "--overwrite")
+        assert_one_line_error(code, err, f"{MARKER} is the name of vibr's marker file")
+    assert list(tmp_path.iterdir()) == []
+
+
 
 def test_record_file_keeps_other_entries(tmp_path):
     from vibr.io.outputs import record_file, written_by_vibr

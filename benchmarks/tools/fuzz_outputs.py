@@ -90,7 +90,8 @@ def _pick(rng, options):
 
 def _render(rng) -> Spec:
     o = _pick(rng, ["out.png", "out.png", "sub/out.png", "a/b/out.png", "ro/out.png", "lnk_out.png",
-                    "s/images/view_000.png", "s/transforms.json", "s/depth/view_001.npy", "frames", "out.tif"])
+                    "s/images/view_000.png", "s/transforms.json", "s/depth/view_001.npy", "frames", "out.tif",
+                    MARKER, "sub/" + MARKER])
     argv = ["render", SCENE, "--target", _pick(rng, ["4", "view_004"]), "-o", o]
     files = [o]
     if rng.random() < 0.4:
@@ -115,7 +116,7 @@ def _render_path_video(rng) -> Spec:
     v = _pick(rng, ["fly.mp4", "fly.mp4", "sub/fly.mp4", "fly.gif", "ro/fly.mp4", "s/fly.mp4", "lnk_fly.mp4"])
     argv = ["render", SCENE, "--path", "cam.json", "-o", v]
     if rng.random() < 0.4:
-        fd = _pick(rng, ["frames", "fly_frames", "user", "s/images", "sub/frames", "lnk_frames"])
+        fd = _pick(rng, ["frames", "fly_frames", "user", "s/images", "s", "sub/frames", "lnk_frames"])
         argv += ["--frames-dir", fd]
     else:
         fd = str(Path(v).with_name(Path(v).stem + "_frames"))
@@ -135,13 +136,14 @@ def _path(rng) -> Spec:
 
 def _eval(rng) -> Spec:
     j = _pick(rng, ["report.json", "report.json", "p.json", "sub/report.json", "s/transforms.json", "cam.json",
-                    "ro/report.json", "lnk_p.json"])
+                    "ro/report.json", "lnk_p.json", MARKER])
     return Spec("eval", ["eval", SCENE, "--target", "4", "--method", "gradient", "--gamma", "1", "--json", j],
                 files=[j])
 
 
 def _folder_out(rng, family) -> Spec:
-    out = _pick(rng, ["conv", "conv", "conv/", "sub/conv", "user", "s", "s/sub", "out.png", "ro/conv", "lnk_frames"])
+    out = _pick(rng, ["conv", "conv", "conv/", "sub/conv", "user", "s", "s/sub", "s/images", "out.png", "ro/conv",
+                      "lnk_frames", MARKER])
     argv = ["convert", SCENE, out] if family == "convert" else ["depth", SCENE, "-o", out]
     return Spec(family, argv, folders=[out])
 
@@ -478,7 +480,8 @@ def may_change(rel, before, spec: Spec, a: Areas, vibr_files: dict, scene_files:
                 fnmatch.fnmatch(os.path.basename(rel), g) for g in FRAME_GLOBS))):
             return True
     for fo in a.folders:  # a folder vibr wrote is replaced whole: its marker lists names, not contents
-        if _inside(rel, fo) and spec.overwrite and (rel in vibr_files or os.path.relpath(rel, fo) in a.listed[fo]):
+        if _inside(rel, fo) and spec.overwrite and (rel in vibr_files or os.path.relpath(rel, fo) in a.listed[fo]
+                                                    or before[0] == "dir"):  # a folder goes with its files
             return True
     return False
 
@@ -508,7 +511,27 @@ def may_appear(rel, ok: bool, spec: Spec, a: Areas) -> bool:
     return False
 
 
-def check_case(spec: Spec, run: Run, before: dict, after: dict, a: Areas, vibr_files: dict,
+#: the first bytes of each output format, by extension ("": vibr writes a PNG)
+_MAGIC = {".png": [b"\x89PNG"], "": [b"\x89PNG"], ".tif": [b"II*\0", b"MM\0*"], ".npy": [b"\x93NUMPY"],
+          ".gif": [b"GIF8"]}
+
+
+def _holds_its_format(path: Path) -> bool:
+    """Whether the output file ``path`` holds what its extension says (a report, not a
+    marker written over it)."""
+    data = path.read_bytes()
+    ext = os.path.splitext(path.name)[1].lower() if not path.name.startswith(".") or path.name.count(".") > 1 else ""
+    if ext == ".json":
+        try:
+            return "written_by" not in json.loads(data)
+        except ValueError:
+            return False
+    if ext == ".mp4":
+        return data[4:8] == b"ftyp"
+    return any(data.startswith(m) for m in _MAGIC.get(ext, [b""]))
+
+
+def check_case(spec: Spec, run: Run, before: dict, after: dict, a: Areas, case: Path, vibr_files: dict,
                scene_files: set) -> list:
     """The problems of one case (an empty list when it passed); ``a``: its output areas,
     taken before the run."""
@@ -542,6 +565,8 @@ def check_case(spec: Spec, run: Run, before: dict, after: dict, a: Areas, vibr_f
         for f in a.files:
             if after.get(f, ("?",))[0] != "file":
                 problems.append(f"exit 0 but {f} is not a file")
+            elif not _holds_its_format(case / f):
+                problems.append(f"exit 0 but {f} does not hold what its name says")
         for fd in a.frames:
             if f"{fd}/frame_00000.png" not in after:
                 problems.append(f"exit 0 but no frames in {fd}")
@@ -620,7 +645,7 @@ def run_case(i: int, seed: int, family: str, base: Path, work: Path, disk: Path 
         run = run_vibr(spec.argv, spec.as_nobody)
         seconds = time.perf_counter() - t0
         after = snapshot(case)
-        problems = check_case(spec, run, before, after, a, vibr_files, scene_files)
+        problems = check_case(spec, run, before, after, a, case, vibr_files, scene_files)
     finally:
         os.chdir(here)
     if keep is not None:

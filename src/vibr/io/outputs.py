@@ -60,9 +60,10 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
         The output file or folder.
     kind : {"file", "dir"}
         ``"file"``: ``path`` must not be a folder; its parent folder must exist and be
-        writable. ``"dir"``: ``path`` must not be a file; an existing folder is accepted
-        only with ``overwrite`` (its replacement is then checked by
-        :func:`check_replaceable`); its parent must exist and be writable.
+        writable; a symbolic link there, even to nothing, is an existing file. ``"dir"``:
+        ``path`` must not be a file; an existing folder is accepted only with ``overwrite``
+        (its replacement is then checked by :func:`check_replaceable`); its parent must
+        exist and be writable. Either is refused when named :data:`MARKER`.
     overwrite : bool
         Whether an existing output may be replaced. A file vibr wrote (:func:`written_by_vibr`)
         may always be replaced; a folder never without ``overwrite``.
@@ -84,6 +85,8 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
     if path is None or not str(os.fspath(path)).strip():
         raise VibrInputError(f"{what}: the output name is empty")
     p = Path(os.fspath(path))
+    if p.name == MARKER:  # record_file would write the marker over the output
+        raise VibrInputError(f"{what}: {MARKER} is the name of vibr's marker file; choose another name", p)
     if kind == "file":
         if p.is_dir():
             raise VibrInputError(f"{what} is a folder, a file name is expected", p)
