@@ -114,6 +114,49 @@ def test_frames_folder_ownership_rule(tmp_path):
         check_frames_folder(d, _owned_frame_file, overwrite=False)
 
 
+@pytest.mark.parametrize("overwrite", [False, True])
+def test_a_file_in_the_place_of_the_frames_folder_is_refused(capsys, scene_dir, path_file, tmp_path, overwrite):
+    """(benchmarks/tools/fuzz_outputs.py: `render --path P -o v.mp4` with a file, or a link to
+    none, named v_frames gave a FileExistsError traceback once the scene was read.)"""
+    (tmp_path / "v_frames").write_text("the user's file")
+    (tmp_path / "dangling").symlink_to(tmp_path / "missing")
+    for extra in ([], ["--frames-dir", tmp_path / "dangling"]):
+        code, err = run_cli(capsys, "render", scene_dir, "--path", path_file, "-o", tmp_path / "v.mp4", *extra,
+                            *(["--overwrite"] if overwrite else []))
+        assert_one_line_error(code, err, "frames folder exists and is not a folder")
+    assert (tmp_path / "v_frames").read_text() == "the user's file"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling", "v_frames"]
+
+
+def test_an_image_write_on_a_full_disk_prints_no_traceback(tmp_path):
+    """(benchmarks/tools/fuzz_outputs.py: an 8-bit PNG frame on a full disk gave vibr's one
+    line, then "Exception ignored in PluginV3.__del__" and a traceback: imageio closed its
+    file again in its finaliser.) RLIMIT_FSIZE fails the write as a full disk does."""
+    code = f"""
+import gc, resource, signal, sys
+import numpy as np
+sys.path.insert(0, {SRC!r})
+from vibr.errors import OutputFailed
+from vibr.eval.sigma_figures import write_sigma
+from vibr.io import write_image
+from vibr.io.depthfiles import write_depth
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (1000, 1000))
+img = np.random.default_rng(0).random((48, 48, 3))
+for write in (lambda: write_image("a.png", img, bits=8), lambda: write_image("a.bmp", img),
+              lambda: write_depth("d.png", 1 + img[..., 0]), lambda: write_sigma("s.png", 10 * img[..., 0])):
+    try:
+        write()
+    except OutputFailed as exc:
+        print("refused:", exc.problem)
+    gc.collect()
+"""
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert r.stdout.splitlines() == ["refused: cannot write: File too large"] * 4
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_single_files_need_overwrite_unless_vibr_wrote_them(capsys, scene_dir, tmp_path):
     from vibr.io.outputs import written_by_vibr
 
@@ -139,6 +182,34 @@ def test_single_files_need_overwrite_unless_vibr_wrote_them(capsys, scene_dir, t
     code, err = run_cli(capsys, "eval", scene_dir, "--target", "4", "--json", rep)
     assert_one_line_error(code, err, rep, "did not write")
     assert png.read_bytes() == b"not vibr's" and rep.read_text() == "{}"
+
+def test_a_users_link_to_nothing_is_not_replaced(capsys, scene_dir, tmp_path):
+    """(benchmarks/tools/fuzz_outputs.py: a symbolic link to a missing file at -o did not
+    "exist", and the output replaced it without --overwrite.)"""
+    for name in ("p.json", "out"):
+        (tmp_path / name).symlink_to(tmp_path / "missing")
+    code, err = run_cli(capsys, "path", "orbit", scene_dir, "-o", tmp_path / "p.json", "--frames", "3")
+    assert_one_line_error(code, err, "p.json", "did not write", "--overwrite")
+    code, err = run_cli(capsys, "convert", scene_dir, tmp_path / "out", "--overwrite")
+    assert_one_line_error(code, err, "exists and is not a folder")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "p.json"]
+    assert all(os.readlink(tmp_path / n) == str(tmp_path / "missing") for n in ("out", "p.json"))
+    assert run_cli(capsys, "path", "orbit", scene_dir, "-o", tmp_path / "p.json", "--frames", "3",
+                   "--overwrite")[0] == 0  # asked: the link is replaced, never written through
+    assert (tmp_path / "p.json").is_file() and not (tmp_path / "p.json").is_symlink()
+    assert not (tmp_path / "missing").exists()
+
+
+def test_an_output_named_as_the_marker_is_refused(capsys, scene_dir, tmp_path):
+    """(benchmarks/tools/fuzz_outputs.py: `render -o .vibr-output` and `eval --json
+    .vibr-output` wrote their output, then the marker over it, and said "wrote".)"""
+    for cmd in (["render", scene_dir, "--target", "4", "-o", tmp_path / MARKER],
+                ["eval", scene_dir, "--target", "4", "--method", "gradient", "--json", tmp_path / MARKER],
+                ["convert", scene_dir, tmp_path / MARKER]):
+        code, err = run_cli(capsys, *cmd, "--overwrite")
+        assert_one_line_error(code, err, f"{MARKER} is the name of vibr's marker file")
+    assert list(tmp_path.iterdir()) == []
+
 
 
 def test_record_file_keeps_other_entries(tmp_path):

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VibrInputError
+from ..io.images import write_encoded
 from ..io.video import VideoInfo, open_video
 from ..progress import progress
 
@@ -169,8 +170,6 @@ def extract_frames(video, out_dir, n: int = DEFAULT_FRAMES) -> VideoFrames:
 def _read_stretches(video: Path, out: Path, n: int, total: int | None) -> VideoFrames:
     """One reading of the video: the best frame of each stretch into ``out`` (emptied),
     the stretches cut for ``total`` frames (None: the header's count)."""
-    import imageio.v3 as iio
-
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
@@ -190,7 +189,7 @@ def _read_stretches(video: Path, out: Path, n: int, total: int | None) -> VideoF
         for i, frame in enumerate(progress(frames, desc="calibrate: video frames", total=total or None)):
             k = _stretch(i, total, n)
             if k != current and best[3] is not None:
-                _keep(best, out, kept, iio)
+                _keep(best, out, kept)
                 best = (-1.0, 0.0, -1, None)
             current = k
             kept.n_read = i + 1
@@ -202,15 +201,15 @@ def _read_stretches(video: Path, out: Path, n: int, total: int | None) -> VideoF
             if s * weight > best[0]:
                 best = (s * weight, s, i, frame.copy())
         if best[3] is not None:
-            _keep(best, out, kept, iio)
+            _keep(best, out, kept)
     kept.median_sharpness = float(np.median(scores)) if scores else 0.0
     return kept
 
 
-def _keep(best, out: Path, kept: VideoFrames, iio) -> None:
+def _keep(best, out: Path, kept: VideoFrames) -> None:
     _, s, i, frame = best
     f = out / f"frame_{i:06d}.bmp"
-    iio.imwrite(f, frame)
+    write_encoded(f, frame, ".bmp")
     kept.files.append(f)
     kept.indices.append(i)
     kept.sharpness.append(s)

@@ -11,6 +11,7 @@ import numpy as np
 
 from .._runtime.atomic import atomic_path
 from ..errors import VibrInputError
+from ..io.images import write_encoded
 from ..render.uncertainty import hole_sigma
 
 logger = logging.getLogger(__name__)
@@ -102,9 +103,7 @@ def write_sigma(path, sigma, vmax: float | None = None) -> None:
             with open(tmp, "wb") as fh:
                 np.save(fh, np.asarray(sigma, np.float32))
         else:
-            import imageio.v3 as iio
-
-            iio.imwrite(tmp, sigma_figure(sigma, vmax), extension=".png")
+            write_encoded(tmp, sigma_figure(sigma, vmax), ".png")
 
 
 _LINE_COLOURS = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (0, 0, 0), (214, 39, 40), (148, 103, 189)]
@@ -114,9 +113,7 @@ def sparsification_plot(path, fractions, curves: dict, title: str = "", size=(48
     """Draw sparsification curves (dict label → values over ``fractions``; a label
     containing "oracle" is drawn dashed) into a PNG, atomically. x: fraction of pixels
     removed; y: RMSE of the rest, relative to all pixels."""
-    import imageio.v3 as iio
     from PIL import Image, ImageDraw
-
 
     Wd, Hd = size
     ml, mr, mt, mb = 46, 12, 22, 34
@@ -149,7 +146,7 @@ def sparsification_plot(path, fractions, curves: dict, title: str = "", size=(48
         d.line([(Wd - mr - 120, ly + 5), (Wd - mr - 100, ly + 5)], fill=col, width=2)
         d.text((Wd - mr - 96, ly), label, fill=(0, 0, 0))
     with atomic_path(path) as tmp:
-        iio.imwrite(tmp, np.asarray(img), extension=".png")
+        write_encoded(tmp, np.asarray(img), ".png")
 
 
 def write_sparsification_figure(folder, results, prefix: str) -> str:

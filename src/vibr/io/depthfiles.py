@@ -27,6 +27,7 @@ from .._runtime.atomic import atomic_path
 from ..errors import VibrInputError, require_file
 from ..geometry.resample import resize_depth
 from ..scene import depth_from_file_values
+from .images import write_encoded
 
 logger = logging.getLogger(__name__)
 
@@ -239,13 +240,11 @@ def write_depth(path, depth: np.ndarray, scale: float | None = None) -> None:
     elif ext == ".bin":
         write_colmap_bin(path, d)
     elif ext == ".png":
-        import imageio.v3 as iio
-
         scale = 1e-3 if scale is None else float(scale)
         q = np.round(d.astype(np.float64) / scale)
         if q.max(initial=0) > 65535:
             raise ValueError(f"depth {d.max():.4g} does not fit a 16-bit PNG with scale {scale}")
         with atomic_path(path) as tmp:
-            iio.imwrite(tmp, q.astype(np.uint16), extension=".png")
+            write_encoded(tmp, q.astype(np.uint16), ".png")
     else:
         raise ValueError(f"unknown depth file type {ext!r}")

@@ -302,6 +302,18 @@ def check_image_ext(path, bits: int | None = None) -> str:
     return ext
 
 
+def write_encoded(path, q: np.ndarray, extension: str, **kw) -> None:
+    """Write the array ``q`` to ``path`` in the format of ``extension`` (imageio's writer
+    options ``kw``), encoded in memory first: a file imageio opens itself and cannot close
+    (a full disk) is closed again by imageio's finaliser, which printed a traceback after
+    vibr's one-line error."""
+    import imageio.v3 as iio
+
+    data = iio.imwrite("<bytes>", q, extension=extension, **kw)
+    with open(path, "wb") as f:
+        f.write(data)
+
+
 def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | None = None) -> None:
     """Write an H×W×3 (or H×W) float image in [0, 1] atomically.
 
@@ -313,8 +325,6 @@ def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | Non
     """
     if bits not in (None, 8, 16):
         raise VibrInputError(f"bit depth must be 8 or 16, got {bits}", path)
-    import imageio.v3 as iio
-
     path = os.fspath(path)
     ext = check_image_ext(path, bits)
     if ext in _EIGHT_BIT_EXTS:
@@ -335,7 +345,7 @@ def write_image(path, img: np.ndarray, bits: int | None = None, text: dict | Non
                 kw["pnginfo"] = info = PngInfo()
                 for k, v in text.items():
                     info.add_text(str(k), str(v))
-            iio.imwrite(tmp, q, extension=ext or ".png", **kw)
+            write_encoded(tmp, q, ext or ".png", **kw)
 
 
 def read_png_text(path) -> dict:

@@ -60,9 +60,10 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
         The output file or folder.
     kind : {"file", "dir"}
         ``"file"``: ``path`` must not be a folder; its parent folder must exist and be
-        writable. ``"dir"``: ``path`` must not be a file; an existing folder is accepted
-        only with ``overwrite`` (its replacement is then checked by
-        :func:`check_replaceable`); its parent must exist and be writable.
+        writable; a symbolic link there, even to nothing, is an existing file. ``"dir"``:
+        ``path`` must not be a file; an existing folder is accepted only with ``overwrite``
+        (its replacement is then checked by :func:`check_replaceable`); its parent must
+        exist and be writable. Either is refused when named :data:`MARKER`.
     overwrite : bool
         Whether an existing output may be replaced. A file vibr wrote (:func:`written_by_vibr`)
         may always be replaced; a folder never without ``overwrite``.
@@ -84,15 +85,17 @@ def check_output(path, kind: str = "file", *, overwrite: bool = True, what: str 
     if path is None or not str(os.fspath(path)).strip():
         raise VibrInputError(f"{what}: the output name is empty")
     p = Path(os.fspath(path))
+    if p.name == MARKER:  # record_file would write the marker over the output
+        raise VibrInputError(f"{what}: {MARKER} is the name of vibr's marker file; choose another name", p)
     if kind == "file":
         if p.is_dir():
             raise VibrInputError(f"{what} is a folder, a file name is expected", p)
-        if p.exists() and not overwrite and not written_by_vibr(p):
+        if os.path.lexists(p) and not overwrite and not written_by_vibr(p):  # a link to nothing too
             raise OutputExists(f"{what} already exists and vibr did not write it", p)
         if str(os.fspath(path)).endswith(("/", os.sep)):
             raise VibrInputError(f"{what} ends with a path separator, a file name is expected", p)
     else:
-        if p.exists() and not p.is_dir():
+        if os.path.lexists(p) and not p.is_dir():
             raise VibrInputError(f"{what} exists and is not a folder", p)
         if p.is_dir() and not overwrite:
             raise OutputExists(f"{what} folder already exists", p)
@@ -318,9 +321,12 @@ def check_frames_folder(folder, owned, *, overwrite: bool, what: str = "frames f
     ``owned(path)`` says whether a file with one of the names the command writes is vibr's
     (True / False: a frame with or without vibr's text chunk), None for any other name: such
     a file is vibr's when ``folder``'s marker lists it. The marker and vibr's half-written
-    temporary files (``.NAME.*.part*``) are vibr's too. A missing or empty folder is accepted.
+    temporary files (``.NAME.*.part*``) are vibr's too. A missing or empty folder is accepted;
+    a file (or a link to none) in its place is refused, ``overwrite`` or not.
     """
     folder = Path(folder)
+    if os.path.lexists(folder) and not folder.is_dir():
+        raise VibrInputError(f"{what} exists and is not a folder", folder)
     if not folder.is_dir() or overwrite:
         return
     listed = read_marker(folder) or set()
