@@ -27,6 +27,7 @@ def test_demo_default_renders_the_held_out_view(tmp_path, capsys):
     assert read_video_info(video)[:3] == (72, 256, 256) and f"wrote {video}" in txt
 
 
+@pytest.mark.slow
 def test_demo_video_spans_the_parallax_and_keeps_the_demos_quality(tmp_path, capsys):
     """The demo's fly-through (fewer frames, the demo's size): the camera moves across the
     views, not by a few pixels (mean TV-L1 optical flow between the first frame and the

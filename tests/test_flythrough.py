@@ -922,6 +922,7 @@ def test_video_extension_must_be_known(tmp_path):
         write_video(tmp_path / "a.avi", [np.zeros((8, 8, 3), np.uint8)], fps=24)
 
 
+@pytest.mark.slow
 def test_depth_only_for_the_views_the_path_uses(tmp_path):
     """A scene of many views without depth: the fly-through estimates depth for the views
     its frames may use (each frame's 2·n_views best, ranked before depth), not for all."""

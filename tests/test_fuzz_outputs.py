@@ -11,6 +11,9 @@ from pathlib import Path
 
 import pytest
 
+#: processes, fly-throughs and real encodes: seconds each (the fast subset leaves them out)
+pytestmark = pytest.mark.slow
+
 _SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "tools" / "fuzz_outputs.py"
 
 

@@ -171,6 +171,7 @@ def _vibr_with_file_limit(args, limit_bytes, cwd):
                           capture_output=True, text=True, timeout=300, preexec_fn=limit)
 
 
+@pytest.mark.slow
 def test_a_write_that_fails_is_one_line_and_leaves_nothing(tmp_path):
     """A full disk gave a traceback (PNG, .npy, scene folders) or, for the video, exit 0
     with a truncated file (ffmpeg's status was not read)."""

@@ -283,6 +283,7 @@ def _alive(pid):
         return False
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kill -9 and /proc: Linux")
 def test_workers_die_with_a_killed_parent(capsys, scene_dir, tmp_path):
     """kill -9 of a fly-through on 2 processes while its frames render: within 5 s no process

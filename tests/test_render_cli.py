@@ -48,6 +48,7 @@ def test_render_camera_file_and_errors(grid64_dir, tmp_path, capsys):
     assert not bad.exists()
 
 
+@pytest.mark.slow
 def test_scene_without_any_geometry_renders_by_default(tmp_path, capsys):
     """No depth maps, no sparse points: the default --depth auto estimates depth from the
     sources (the target held out) and renders; --depth gt says what is missing."""

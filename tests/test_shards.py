@@ -13,6 +13,9 @@ import pytest
 
 from vibr.errors import VibrInputError
 
+#: processes, fly-throughs and real encodes: seconds each (the fast subset leaves them out)
+pytestmark = pytest.mark.slow
+
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from vibr.camera import Camera
 from vibr.stereo import estimate_depth
@@ -75,6 +76,7 @@ def test_segment_image_separates_colours_and_upsamples():
     assert np.array_equal(up[::2, ::2], lab)
 
 
+@pytest.mark.slow
 def test_estimate_depth_segment_fill_recovers_pixels():
     """On a hand-held scene, the fill turns unknown pixels into known ones, most of them
     right, and the second median does not lower the share of right pixels."""
