@@ -127,3 +127,24 @@ def write_or_always_die(ctx, task):
     with atomic_path(out) as tmp:
         Path(tmp).write_text(task)
     return {"task": task, "skipped": False}
+
+
+def lost_workers_scenario(folder):
+    """Run the victim's tasks on a one-worker LocalCluster whose worker it kills, then again
+    with the victim spared; print the error line and the second run's results as JSON (run
+    in a process of its own: a LocalCluster wants a fresh event loop)."""
+    import json
+
+    from vibr.errors import VibrInputError
+    from vibr.executor import run_tasks
+
+    tasks = ["a", "b", "victim"]
+    try:
+        run_tasks(write_or_always_die, tasks, setup=str, setup_args=(folder,), executor="local:1", retries=0)
+        msg = None
+    except VibrInputError as exc:
+        msg = str(exc)
+    done = sorted(p.stem for p in Path(folder).glob("*.txt"))
+    (Path(folder) / "victim.spared").write_text("")
+    res = run_tasks(write_or_always_die, tasks, setup=str, setup_args=(folder,), executor="local:1")
+    print(json.dumps({"message": msg, "done": done, "rerun": res}))
