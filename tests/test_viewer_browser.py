@@ -108,22 +108,30 @@ def test_viewer_in_chromium(small_scene, tmp_path):
                 # the viewer moved the browser to view 0; a render for exactly that camera
                 # arrives once the browser echoed it (earlier renders: its default camera)
                 cam0 = small_scene.views[0].camera
-                deadline = time.monotonic() + 30
+                deadline = time.monotonic() + 45
+                moved = time.monotonic()
                 # (and, once the panel has collapsed to its rail, at the canvas's 4:3)
                 while not (np.allclose(rec.camera.R, cam0.R, atol=1e-4)
                            and np.allclose(rec.camera.centre, cam0.centre, atol=1e-4)
                            and (rec.camera.width, rec.camera.height) == (128, 96)):
                     assert time.monotonic() < deadline, f"no render at view 0's camera: last {rec.camera}"
-                    nxt = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=15)
+                    if time.monotonic() - moved > 10:
+                        # the browser reported its own start camera after the move (it comes
+                        # up while the page loads, in one run in two after the rest of the
+                        # suite): move it to view 0 again, as the viewer does on a connection
+                        client = next(iter(viewer.clients().values()))
+                        viewer.move_client(client, cam0)
+                        moved = time.monotonic()
+                    nxt = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=10)
                     if nxt is None:
                         # the browser's last report was taken as a repeat of the one before
                         # (run after the rest of the suite, one time in two): ask for its
                         # render again, as a new camera report would
                         cid = next(iter(viewer.clients()))
                         viewer.request(cid, viewer._states[cid])
-                        nxt = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=30)
-                    assert nxt is not None, f"no render after {rec.camera}"
-                    rec = nxt
+                        nxt = viewer.wait_for_image(kind="full", after_seq=rec.seq, timeout=10)
+                    if nxt is not None:
+                        rec = nxt
                 box = page.locator("canvas").first.bounding_box()
                 assert (box["width"], box["height"]) == (640, 480), box
                 page.screenshot(path=str(tmp_path / "viewer_scene.png"), timeout=30_000)
@@ -163,7 +171,7 @@ def test_viewer_in_chromium(small_scene, tmp_path):
     # and shows them (the browser stretches the 128×96 image over the 640×480 canvas)
     iio.imwrite(tmp_path / "sent.png", rec.image)
     assert err < SCREEN_TOL, f"screenshot differs from the sent image by {err:.1f} grey levels on average"
-    assert time.perf_counter() - t_start < 90
+    assert time.perf_counter() - t_start < 120
 
 
 def _latest_full(viewer, after_seq: int, quiet_s: float = 1.5, timeout: float = 30.0):
