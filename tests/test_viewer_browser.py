@@ -135,20 +135,7 @@ def test_viewer_in_chromium(small_scene, tmp_path):
                 box = page.locator("canvas").first.bounding_box()
                 assert (box["width"], box["height"]) == (640, 480), box
                 page.screenshot(path=str(tmp_path / "viewer_scene.png"), timeout=30_000)
-                # hide what is drawn over the background; screenshots until the browser
-                # repainted (software GL: up to seconds)
-                viewer.gui["points"].value = "never"
-                viewer.gui["show_cameras"].value = False
-                viewer._set_visible("points")
-                viewer._set_visible("cameras")
-                shot = tmp_path / "viewer.png"
-                deadline = time.monotonic() + 20
-                while True:
-                    time.sleep(1.0)
-                    page.screenshot(path=str(shot), clip=box, timeout=30_000)
-                    err = _screen_error(shot, rec.image)
-                    if err < SCREEN_TOL or time.monotonic() > deadline:
-                        break
+                err = _bare_screenshot_error(viewer, page, box, tmp_path / "viewer.png", rec.image, _screen_error)
             finally:
                 browser.close()
     finally:
@@ -173,6 +160,22 @@ def test_viewer_in_chromium(small_scene, tmp_path):
     assert err < SCREEN_TOL, f"screenshot differs from the sent image by {err:.1f} grey levels on average"
     assert time.perf_counter() - t_start < 120
 
+
+
+def _bare_screenshot_error(viewer, page, box, shot, image, error) -> float:
+    """Hide what is drawn over the background (points, frustums) and screenshot the canvas
+    until the browser has repainted (software GL: up to seconds): ``error(shot, image)``."""
+    viewer.gui["points"].value = "never"
+    viewer.gui["show_cameras"].value = False
+    viewer._set_visible("points")
+    viewer._set_visible("cameras")
+    deadline = time.monotonic() + 20
+    while True:
+        time.sleep(1.0)
+        page.screenshot(path=str(shot), clip=box, timeout=30_000)
+        err = error(shot, image)
+        if err < SCREEN_TOL or time.monotonic() > deadline:
+            return err
 
 def _latest_full(viewer, after_seq: int, quiet_s: float = 1.5, timeout: float = 30.0):
     """The last full-size image sent once the camera has settled: no newer one for
@@ -240,18 +243,8 @@ def test_camera_moves_at_the_scale_of_the_scene(small_scene, tmp_path):
                 # the panel: collapsed, beside the canvas, not over it
                 box = page.locator("canvas").first.bounding_box()
                 assert box["x"] == 0 and box["width"] >= 0.95 * 1280 and box["height"] == 800, box
-                viewer.gui["points"].value = "never"
-                viewer.gui["show_cameras"].value = False
-                viewer._set_visible("points")
-                viewer._set_visible("cameras")
-                shot = tmp_path / "viewer_1280.png"
-                deadline = time.monotonic() + 20
-                while True:
-                    time.sleep(1.0)
-                    page.screenshot(path=str(shot), clip=box, timeout=30_000)
-                    err = _whole_screen_error(shot, rec.image)
-                    if err < SCREEN_TOL or time.monotonic() > deadline:
-                        break
+                err = _bare_screenshot_error(viewer, page, box, tmp_path / "viewer_1280.png", rec.image,
+                                             _whole_screen_error)
                 assert err < SCREEN_TOL, f"the canvas differs from the render by {err:.1f} grey levels"
 
                 # a drag of 10 % of the canvas width

@@ -150,7 +150,6 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
     if depth == "gt":
         src = _gt_depth(scene, src, ti)
     elif depth == "estimated":
-
         if len(src) < 2:  # the target takes no part in its sources' depth
             raise VibrInputError("depth is estimated from the sources alone and one source is too few: "
                                  "use two or more (--views K, --sources), or --depth planar / files", scene.root)

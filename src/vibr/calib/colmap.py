@@ -830,7 +830,6 @@ def calibrate(photos_dir, out_dir, *, overwrite: bool = False, **kwargs) -> Scen
     if out.exists() and not overwrite:
         raise OutputExists("output folder already exists", out)
     if out.exists():
-
         check_not_input(out, [photos_dir])
         check_replaceable(out)  # overwrite replaces only a folder vibr wrote
     parent = out.resolve().parent

@@ -114,7 +114,6 @@ def evaluate_target(scene, task: dict) -> dict:
     ev = run_evaluation(scene, task["target"], task["settings"], **kw)
     rep = ev.report
     if figures:
-
         rep["figures"] = write_evaluation_figures(ev, figures)
     rep["wall_seconds"] = round(time.perf_counter() - t0, 3)
     rep["config"] = task["config"]

@@ -232,7 +232,6 @@ def _measure_rows(rows, tview, cover, samples, intensity_scale, o: EvalOptions) 
         if lp is not None:
             entry["lpips"] = lp(res.image, tview.image)
         if o.uncertainty:
-
             entry["uncertainty"] = uncertainty_metrics(res.uncertainty, res.image, tview.image, mask=m,
                                                        border=o.border)
         if o.view_split is not None:
@@ -251,7 +250,6 @@ def _checked_settings(settings, mask: str, intensity_scale):
     if not settings:
         raise VibrInputError("no setting to evaluate")
     if intensity_scale is None:
-
         intensity_scale = DEFAULTS["scale"]
     intensity_scale = float(intensity_scale)
     if not intensity_scale > 0:

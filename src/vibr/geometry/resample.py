@@ -185,7 +185,6 @@ def scaled_scene(scene, s: float):
     views = [scaled_view(v, s) for v in scene.views]
     meta = dict(scene.meta)
     if meta.get("missing_views"):  # a light field's absent positions (vibr.io.hci)
-
         meta["missing_views"] = {n: Camera.from_dict(d).scaled(s).to_dict() for n, d in meta["missing_views"].items()}
     return scene.replace(views=views, meta=meta)
 

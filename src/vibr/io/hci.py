@@ -114,7 +114,6 @@ def _read_ground_truth(disp_path: Path, depth_path: Path, H: int, W: int):
         if not np.all(np.isfinite(disp)):
             raise VibrInputError(f"disparity has {int((~np.isfinite(disp)).sum())} NaN or infinite values", disp_path)
     elif depth_path.is_file():
-
         depth_gt = depth_from_file_values(read_pfm(depth_path), (H, W), depth_path)
     return disp, depth_gt
 

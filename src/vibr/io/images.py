@@ -238,7 +238,6 @@ def read_image(path) -> np.ndarray:
     if a.dtype in (np.uint8, np.uint16):
         return np.ascontiguousarray(from_uint(a))
     if np.issubdtype(a.dtype, np.floating):
-
         return np.clip(check_image(a, p), 0.0, 1.0)
     if np.issubdtype(a.dtype, np.integer):
         return np.ascontiguousarray(a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max))

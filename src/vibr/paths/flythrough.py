@@ -219,7 +219,6 @@ def _sigma_key(path) -> str | None:
 
 
 def _write_sigma_frame(path, sigma, key: str) -> None:
-
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, sigma=np.asarray(sigma, np.float16), key=np.array(key))
 
@@ -417,7 +416,6 @@ def check_path_sees_scene(scene: Scene, cameras, source=None) -> None:
 
 
 def _frames_dir_for(out: Path, frames_dir) -> tuple[Path, Path | None]:
-
     if is_video(out):
         return (Path(frames_dir) if frames_dir else out.with_name(out.stem + "_frames")), out
     if out.suffix:
@@ -741,7 +739,6 @@ def _run_frames(ctx: FrameContext, indices: list, executor, progress: bool) -> t
     if executor == "auto":
         executor = auto_executor(ctx, len(todo))
     if executor is not None:
-
         kind, arg = parse_executor(executor)
         n_proc = min(arg, max(len(todo), 1)) if kind == "processes" else arg
         engine = {"serial": "in this process", "processes": f"on {n_proc} processes",
@@ -749,7 +746,6 @@ def _run_frames(ctx: FrameContext, indices: list, executor, progress: bool) -> t
         out = run_tasks(render_frame, todo, setup=_same, setup_args=(ctx,), executor=executor,
                         desc="frames") if todo else []
     else:
-
         engine = "in this process"
         out = [render_frame(ctx, i) for i in (bar(todo, desc="frames") if progress else todo)]
     return sorted(out + skipped, key=lambda f: f["index"]), engine

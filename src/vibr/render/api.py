@@ -77,7 +77,6 @@ def fine_grid(sources: Scene, camera: Camera, supersample="auto", prepared: dict
                                                            for m, p in renders):
         return sources, camera, prepared, ResolutionPlan()
     if plan.scales:
-
         sources = sources.replace(views=[scaled_view(v, plan.scales[v.name]) if v.name in plan.scales else v
                                          for v in sources.views])
         if prepared:
@@ -253,7 +252,6 @@ def render(sources: Scene, target: View | Camera, method=None, *, params: Render
     res.times["geometry"] = t_geo
     res.times["total"] = time.perf_counter() - t_all
     if isinstance(target, View) and target.image is not None:
-
         cover = res.coverage if target.mask is None else res.coverage & target.mask
         res.metrics = view_metrics(res.image, target.image, cover)
     return res

@@ -182,7 +182,6 @@ class Method:
         (:func:`method_params`); returns a :class:`~vibr.render.RenderResult` (with its
         ``uncertainty`` map when asked, :mod:`vibr.render.uncertainty`)."""
         if self.solve:
-
             return solve_variational(samples, p, self, callback=callback, progress_bar=progress_bar,
                                      verbose=verbose, uncertainty=uncertainty,
                                      centres=(source_centres, target_centre), stop=stop)
@@ -207,7 +206,6 @@ def _render_ulr(method: Method, samples, p, source_centres, target_centre, uncer
     times["init"] = time.perf_counter() - t0
     sig = None
     if uncertainty:  # the ULR-weighted spread of the blended views
-
         sig = ulr_sigma(var[0], cov.coverage, scale=float(p["scale"]))
     times["total"] = time.perf_counter() - t_all
     return RenderResult(np.clip(img, 0, 1), cov.coverage, times=times, method=method.name, params=p,

@@ -339,7 +339,6 @@ def _outer_passes(prob: _Problem, method, u, *, callback, progress_bar, verbose,
     power_state: dict = {}
     passes = range(n_outer)
     if progress_bar:
-
         passes = progress(passes, desc=f"render {method.name}")
     A = b = c = None
     for o in passes:

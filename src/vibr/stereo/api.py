@@ -431,7 +431,6 @@ def _check_request(scene: Scene, views, exclude, opt: DepthOptions):
         raise VibrInputError(f"pm_radius must be an integer >= 1, got {r}", scene.root)
     method = depth_method(scene, opt.method)
     if method == "lightfield":
-
         LightFieldOptions(**opt.lightfield)  # its checks, before any view is estimated
     if opt.depth_range is not None:
         dr = (float(opt.depth_range[0]), float(opt.depth_range[1]))
@@ -514,7 +513,6 @@ def _estimate_mvs(scene, targets, inputs, cams, imgs, opt: DepthOptions, checkpo
     med_r = 9 if opt.median_radius is None else int(opt.median_radius)  # MVS default: 19×19 window
     ck = None
     if checkpoint is not None:
-
         ck = ViewCheckpoint(checkpoint, {**{f.name: getattr(opt, f.name) for f in fields(opt)}, "med_r": med_r})
 
     todo = [i for i in est if nbrs[i]]
@@ -573,7 +571,6 @@ def sweep_task(ctx: dict, task) -> tuple:
 
 
 def _why_no_partner(cams, i, inputs) -> str:
-
     others = [j for j in inputs if j != i]
     if others and shared_centre([cams[i]] + [cams[j] for j in others]) is not None:
         return (": every view shares its centre (a rotation-only capture), so there is no parallax to "

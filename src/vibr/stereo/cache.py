@@ -233,7 +233,6 @@ def _scene_with_depth(scene: Scene, depth, estimate_kw, cache_dir, exclude, exec
         if all(v.depth is None for v in src.views):
             raise VibrInputError("the scene has no depth maps: use depth='estimated'", scene.root)
         if not src.has_depth:
-
             src = ensure_source_depth(src)
         # a new meta: the caller's scene is not changed
         return src.replace(meta=dict(src.meta, depth_source="scene", depth_time_s=time.perf_counter() - t0))

@@ -361,7 +361,6 @@ def _sweep_range(scene: Scene, ref: int, cams, img, others, pos, best_d, st_conf
     dsel = best_d[st_conf] if st_conf.sum() > 100 else best_d.ravel()
     dlo, dhi = np.percentile(dsel, [1, 99])
     if depth_range is None and (st_conf.sum() <= 100 or max(abs(dlo), abs(dhi)) > st_max_disp):
-
         nb0 = sorted(others, key=lambda k: abs(pos[k][0] - r0) + abs(pos[k][1] - c0))[:4]
         depth_range = default_depth_range(scene, ref, cams, {k: img(k) for k in [ref] + nb0}, nb0,
                                           use_points=False)

@@ -78,7 +78,6 @@ class ViewSettings:
     params: dict = field(default_factory=dict)
 
     def __post_init__(self):
-
         if self.method not in METHODS:
             raise VibrInputError(f"unknown method {self.method!r} (choose from {', '.join(METHODS)})")
         if self.n_views < 1 or self.preview_long_side < 8 or (self.full_long_side is not None and self.full_long_side < 8):
@@ -130,7 +129,6 @@ class ViewRenderer:
     """
 
     def __init__(self, scene: Scene, rank_points: np.ndarray | None = None, threads: int | None = None):
-
         self.scene = scene
         self._long_side = max(max(v.shape) for v in scene.views)
         self._scaled: dict[float, Scene] = {1.0: scene}
@@ -142,7 +140,6 @@ class ViewRenderer:
         # entered from two threads at once, and renders are CPU-bound anyway
         self._lock = threading.Lock()
         if threads is not None and int(threads) < 1:
-
             raise VibrInputError(f"threads must be >= 1, got {threads}")
         self.threads = threads
         if rank_points is None:
