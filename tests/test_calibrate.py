@@ -62,7 +62,7 @@ def calibrated(synthetic_photos, tmp_path_factory):
 def test_raw_colmap_model_loads_as_colmaps_undistorter_writes_it(calibrated):
     """The mapper's model (SIMPLE_RADIAL, distorted) loaded as it is, undistorted by vibr at
     load, is the scene COLMAP's image_undistorter wrote: the same cameras, images within
-    8-bit rounding (on fountain at ×0.25: 58.9 dB, docs/explanation/calibration.md)."""
+    8-bit rounding (the check of docs/explanation/calibration.md)."""
     from vibr.io import load_scene
     from vibr.metrics import psnr
 
