@@ -7,11 +7,14 @@ pixels on a plane behind the view's known depth. This script renders, with depth
 from the sources as ``vibr eval`` does for a scene without depth maps, under each rule:
 
 * ``never``: unknown pixels left out (push–pull fills what no sample covers);
-* ``views >= 50 %``: the plane in the views at least half unknown (the rule of
-  ``fallback="auto"`` until 2026-11-28);
-* ``auto``: that, and in every other view the plane at the unknown pixels whose photograph
-  is flat (:func:`vibr.geometry.proxy.flat_pixels`, ``FALLBACK_FLAT_STD``; since 2026-11-28),
-  and the same with the flat limit halved and doubled;
+* ``views >= 50 %``: the plane in the views at least half unknown (a former rule);
+* ``views >= 50 % + flat``: that, and in every other view the plane at the unknown pixels
+  whose photograph is flat (:func:`vibr.geometry.proxy.flat_pixels`, ``FALLBACK_FLAT_STD``),
+  the textured ones completed (the former ``"auto"``), and the same with the flat limit
+  halved and doubled;
+* ``auto (backdrop + carving)``: ``fallback="auto"``, the plane at each view's backdrop
+  only, the samples that land on another view's backdrop carved
+  (``benchmarks/quality/backdrop_carving.py``);
 * ``auto + local background`` (measured, not the default): ``auto``, and each textured unknown
   pixel of those views takes the farthest depth of its view within ``BG_RADIUS`` px, the plane
   included (the background beside a silhouette, as depth-image-based rendering fills
@@ -71,18 +74,19 @@ def local_background(src, radius: int = BG_RADIUS):
 def rules():
     """name → function(sources) → sources with the rule's fallback."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
+    from vibr.geometry.proxy import FALLBACK_FLAT_STD, fallback_depth
 
-    def auto(flat_std):
-        return lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION, flat_std=flat_std)
+    def auto(flat_std):  # the former "auto": views at least half unknown, flat pixels of the others
+        return lambda s: fallback_depth(s, min_fraction=0.5, flat_std=flat_std, complete=True)
 
     return {
         "never": lambda s: apply_fallback(s, "never"),
-        "views >= 50 %": lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION),
-        "auto": lambda s: apply_fallback(s, "auto"),
+        "views >= 50 %": lambda s: fallback_depth(s, min_fraction=0.5),
+        "views >= 50 % + flat": auto(FALLBACK_FLAT_STD),
+        "auto (backdrop + carving)": lambda s: apply_fallback(s, "auto"),
         "auto + local background": local_background,
-        "auto, flat limit / 2": auto(FALLBACK_FLAT_STD / 2),
-        "auto, flat limit × 2": auto(FALLBACK_FLAT_STD * 2),
+        "views >= 50 % + flat, flat limit / 2": auto(FALLBACK_FLAT_STD / 2),
+        "views >= 50 % + flat, flat limit × 2": auto(FALLBACK_FLAT_STD * 2),
         "always": lambda s: apply_fallback(s, "always"),
     }
 

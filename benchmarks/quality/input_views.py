@@ -42,10 +42,10 @@ from _common import data_dir  # noqa: E402
 def variants():
     """name → (the fallback rule applied to raw sources, geometry_kw of the render)."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_FLAT_STD, FALLBACK_MIN_FRACTION, fallback_depth
+    from vibr.geometry.proxy import FALLBACK_FLAT_STD, fallback_depth
 
     return {
-        "before": (lambda s: fallback_depth(s, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD),
+        "before": (lambda s: fallback_depth(s, min_fraction=0.5, flat_std=FALLBACK_FLAT_STD),
                    {"same_ray_px": 0.0}),
         "after": (lambda s: apply_fallback(s, "auto"), {}),
     }

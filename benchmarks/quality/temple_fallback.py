@@ -6,9 +6,9 @@ covered (2-px border), and writes the figure reference | without | with.
     python benchmarks/quality/temple_fallback.py [--data DIR] [--figure docs/img/temple_fallback.png]
     python benchmarks/quality/temple_fallback.py --fountain     # also fountain 2/5/8 (scale 0.25, estimated)
 
-Each table row gives the views' unknown-depth fractions (min–max over the sources): what
-``fallback="auto"`` (vibr.geometry.proxy.FALLBACK_MIN_FRACTION) decides on per view; "with"
-is the plane at every unknown pixel (``"always"``). ``benchmarks/quality/fallback_rule.py`` compares
+Each table row gives the views' unknown-depth fractions (min–max over the sources); "with"
+is the plane at every unknown pixel (``"always"``); ``benchmarks/quality/backdrop_carving.py``
+measures ``fallback="auto"`` (each view's backdrop, silhouette carving). ``benchmarks/quality/fallback_rule.py`` compares
 the rules, the flat pixels of ``"auto"`` included.
 """
 

@@ -122,10 +122,10 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Extra arguments of :func:`vibr.stereo.estimate_depth`.
     fallback : {"auto", "always", "never"} or bool
         Give source pixels of unknown depth the fallback proxy
-        (:func:`vibr.geometry.apply_fallback`): "auto" (default) in the views at least
-        :data:`vibr.geometry.proxy.FALLBACK_MIN_FRACTION` unknown and at the flat unknown
-        pixels of the others (:func:`vibr.geometry.proxy.flat_pixels`), their textured
-        unknown pixels completed (:func:`vibr.geometry.proxy.complete_depth`), "always"
+        (:func:`vibr.geometry.apply_fallback`): "auto" (default) at each view's backdrop
+        (:func:`vibr.geometry.proxy.backdrop_pixels`), its other unknown pixels completed
+        (:func:`vibr.geometry.proxy.complete_depth`), the samples that land on another
+        view's backdrop carved (:func:`vibr.geometry.proxy.carve_silhouettes`), "always"
         (True) the plane at every unknown pixel, "never" (False).
     cache_dir : path, None or False
         Estimated depth through the on-disk cache of :func:`vibr.stereo.cache.estimated_depth`

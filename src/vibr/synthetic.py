@@ -48,6 +48,8 @@ __all__ = [
     "arc_cameras",
     "free_cameras",
     "make_scene",
+    "ring_scene",
+    "RING_KINDS",
     "handheld_cameras",
     "walk_cameras",
     "degrade_depth",
@@ -856,6 +858,56 @@ def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 12
         meta["baseline"] = baseline
         meta["grid_pos"] = {v.name: (i // gshape[1], i % gshape[1]) for i, v in enumerate(views)}
     return Scene(views, name=f"synthetic-{layout}", grid=gshape, meta=meta)
+
+
+#: :func:`ring_scene` kinds: a textureless grey-white object on black (the Middlebury rings'
+#: backdrop, an object stereo leaves mostly unknown) and a textured object on a uniform grey backdrop.
+RING_KINDS = ("textureless", "textured")
+
+
+def ring_scene(kind: str = "textureless", n_views: int = 16, width: int = 160, height: int = 120,
+               supersample: int = 2) -> Scene:
+    """A ring of ``n_views`` cameras around an object on a uniform backdrop, as the
+    Middlebury temple and dino rings are taken: rays that miss the object see the backdrop.
+
+    The object: a box on a wider slab and a sphere beside it, about the origin; the cameras on
+    a circle of radius 4 in the plane 1.2 above it (world up is −y), all looking at it.
+    ``kind`` (:data:`RING_KINDS`): ``"textureless"``, every surface one grey-white (faces
+    differ by shading only) on a black backdrop; ``"textured"``, brick, gravel and a photograph
+    on a uniform grey backdrop.
+
+    Every view's depth is the ray-cast truth where a stereo matcher could find it: NaN where
+    the ray hits nothing (the backdrop) and where the photograph is flat
+    (:func:`vibr.geometry.proxy.flat_pixels`, the windows no matcher can match); the truth
+    (image and full depth) stays in ``meta["truth_depth"]`` (name → depth map).
+    """
+    from .geometry.proxy import flat_pixels
+
+    if kind not in RING_KINDS:
+        raise VibrInputError(f"ring_scene: kind must be one of {', '.join(RING_KINDS)}, got {kind!r}")
+    if n_views < 3:
+        raise VibrInputError(f"ring_scene: at least 3 views, got {n_views}")
+    plain = np.full((8, 8, 3), 0.85, np.float32)
+    w = World(background=(0.0, 0.0, 0.0) if kind == "textureless" else (0.45, 0.45, 0.5))
+    tex = (plain, plain, plain) if kind == "textureless" else ("brick", "gravel", "coffee")
+    w.add_box([0.0, 0.45, 0.0], [0.9, 0.15, 0.6], tex[1], tile=0.8, name="slab")
+    w.add_box([-0.3, -0.2, 0.0], [0.35, 0.5, 0.35], tex[0], tile=0.6, yaw_deg=20.0, name="box")
+    w.add_sphere([0.5, 0.0, 0.1], 0.3, tex[2], tiles=2, name="sphere")
+    K = Camera.intrinsics(_focal(width, 40.0), width, height)
+    cams = []
+    for a in np.linspace(0.0, 2 * math.pi, int(n_views), endpoint=False):
+        eye = np.array([4.0 * math.sin(a), -1.2, -4.0 * math.cos(a)])
+        cams.append(_look_at(eye, (0.0, 0.1, 0.0), K, width, height))
+    views, truth = [], {}
+    for i, cam in enumerate(cams):
+        img, depth = render_view(w, cam, supersample)
+        name = f"ring_{i:03d}"
+        truth[name] = depth
+        views.append(View(name, img, cam, depth=np.where(flat_pixels(img), np.nan, depth).astype(np.float32),
+                          sigma_z=float(DEFAULT_SIGMA_Z)))
+    meta = {"format": "synthetic", "layout": "ring", "kind": kind, "supersample": supersample,
+            "depth_kind": "orthogonal, exact where textured", "truth_depth": truth}
+    return Scene(views, name=f"synthetic-ring-{kind}", meta=meta)
 
 
 # ---------------------------------------------------------------------------- depth helpers

@@ -190,14 +190,14 @@ def add_depth_options(p: argparse.ArgumentParser) -> None:
                    help="folder of per-view depth maps for --depth files (NAME.npy/.pfm/.png/.bin, orthogonal "
                         "depth, 0 = unknown; a map of the view's aspect at another size, e.g. full size with "
                         "--scale, is resized to it)")
-    from ..geometry.proxy import FALLBACK_MIN_FRACTION, FALLBACK_MODES
+    from ..geometry.proxy import FALLBACK_MODES
 
     p.add_argument("--fallback", choices=FALLBACK_MODES, default="auto",
                    help="source pixels of unknown depth (a black backdrop, the sky) get a plane "
                         "behind the view's known depth with a large sigma_z instead of being dropped: "
-                        f"in the views at least {100 * FALLBACK_MIN_FRACTION:.0f}%% unknown and, in the others, "
-                        "where the photograph is flat, the other unknown pixels of those taking a depth completed "
-                        "from their view's (auto, the default), at every unknown pixel (always), "
+                        "at each view's backdrop (flat unknown pixels connected to the image border), the other "
+                        "unknown pixels taking a depth completed from their view's, and the samples that land on "
+                        "another view's backdrop dropped (auto, the default), at every unknown pixel (always), "
                         "or never (docs/explanation/renderer.md \"Fallback proxy\")")
     add_cache_options(p)
 

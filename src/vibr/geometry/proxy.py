@@ -20,7 +20,7 @@ from ..scene import Scene, View
 from .depth import DEFAULT_SIGMA_Z_REL
 
 __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "complete_depth", "FALLBACK_MODES",
-           "FALLBACK_MIN_FRACTION", "FALLBACK_FLAT_STD", "FALLBACK_FACTOR",
+           "FALLBACK_FLAT_STD", "FALLBACK_FACTOR", "backdrop_pixels", "carve_silhouettes",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
 
 #: Default planar-proxy uncertainty: ``sigma_z = max(PROXY_SIGMA_Z_REL · D,
@@ -190,12 +190,6 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
 FALLBACK_FACTOR = 1.03
 FALLBACK_PERCENTILE = 99.0
 FALLBACK_SIGMA_Z_REL = 0.25
-#: ``fallback="auto"``: the views of which at least this fraction has no depth get the proxy
-#: at every unknown pixel. A view that stereo leaves mostly unknown shows a backdrop (the
-#: temple ring); in the others, unknown textured patches are stereo failures on the object,
-#: where the plane would be wrong (fountain): the fractions and what the proxy costs are in
-#: docs/explanation/renderer.md, "Fallback proxy".
-FALLBACK_MIN_FRACTION = 0.5
 #: ``fallback="auto"``, in every view: the unknown pixels whose photograph is flat, every
 #: channel's standard deviation over the ``(2·FLAT_RADIUS+1)²`` window below
 #: ``FALLBACK_FLAT_STD`` (intensities in [0, 1]; the depth benchmarks' limit of a textured
@@ -204,9 +198,10 @@ FALLBACK_MIN_FRACTION = 0.5
 #: failure on a surface, where the plane would be wrong (docs/explanation/renderer.md, "Fallback proxy").
 FALLBACK_FLAT_STD = 0.02
 FLAT_RADIUS = 3
-#: ``"auto"`` (views at least FALLBACK_MIN_FRACTION unknown, and the flat unknown pixels of
-#: the others; their textured unknown pixels completed from the view's known depth,
-#: :func:`complete_depth`), ``"always"`` (the plane at every unknown pixel), ``"never"``.
+#: ``"auto"`` (the plane at each view's backdrop, :func:`backdrop_pixels`; its other unknown
+#: pixels completed from the view's known depth, :func:`complete_depth`; then the samples
+#: that land on another view's backdrop carved, :func:`carve_silhouettes`), ``"always"``
+#: (the plane at every unknown pixel), ``"never"``.
 FALLBACK_MODES = ("auto", "always", "never")
 
 
@@ -228,6 +223,98 @@ def flat_pixels(image, radius: int = FLAT_RADIUS, max_std: float = FALLBACK_FLAT
         var = uniform_filter(ch * ch, size, mode="nearest") - m * m
         np.maximum(worst, np.sqrt(np.maximum(var, 0.0)), out=worst)
     return worst < float(max_std)
+
+
+def backdrop_pixels(image, unknown) -> np.ndarray:
+    """(H, W) bool: a view's backdrop, the unknown-depth pixels whose photograph is flat
+    (:func:`flat_pixels`) in a connected region of such pixels (4-connected) that reaches the
+    image border.
+
+    What lies beyond the object (a black cloth, a uniform wall behind it, the sky) fills the
+    frame around it: flat, so stereo cannot match it, and continuous up to the image's edge.
+    A flat face of the object stereo could not match either is closed in by the object's
+    textured outline, or by its silhouette, where the window straddling the edge is not flat."""
+    from scipy.ndimage import label
+
+    cand = np.asarray(unknown, bool) & flat_pixels(image)
+    lab, n = label(cand)
+    if n == 0:
+        return cand
+    edge = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    return np.isin(lab, edge[edge > 0])
+
+
+#: Depths at which :func:`carve_silhouettes` tests a sample: its depth and ``±sigma_z``
+#: between (the segment's ends and midpoints), so only a sample that no depth it may have
+#: puts on an object in the other view is carved.
+CARVE_STEPS = (-1.0, -0.5, 0.0, 0.5, 1.0)
+
+
+def carve_silhouettes(sources: Scene, backdrop: dict) -> Scene:
+    """Silhouette consistency (space carving with the views' backdrops): drop the depth of
+    every source pixel that is not backdrop itself whose 3D point, at every depth within
+    its ``±sigma_z``, lands on the backdrop of another view (all four pixels of the
+    landing point's bilinear cell backdrop, inside that view's frame, in front of it).
+
+    A view's backdrop pixel saw nothing along its ray up to the backdrop, so no surface
+    lies on that ray: a sample put there (a stereo mismatch, a completed depth on the
+    wrong side of an edge) is a ghost in any target. Dropped, the pixel is left to the
+    others views' samples; fallback pixels of the plane (the backdrop) are kept.
+
+    Parameters
+    ----------
+    backdrop : dict
+        view name → (H, W) bool, :func:`backdrop_pixels` of that view (views not in it
+        carve nothing).
+
+    Returns
+    -------
+    The scene with carved pixels NaN (and out of the ``fallback`` mask), and
+    ``meta["carved"] = {name: fraction of the view's pixels carved}``.
+    """
+    from scipy.ndimage import binary_erosion
+
+    # a landing point is on backdrop when its whole bilinear cell is: the mask eroded towards +x, +y
+    cells = {n: binary_erosion(m, np.array([[0, 0, 0], [0, 1, 1], [0, 1, 1]], bool), border_value=0)
+             for n, m in backdrop.items() if m is not None and m.any()}
+    views, info = [], {}
+    for v in sources.views:
+        others = [(u.camera, cells[u.name]) for u in sources.views if u.name != v.name and u.name in cells]
+        z = None if v.depth is None else np.asarray(v.depth, np.float32)
+        own = backdrop.get(v.name)
+        test = np.zeros(v.camera.shape, bool) if z is None else np.isfinite(z)
+        if own is not None:
+            test &= ~own
+        if not others or not test.any():
+            views.append(v)
+            continue
+        ys, xs = np.nonzero(test)
+        zc = z[ys, xs].astype(np.float64)
+        sz = np.zeros_like(zc) if v.sigma_z is None else \
+            np.broadcast_to(np.asarray(v.sigma_z, np.float64), z.shape)[ys, xs]
+        xy = np.stack([xs, ys], -1).astype(np.float64)
+        carved = np.zeros(len(zc), bool)
+        for cam, cell in others:
+            H, W = cell.shape
+            on = np.ones(len(zc), bool)
+            for step in CARVE_STEPS:
+                d = np.maximum(zc + step * sz, 1e-6 * zc)
+                uv, w = cam.project(v.camera.backproject(xy, d))
+                x0, y0 = np.floor(uv[:, 0]), np.floor(uv[:, 1])
+                inside = (w > 0) & (x0 >= 0) & (y0 >= 0) & (x0 < W - 1) & (y0 < H - 1)
+                hit = np.zeros(len(zc), bool)
+                hit[inside] = cell[y0[inside].astype(np.int64), x0[inside].astype(np.int64)]
+                on &= hit
+            carved |= on
+        if not carved.any():
+            views.append(v)
+            continue
+        cut = np.zeros(v.camera.shape, bool)
+        cut[ys[carved], xs[carved]] = True
+        fb = None if v.fallback is None else v.fallback & ~cut
+        views.append(v.replace(depth=np.where(cut, np.float32(np.nan), z), fallback=fb))
+        info[v.name] = float(cut.mean())
+    return sources.replace(views=views, meta=dict(sources.meta, carved=info))
 
 
 def _push_pull(vals: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -300,7 +387,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
                    min_fraction: float = 0.0, flat_std: float | None = None,
-                   complete: bool = False) -> Scene:
+                   complete: bool = False, backdrop: bool = False) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -321,7 +408,9 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     the unknown pixels :func:`flat_pixels` finds flat at ``flat_std`` get the plane (none
     when ``flat_std`` is None); the others stay unknown, or with ``complete`` take the depth
     :func:`complete_depth` gives them from the view's known depth and its large sigma_z
-    (also marked as fallback). The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
+    (also marked as fallback). With ``backdrop``, in every view, only the view's backdrop
+    (:func:`backdrop_pixels`) gets the plane and ``min_fraction`` / ``flat_std`` are not
+    read; its other unknown pixels are left, or completed with ``complete``. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
     sample wherever a known surface lands in the target, whatever their depths (known
     geometry wins: a source facing the target has its plane in front of the object); other
     placements measured in docs/explanation/renderer.md.
@@ -329,7 +418,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     Returns the scene with each such view's ``fallback`` mask (:class:`vibr.scene.View`) set
     to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,
     "fraction": f_k}}`` for the views that have such pixels (``f_k`` their fraction; with
-    ``complete``, ``"completed"``: the fraction completed rather than given the plane).
+    ``complete``, ``"completed"``: the fraction completed rather than given the plane; with
+    ``backdrop``, ``"backdrop"``: the view's backdrop mask).
     """
 
     dsr = DEFAULT_SIGMA_Z_REL if default_sigma_rel is None else float(default_sigma_rel)
@@ -346,7 +436,12 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         if v.mask is not None:  # masked pixels stay out of the render (prepare_depth)
             unknown &= v.mask
         textured = np.zeros_like(unknown)
-        if unknown.any() and unknown.mean() < min_fraction:
+        bg = None
+        if backdrop:
+            bg = backdrop_pixels(v.image, unknown)
+            textured = unknown & ~bg if complete else textured
+            unknown = bg
+        elif unknown.any() and unknown.mean() < min_fraction:
             # a view mostly known: its unknown textured pixels are stereo failures on a surface
             flat = flat_pixels(v.image, max_std=flat_std) if flat_std is not None else np.zeros_like(unknown)
             textured = unknown & ~flat if complete else textured
@@ -369,6 +464,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         info[v.name] = {"depth": D, "fraction": float((unknown | textured).mean())}
         if complete:
             info[v.name]["completed"] = float(textured.mean())
+        if bg is not None:
+            info[v.name]["backdrop"] = bg
     return sources.replace(views=views, meta=dict(sources.meta, fallback=info))
 
 
@@ -383,4 +480,6 @@ def apply_fallback(sources: Scene, mode="auto") -> Scene:
         return sources
     if mode == "always":
         return fallback_depth(sources)
-    return fallback_depth(sources, min_fraction=FALLBACK_MIN_FRACTION, flat_std=FALLBACK_FLAT_STD, complete=True)
+    out = fallback_depth(sources, backdrop=True, complete=True)
+    masks = {n: i["backdrop"] for n, i in out.meta.get("fallback", {}).items() if "backdrop" in i}
+    return carve_silhouettes(out, masks)
