@@ -24,6 +24,14 @@ Each row: covered % (pixels some sample reaches), the default ``gradient`` rende
 the covered pixels and on all pixels, ULR's PSNR on all pixels (dB, 2-px border), before
 and after.
 
+Then the fly-through (docs/explanation/flythrough.md, "The path file"): the path of
+``vibr path interpolate SCENE --frames 2 --scale 0.25`` (frames at photos 0000 and 0010),
+rendered by :func:`vibr.paths.flythrough.render_path` (8 soft-weighted sources per frame,
+the default) from all 11 photos: covered % and all-pixel PSNR against the
+photo at scale 0.25 (the frames are 8-bit PNGs), each frame with the centred pinhole of its vertical fov (before: what
+a camera_path.json frame was) and with the photo's K (after), and the frame's sources and
+weights.
+
     python3 benchmarks/quality/input_views.py [--cache-dir DIR] [--skip-fountain] [--size 192]
 """
 
@@ -65,6 +73,41 @@ def fountain_cases(cache_dir):
         yield f"fountain {t} held out", estimated_depth(src, None, cache_dir), tv, tv
 
 
+def flythrough_rows(cache_dir, out_dir):
+    """Per path frame: (name, before, after, sources) with before / after (covered %,
+    all-pixel PSNR) and the sources ``[(name, weight), ...]`` of the frame."""
+    from vibr.camera import Camera
+    from vibr.io import load_scene, read_image
+    from vibr.metrics import psnr
+    from vibr.paths.camera_path import CameraPath, interpolate
+    from vibr.paths.flythrough import render_path
+    from vibr.stereo.cache import estimated_depth
+
+    full = load_scene(data_dir() / "strecha_fountain-P11")
+    fo = load_scene(data_dir() / "strecha_fountain-P11", scale=0.25)
+    every = estimated_depth(fo, None, cache_dir)
+    path = interpolate(full, n_frames=2, scale=0.25)
+    names = [path.meta["views"][0], path.meta["views"][-1]]
+    centred = [Camera(Camera.intrinsics(c.K[1, 1], c.width, c.height), c.R, c.t, c.width, c.height)
+               for c in path.cameras]
+    res = {}
+    for variant, cams in (("before", centred), ("after", path.cameras)):
+        d = Path(out_dir) / variant
+        r = render_path(every, CameraPath(cams, path.fps), d, cache_dir=cache_dir, executor=None, progress=False,
+                        overwrite=True)
+        res[variant] = (d, r.frames)
+    for i, name in enumerate(names):
+        ref = fo[name].image
+        row = []
+        for variant in ("before", "after"):
+            d, frames = res[variant]
+            img = read_image(d / f"frame_{i:05d}.png")
+            cov = frames[i]["coverage"]
+            row.append((100 * cov, psnr(img, ref, border=2)))
+        fr = res["after"][1][i]
+        yield f"fountain path frame at {name}", row[0], row[1], list(zip(fr["views"], fr["weights"]))
+
+
 def synthetic_cases(size: int, seeds=(0, 1)):
     from vibr.synthetic import degrade_depth, make_scene
 
@@ -98,6 +141,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache-dir", default=None, help="depth cache folder (default: vibr's)")
     ap.add_argument("--size", type=int, default=192, help="synthetic image width")
     ap.add_argument("--skip-fountain", action="store_true")
+    ap.add_argument("--frames-dir", default="input_views_frames",
+                    help="where the fly-through's frames go (before/, after/; default ./input_views_frames)")
     args = ap.parse_args(argv)
     cases = [] if args.skip_fountain else list(fountain_cases(args.cache_dir))
     cases += list(synthetic_cases(args.size))
@@ -109,6 +154,15 @@ def main(argv=None) -> int:
         row = measure(raw, target, ref)
         print(f"| {case} | " + " | ".join("{:.1f} / {:.2f} / {:.2f} / {:.2f}".format(*row[n]) for n in names) + " |",
               flush=True)
+    if args.skip_fountain:
+        return 0
+    print("\nfly-through frames at photos: covered % / all-pixel PSNR (dB, 2-px border), the frame as a centred "
+          "pinhole of its fov (before) and with the photo's K (after); the frame's sources (weight)\n")
+    print("| frame | before | after | sources |")
+    print("|---|---|---|---|")
+    for case, before, after, src in flythrough_rows(args.cache_dir, args.frames_dir):
+        used = ", ".join(f"{n} ({w:.2f})" for n, w in src)
+        print(f"| {case} | {before[0]:.1f} / {before[1]:.2f} | {after[0]:.1f} / {after[1]:.2f} | {used} |", flush=True)
     return 0
 
 

@@ -10,14 +10,18 @@ frame, :func:`read_camera_path` and :func:`write_camera_path` map to and from it
     {"camera_type": "perspective", "render_width": W, "render_height": H,
      "seconds": S, "fps": F,
      "camera_path": [{"camera_to_world": [16 numbers, 4x4 row-major],
-                      "fov": vertical field of view in degrees, "aspect": W / H}, ...]}
+                      "fov": vertical field of view in degrees, "aspect": W / H,
+                      "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy}, ...]}
 
 ``camera_to_world`` uses **OpenGL camera axes** (x right, y up, looking down −z), vibr uses
 OpenCV axes (x right, y down, looking down +z): the flip ``diag(1, −1, −1)`` of the camera
 axes lives in :func:`camera_from_c2w_opengl` / :func:`c2w_opengl_from_camera` and nowhere
 else. The focal length is nerfstudio's ``f = (H / 2) / tan(fov / 2)`` (fx = fy), the
 principal point the image centre (``W/2, H/2`` with nerfstudio's pixel centres at half
-integers, ``(W − 1)/2, (H − 1)/2`` in vibr's). docs/explanation/flythrough.md has the details, the
+integers, ``(W − 1)/2, (H − 1)/2`` in vibr's), unless the frame carries vibr's optional
+``fl_x``, ``fl_y``, ``cx``, ``cy`` (:data:`FRAME_INTRINSICS`: transforms.json's names and pixel
+convention), written for a camera that is not such a pinhole (a frame at a photograph's
+camera has the photograph's intrinsics). docs/explanation/flythrough.md has the details, the
 ``dataparser_transforms.json`` mapping and the sources.
 
 Generators (:func:`interpolate`, :func:`orbit`, :func:`spiral`) return a :class:`CameraPath`.
@@ -47,7 +51,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["CameraPath", "read_camera_path", "write_camera_path", "camera_from_c2w_opengl",
            "c2w_opengl_from_camera", "read_dataparser_transforms", "interpolate", "orbit", "spiral",
            "scene_centre", "scene_up", "scene_points", "scene_processing_transform", "LEGACY_COLMAP_APPLIED",
-           "frame_count", "ROLL_MODES", "orient_keys", "turns_text", "grid_loop", "smooth_keys"]
+           "frame_count", "key_intrinsics", "FRAME_INTRINSICS", "ROLL_MODES", "orient_keys", "turns_text", "grid_loop", "smooth_keys"]
 
 #: How :func:`interpolate` orients its key cameras about their optical axes (``roll=``;
 #: ``vibr path interpolate --roll``). orbit and spiral look at the scene with its up, as "level".
@@ -61,6 +65,13 @@ ROLL_MODES = {
 #: A camera looking within this angle (degrees) of the scene's up or down has no roll to
 #: correct: its image's up says nothing about the world's (a nadir photograph).
 ROLL_UNDEFINED_DEG = 15.0
+
+#: A frame's own intrinsics, optional keys vibr adds to nerfstudio's frame (which its readers
+#: ignore): focal lengths and principal point in pixels with transforms.json's names and pixel
+#: convention (the top-left pixel's centre at (0.5, 0.5): vibr's ``cx = cx_file − 0.5``).
+#: Written only for a camera that is not the centred square-pixel pinhole of its ``fov``; a
+#: frame without them is that pinhole.
+FRAME_INTRINSICS = ("fl_x", "fl_y", "cx", "cy")
 
 #: OpenGL camera axes (x right, y up, z backward) <-> OpenCV (x right, y down, z forward).
 _GL_CV = np.diag([1.0, -1.0, -1.0])
@@ -158,16 +169,45 @@ def c2w_opengl_from_camera(camera: Camera) -> np.ndarray:
     return M
 
 
-def _check_pinhole(cam: Camera, tol: float = 1e-6) -> None:
-    """nerfstudio's schema has one focal length and a centred principal point: say when a
-    camera is not exactly that (the written path then differs from it)."""
+def _frame_intrinsics(cam: Camera, tol: float = 1e-9) -> dict:
+    """A frame's :data:`FRAME_INTRINSICS` for ``cam``, or {} when its ``fov`` alone says its K
+    (a centred square-pixel pinhole, within ``tol`` of its focal length). A skewed K has no
+    such keys: its skew is dropped with a warning."""
     K = cam.K
-    cx, cy = (cam.width - 1) / 2, (cam.height - 1) / 2
-    off = max(abs(K[0, 2] - cx), abs(K[1, 2] - cy), abs(K[0, 0] - K[1, 1]), abs(K[0, 1]))
-    if off > tol * max(K[0, 0], 1.0):
-        logger.warning("camera %r is not a centred square-pixel pinhole (K = %s): nerfstudio's "
-                       "camera_path schema keeps only its vertical field of view", cam,
+    f = max(float(K[1, 1]), 1.0)
+    if abs(K[0, 1]) > tol * f:
+        logger.warning("camera %r has a skewed K (%s): the camera_path frame drops its skew", cam,
                        np.array2string(K, precision=2))
+    cx, cy = (cam.width - 1) / 2, (cam.height - 1) / 2
+    if max(abs(K[0, 2] - cx), abs(K[1, 2] - cy), abs(K[0, 0] - K[1, 1])) <= tol * f:
+        return {}
+    return {"fl_x": float(K[0, 0]), "fl_y": float(K[1, 1]), "cx": float(K[0, 2]) + 0.5, "cy": float(K[1, 2]) + 0.5}
+
+
+def _read_frame_intrinsics(fr: dict, fov: float, w: int, h: int, where) -> np.ndarray | None:
+    """The K of a frame that carries :data:`FRAME_INTRINSICS` (any of them; ``fl_y`` defaults
+    to the ``fov``'s focal, ``fl_x`` to ``fl_y``, ``cx, cy`` to the image centre), else None.
+    ``fl_y`` and ``fov`` must agree: a file edited in one of them would otherwise mean two
+    cameras."""
+    if not any(k in fr for k in FRAME_INTRINSICS):
+        return None
+    vals = {}
+    for k in FRAME_INTRINSICS:
+        if k in fr:
+            try:
+                vals[k] = float(fr[k])
+            except (TypeError, ValueError):
+                raise VibrInputError(f"{k!r} must be a number, got {fr[k]!r}", where) from None
+            if not math.isfinite(vals[k]) or (k.startswith("fl") and vals[k] <= 0):
+                raise VibrInputError(f"{k!r} must be {'positive and ' if k.startswith('fl') else ''}finite, "
+                                     f"got {fr[k]!r}", where)
+    f_fov = focal_from_fov(fov, h)
+    fy = vals.get("fl_y", f_fov)
+    if abs(fy - f_fov) > 1e-6 * fy:
+        raise VibrInputError(f"'fl_y' {fy:g} px and 'fov' {fov:g} degrees ({f_fov:g} px) disagree: correct or "
+                             "remove one of them", where)
+    fx = vals.get("fl_x", fy)
+    return Camera.intrinsics(fx, w, h, fy=fy, cx=vals.get("cx", w / 2.0) - 0.5, cy=vals.get("cy", h / 2.0) - 0.5)
 
 
 # ----------------------------------------------------------------------------- files
@@ -181,7 +221,11 @@ def write_camera_path(path, cameras, *, fps: float = 24.0, seconds: float | None
     With ``dataparser_transforms`` (nerfstudio's ``dataparser_transforms.json``, and the
     scene's ``applied_transform`` / ``applied_scale``: :func:`scene_processing_transform`)
     the cameras are written in nerfstudio's normalised frame, the one ``ns-render`` renders
-    in; :func:`read_camera_path` with the same arguments reads them back."""
+    in; :func:`read_camera_path` with the same arguments reads them back.
+
+    A camera that is not a centred square-pixel pinhole (a frame at a photograph's camera)
+    gets its ``fl_x``, ``fl_y``, ``cx``, ``cy`` (:data:`FRAME_INTRINSICS`) beside its ``fov``
+    (``ns-render`` keeps only the ``fov``); a skewed K loses its skew, with a warning."""
     if isinstance(cameras, CameraPath):
         fps = cameras.fps
         seconds = cameras.seconds if seconds is None else seconds
@@ -197,9 +241,8 @@ def write_camera_path(path, cameras, *, fps: float = 24.0, seconds: float | None
     to_file = _frame_map(dataparser_transforms, applied_transform, applied_scale, path, _normalise)
     frames = []
     for c in cams:
-        _check_pinhole(c)
         frames.append({"camera_to_world": to_file(c2w_opengl_from_camera(c)).ravel().tolist(),
-                       "fov": fov_from_focal(float(c.K[1, 1]), h), "aspect": w / h})
+                       "fov": fov_from_focal(float(c.K[1, 1]), h), "aspect": w / h, **_frame_intrinsics(c)})
     if dataparser_transforms is not None:
         meta = dict(meta or {}, frame=f"nerfstudio's normalised frame ({os.fspath(dataparser_transforms)})")
     data = {"camera_type": "perspective", "render_width": int(w), "render_height": int(h),
@@ -304,7 +347,12 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
     ------
     VibrInputError
         Not JSON, no ``camera_path`` or an empty one, a size that is not positive, a
-        camera type other than perspective, a non-rigid matrix, a fov outside (0, 180).
+        camera type other than perspective, a non-rigid matrix, a fov outside (0, 180),
+        intrinsics (:data:`FRAME_INTRINSICS`) that are not finite numbers, a focal length
+        that is not positive or an ``fl_y`` that disagrees with the ``fov``.
+
+    A frame with ``fl_x``, ``fl_y``, ``cx``, ``cy`` has that K; one without them (every file
+    of nerfstudio's) the centred square-pixel pinhole of its ``fov``.
     """
 
     p = os.fspath(path)
@@ -346,7 +394,9 @@ def read_camera_path(path, *, dataparser_transforms=None, applied_transform=None
             if abs(s - 1.0) > ROTATION_TOL:  # the file's own matrix, before any dataparser scale
                 scaled.append((i, s))
             M = from_file(M)
-        cams.append(camera_from_c2w_opengl(M, fr["fov"], w, h, source=where))
+        cam = camera_from_c2w_opengl(M, fr["fov"], w, h, source=where)
+        K = _read_frame_intrinsics(fr, float(fr["fov"]), w, h, where)
+        cams.append(cam if K is None else Camera(K, cam.R, cam.t, w, h, where))
     if scaled:  # usable (the rotation is the camera), but not what a viewer or 'vibr path' writes
         ss = [s for _, s in scaled]
         logger.warning(f"{p}: the camera_to_world rotations of {len(scaled)} of {len(frames)} frames carry a "
@@ -507,6 +557,52 @@ def _vertical_focal(cam: Camera, w: int, h: int) -> float:
     return float(cam.K[1, 1]) / (cam.width if other else cam.height)
 
 
+def key_intrinsics(cam: Camera, w: int, h: int) -> np.ndarray:
+    """The (3, 3) K of a w×h frame at the key camera ``cam``: its photograph's K brought to
+    the frame, so that the frame at the key is the photograph resized.
+
+    The image is scaled about its centre (``x' + ½ − w/2 = s_x (x + ½ − W/2)``, likewise y):
+    by ``s_x = w/W``, ``s_y = h/H`` when the photograph has the frame's shape (up to a pixel
+    of rounding: what :meth:`Camera.scaled` gives), else by one ``s = h/L`` on both axes,
+    ``L`` the reference length of :func:`_vertical_focal` (its height, or its width for a
+    photograph of the other orientation than the frame): its field of view kept vertically
+    and its pixels square, the principal point's offset from the centre scaled alike."""
+    W, H = cam.width, cam.height
+    other = (W > H and h > w) or (H > W and w > h)
+    if not other and abs(W * h / H - w) <= 1.0:
+        sx, sy = w / W, h / H
+    else:
+        sx = sy = h / (W if other else H)
+    S = np.array([[sx, 0.0, 0.5 * (w - sx * W) + 0.5 * sx - 0.5],
+                  [0.0, sy, 0.5 * (h - sy * H) + 0.5 * sy - 0.5],
+                  [0.0, 0.0, 1.0]])
+    return S @ cam.K
+
+
+def _intrinsics_along(t, keys, ts, bc) -> np.ndarray:
+    """(len(ts), 3, 3) K at the path parameters ``ts`` from the keys' K (n, 3, 3) at the
+    knots ``t``: cubic splines (boundary ``bc``, as the positions) of ``log fx``, ``log fy``
+    (a zoom's steps alike in and out), the skew over fy and the principal point. At a knot
+    a frame has its key's K exactly; an entry every key shares is kept as it is (a path
+    through centred pinholes stays one)."""
+    from scipy.interpolate import CubicSpline
+
+    raw = np.stack([keys[:, 0, 0], keys[:, 1, 1], keys[:, 0, 1], keys[:, 0, 2], keys[:, 1, 2]], axis=1)
+    tr = np.column_stack([np.log(raw[:, 0]), np.log(raw[:, 1]), raw[:, 2] / raw[:, 1], raw[:, 3], raw[:, 4]])
+    v = CubicSpline(t, tr, bc_type=bc)(ts)
+    fy = np.exp(v[:, 1])
+    out = np.column_stack([np.exp(v[:, 0]), fy, v[:, 2] * fy, v[:, 3], v[:, 4]])
+    const = np.all(raw == raw[0], axis=0)
+    out[:, const] = raw[0, const]
+    at_key = np.searchsorted(t, ts)
+    hit = (at_key < len(t)) & (t[np.minimum(at_key, len(t) - 1)] == ts)
+    out[hit] = raw[at_key[hit]]
+    K = np.zeros((len(ts), 3, 3))
+    K[:, 0, 0], K[:, 1, 1], K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = out.T
+    K[:, 2, 2] = 1.0
+    return K
+
+
 # ----------------------------------------------------------------------------- generators
 def _check_not_one_centre(scene, what: str) -> None:
     """An orbit or a spiral moves the camera; from a rotation-only capture (every camera at
@@ -655,10 +751,13 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     counts as the motion of what is looked at). Positions: a natural cubic spline
     (``scipy.interpolate.CubicSpline``, C² with zero end curvature); orientations:
     ``scipy.spatial.transform.RotationSpline`` (rotation vectors between consecutive keys
-    cubic in t, angular rate and acceleration continuous: C²); the vertical focal length
-    (relative to the image height, or to the width for a photograph of the other
-    orientation than the frame: :func:`_vertical_focal`): a natural cubic spline. Frames are ``n_frames`` equal
-    steps of t from the first key to the last, so a key camera is never repeated.
+    cubic in t, angular rate and acceleration continuous: C²); the intrinsics: each key's
+    photograph's K brought to the frame (:func:`key_intrinsics`: focal lengths and
+    principal point, scaled with the image height, or the width for a photograph of the
+    other orientation than the frame), their log focal lengths and principal points by
+    the same cubic splines (:func:`_intrinsics_along`), so that a frame at a key camera
+    is its photograph, resized. Frames are ``n_frames`` equal steps of t from the first key
+    to the last, so a key camera is never repeated.
 
     Parameters
     ----------
@@ -704,15 +803,12 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
     bc = "periodic" if closed else "natural"
     pos = CubicSpline(t, C, bc_type=bc)
     rot = RotationSpline(t, rots)
-    foc = CubicSpline(t, [_vertical_focal(c, w, h) for c in cams], bc_type=bc)
     # a closed loop does not end on its first frame again: the video loops without a repeat
     ts = np.linspace(t[0], t[-1], n, endpoint=not closed) if n > 1 else t[:1]
     Rc2w = rot(ts).as_matrix()
-    P, F = pos(ts), foc(ts)
-    out = []
-    for Ri, Ci, fi in zip(Rc2w, P, F):
-        K = Camera.intrinsics(float(fi) * h, w, h)
-        out.append(Camera.from_centre(K, Ri.T, Ci, w, h))
+    P = pos(ts)
+    Ks = _intrinsics_along(t, np.array([key_intrinsics(c, w, h) for c in cams]), ts, bc)
+    out = [Camera.from_centre(K, Ri.T, Ci, w, h) for Ri, Ci, K in zip(Rc2w, P, Ks)]
     return CameraPath(out, float(fps), None, w, h,
                       {"kind": "interpolate", "views": names, "knots": t.tolist(), "roll": roll, "closed": closed,
                        "smooth": float(smooth)})
