@@ -677,8 +677,10 @@ class Viewer:
             self._workers[cid] = worker
             self._report_threads[cid] = reports
             self.sent[cid] = []
-        client.camera.on_update(self._on_report)
+        # moved before its reports are heard: a report handled before the move would be the
+        # browser's start camera, governed from nothing, and its image the first one shown
         self.move_client(client, self.scene.views[0].camera)
+        client.camera.on_update(self._on_report)
 
     def _on_disconnect(self, client) -> None:
         with self._lock:
