@@ -14,6 +14,7 @@ import threading
 import time
 import urllib.request
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -730,3 +731,117 @@ def test_camera_bounds_of_a_scene(tiny_scene):
     assert b.max_turn == pytest.approx(math.atan2(cam.height / 2, cam.K[1, 1]))
     moved = camera_bounds(tiny_scene, P, origin=C.mean(axis=0))
     assert np.allclose(moved.centre, 0) and np.allclose(moved.target, b.target - C.mean(axis=0))
+
+
+class _Handle:
+    """viser's camera handle as the viewer meets it: ``_state`` is the newest report, replaced
+    whole by the next one, and the server's camera writes change it in place."""
+
+    def __init__(self, client, **state):
+        self.client = client
+        self._state = SimpleNamespace(**state)
+
+    def __setattr__(self, name, value):
+        if name in ("client", "_state"):
+            object.__setattr__(self, name, value)
+        else:  # a server write: viser's setters store it in the current report
+            setattr(self._state, name, np.asarray(value, float) if name != "far" else float(value))
+
+
+def _report_of(viewer, camera, far, width=640, height=480):
+    from vibr.viewer import app
+
+    (camera,), _ = app.orient_keys([camera], "snap", viewer.up)
+    wxyz, pos, fov, _ = app.viser_pose_from_camera(camera)
+    pos = pos - viewer.origin
+    return dict(wxyz=np.asarray(wxyz), position=np.asarray(pos), fov=fov, image_width=width, image_height=height,
+                look_at=pos + viewer._depth() * np.asarray(camera.optical_axis), up_direction=np.asarray(viewer.up),
+                far=far)
+
+
+def test_the_browser_reaches_the_first_view_however_late_it_applies_the_move(tiny_scene, monkeypatch):
+    """On connection the viewer moves the browser to view 0. A browser still loading (no
+    GPU, a busy machine) reports its own start camera for seconds before it applies the move;
+    those reports are no drag: every render is of view 0, and once the browser reports the
+    move's marker it is in step, with nothing more to correct (before: after 2 s the move
+    was taken as lost and the browser's move to view 0 as a drag away from it). And a
+    report is copied as it arrives: the server's write of a correction into viser's live
+    camera state is not read as the browser's report of it."""
+    import asyncio
+    import contextlib
+
+    from vibr.viewer import app
+    from vibr.viewer.geometry import camera_bounds
+
+    v = Viewer(tiny_scene, ViewerOptions(warm_up=False))
+    P, _ = point_cloud(tiny_scene, 5000, origin=v.origin)
+    v.bounds = camera_bounds(tiny_scene, P.astype(np.float64) + v.origin, v.origin)
+    got = []
+    v._workers[7] = SimpleNamespace(submit=lambda payload, t_update=None: got.append(payload[0]))
+    v._hide_frustums_at = lambda pos: None
+    v._set_visible = lambda what: None
+    client = SimpleNamespace(client_id=7, atomic=contextlib.nullcontext, flush=lambda: None)
+    start = tiny_scene.views[3].camera  # the browser's own start camera
+    client.camera = _Handle(client, **_report_of(v, start, far=1000.0))
+    clock = [100.0]
+    monkeypatch.setattr(app.time, "perf_counter", lambda: clock[0])
+    v.move_client(client, tiny_scene.views[0].camera)  # writes the marker into the live state
+    marker = v._steers[7].pending
+    assert client.camera._state.far == marker
+    cam0 = v._states.get(7)
+    for _ in range(3):  # the start camera, reported long after the move was sent
+        clock[0] += 3.0
+        client.camera._state = SimpleNamespace(**_report_of(v, start, far=1000.0))
+        v._on_camera(app._Report.of(client.camera))
+    view0 = app.CameraState.of(SimpleNamespace(**_report_of(v, tiny_scene.views[0].camera, far=marker)))
+    assert cam0 is None and got and all(np.allclose(s.position, view0.position) for s in got)
+    # the browser applied the move: in step at view 0, nothing to correct
+    client.camera._state = SimpleNamespace(**_report_of(v, tiny_scene.views[0].camera, far=marker))
+    sent = []
+    v._send_pose = lambda c, correction: sent.append(correction)
+    v._on_camera(app._Report.of(client.camera))
+    assert not sent and np.allclose(v._states[7].position, view0.position, atol=1e-9)
+    assert v._steers[7].pending is None
+
+    # copied on arrival: the handle changed in place after the report is not what is handled
+    v._report_threads[7] = app.ThreadPoolExecutor(max_workers=1)
+    seen = []
+    v._on_camera = lambda report, t=None: seen.append(report)
+    moved = _report_of(v, tiny_scene.views[1].camera, far=marker)
+    client.camera._state = SimpleNamespace(**moved)
+    asyncio.run(v._on_report(client.camera))
+    client.camera.far = marker * 2  # the server's next correction, written in place
+    client.camera.position = (9.0, 9.0, 9.0)
+    for i in range(2, 5):  # and reports are handled in the order they came
+        client.camera._state = SimpleNamespace(**_report_of(v, tiny_scene.views[i].camera, far=marker))
+        asyncio.run(v._on_report(client.camera))
+    v._report_threads[7].shutdown(wait=True)
+    assert seen[0].far == marker and np.allclose(seen[0].position, moved["position"])
+    assert [r.position for r in seen[1:]] == [
+        tuple(_report_of(v, tiny_scene.views[i].camera, far=marker)["position"]) for i in range(2, 5)]
+
+
+@pytest.mark.slow
+def test_a_preview_has_the_tone_of_the_full_view_on_a_real_scene(cotton_dir):
+    """cotton at scale 0.25 (the full view 128², the preview 64²: sources resized by ½, one
+    outer pass), at view 0 (where the viewer starts) and halfway to view 10 (no source
+    there): the preview's mean and contrast are the full view's, resized to the preview's
+    size (measured: means within 0.01 grey levels; standard deviation 27.87 against 27.76 at
+    view 0, 29.81 against 27.83 halfway, where the preview keeps more of the ghosting)."""
+    from skimage.transform import resize
+
+    from vibr.io import load_scene
+    from vibr.viewer import ViewRenderer, scene_with_depth
+    from vibr.viewer.app import shown_image
+
+    scene = scene_with_depth(load_scene(cotton_dir, scale=0.25), cache_dir=False)
+    settings = ViewSettings(preview_long_side=64, full_long_side=128)
+    r = ViewRenderer(scene)
+    c0 = scene.views[0].camera
+    half = Camera.from_centre(c0.K, c0.R, (c0.centre + scene.views[10].camera.centre) / 2, c0.width, c0.height)
+    for cam in (c0, half):
+        full = shown_image(r.render(cam, settings))[0] / 255.0
+        preview = shown_image(r.render(cam.scaled(0.5), settings, preview=True))[0] / 255.0
+        full = resize(full, preview.shape[:2], order=1, anti_aliasing=True)
+        assert abs(preview.mean() - full.mean()) * 255 < 1.0, (preview.mean(), full.mean())
+        assert abs(preview.std() / full.std() - 1) < 0.1, (preview.std(), full.std())

@@ -111,8 +111,23 @@ def demo_path(scene, n_frames: int = DEMO_FRAMES, fps: float = DEMO_FPS):
     return interpolate(scene, n_frames=n_frames, fps=fps)
 
 
+def frames_psnr(scene, path, frames_dir) -> list[float]:
+    """PSNR (dB, all pixels) of each written frame of the demo's fly-through against the
+    ray-cast truth at its camera (the synthetic world the scene was made from)."""
+    from ..io import read_image
+    from ..metrics import psnr
+    from ..paths.flythrough import frame_name
+    from ..synthetic import default_world, render_view
+
+    world = default_world(scene.meta.get("seed", 0))
+    ss = int(scene.meta.get("supersample", 2))
+    return [psnr(read_image(os.path.join(frames_dir, frame_name(i))), render_view(world, cam, ss)[0])
+            for i, cam in enumerate(path.cameras)]
+
+
 def _demo_video(scene, args) -> None:
-    """The demo's fly-through (:func:`demo_path`, docs/explanation/flythrough.md) to args.video."""
+    """The demo's fly-through (:func:`demo_path`, docs/explanation/flythrough.md) to
+    args.video, and its frames' PSNR against the ray-cast truth."""
     import shutil
     import tempfile
 
@@ -131,6 +146,7 @@ def _demo_video(scene, args) -> None:
     try:
         res = render_path(scene, path, args.video, method=args.method, n_views=4, frames_dir=tmp,
                           cache_dir=False, progress=True)
+        scores = frames_psnr(scene, path, tmp)
     finally:
         if not args.frames_dir:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -138,4 +154,7 @@ def _demo_video(scene, args) -> None:
     what = "loop round the grid" if path.meta.get("closed") else "sweep through the views"
     print(f"vibr demo: fly-through ({res.video_frames} frames, {res.video_size[0]}x{res.video_size[1]}, "
           f"{path.seconds:.1f} s {what}) rendered in {time.perf_counter() - t0:.1f} s")
+    worst = min(range(len(scores)), key=scores.__getitem__)
+    print(f"  PSNR  {scores[worst]:6.2f} dB   (all pixels, its worst frame ({worst}) against the ray-cast truth; "
+          f"{min(scores):.2f}-{max(scores):.2f} dB, mean {sum(scores) / len(scores):.2f})")
     print(f"  wrote {os.path.abspath(res.video)}")

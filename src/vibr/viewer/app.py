@@ -1,9 +1,18 @@
 """The browser viewer: a viser server showing a scene and vibr's render of the view.
 
-Threads: viser runs its event loop on its own thread and calls synchronous callbacks on a
-thread pool; those callbacks only record the camera and hand it to the client's
-:class:`~vibr.viewer.worker.LatestRequestWorker`, whose thread renders (preview, then full
-size once the camera is still) and sends the image as the client's background.
+Threads: viser runs its event loop on its own thread. A camera report is copied on that
+loop as it arrives (:meth:`Viewer._on_report`) and handled on the client's own report thread,
+one report after another in the order the browser sent them (:meth:`Viewer._on_camera`: the
+camera governed, the render requested); the client's
+:class:`~vibr.viewer.worker.LatestRequestWorker` thread renders (preview, then full size once
+the camera is still) and sends the image as the client's background.
+
+Why the copy and the order: viser hands every callback its live camera handle, whose state
+is the newest report and is also what the server's own camera writes change in place
+(:meth:`Viewer.move_client` sets the far-plane marker, the position and the look-at on it),
+and runs synchronous callbacks on a pool in any order. Read late, a report could carry the
+viewer's own correction as if the browser had applied it, or an older report could be
+handled after a newer one; either left the render at a camera the browser had left.
 """
 
 from __future__ import annotations
@@ -14,6 +23,7 @@ import logging
 import socket
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -125,6 +135,30 @@ class CameraState:
         return camera_from_viser(self.wxyz, pos, self.fov, self.aspect, long_side)
 
 
+@dataclass(frozen=True)
+class _Report:
+    """One camera report of a browser, copied from viser's camera handle as it arrived: the
+    handle's state is replaced by the next report and changed in place by the server's own
+    camera writes, so it is read once, on viser's event loop (:meth:`Viewer._on_report`)."""
+
+    client: object
+    wxyz: tuple
+    position: tuple
+    fov: float
+    aspect: float
+    look_at: tuple | None
+    up_direction: tuple | None
+    far: float
+
+    @classmethod
+    def of(cls, cam) -> "_Report":
+        st = cam._state
+        vec = lambda a: tuple(map(float, a))  # noqa: E731 - copies, never the handle's arrays
+        return cls(cam.client, vec(st.wxyz), vec(st.position), float(st.fov),
+                   float(st.image_width) / max(1.0, float(st.image_height)), vec(st.look_at),
+                   vec(st.up_direction), float(st.far))
+
+
 @dataclass
 class _Steer:
     """The viewer's camera for one client, governed (:meth:`Viewer._govern`): ``position`` and
@@ -137,7 +171,6 @@ class _Steer:
     raw: tuple | None = None
     pending: float | None = None
     sent: tuple | None = None
-    sent_at: float = 0.0
     clamped: bool = False
     jump: bool = False  # the pending correction is a jump (to an input camera): moves before it are void
 
@@ -200,6 +233,12 @@ def send_background(client, img: np.ndarray, kind: str) -> None:
     queue(msg)
 
 
+def _log_failure(future) -> None:
+    """Log the exception of a report handled on a client's report thread (else lost)."""
+    if not future.cancelled() and future.exception() is not None:
+        logger.error("camera report failed", exc_info=future.exception())
+
+
 def check_port_free(host: str, port: int) -> None:
     """Raise :class:`VibrInputError` naming the port when something listens on it.
 
@@ -238,6 +277,7 @@ class Viewer:
         self.sent: dict[int, list[SentImage]] = {}
         self.keyframes: list[Camera] = []
         self._workers: dict[int, LatestRequestWorker] = {}
+        self._report_threads: dict[int, ThreadPoolExecutor] = {}  # per client: its reports in order
         self._states: dict[int, CameraState] = {}
         self._lock = threading.Lock()
         self._frustums: dict[str, object] = {}
@@ -312,6 +352,10 @@ class Viewer:
         with self._lock:
             workers = list(self._workers.values())
             self._workers.clear()
+            threads = list(self._report_threads.values())
+            self._report_threads.clear()
+        for t in threads:
+            t.shutdown(wait=False, cancel_futures=True)
         for w in workers:
             w.stop()
         if self.server is not None:
@@ -372,7 +416,7 @@ class Viewer:
         with self._lock:
             marker = self._next_marker()
             self._steers[getattr(client, "client_id", None)] = _Steer(pos, forward, pending=marker, sent=(pos, look),
-                                                                      sent_at=time.perf_counter(), jump=True)
+                                                                      jump=True)
         with client.atomic():
             client.camera.far = marker
             client.camera.fov = fov
@@ -388,10 +432,12 @@ class Viewer:
 
     def _next_marker(self) -> float:
         """A far-plane value that marks the next correction sent to a browser (the browser
-        reports its far plane with every camera): two values taken in turn, far beyond the
-        scene, distinct from viser's default."""
+        reports its far plane with every camera, and keeps it until the server sets another):
+        far beyond the scene, distinct from viser's default and from the last 999 markers
+        (steps of 1e-4, ten times the tolerance under which viser's setter sends nothing),
+        so that a report names the correction it was made after."""
         self._markers += 1
-        return max(1000.0, 100.0 * self._depth()) * (1.0 + 1e-4 * (1 + self._markers % 2))
+        return max(1000.0, 100.0 * self._depth()) * (1.0 + 1e-4 * (1 + self._markers % 999))
 
     def _govern(self, cid: int, report) -> tuple["CameraState", tuple | None]:
         """The camera to render for a client's camera report, and the correction to send it.
@@ -402,7 +448,12 @@ class Viewer:
         the result, so its drawing of the cameras and points matches the render. A browser
         keeps moving from its own camera until the correction arrives: its moves are counted
         from its previous report until a report carries the correction's far-plane marker,
-        then from the correction. Returns (state, (position, look-at, marker) or None)."""
+        then from the correction. The browser applies the server's messages in order and
+        reports the marker with every camera after it, however long it took (a page still
+        loading, a browser drawing without a GPU): a correction is waited for, never given
+        up after a time, else the browser's start camera, reported before it applied the
+        move to the first view, was taken for a drag away from that view. Returns (state,
+        (position, look-at, marker) or None)."""
         raw_state = CameraState.of(report)
         if self.bounds is None or getattr(report, "look_at", None) is None:
             return raw_state, None
@@ -411,7 +462,6 @@ class Viewer:
         if not np.all(np.isfinite(L1)) or np.allclose(L1, P1):
             return raw_state, None
         up = np.asarray(report.up_direction, np.float64)
-        t = time.perf_counter()
         with self._lock:
             sv = self._steers.get(cid)
             if sv is None:
@@ -420,8 +470,6 @@ class Viewer:
                 base = sv.raw
                 if sv.pending is not None and abs(float(report.far) - sv.pending) <= 1e-9 * sv.pending:
                     base, sv.pending, sv.jump = sv.sent, None, False  # the browser moved to the correction
-                elif sv.pending is not None and t - sv.sent_at > 2.0:
-                    sv.pending, sv.jump = None, False  # lost: the browser's own camera from now on
                 elif sv.jump:
                     base = None  # the browser's moves before it reached the input camera
                 if base is not None:
@@ -439,7 +487,7 @@ class Viewer:
                                 tuple(map(float, sv.position)), raw_state.fov, raw_state.aspect)
             if sv.pending is not None:
                 return state, None
-            sv.pending, sv.sent, sv.sent_at = self._next_marker(), (sv.position, look), t
+            sv.pending, sv.sent = self._next_marker(), (sv.position, look)
             return state, (sv.position, look, sv.pending)
 
     def _send_pose(self, client, correction) -> None:
@@ -624,23 +672,45 @@ class Viewer:
         cid = client.client_id
         worker = LatestRequestWorker(lambda req, kind: self._render_for(client, req, kind),
                                      settle_s=self.options.settle_s, name=f"vibr-view-{cid}")
+        reports = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"vibr-view-camera-{cid}")
         with self._lock:
             self._workers[cid] = worker
+            self._report_threads[cid] = reports
             self.sent[cid] = []
-        client.camera.on_update(self._on_camera)
+        # moved before its reports are heard: a report handled before the move would be the
+        # browser's start camera, governed from nothing, and its image the first one shown
         self.move_client(client, self.scene.views[0].camera)
+        client.camera.on_update(self._on_report)
 
     def _on_disconnect(self, client) -> None:
         with self._lock:
             w = self._workers.pop(client.client_id, None)
+            reports = self._report_threads.pop(client.client_id, None)
             self._states.pop(client.client_id, None)
             self._steers.pop(client.client_id, None)
             self._moving.discard(client.client_id)
+        if reports is not None:
+            reports.shutdown(wait=False, cancel_futures=True)
         if w is not None:
             w.stop(timeout=0.1)
 
-    def _on_camera(self, cam) -> None:
-        t = time.perf_counter()
+    async def _on_report(self, cam) -> None:
+        """viser's camera callback, on its event loop as the report arrives: the report is
+        copied now (:class:`_Report`) and handled on the client's report thread, after the
+        reports before it (:meth:`_on_camera`; nothing that waits runs on the loop)."""
+        report = _Report.of(cam)
+        reports = self._report_threads.get(report.client.client_id)
+        if reports is None:
+            return
+        try:
+            reports.submit(self._on_camera, report, time.perf_counter()).add_done_callback(_log_failure)
+        except RuntimeError:  # shut down: the client left or the viewer stopped
+            pass
+
+    def _on_camera(self, cam, t: float | None = None) -> None:
+        """Handle one camera report (a :class:`_Report`, or anything with its fields) made at
+        time ``t``: govern it, correct the browser, request the render."""
+        t = time.perf_counter() if t is None else t
         cid = cam.client.client_id
         st, correction = self._govern(cid, getattr(cam, "_state", cam))
         if correction is not None:
