@@ -31,9 +31,21 @@ def test_the_layout_is_by_purpose():
     assert [p.name for p in BENCH.glob("*.py")] == ["_common.py"]
 
 
+@pytest.fixture(scope="module")
+def help_runs(request):
+    """The ``--help`` run of every script this session tests, one per core at a time (each is
+    mostly an interpreter's imports, on one core), started at the first test that asks."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    scripts = [item.callspec.params["script"] for item in request.session.items
+               if item.originalname == "test_every_script_answers_help"]
+    with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 2)) as pool:
+        yield {s: pool.submit(_run, s, "--help") for s in scripts}
+
+
 @pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.name}")
-def test_every_script_answers_help(script):
-    r = _run(script, "--help")
+def test_every_script_answers_help(script, help_runs):
+    r = help_runs[script].result()
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.lstrip().startswith("usage:"), r.stdout[:200]
 

@@ -153,9 +153,10 @@ def test_atomic_path_registers_its_temporary_file_before_creating_it(tmp_path, m
 
 
 # ----------------------------------------------------------------------------- a full disk
-def _vibr_with_file_limit(args, limit_bytes, cwd):
-    """``python -m vibr ARGS`` whose files (and ffmpeg's) may not grow past ``limit_bytes``
-    (RLIMIT_FSIZE: a write past it fails with EFBIG, as on a full disk with ENOSPC)."""
+def _start_with_file_limit(args, limit_bytes, cwd):
+    """``python -m vibr ARGS`` started (a Popen) with its files (and ffmpeg's) not allowed to
+    grow past ``limit_bytes`` (RLIMIT_FSIZE: a write past it fails with EFBIG, as on a full
+    disk with ENOSPC)."""
     import os
     import resource
     import signal
@@ -167,8 +168,20 @@ def _vibr_with_file_limit(args, limit_bytes, cwd):
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
 
     env = dict(os.environ, VIBR_CACHE_DIR=str(cwd / "cache"))
-    return subprocess.run([sys.executable, "-m", "vibr", "-q", *map(str, args)], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=300, preexec_fn=limit)
+    return subprocess.Popen([sys.executable, "-m", "vibr", "-q", *map(str, args)], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=limit)
+
+
+def _finished(proc):
+    """The process's return code, stdout and stderr (as subprocess.run's result), once it ends."""
+    import subprocess
+
+    try:
+        out, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
 @pytest.mark.slow
@@ -181,17 +194,20 @@ def test_a_write_that_fails_is_one_line_and_leaves_nothing(tmp_path):
     # without a limit first: numba's kernel cache is then written (a cold cache is a file
     # the limit stops too: 'vibr render: error: cannot write: File too large', no name)
     assert main(["render", str(scene), "--target", "1", "-o", str(tmp_path / "warm.png"), "-q"]) == 0
-    for args, out in ((["render", scene, "--target", "1", "-o", "x.png", "--bit-depth", "16"], "x.png"),
-                      (["convert", scene, "c"], "c")):
-        r = _vibr_with_file_limit(args, 2000, tmp_path)
+    cases = ((["render", scene, "--target", "1", "-o", "x.png", "--bit-depth", "16"], "x.png"),
+             (["convert", scene, "c"], "c"))
+    started = [_start_with_file_limit(args, 2000, tmp_path) for args, _ in cases]  # both at once
+    for (args, out), proc in zip(cases, started):
+        r = _finished(proc)
         assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
         assert r.stderr.strip().splitlines()[-1].startswith(f"vibr {args[0]}: error: ")
         assert "cannot write: File too large" in r.stderr and not (tmp_path / out).exists()
-        assert not list(tmp_path.glob(".*part*"))
+    assert not list(tmp_path.glob(".*part*"))
     # the frames are written (no limit), then the video cannot be: one line, no video
     assert main(["path", "orbit", str(scene), "--frames", "4", "-o", str(tmp_path / "p.json"), "-q"]) == 0
     assert main(["render", str(scene), "--path", str(tmp_path / "p.json"), "-o", str(tmp_path / "f"), "-q"]) == 0
-    r = _vibr_with_file_limit(["render", scene, "--path", "p.json", "-o", "v.mp4", "--frames-dir", "f"], 1500, tmp_path)
+    r = _finished(_start_with_file_limit(["render", scene, "--path", "p.json", "-o", "v.mp4", "--frames-dir", "f"],
+                                         1500, tmp_path))
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
     assert r.stderr.strip().splitlines()[-1].startswith("vibr render: error: v.mp4: cannot write the video: ffmpeg:")
     assert not (tmp_path / "v.mp4").exists()
