@@ -377,7 +377,7 @@ def page(report: dict) -> str:
         "## The run",
         "",
         f"* Command (from the repository root): `{report['command']}`",
-        f"* Wall time {report['seconds'] / 60:.1f} min; code `{report['commit']}`; Open3D {report['open3d']}.",
+        f"* Wall time {report['seconds'] / 60:.1f} min; Open3D {report['open3d']}.",
         "* Machine (shared; timings are indicative):",
         "",
         "```",
@@ -386,7 +386,7 @@ def page(report: dict) -> str:
         "",
         "## The peer's geometry, in closed form",
         "",
-        "A textured plane slanted 50° (vibr.synthetic, five views of 160×120, exact depth), its middle "
+        f"A textured plane slanted {SLANT_DEG:g}° (vibr.synthetic, five views of 160×120, exact depth), its middle "
         "view rendered by the peer from the four others: the median error of the ray-cast depth against "
         "the plane's, in voxels, with the intrinsics Open3D's integration is given shifted by half a pixel "
         "(its pixel centres are at +½, vibr's at integers) and unshifted.",
@@ -417,6 +417,10 @@ def page(report: dict) -> str:
                          f"{x['psnr_common']:.2f}", f"{x['psnr_all']:.2f}", f"{x['coverage_pct']:.1f}",
                          f"{x['sharpness']:.2f}"])
     lines += [md_table(["case", "method", "common %", "PSNR common", "PSNR all", "coverage %", "sharpness"], rows), ""]
+    if report.get("figures"):
+        lines += [f"Figures, written by the run and not committed (they show the dataset photographs): "
+                  f"`{report['figures']}/*.png`, the photograph, then {', '.join(METHODS)}, and below a "
+                  f"quarter of each at 2×.", ""]
     lines += ["## What the table says", ""]
     for r in report["cases"]:
         if "error" in r:
@@ -463,7 +467,8 @@ def main(argv=None) -> int:
             print(f"{case['name']}: FAILED {reps[-1]['error']}", file=sys.stderr, flush=True)
     report = dict(command="python3 benchmarks/quality/mesh_peer.py " + " ".join(argv if argv is not None else sys.argv[1:]),
                   seconds=time.perf_counter() - t0, commit=git_commit(), open3d=open3d.__version__,
-                  machine=machine_description(), options=asdict(opts), self_check=check, cases=reps)
+                  machine=machine_description(), options=asdict(opts), self_check=check, cases=reps,
+                  figures=None if a.figures is None else str(a.figures))
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "results.json").write_text(json.dumps(report, indent=1))
     if a.write_docs:
