@@ -10,7 +10,8 @@ The peer (Open3D, the ``bench`` extra: ``pip install -e '.[bench]'``; vibr never
   every source, rays through vibr's pixel centres (``(col, row)``, docs/reference/conventions.md);
 * each target pixel's surface point textured from the sources that see it (its depth within 4
   voxels of the mesh's depth at the source pixel), blended by angle as Buehler et al.'s ULR
-  with vibr's ``ulr_k`` (4) views; pixels with no surface, or no source that sees it, black.
+  with vibr's ``ulr_k`` (4) views (``peer``), or taken from the one source of the smallest angle
+  (``peer 1 view``); pixels with no surface, or no source that sees it, black.
 
 Open3D's integration reads the depth pixel ``floor(x)`` of a projection x, so its pixel
 centres are at ``+½``: the peer gives it ``K`` with the principal point shifted by +½.
@@ -41,7 +42,7 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +61,7 @@ from _common import (  # noqa: E402
 
 PAGE = RESULTS / "peer.md"
 OUT = ROOT / "out" / "mesh_peer"
-METHODS = ("gradient", "ulr", "bvs", "peer")
+METHODS = ("gradient", "ulr", "bvs", "peer", "peer 1 view")
 BORDER = 2
 
 
@@ -190,7 +191,9 @@ def texture(sources, source_depth, camera, depth, voxel: float, opts: PeerOption
 
 def peer_render(sources, camera, opts: PeerOptions = PeerOptions()) -> dict:
     """The peer's render at ``camera`` from ``sources`` (their depth: NaN where unknown):
-    ``image``, ``coverage``, ``depth`` (the mesh's), ``voxel``, ``triangles``, ``seconds``."""
+    ``image``, ``coverage``, ``depth`` (the mesh's), ``voxel``, ``triangles``, ``seconds``, and
+    ``one_view``: the same pixels textured from the one source of the smallest angle (the nearest
+    photograph, reprojected: no blend to blur it)."""
     t0 = time.perf_counter()
     voxel = voxel_size(sources)
     vbg = fuse(sources, voxel, opts)
@@ -200,7 +203,8 @@ def peer_render(sources, camera, opts: PeerOptions = PeerOptions()) -> dict:
     depth = raycast_depth(scene, camera)
     src_depth = [raycast_depth(scene, v.camera) for v in sources.views]
     img, cov = texture(sources, src_depth, camera, depth, voxel, opts)
-    return dict(image=img, coverage=cov, depth=depth, voxel=voxel, triangles=ntri,
+    one, _ = texture(sources, src_depth, camera, depth, voxel, replace(opts, k=1))
+    return dict(image=img, coverage=cov, depth=depth, voxel=voxel, triangles=ntri, one_view=one,
                 blocks=int(vbg.hashmap().size()), seconds=time.perf_counter() - t0)
 
 
@@ -254,8 +258,6 @@ def self_check(opts: PeerOptions = PeerOptions()) -> dict:
     the shifted error is under 0.15 voxel and under a third of the unshifted one, the coverage
     above 90 % of ``seen`` (the TSDF loses a voxel or so at the frustums' edges and holes where
     rays are sparse) and the PSNR above 35 dB."""
-    from dataclasses import replace
-
     from vibr.metrics import psnr
     from vibr.synthetic import planar_depth
 
@@ -333,6 +335,7 @@ def run_case(cache, case, opts: PeerOptions, figures: Path | None) -> dict:
                           seconds=time.perf_counter() - t0)
     p = peer_render(raw, tv.camera, opts)
     renders["peer"] = p
+    renders["peer 1 view"] = dict(image=p["one_view"], coverage=p["coverage"], seconds=p["seconds"])
     rep = dict(name=case["name"], sources=src.names, target=tv.name, size=list(tv.image.shape[:2]),
                voxel=p["voxel"], triangles=p["triangles"], blocks=p["blocks"], **measure(renders, tv.image))
     if figures is not None:
@@ -369,7 +372,8 @@ def page(report: dict) -> str:
         "target): the maps fused into an Open3D TSDF (`VoxelBlockGrid`, voxel = one pixel's footprint at "
         "the sources' median depth, truncation 4 voxels), the mesh ray-cast at the target, each pixel "
         "textured from the sources that see its surface point (a z-test against the mesh's depth at the "
-        "source, 4 voxels), blended by angle as ULR with 4 views; pixels with no surface are black. vibr's "
+        "source, 4 voxels), blended by angle as ULR with 4 views (`peer`) or from the source of the smallest "
+        "angle alone (`peer 1 view`); pixels with no surface are black. vibr's "
         "methods render from the same depth with their fallback proxy where stereo left none. The script's "
         "docstring gives the details; Open3D is the `bench` extra (`pip install -e '.[bench]'`), which "
         "vibr never imports.",
