@@ -61,7 +61,8 @@ from _common import (  # noqa: E402
 
 PAGE = RESULTS / "peer.md"
 OUT = ROOT / "out" / "mesh_peer"
-METHODS = ("gradient", "ulr", "bvs", "peer", "peer 1 view")
+VIBR_METHODS = ("gradient", "ulr", "bvs")
+METHODS = (*VIBR_METHODS, "peer", "peer 1 view")
 BORDER = 2
 
 
@@ -328,7 +329,7 @@ def run_case(cache, case, opts: PeerOptions, figures: Path | None) -> dict:
 
     src, raw, tv = case_sources(cache, case)
     renders = {}
-    for m in METHODS[:-1]:
+    for m in VIBR_METHODS:
         t0 = time.perf_counter()
         res = render(src, tv, m)
         renders[m] = dict(image=np.clip(res.image, 0, 1), coverage=np.asarray(res.coverage, bool),
