@@ -33,7 +33,8 @@ Laplacian energy over the photograph's: 1 as sharp, below 1 blurred).
         [--figures DIR] [--write-docs]
 
 JSON in ``out/mesh_peer/results.json``; ``--write-docs`` writes ``docs/results/peer.md``. Exits 1
-when the self-check fails or a case fails to run (not when vibr loses).
+when the self-check fails or a case fails to run (then the page is left as it was), not when
+vibr loses.
 """
 
 from __future__ import annotations
@@ -175,10 +176,15 @@ def texture(sources, source_depth, camera, depth, voxel: float, opts: PeerOption
         ang = np.arccos(np.clip(np.sum(to_t * to_s, axis=1), -1, 1))
         theta[vis, s] = ang[vis]
         cols[vis, s] = _bilinear(v.image, xy[vis])
-    srt = np.sort(theta, axis=1)
-    thr = srt[:, opts.k] if S > opts.k else np.full(n, np.inf)  # the (k+1)-th best angle
-    with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where(np.isfinite(theta), np.maximum(0.0, 1.0 - theta / thr[:, None]) / np.maximum(theta, 1e-4), 0.0)
+    if opts.k == 1:  # the best view alone (ULR's weights would give two tied views, as a grid's, none)
+        w = np.zeros((n, S))
+        seen = np.isfinite(theta).any(axis=1)
+        w[np.flatnonzero(seen), np.argmin(theta[seen], axis=1)] = 1.0
+    else:
+        srt = np.sort(theta, axis=1)
+        thr = srt[:, opts.k] if S > opts.k else np.full(n, np.inf)  # the (k+1)-th best angle
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.where(np.isfinite(theta), np.maximum(0.0, 1.0 - theta / thr[:, None]) / np.maximum(theta, 1e-4), 0.0)
     wsum = w.sum(axis=1)
     img = np.zeros((H, W, 3), np.float32)
     cov = np.zeros((H, W), bool)
@@ -204,7 +210,8 @@ def peer_render(sources, camera, opts: PeerOptions = PeerOptions()) -> dict:
     depth = raycast_depth(scene, camera)
     src_depth = [raycast_depth(scene, v.camera) for v in sources.views]
     img, cov = texture(sources, src_depth, camera, depth, voxel, opts)
-    one, _ = texture(sources, src_depth, camera, depth, voxel, replace(opts, k=1))
+    one, one_cov = texture(sources, src_depth, camera, depth, voxel, replace(opts, k=1))
+    assert np.array_equal(one_cov, cov)  # the same pixels, whatever the blend
     return dict(image=img, coverage=cov, depth=depth, voxel=voxel, triangles=ntri, one_view=one,
                 blocks=int(vbg.hashmap().size()), seconds=time.perf_counter() - t0)
 
@@ -476,12 +483,14 @@ def main(argv=None) -> int:
                   figures=None if a.figures is None else str(a.figures))
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "results.json").write_text(json.dumps(report, indent=1))
-    if a.write_docs:
-        PAGE.write_text(page(report))
     failed = [r["name"] for r in reps if "error" in r]
     if failed:
-        print(f"failed to run: {', '.join(failed)}", file=sys.stderr)
-    return 1 if failed else 0
+        print(f"failed to run: {', '.join(failed)}" + (f"; {PAGE.name} not written" if a.write_docs else ""),
+              file=sys.stderr)
+        return 1
+    if a.write_docs:
+        PAGE.write_text(page(report))
+    return 0
 
 
 if __name__ == "__main__":
