@@ -233,6 +233,23 @@ def test_render_and_stereo_do_not_import_io():
     assert not bad, "\n".join(bad)
 
 
+#: packages only the benchmarks use (pyproject.toml's ``bench`` extra): vibr never imports them
+BENCH_ONLY = ("open3d",)
+
+
+def test_vibr_never_imports_the_benchmark_extras():
+    """The ``bench`` extra (open3d, for benchmarks/quality/mesh_peer.py) is not a dependency of vibr."""
+    import re
+
+    bad = [f"{path.relative_to(SRC.parent)}:{line}: imports {name}" for path, module in _modules()
+           for line, name in imported_modules(path, module) if name.split(".")[0] in BENCH_ONLY]
+    assert not bad, "\n".join(bad)
+    toml = (SRC.parent / "pyproject.toml").read_text()  # (tomllib is Python 3.11+)
+    dependencies = re.search(r"^dependencies = \[(.*?)\]", toml, re.S | re.M).group(1)
+    bench = re.search(r"^bench = \[(.*?)\]", toml, re.S | re.M)
+    assert bench and "open3d-cpu" in bench.group(1) and "open3d" not in dependencies
+
+
 def test_the_architecture_page_lists_the_allow_list():
     """docs/explanation/architecture.md's table is the allow-list, row for row."""
     import re

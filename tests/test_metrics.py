@@ -100,3 +100,51 @@ def test_errors(pair):
         dssim(img, ref, border=40)
     with pytest.raises(VibrInputError, match="window"):
         ssim(img[:8, :8], ref[:8, :8])
+
+
+def _sinusoid(omega, amplitude=0.25, shape=(40, 64)):
+    x = np.arange(shape[1])
+    return np.broadcast_to(0.5 + amplitude * np.cos(omega * x), shape)[..., None].repeat(3, axis=2)
+
+
+def test_laplacian_energy_of_a_sinusoid():
+    from vibr.metrics import laplacian_energy
+
+    # 64 columns counted (border 1, stencil 1): whole periods, where the mean of (a (2 cos ω − 2) cos ωx)² = 2 a² (1 − cos ω)²
+    for omega, a in ((2 * np.pi / 8, 0.25), (2 * np.pi / 4, 0.1)):
+        assert laplacian_energy(_sinusoid(omega, a, (40, 68)), border=1) == pytest.approx(
+            2 * a * a * (1 - np.cos(omega)) ** 2, rel=1e-9)
+    assert laplacian_energy(_sinusoid(np.pi, 0.3, (40, 68)), border=1) == pytest.approx(16 * 0.3 ** 2)  # ±a
+    ramp = np.broadcast_to(np.linspace(0, 1, 64), (40, 64))
+    assert laplacian_energy(ramp) == pytest.approx(0.0, abs=1e-20)
+
+
+def test_sharpness_ratio():
+    from scipy.ndimage import gaussian_filter
+
+    from vibr.metrics import METRICS, sharpness, view_metrics
+
+    ref = _sinusoid(2 * np.pi / 8, 0.25, (40, 68))
+    assert sharpness(ref, ref) == pytest.approx(1.0)
+    assert sharpness(0.5 + 0.5 * (ref - 0.5), ref) == pytest.approx(0.25)  # contrast halved
+    # a coarser texture in place of the photo's: ((1 − cos ω₁) / (1 − cos ω₂))²
+    coarse = _sinusoid(2 * np.pi / 16, 0.25, (40, 68))
+    want = ((1 - np.cos(2 * np.pi / 16)) / (1 - np.cos(2 * np.pi / 8))) ** 2
+    assert sharpness(coarse, ref, border=1) == pytest.approx(want, rel=1e-6)
+    # blur lowers it, more blur lowers it more; noise raises it above 1
+    rng = np.random.default_rng(1)
+    photo = gaussian_filter(rng.random((48, 48, 3)), (1, 1, 0))
+    s1, s2 = (sharpness(gaussian_filter(photo, (s, s, 0)), photo, border=2) for s in (0.7, 1.5))
+    assert 0 < s2 < s1 < 1
+    assert sharpness(photo + 0.05 * rng.standard_normal(photo.shape), photo, border=2) > 1.5
+    # only the masked pixels count: noise outside the mask changes nothing
+    mask = np.zeros((48, 48), bool)
+    mask[10:30, 10:30] = True
+    noisy = photo.copy()
+    noisy[35:] += 0.2 * rng.standard_normal(noisy[35:].shape)
+    assert sharpness(noisy, photo, mask) == pytest.approx(1.0)
+    assert sharpness(noisy, photo) > 1.2
+    assert np.isnan(sharpness(ref * 0 + 0.5, ref * 0 + 0.5))  # a flat photograph has no high frequency
+    assert "sharpness" in METRICS and view_metrics(noisy, photo, mask)["sharpness"] == pytest.approx(1.0)
+    with pytest.raises(VibrInputError, match="sharpness"):
+        sharpness(photo[:10], photo)

@@ -20,7 +20,7 @@ import numpy as np
 from .errors import VibrInputError
 
 __all__ = ["psnr", "ssim", "dssim", "mse", "view_metrics", "METRIC_BORDER", "Metric", "METRICS", "register_metric",
-           "unregister_metric", "get_metric", "checkerboard_energy",
+           "unregister_metric", "get_metric", "checkerboard_energy", "laplacian_energy", "sharpness",
            "speckle_density", "pixel_error", "sparsification", "ause", "spearman", "uncertainty_metrics"]
 
 
@@ -231,6 +231,33 @@ def checkerboard_energy(img, mask=None, border: int = 0) -> float:
     return float(d[m].mean()) if m.any() else float("nan")
 
 
+def laplacian_energy(img, mask=None, border: int = 0) -> float:
+    """High-frequency energy of the grey image g: the mean of the squared 4-neighbour
+    Laplacian ``g(i−1,j) + g(i+1,j) + g(i,j−1) + g(i,j+1) − 4 g(i,j)`` over the counted pixels
+    (``mask``, ``border`` excluded, eroded by one pixel: the stencil stays inside). A
+    sinusoid of amplitude a and frequency 0 < ω < π (radians per pixel) along x gives
+    ``2 a² (1 − cos ω)²`` over whole periods; a linear ramp gives 0."""
+    g, m = _grey_mask(img, mask, border, 1)
+    lap = np.zeros_like(g)
+    lap[1:-1, 1:-1] = g[:-2, 1:-1] + g[2:, 1:-1] + g[1:-1, :-2] + g[1:-1, 2:] - 4.0 * g[1:-1, 1:-1]
+    return float(np.mean(lap[m] ** 2)) if m.any() else float("nan")
+
+
+def sharpness(img, ref, mask=None, border: int = 0) -> float:
+    """How sharp a render is against its photograph: :func:`laplacian_energy` of ``img`` over
+    that of ``ref``, on the same pixels. 1: as much fine texture as the photograph; below 1:
+    blurred (a contrast halved gives 0.25); above 1: more high frequencies than the photograph
+    (noise, seams, aliasing). NaN when the photograph has no high frequency there."""
+    _prepare(img, ref, mask, border, "sharpness")  # same shapes, a valid mask and border
+    e_ref = laplacian_energy(ref, mask, border)
+    return laplacian_energy(img, mask, border) / e_ref if e_ref > 0 else float("nan")
+
+
+register_metric(Metric("sharpness", sharpness, True,
+                       "high-frequency energy (squared Laplacian) of the render over the photograph's: 1 as "
+                       "sharp, below 1 blurred, above 1 noisier", fmt=".3f"))
+
+
 def speckle_density(img, mask=None, border: int = 0, threshold: float = 0.1) -> float:
     """Isolated outlier pixels per 10,000: pixels of the grey image (intensities in [0, 1])
     that differ from the median of their 3×3 neighbourhood by more than ``threshold``
@@ -250,7 +277,7 @@ METRIC_BORDER = 2
 def view_metrics(img, ref, mask=None, border: int = METRIC_BORDER) -> dict:
     """The metrics of a rendered view against the held-out photograph, by the one rule of
     ``vibr render`` and ``vibr eval``: every registered metric (:data:`METRICS`, in order:
-    ``psnr``, ``ssim`` and ``dssim = 10⁴ · (1 − SSIM)``, then any a user registered) over the
+    ``psnr``, ``ssim``, ``dssim = 10⁴ · (1 − SSIM)`` and ``sharpness``, then any a user registered) over the
     pixels of ``mask`` (the reconstructed pixels) with ``border`` pixels at each edge
     excluded. A metric with a ``min_side`` (``ssim`` and ``dssim``) is NaN for an image too
     small for it (:func:`check_measurable`): the PSNR of a tiny render is still worth
