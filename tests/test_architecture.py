@@ -30,7 +30,7 @@ ALLOWED_AREAS = {
     "scene": {"errors", "camera"},
     "metrics": {"errors"},
     "_runtime": {"errors"},
-    "synthetic": _LIB,
+    "synthetic": _LIB | {"geometry"},
     "geometry": _LIB,
     "io": _LIB | {"geometry"},
     "render": _LIB | {"geometry"},
