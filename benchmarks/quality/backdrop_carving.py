@@ -9,10 +9,11 @@ another view's backdrop (:func:`vibr.geometry.proxy.carve_silhouettes`). "before
 former rule: the plane at every unknown pixel of the views at least half unknown, and at
 the flat unknown pixels of the others, the textured ones completed.
 
-Protocol, fixed before any measurement. The rule has no constant of its own: the flat
-limit is ``FALLBACK_FLAT_STD`` (chosen on the depth benchmarks), the carving tests a
-sample's ±sigma_z and the whole bilinear cell it lands in. Anything chosen would be chosen
-on the procedural rings only (:func:`vibr.synthetic.ring_scene`: a textureless object on
+Protocol, fixed before any measurement. The rule has one constant of its own, the
+backdrop plane's sigma_z (``BACKDROP_SIGMA_Z_REL``, ``--backdrop-sigma`` sweeps it: "after
+σ=X" rows); the flat limit is ``FALLBACK_FLAT_STD`` (chosen on the depth benchmarks), the
+carving tests a sample's ±sigma_z and the whole bilinear cell it lands in. Anything chosen
+is chosen on the procedural rings only (:func:`vibr.synthetic.ring_scene`: a textureless object on
 black, a textured object on a uniform grey backdrop, 16 views, ray-cast truth, depth
 unknown where the photograph is flat or the ray misses the object); the real scenes are
 reported without tuning:
@@ -29,6 +30,7 @@ every channel at most 10 grey levels), and ULR's all-pixel PSNR. Targets on the 
 backdrop error <= 2 grey levels, all-pixel PSNR >= 23 dB.
 
     python3 benchmarks/quality/backdrop_carving.py [--real] [--out DIR]   # DIR: PNGs target | before | after | ULR
+    python3 benchmarks/quality/backdrop_carving.py --backdrop-sigma 0.25,0.05,0.01,0   # the sweep on the rings
 """
 
 from __future__ import annotations
@@ -45,13 +47,23 @@ from _common import data_dir  # noqa: E402
 BLACK = 10  # grey levels: a photograph's pixel is black when every channel is at most this
 
 
-def rules():
-    """name → function(raw sources) → sources with that fallback."""
+def rules(sigmas=()):
+    """name → function(raw sources) → sources with that fallback ("after σ=X": "auto" with
+    the backdrop plane's sigma_z X times its depth)."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_FLAT_STD, fallback_depth
+    from vibr.geometry.proxy import FALLBACK_FLAT_STD, carve_silhouettes, fallback_depth
 
-    return {"before": lambda s: fallback_depth(s, min_fraction=0.5, flat_std=FALLBACK_FLAT_STD, complete=True),
-            "after": lambda s: apply_fallback(s, "auto")}
+    def auto_with(rel):
+        def rule(s):
+            out = fallback_depth(s, backdrop=True, complete=True, backdrop_sigma_rel=rel)
+            return carve_silhouettes(out, {n: i["backdrop"] for n, i in out.meta.get("fallback", {}).items()
+                                           if "backdrop" in i})
+        return rule
+
+    out = {"before": lambda s: fallback_depth(s, min_fraction=0.5, flat_std=FALLBACK_FLAT_STD, complete=True),
+           "after": lambda s: apply_fallback(s, "auto")}
+    out.update({f"after σ={x:g}": auto_with(x) for x in sigmas})
+    return out
 
 
 def cases(real: bool):
@@ -77,13 +89,13 @@ def cases(real: bool):
         yield f"fountain {t}", raw, tv, None
 
 
-def measure(raw, tv, backdrop):
+def measure(raw, tv, backdrop, sigmas=()):
     """rule → (all-pixel PSNR, covered PSNR, backdrop grey-level error, ULR PSNR, image, ULR image)."""
     from vibr.metrics import psnr
     from vibr.render import shared_geometry
 
     renders = {}
-    for name, rule in rules().items():
+    for name, rule in rules(sigmas).items():
         geo = shared_geometry(rule(raw), tv, [("gradient", {}), ("ulr", {})])
         renders[name] = (geo.render("gradient"), geo.render("ulr"))
     cover = np.logical_and.reduce([g.coverage for g, _ in renders.values()])
@@ -100,11 +112,14 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--real", action="store_true", help="also the temple and fountain views (estimated depth)")
     ap.add_argument("--out", help="folder for the PNGs target | before | after | ULR (after)")
+    ap.add_argument("--backdrop-sigma", default="", metavar="X,...",
+                    help="also the rule with the backdrop plane's sigma_z X times its depth (rows 'after σ=X')")
     args = ap.parse_args(argv)
+    sigmas = [float(x) for x in args.backdrop_sigma.split(",") if x.strip()]
     print("| case | rule | PSNR all | PSNR covered | backdrop error (grey levels) | ULR all |")
     print("|---|---|---|---|---|---|")
     for name, raw, tv, backdrop in cases(args.real):
-        res = measure(raw, tv, backdrop)
+        res = measure(raw, tv, backdrop, sigmas)
         for rule, (pa, pc, err, pu, *_) in res.items():
             print(f"| {name} | {rule} | {pa:.2f} | {pc:.2f} | {err:.2f} | {pu:.2f} |", flush=True)
         if args.out:

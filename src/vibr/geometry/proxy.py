@@ -21,7 +21,7 @@ from .depth import DEFAULT_SIGMA_Z_REL
 
 __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "complete_depth", "FALLBACK_MODES",
            "FALLBACK_FLAT_STD", "FALLBACK_FACTOR", "backdrop_pixels", "carve_silhouettes",
-           "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE"]
+           "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE", "BACKDROP_SIGMA_Z_REL"]
 
 #: Default planar-proxy uncertainty: ``sigma_z = max(PROXY_SIGMA_Z_REL · D,
 #: PROXY_SPREAD_REL · (p95 − p5))``, the p the percentiles of the available depth seen from
@@ -190,6 +190,14 @@ def planar_proxy(sources: Scene, target_camera, depth: float | None = None,
 FALLBACK_FACTOR = 1.03
 FALLBACK_PERCENTILE = 99.0
 FALLBACK_SIGMA_Z_REL = 0.25
+#: sigma_z of the backdrop's plane (:func:`backdrop_pixels`, ``fallback="auto"``), relative to its
+#: depth: 0. Its pixels are flat in their photograph, so wherever a depth error moves one it
+#: shows the backdrop's colour: the misregistration weight (``sigma_z · ∂τ/∂z · ∇u``) has no
+#: colour error to guard against, and the former 0.25 collapsed the backdrop's weight at every
+#: silhouette the target shows, where TV and the gradient term then smeared the object over it
+#: (docs/explanation/renderer.md, "Fallback proxy"; chosen on the procedural rings among 0.25,
+#: 0.05, 0.01 and 0, ``benchmarks/quality/backdrop_carving.py``).
+BACKDROP_SIGMA_Z_REL = 0.0
 #: ``fallback="auto"``, in every view: the unknown pixels whose photograph is flat, every
 #: channel's standard deviation over the ``(2·FLAT_RADIUS+1)²`` window below
 #: ``FALLBACK_FLAT_STD`` (intensities in [0, 1]; the depth benchmarks' limit of a textured
@@ -387,7 +395,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
                    min_fraction: float = 0.0, flat_std: float | None = None,
-                   complete: bool = False, backdrop: bool = False) -> Scene:
+                   complete: bool = False, backdrop: bool = False,
+                   backdrop_sigma_rel: float = BACKDROP_SIGMA_Z_REL) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -409,8 +418,9 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     when ``flat_std`` is None); the others stay unknown, or with ``complete`` take the depth
     :func:`complete_depth` gives them from the view's known depth and its large sigma_z
     (also marked as fallback). With ``backdrop``, in every view, only the view's backdrop
-    (:func:`backdrop_pixels`) gets the plane and ``min_fraction`` / ``flat_std`` are not
-    read; its other unknown pixels are left, or completed with ``complete``. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
+    (:func:`backdrop_pixels`) gets the plane, with ``sigma_z = backdrop_sigma_rel · D_k``
+    (:data:`BACKDROP_SIGMA_Z_REL`), and ``min_fraction`` / ``flat_std`` are not read; its
+    other unknown pixels are left, or completed with ``complete``. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
     sample wherever a known surface lands in the target, whatever their depths (known
     geometry wins: a source facing the target has its plane in front of the object); other
     placements measured in docs/explanation/renderer.md.
@@ -457,6 +467,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
             s = np.full(z.shape, dsr * float(np.median(z[known])) if known.any() else 0.0, np.float32)
         z = np.where(unknown, np.float32(D), z)
         s[unknown] = sigma_rel * D
+        if bg is not None:  # the backdrop's photograph is flat: a depth error moves it onto the same colour
+            s[unknown] = float(backdrop_sigma_rel) * D
         if textured.any():  # a surface stereo missed: its neighbourhood's depth, and how much that varies
             zc, sc = complete_depth(np.where(known, z, np.nan), s)
             z, s = np.where(textured, zc, z), np.where(textured, sc, s)
