@@ -478,3 +478,19 @@ def test_temple_view_4_backdrop_and_psnr(temple_dir):
     err = 255 * np.abs(img - tv.image)[black].mean()
     p = psnr(img, tv.image, border=2)
     assert p >= 23.0 and err <= 2.0, (p, err)
+
+
+def test_apply_fallback_twice_is_applying_it_once():
+    """A scene the fallback was applied to (prepare, scene_with_depth) comes back as it is: a
+    second pass took the first one's planes and completed depth for measured depth, so the
+    known layer no longer hid them (the temple from its 15 other views rendered black)."""
+    from vibr.geometry import apply_fallback
+    from vibr.synthetic import ring_scene
+
+    sc = ring_scene("textured", n_views=6, width=64, height=48)
+    once = apply_fallback(sc, "auto")
+    assert any(v.fallback is not None and v.fallback.any() for v in once.views)
+    twice = apply_fallback(once, "auto")
+    for a, b in zip(once.views, twice.views):
+        assert np.array_equal(a.depth, b.depth, equal_nan=True)
+        assert (a.fallback is None and b.fallback is None) or np.array_equal(a.fallback, b.fallback)

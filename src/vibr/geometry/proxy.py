@@ -484,11 +484,14 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
 def apply_fallback(sources: Scene, mode="auto") -> Scene:
     """The fallback proxy by mode (:data:`FALLBACK_MODES`; True/False read as "always" /
     "never"): the one place :func:`vibr.pipeline.prepare`, :func:`vibr.stereo.cache.scene_with_depth`
-    (fly-throughs, the viewer) and the benchmarks decide it."""
+    (fly-throughs, the viewer) and the benchmarks decide it. A scene it was applied to
+    (``meta["fallback"]`` set) is returned as it is: a second pass would take the first one's
+    planes and completed depth for measured depth, and the known layer would no longer hide
+    them."""
     mode = {True: "always", False: "never", None: "auto"}.get(mode, mode)
     if mode not in FALLBACK_MODES:
         raise VibrInputError(f"fallback must be one of {', '.join(FALLBACK_MODES)}, got {mode!r}")
-    if mode == "never":
+    if mode == "never" or "fallback" in sources.meta:
         return sources
     if mode == "always":
         return fallback_depth(sources)
