@@ -310,6 +310,15 @@ def _targets(reps, k):
     return "; ".join(out)
 
 
+def _read_done(path, case):
+    """The report of ``case`` in ``path`` if it exists and rendered the settings ``case`` asks."""
+    if not path.is_file():
+        return None
+    rep = json.loads(path.read_text())
+    want = case.get("labels") or [lab for lab, _, _ in settings()]
+    return rep if all(lab in rep["results"] for lab in want) and rep["split"] == case["split"] else None
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
@@ -318,6 +327,8 @@ def main(argv=None):
     ap.add_argument("--only", default="", help="comma list of case-name prefixes (e.g. cotton,synthetic)")
     ap.add_argument("--choose-only", action="store_true", help="run the choose half only and print the choice")
     ap.add_argument("--write-docs", action="store_true", help="write the table into docs/results/defaults.md")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the cases already reported in --out with the same settings")
     ap.add_argument("--report-only", action="store_true", help="rebuild the table from the JSON in --out")
     a = ap.parse_args(argv)
     from vibr.executor import run_tasks
@@ -335,9 +346,15 @@ def main(argv=None):
     else:
         # the choice first, on the procedural scenes only; the photographs are rendered after it
         t0 = time.perf_counter()
-        run = lambda cs, desc: run_tasks(run_case, [{**c, "file": str(fname(c))} for c in cs],  # noqa: E731
-                                         setup=SceneCache, setup_args=(str(data_dir(a.data)),),
-                                         executor=a.workers, desc=desc)
+        def run(cs, desc):
+            # a case whose report is on disk with the same settings is not run again (--resume)
+            done = {c["name"]: _read_done(fname(c), c) for c in cs} if a.resume else {}
+            todo = [{**c, "file": str(fname(c))} for c in cs if done.get(c["name"]) is None]
+            new = run_tasks(run_case, todo, setup=SceneCache, setup_args=(str(data_dir(a.data)),),
+                            executor=a.workers, desc=desc) if todo else []
+            by = {r["name"]: r for r in new}
+            return [done.get(c["name"]) or by[c["name"]] for c in cs]
+
         reps = run(choose_cases, "sweep: choose")
         chosen = choose(reps)
         print(f"# chosen on {len(reps)} procedural cases: {chosen}", file=sys.stderr)
