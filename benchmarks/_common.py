@@ -289,12 +289,8 @@ def sweep_sources(cache, case):
     if depth != "estimated":
         return prepare(sc, tname, sources=names, depth=depth)
     tview = sc[tname]
-    src = scene_with_depth(sc.subset(names), depth="estimated")  # the target takes no part
-    if case.get("all"):  # as vibr eval renders it: the fallback proxy where depth is unknown
-        from vibr.geometry import apply_fallback
-
-        src = apply_fallback(src, "auto")
-    return src, tview
+    # the target takes no part; the fallback proxy where depth is unknown, as vibr eval renders it
+    return scene_with_depth(sc.subset(names), depth="estimated"), tview
 
 
 def temple5_sources(cache):
