@@ -231,6 +231,20 @@ def library_label():
     raise SystemExit("sweep_defaults.py: no setting of the sweep equals the library's defaults")
 
 
+def grid_edges(chosen):
+    """The parameters ("gamma", "lam") whose value in ``chosen`` is the smallest or the largest
+    its grid tried (the settings equal to it but for that parameter): there the sweep has not
+    located the optimum."""
+    params = {lab: kw for lab, m, kw in settings() if m == "gradient"}
+    c = params[chosen]
+    edges = []
+    for p in ("gamma", "lam"):
+        vals = {kw[p] for kw in params.values() if all(kw.get(k) == v for k, v in c.items() if k != p)}
+        if len(vals) > 1 and c[p] in (min(vals), max(vals)):
+            edges.append(f"{p} {c[p]:g} is the {'largest' if c[p] == max(vals) else 'smallest'} of {sorted(vals)}")
+    return edges
+
+
 def report_labels(chosen):
     """What a *report* case renders: the chosen setting beside ULR, BVS and the library's default."""
     return list(dict.fromkeys(["ULR", "BVS", chosen, library_label()]))
@@ -293,6 +307,10 @@ def table(reps, chosen):
             orc = np.mean([max(r["results"][lab]["all"] for lab in labs) for r in sub])
             line += f", auto {mean('auto'):.2f}, oracle {orc:.2f}"
         L.append(line + ".")
+    edges = grid_edges(chosen)
+    if edges and chosen != lib:
+        L += ["", f"The choice lies on the edge of the grid ({'; '.join(edges)}): the optimum is not located, "
+              f"so the library's default ({lib}) stays until a wider grid is swept."]
     L += ["", "The targets (all pixels, on the *report* half):", "",
           f"* chosen: {_targets(reps, chosen)}", f"* library: {_targets(reps, lib)}"]
     ratios = [r["auto"]["ratio"] for r in reps if r["auto"]]
