@@ -17,9 +17,10 @@ def test_demo_default_renders_the_held_out_view(tmp_path, capsys):
     psnr = [float(x) for x in re.findall(r"PSNR\s+([\d.]+) dB", txt)]
     dssim = float(re.search(r"DSSIM\s+([\d.]+)", txt).group(1))
     cover = float(re.search(r"([\d.]+)% of the image", txt).group(1))
-    # what the demo prints with the defaults (grid, 256x256, gradient): 44.72 dB on the
-    # reconstructed pixels (99.3 %), DSSIM 32.7, 43.58 dB on all pixels; held within 1 dB
-    assert psnr[0] > 43.72 and psnr[1] > 42.58 and dssim < 40 and cover > 99.0, txt
+    # what the demo prints with the defaults (grid, 256x256, gradient, the new view halfway
+    # from the centre to a corner): 41.43 dB on the reconstructed pixels (99.6 %), DSSIM 67.6,
+    # 41.28 dB on all pixels; held within 1 dB
+    assert psnr[0] > 40.43 and psnr[1] > 40.28 and dssim < 75 and cover > 99.0, txt
     assert read_image(out).shape == (256, 256, 3)
     # the quick start's fly-through: 3 s at 24 fps round the grid, decoded back
     from vibr.io.video import read_video_info
@@ -32,15 +33,12 @@ def test_demo_video_spans_the_parallax_and_keeps_the_demos_quality(tmp_path, cap
     """The demo's fly-through (fewer frames, the demo's size): the camera moves across the
     views, not by a few pixels (mean TV-L1 optical flow between the first frame and the
     middle one, decoded from the video, at least 5 % of the width), no frame is more than
-    4.5 dB below the demo's own PSNR against the ray-cast truth at its camera, and the worst
-    frame's PSNR is the one the demo prints.
+    3 dB below the demo's own PSNR (its new view, all pixels) against the ray-cast truth at
+    its camera, and the worst frame's PSNR is the one the demo prints.
 
-    The held-out centre view, framed by its eight neighbours at whole-pixel offsets, is the
-    demo's best case: a frame between views renders worse wherever it lies, 70 % of its
-    squared error on the silhouettes (hard where the ray-cast truth is anti-aliased).
     Measured at 256x256 (the demo's default, 72 frames): mean flow 6.5 % of the width, the
-    demo 43.58 dB (all pixels), its frames 39.34-47.06 dB (the worst 4.24 dB below it);
-    here (10 frames) 39.81 dB for the worst."""
+    demo's new view 41.28 dB (all pixels), its frames 39.34-47.06 dB (the worst 1.94 dB
+    below it); here (10 frames) 39.81 dB for the worst."""
     import imageio.v3 as iio
     import numpy as np
     from skimage.color import rgb2gray
@@ -65,7 +63,7 @@ def test_demo_video_spans_the_parallax_and_keeps_the_demos_quality(tmp_path, cap
     path = demo_path(make_scene(width=256, height=256), n)
     worst = min(psnr(read_image(frames / f"frame_{i:05d}.png"), render_view(world, cam, 2)[0])
                 for i, cam in enumerate(path.cameras))
-    assert worst >= demo_psnr - 4.5, (worst, demo_psnr)
+    assert worst >= demo_psnr - 3.0, (worst, demo_psnr)
     assert abs(printed - worst) < 0.01, (printed, worst)
 
 

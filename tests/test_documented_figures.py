@@ -123,6 +123,9 @@ _PRINTED = "the command's own settings as it prints them (frames over fps), not 
 FIGURES = [
     Figure(_R, "40 dB",
            "tests/test_render_solver.py::test_synthetic_exact_depth_40db", floor=('r.metrics["psnr"] >= 40.0',)),
+    Figure("docs/tutorials/first-render.md", "3 dB",
+           "tests/test_cli_demo.py::test_demo_video_spans_the_parallax_and_keeps_the_demos_quality",
+           floor=("worst >= demo_psnr - 3.0",)),
     Figure(_R, "51.15 to 33.84 dB", "cotton_intensity_scale"),
     Figure(_R, "49.66 / 49.85 / 49.94 / 49.96 dB", "cotton_paper_gamma_sweep"),
     Figure(_R, "35.98 → 32.69 dB", "grid64_robust_bvs"),
