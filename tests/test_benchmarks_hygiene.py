@@ -33,7 +33,7 @@ def test_the_layout_is_by_purpose():
 
 @pytest.fixture(scope="module")
 def help_runs(request):
-    """The ``--help`` run of every script this session tests, one per core at a time (each is
+    """The ``--help`` run of every script the session's tests check, one per core at a time (each is
     mostly an interpreter's imports, on one core), started at the first test that asks."""
     from concurrent.futures import ThreadPoolExecutor
 

@@ -388,8 +388,8 @@ def test_a_work_folder_without_room_is_refused_before_colmap(synthetic_photos, t
 
 def test_a_zoom_gets_one_camera_per_photo(tmp_path):
     """Photos of one size whose EXIF gives two focal lengths (a zoom): one camera per photo,
-    each focal length recovered. With one shared camera (before 2026-11-27; the copies COLMAP
-    reads are PNGs without EXIF) both zooms got one focal length, 17 % and 22 % off. The
+    each focal length recovered. With one shared camera (the copies COLMAP
+    reads are PNGs without EXIF) both zooms would get one focal length, 17 % and 22 % off. The
     photos are :func:`vibr.synthetic.zoom_photos` (benchmarks/quality/calibrate_zoom.py's)."""
     from vibr.calib.colmap import _lens_keys, calibrate_scene
     from vibr.synthetic import zoom_photos

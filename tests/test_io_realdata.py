@@ -160,7 +160,7 @@ def test_hci_without_cfg_grid_option(cotton_dir, tmp_path):
 def test_a_missing_light_field_view_renders_at_its_grid_position(cotton_dir, tmp_path, capsys):
     """A light field without its centre photograph: input_Cam040 is named in the errors as
     missing, and rendered as a novel view at its grid position; against the real photograph
-    (kept aside) 50.35 dB at scale 0.25 from the 8 best views (estimated depth; 2026-11-28)."""
+    (kept aside) 50.35 dB at scale 0.25 from the 8 best views (estimated depth)."""
     from vibr.cli import main
     from vibr.io import read_image
     from vibr.metrics import psnr

@@ -163,8 +163,8 @@ def test_transforms_rotation_with_a_uniform_scale(tmp_path):
 
 def test_transforms_camera_rig_names(tmp_path):
     """A rig's frames share file stems (``images/cam0/0000.png``, ``images/cam1/0000.png``):
-    the views are named by their paths below the shared folders (until 2026-11-27 such a
-    scene was refused: "duplicate view names"), and keep those names through a save."""
+    the views are named by their paths below the shared folders (not refused as
+    "duplicate view names"), and keep those names through a save."""
     import os
 
     from vibr.synthetic import make_scene

@@ -841,8 +841,8 @@ def test_views_side_by_side_stop_at_the_first_error(monkeypatch):
 
 def test_a_view_without_stereo_partner_gets_unknown_depth():
     """A view turned more than 60 degrees from every other (a sparse ring) has no partner:
-    its depth is left unknown with a warning naming it, and the others are estimated (until
-    2026-11-27 the whole estimate, and every render of the scene, stopped there). With no
+    its depth is left unknown with a warning naming it, and the others are estimated (the
+    whole estimate, and every render of the scene, must not stop there). With no
     partner anywhere it is still an error."""
     import io
     import logging

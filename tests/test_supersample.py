@@ -302,7 +302,7 @@ def test_coarser_sources_weigh_their_gradients_less():
     before = render_samples(S)
     assert np.array_equal(auto.image, quarter.image)
     both = auto.coverage & before.coverage
-    # 0.44 dB with the defaults of 2026-11-28 (more than 0.5 before lam_density)
+    # 0.44 dB with the defaults (more than 0.5 without lam_density)
     assert psnr(auto.image, tgt.image, mask=both, border=2) > psnr(before.image, tgt.image, mask=both, border=2) + 0.3
 
 

@@ -228,7 +228,7 @@ def test_cli_eval_uncertainty_report_and_plot(tmp_path):
     img = iio.imread(r["figures"]["sparsification"])
     assert img.ndim == 3 and img.shape[0] > 100
     # several targets: each view's report scores its uncertainty, the summary averages AUSE
-    # (--uncertainty was ignored with --target all or a list until 2026-11-26)
+    # (--uncertainty is not ignored with --target all or a list)
     rep2 = tmp_path / "r2.json"
     assert main(["eval", str(tmp_path / "s"), "--target", "view_000,view_004", "--method", "ulr,gradient",
                  "--gamma", "1", "--json", str(rep2), "--uncertainty", "-q"]) == 0

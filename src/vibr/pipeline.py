@@ -114,7 +114,7 @@ def prepare(scene: Scene, target: int | str | Camera, *, sources: Sequence[int |
         Folder of depth files, for ``depth="files"``.
     n_views : int or "all", optional
         Keep only this many source views, the best for the target (:mod:`vibr.geometry.selection`)
-        among ``sources`` when given (until 2026-11-26 a list of sources ignored it).
+        among ``sources`` when given.
         Default: every view, but the :data:`ESTIMATED_SOURCES` best when the depth is
         estimated and the :data:`PLANAR_SOURCES` best with the planar proxy, when
         ``sources`` is not given; ``"all"``: every view in any case.

@@ -7,9 +7,9 @@ to at most 32 MiB as blocks are freed) with a fresh ``mmap``, and unmaps it agai
 per use. Frame after frame of a fly-through this is the same work again. Keeping those
 blocks in the heap (mmap threshold 256 MiB) and not returning the heap's free top to the
 kernel below 2 GiB (trim threshold) lets the next frame reuse the pages (measured with
-``benchmarks/perf/bench_malloc.py``: docs/explanation/performance.md). The trim threshold was 512 MiB until
-2026-11-28: a viewer's 768² render frees about 600 MiB at the top of the heap, which glibc
-then gave back and the next render faulted in again (docs/explanation/viewer.md, "The heap's top").
+``benchmarks/perf/bench_malloc.py``: docs/explanation/performance.md). The trim threshold is above what a
+viewer's 768² render frees at the top of the heap (about 600 MiB): below it, glibc gave that
+back and the next render faulted it in again (docs/explanation/viewer.md, "The heap's top").
 
 Those settings hold for glibc's main heap only. A thread other than the main one (the
 viewer's render worker) gets an arena of its own, whose heaps are at most 64 MiB: a larger

@@ -64,8 +64,8 @@ __all__ = ["Viewer", "ViewerOptions", "SentImage", "CameraState", "POINT_MODES",
 #: leaves the server's cores to it), always, never.
 POINT_MODES = ("while moving", "always", "never")
 #: The side of a drawn point, as a fraction of the scene's size (:func:`.geometry.scene_scale`):
-#: 0.004 until 2026-11-28; a browser without a GPU rasterises every point of the frames it
-#: draws after a move, which overlap the full render (docs/explanation/viewer.md, "The heap's top")
+#: small, since a browser without a GPU rasterises every point of the frames it draws after
+#: a move, which overlap the full render (docs/explanation/viewer.md, "The heap's top")
 POINT_SIDE = 0.002
 
 #: What each render control does, said in the panel when the pointer rests on it.
