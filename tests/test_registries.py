@@ -140,7 +140,7 @@ def test_mae_metric(tmp_path, capsys):
     scene_dir = save_scene(make_scene("grid", n_views=9, width=48, height=48, seed=2), tmp_path / "s")
     try:
         values = view_metrics(img, ref, mask, border=2)
-        assert list(values) == ["psnr", "ssim", "dssim", "sharpness", "mae"]
+        assert list(values) == ["psnr", "psnr_all", "ssim", "dssim", "sharpness", "mae"]
         assert values["mae"] == pytest.approx(np.abs(img - ref)[2:-2, 2:-2][mask[2:-2, 2:-2]].mean())
         report = tmp_path / "eval.json"
         assert main(["-q", "eval", str(scene_dir), "--target", "view_004", "--method", "ulr",
@@ -177,4 +177,4 @@ def test_the_built_in_entries_are_registered_in_order():
     assert list(REGISTRY) == ["ulr", "savsr", "bvs", "gradient"]
     assert list(FORMATS) == ["transforms", "hci", "colmap", "middlebury", "strecha"]  # the detection order
     assert list(PATH_KINDS) == ["interpolate", "orbit", "spiral"]
-    assert list(METRICS) == ["psnr", "ssim", "dssim", "sharpness"]
+    assert list(METRICS) == ["psnr", "psnr_all", "ssim", "dssim", "sharpness"]

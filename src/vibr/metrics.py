@@ -197,6 +197,14 @@ def get_metric(name: str) -> Metric:
 
 register_metric(Metric("psnr", psnr, True, "peak signal-to-noise ratio (dB) over the three channels",
                        heading="PSNR dB", width=8, fmt=".2f"))
+def psnr_all(img, ref, mask=None, border: int = 0) -> float:
+    """PSNR over every pixel (``border`` excluded), whatever ``mask`` says: what the holes of a
+    render cost, beside :func:`psnr` over the reconstructed pixels."""
+    return psnr(img, ref, border=border)
+
+
+register_metric(Metric("psnr_all", psnr_all, True, "PSNR (dB) over all pixels, the holes included",
+                       heading="all px dB", width=9, fmt=".2f"))
 register_metric(Metric("ssim", ssim, True, "mean structural similarity (Wang et al. 2004), Gaussian window sigma 1.5",
                        min_side=SSIM_WINDOW))
 register_metric(Metric("dssim", dssim, False, "the paper's DSSIM = 10^4 (1 - SSIM)", heading="DSSIM", width=7,

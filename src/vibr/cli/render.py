@@ -214,7 +214,8 @@ def _report(method: str, res) -> None:
                 f"{t.get('total', 0):.2f} s (geometry {t.get('geometry', 0):.2f}, solve {t.get('solve', 0):.2f})")
     if res.metrics:
         print(f"PSNR {res.metrics['psnr']:.2f} dB  DSSIM {res.metrics['dssim']:.1f}  "
-              f"(SSIM {res.metrics['ssim']:.4f}; {METRIC_RULE})".replace("nan", "n/a"))
+              f"(SSIM {res.metrics['ssim']:.4f}; {METRIC_RULE}, {100 * res.coverage.mean():.1f} % of the "
+              f"image); PSNR {res.metrics['psnr_all']:.2f} dB over all pixels".replace("nan", "n/a"))
 
 
 #: the fly-through's options (attribute, flag), refused with --target rather than ignored
