@@ -267,7 +267,7 @@ def carve_silhouettes(sources: Scene, backdrop: dict) -> Scene:
     A view's backdrop pixel saw nothing along its ray up to the backdrop, so no surface
     lies on that ray: a sample put there (a stereo mismatch, a completed depth on the
     wrong side of an edge) is a ghost in any target. Dropped, the pixel is left to the
-    others views' samples; fallback pixels of the plane (the backdrop) are kept.
+    other views' samples; fallback pixels of the plane (the backdrop) are kept.
 
     Parameters
     ----------
