@@ -21,8 +21,24 @@ the region when its 3D point lands, in at least one source, on a fallback pixel
 (:attr:`vibr.scene.View.fallback`) whose depth agrees within 2 %, and in no source on a
 measured (stereo) pixel that agrees. The region's flicker is the same mean over those pixels.
 
+``--classes`` also splits the flicker by region class. Each kept pixel of frame t+1 falls in one:
+**no depth** (the region above); **silhouette band**, within 2 px of a depth edge of frame t+1
+(neighbours whose log-depth differs by more than 0.03) or of a pixel the warp leaves out;
+**known, textured / flat**, the rest, split by the Sobel gradient of ULR's frame t+1 (above /
+at most 4 grey levels per pixel). It prints each class's share of the kept pixels, its mean
+flicker per method and its contribution to the overall figure (the class's sum over the kept
+pixels), then the region's flicker per step: the region's figure is an unweighted mean over
+steps, so one step with a large region can carry it.
+
+``--procedural`` measures the flicker of a *perfect* render: the ray-cast truth
+(:func:`vibr.synthetic.render_view`) along a ``--frames``-frame path (:func:`interpolate`)
+through procedural scenes (``make_scene`` free seed 0 with 6 views, handheld seed 1 with 7;
+192×144), warped by the true depth, as is and blurred by a Gaussian of 0.5, 0.8 and 1.2 px,
+with the blurred frames' PSNR against the truth. A measure that a blur lowers while the PSNR
+falls counts sharpness as flicker.
+
     python3 benchmarks/quality/path_flicker.py [--frames 24] [--scale 0.125] [--cache-dir DIR]
-        [--work DIR] [--png DIR]
+        [--work DIR] [--png DIR] [--classes] [--procedural]
 
 Prints a table (method | flicker overall | flicker in the region | frames) and writes
 ``out/path_flicker/results.json``. A measurement: exits 0 whatever the figures.
@@ -97,6 +113,99 @@ def fallback_region(sources, X: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return on_fallback & ~on_measured
 
 
+#: log-depth step between neighbours that makes a depth edge
+EDGE_LOG_DEPTH = 0.03
+#: half-width (px) of the silhouette band
+BAND_PX = 2
+#: Sobel gradient (grey levels per pixel) above which a pixel is textured
+TEXTURED = 4.0
+CLASSES = ("known, textured", "known, flat", "silhouette band", "no depth")
+
+
+def region_classes(depth_n: np.ndarray, keep: np.ndarray, region: np.ndarray, ref_grey: np.ndarray) -> dict:
+    """Boolean masks (H×W) of the four classes (module docstring) among the kept pixels."""
+    from scipy.ndimage import binary_dilation, sobel
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ld = np.log(np.where(depth_n > 0, depth_n, np.nan))
+    edge = np.zeros(depth_n.shape, bool)
+    for ax in (0, 1):
+        j = ~(np.abs(np.diff(ld, axis=ax)) <= EDGE_LOG_DEPTH)  # a NaN (no depth) is an edge too
+        if ax == 0:
+            edge[:-1] |= j
+            edge[1:] |= j
+        else:
+            edge[:, :-1] |= j
+            edge[:, 1:] |= j
+    band = binary_dilation(edge | ~keep, iterations=BAND_PX) & keep & ~region
+    known = keep & ~region & ~band
+    tex = np.hypot(sobel(ref_grey, 0), sobel(ref_grey, 1)) / 8 > TEXTURED
+    return {CLASSES[0]: known & tex, CLASSES[1]: known & ~tex, CLASSES[2]: band, CLASSES[3]: region}
+
+
+def class_tables(cams, frames, depth, sources) -> None:
+    """Print the flicker per region class (``--classes``) and the region's per step."""
+    share = {c: [] for c in CLASSES}
+    mean = {m: {c: [] for c in CLASSES} for m in METHODS}
+    contrib = {m: {c: [] for c in CLASSES} for m in METHODS}
+    steps = []
+    for t in range(len(cams) - 1):
+        xy, keep, X = warp_to_next(cams[t], cams[t + 1], depth[t], depth[t + 1])
+        cls = region_classes(depth[t + 1], keep, fallback_region(sources, X, keep), grey(frames["ulr"][t + 1]))
+        n = max(int(keep.sum()), 1)
+        row = [t, int(cls[CLASSES[3]].sum())]
+        for m in METHODS:
+            diff = np.abs(grey(frames[m][t + 1]) - sample_bilinear(grey(frames[m][t]), xy))
+            for c, msk in cls.items():
+                mean[m][c].append(float(diff[msk].mean()) if msk.any() else np.nan)
+                contrib[m][c].append(float(diff[msk].sum()) / n)
+            row.append(mean[m][CLASSES[3]][-1])
+        for c, msk in cls.items():
+            share[c].append(msk.sum() / n)
+        steps.append(row)
+    print("\n| class | share of kept pixels | " + " | ".join(f"{m}: mean / contribution" for m in METHODS) + " |")
+    print("|---|---:|" + "---:|" * len(METHODS))
+    for c in CLASSES:
+        cells = " | ".join(f"{np.nanmean(mean[m][c]):.2f} / {np.mean(contrib[m][c]):.2f}" for m in METHODS)
+        print(f"| {c} | {100 * np.mean(share[c]):.1f} % | {cells} |")
+    print("\n| step | region pixels | " + " | ".join(METHODS) + " |")
+    print("|---:|---:|" + "---:|" * len(METHODS))
+    for r in steps:
+        print(f"| {r[0]}→{r[0] + 1} | {r[1]} | " + " | ".join(f"{v:.2f}" for v in r[2:]) + " |")
+    reg = np.array([r[2:] for r in steps], float)
+    print("| mean, every step | | " + " | ".join(f"{v:.2f}" for v in np.nanmean(reg, 0)) + " |")
+    print("| mean, last step left out | | " + " | ".join(f"{v:.2f}" for v in np.nanmean(reg[:-1], 0)) + " |")
+
+
+def procedural_table(frames: int) -> None:
+    from scipy.ndimage import gaussian_filter
+
+    from vibr.metrics import psnr
+    from vibr.paths.camera_path import interpolate
+    from vibr.synthetic import default_world, make_scene, render_view
+
+    print(f"\nray-cast truth along a {frames}-frame path, 192×144: flicker (grey levels) / PSNR (dB) of the "
+          "truth blurred by a Gaussian of σ px\n")
+    blurs = (0.0, 0.5, 0.8, 1.2)
+    print("| scene | " + " | ".join(f"σ = {s}" for s in blurs) + " |")
+    print("|---|" + "---:|" * len(blurs))
+    for layout, seed, n in (("free", 0, 6), ("handheld", 1, 7)):
+        sc = make_scene(layout, n_views=n, width=192, height=144, seed=seed)
+        cams = list(interpolate(sc, n_frames=frames).cameras)
+        world = default_world(seed)
+        truth = [render_view(world, c) for c in cams]
+        depth = [np.nan_to_num(d, nan=0.0) for _, d in truth]
+        warps = [warp_to_next(cams[t], cams[t + 1], depth[t], depth[t + 1])[:2] for t in range(len(cams) - 1)]
+        cells = []
+        for s in blurs:
+            imgs = [np.clip(gaussian_filter(img, (s, s, 0)) if s else img, 0, 1) for img, _ in truth]
+            g = [grey((im * 255 + 0.5).astype(np.uint8)) for im in imgs]
+            flk = np.mean([np.abs(g[t + 1] - sample_bilinear(g[t], xy))[keep].mean() for t, (xy, keep) in enumerate(warps)])
+            q = np.mean([psnr(im, img, border=2) for im, (img, _) in zip(imgs, truth)])
+            cells.append(f"{flk:.2f} / {q:.1f}")
+        print(f"| {layout} seed {seed} | " + " | ".join(cells) + " |")
+
+
 def render(scene, path, method: str, work: Path, cache_dir, with_depth: bool):
     from vibr.paths.flythrough import render_path
 
@@ -116,6 +225,8 @@ def main(argv=None) -> int:
                     help="frames, depth and results.json (default out/path_flicker)")
     ap.add_argument("--png", default=None, help="folder for the two-frame strips")
     ap.add_argument("--data", default=None, help="data folder (default $VIBR_DATA or ../shared/data)")
+    ap.add_argument("--classes", action="store_true", help="the flicker per region class and per step")
+    ap.add_argument("--procedural", action="store_true", help="the measure on a ray-cast truth, blurred")
     args = ap.parse_args(argv)
 
     from PIL import Image
@@ -174,6 +285,10 @@ def main(argv=None) -> int:
     out["settings"] = {"frames": len(cams), "scale": args.scale, "depth_tol": DEPTH_TOL}
     (work / "results.json").write_text(json.dumps(out, indent=1))
     print(f"\nJSON in {work / 'results.json'}")
+    if args.classes:
+        class_tables(cams, frames, depth, sources)
+    if args.procedural:
+        procedural_table(len(cams))
 
     if args.png and strips:
         d = Path(args.png)
