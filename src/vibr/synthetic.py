@@ -434,8 +434,11 @@ class World:
             pyr = _texture_pyramid(texture)
             self._tex_names.append(texture)
         else:
+            for i, n in enumerate(self._tex_names):
+                if n is texture:  # the same array again (a box's six faces): its pyramid once
+                    return i
             pyr = _pyramid_from_image(np.asarray(texture, dtype=np.float32))
-            self._tex_names.append(None)
+            self._tex_names.append(texture)
         self._tex_pyr.append(pyr)
         return len(self._tex_pyr) - 1
 
