@@ -30,14 +30,15 @@ the whole grid. Without it the peer keeps the recipe above.
 
 Cases (those of the quality table): fountain-P11 views 0002, 0005, 0008 at scale 0.25 from the
 10 others, cotton's centre from its 8 neighbours (stride 1) with the given and with estimated
-depth, temple view 4 from its 4 best views. Methods: vibr's default (``gradient``), ``ulr``,
+depth, backgammon's centre from its 8 neighbours (estimated depth: its ground truth covers the
+centre view only), temple view 4 from its 4 best views. Methods: vibr's default (``gradient``), ``ulr``,
 ``bvs`` (vibr's sources: its depth with the fallback proxy) and the peer. Metrics (2-pixel
 border): PSNR over the pixels every method covers, PSNR over all pixels (what a method leaves
 black counts), coverage, and :func:`vibr.metrics.sharpness` on the common pixels (the render's
 Laplacian energy over the photograph's: 1 as sharp, below 1 blurred).
 
     PYTHONPATH=$PWD/src python3 benchmarks/quality/mesh_peer.py --self-check
-    PYTHONPATH=$PWD/src python3 benchmarks/quality/mesh_peer.py [--tune] [--cases fountain,cotton,temple] \\
+    PYTHONPATH=$PWD/src python3 benchmarks/quality/mesh_peer.py [--tune] [--cases fountain,cotton,backgammon,temple] \\
         [--figures DIR] [--write-docs]
 
 JSON in ``out/mesh_peer/results.json``; ``--write-docs`` writes ``docs/results/peer.md``. Exits 1
@@ -358,10 +359,11 @@ def tune(base: PeerOptions = PeerOptions()) -> dict:
 
 # -- the cases -------------------------------------------------------------------------------
 def cases(which):
-    """The cases of the scenes ``which`` ("fountain", "cotton", "temple"), in that order."""
+    """The cases of the scenes ``which`` ("fountain", "cotton", "backgammon", "temple"), in that order."""
     every = {"fountain": [dict(kind="fountain", target=t, name=f"fountain {t}") for t in ("0002", "0005", "0008")],
              "cotton": [dict(kind="cotton", depth=dp, stride=1, name=f"cotton centre, {dp} depth")
                         for dp in ("gt", "estimated")],
+             "backgammon": [dict(kind="backgammon", stride=1, name="backgammon centre, estimated depth")],
              "temple": [dict(kind="temple", name="temple 0004 from 4")]}
     unknown = set(which) - set(every)
     if unknown:
@@ -378,7 +380,7 @@ def case_sources(cache, case):
     if case.get("depth", "estimated") != "estimated":
         return src, src, tv
     full = {"fountain": ("strecha_fountain-P11", 0.25), "temple": ("middlebury_templeSparseRing", 1.0),
-            "cotton": ("hci2016_cotton", 1.0)}[case["kind"]]
+            "cotton": ("hci2016_cotton", 1.0), "backgammon": ("hci2016_backgammon", 1.0)}[case["kind"]]
     raw = estimated_depth(cache.get(*full).subset(src.names))
     assert raw.names == src.names
     return src, raw, tv
@@ -540,7 +542,8 @@ def page(report: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", help="data folder (default $VIBR_DATA or ../shared/data)")
-    ap.add_argument("--cases", default="fountain,cotton,temple", help="comma-separated: fountain, cotton, temple")
+    ap.add_argument("--cases", default="fountain,cotton,backgammon,temple",
+                    help="comma-separated: fountain, cotton, backgammon, temple")
     ap.add_argument("--self-check", action="store_true", help="run only the closed-form check of the peer")
     ap.add_argument("--tune", action="store_true",
                     help="choose the peer's voxel, truncation and blend on procedural scenes first, then use them")
