@@ -5,9 +5,11 @@
 view's backdrop (:func:`vibr.geometry.proxy.backdrop_pixels`: unknown depth, flat photograph,
 connected to the image border), completes the view's other unknown pixels from its known
 depth, and drops every sample whose point lands, at every depth within its ±sigma_z, on
-another view's backdrop (:func:`vibr.geometry.proxy.carve_silhouettes`). "before" is the
-former rule: the plane at every unknown pixel of the views at least half unknown, and at
-the flat unknown pixels of the others, the textured ones completed.
+another view's backdrop (:func:`vibr.geometry.proxy.carve_silhouettes`). The backdrop is
+the whole of its flat windows; "centres" is the same rule with the backdrop its windows'
+centres only (the rim within a window's radius of each silhouette completed instead).
+"before" is the former rule: the plane at every unknown pixel of the views at least half
+unknown, and at the flat unknown pixels of the others, the textured ones completed.
 
 Protocol, fixed before any measurement. The rule has one constant of its own, the
 backdrop plane's sigma_z (``BACKDROP_SIGMA_Z_REL``, ``--backdrop-sigma`` sweeps it: "after
@@ -51,17 +53,23 @@ def rules(sigmas=()):
     """name → function(raw sources) → sources with that fallback ("after σ=X": "auto" with
     the backdrop plane's sigma_z X times its depth)."""
     from vibr.geometry import apply_fallback
-    from vibr.geometry.proxy import FALLBACK_FLAT_STD, carve_silhouettes, fallback_depth
+    from vibr.geometry.proxy import (
+        BACKDROP_SIGMA_Z_REL,
+        FALLBACK_FLAT_STD,
+        backdrop_pixels,
+        carve_silhouettes,
+        fallback_depth,
+    )
 
-    def auto_with(rel):
+    def auto_with(rel=BACKDROP_SIGMA_Z_REL, core=False):
         def rule(s):
-            out = fallback_depth(s, backdrop=True, complete=True, backdrop_sigma_rel=rel)
-            return carve_silhouettes(out, {n: i["backdrop"] for n, i in out.meta.get("fallback", {}).items()
-                                           if "backdrop" in i})
+            out = fallback_depth(s, backdrop=True, complete=True, backdrop_sigma_rel=rel, backdrop_core=core)
+            return carve_silhouettes(out, {v.name: backdrop_pixels(v.image, v.fallback, core=True) for v in out.views
+                                           if "backdrop" in out.meta.get("fallback", {}).get(v.name, {})})
         return rule
 
     out = {"before": lambda s: fallback_depth(s, min_fraction=0.5, flat_std=FALLBACK_FLAT_STD, complete=True),
-           "after": lambda s: apply_fallback(s, "auto")}
+           "centres": auto_with(core=True), "after": lambda s: apply_fallback(s, "auto")}
     out.update({f"after σ={x:g}": auto_with(x) for x in sigmas})
     return out
 

@@ -233,23 +233,34 @@ def flat_pixels(image, radius: int = FLAT_RADIUS, max_std: float = FALLBACK_FLAT
     return worst < float(max_std)
 
 
-def backdrop_pixels(image, unknown) -> np.ndarray:
-    """(H, W) bool: a view's backdrop, the unknown-depth pixels whose photograph is flat
-    (:func:`flat_pixels`) in a connected region of such pixels (4-connected) that reaches the
-    image border.
+def backdrop_pixels(image, unknown, *, core: bool = False) -> np.ndarray:
+    """(H, W) bool: a view's backdrop, the unknown-depth pixels of the flat windows
+    (:func:`flat_pixels`) centred in a connected region of such window centres (4-connected,
+    unknown depth) that reaches the image border.
 
     What lies beyond the object (a black cloth, a uniform wall behind it, the sky) fills the
     frame around it: flat, so stereo cannot match it, and continuous up to the image's edge.
     A flat face of the object stereo could not match either is closed in by the object's
-    textured outline, or by its silhouette, where the window straddling the edge is not flat."""
-    from scipy.ndimage import label
+    textured outline, or by its silhouette, where the window straddling the edge is not flat.
+    The backdrop is the whole of its flat windows, not only their centres: the pixels within
+    a window's radius of a silhouette are the backdrop's colour (a window holding them is
+    flat) but the centre of none, and left out they took the object's completed depth, a
+    halo around it in every target. ``core``: the centres only (what
+    :func:`carve_silhouettes` carves against: a window's rim beside a silhouette may hold a
+    sliver of the object as another view sees it)."""
+    from scipy.ndimage import binary_dilation, label
 
-    cand = np.asarray(unknown, bool) & flat_pixels(image)
+    unknown = np.asarray(unknown, bool)
+    cand = unknown & flat_pixels(image)
     lab, n = label(cand)
     if n == 0:
         return cand
     edge = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
-    return np.isin(lab, edge[edge > 0])
+    centres = np.isin(lab, edge[edge > 0])
+    if core or not centres.any():
+        return centres
+    size = 2 * FLAT_RADIUS + 1
+    return unknown & binary_dilation(centres, np.ones((size, size), bool))
 
 
 #: Depths at which :func:`carve_silhouettes` tests a sample: its depth and ``±sigma_z``
@@ -396,7 +407,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
                    min_fraction: float = 0.0, flat_std: float | None = None,
                    complete: bool = False, backdrop: bool = False,
-                   backdrop_sigma_rel: float = BACKDROP_SIGMA_Z_REL) -> Scene:
+                   backdrop_sigma_rel: float = BACKDROP_SIGMA_Z_REL, backdrop_core: bool = False) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -420,7 +431,9 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     (also marked as fallback). With ``backdrop``, in every view, only the view's backdrop
     (:func:`backdrop_pixels`) gets the plane, with ``sigma_z = backdrop_sigma_rel · D_k``
     (:data:`BACKDROP_SIGMA_Z_REL`), and ``min_fraction`` / ``flat_std`` are not read; its
-    other unknown pixels are left, or completed with ``complete``. The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
+    other unknown pixels are left, or completed with ``complete``. ``backdrop_core``: the
+    backdrop's flat windows' centres only (``backdrop_pixels(..., core=True)``, the former
+    rule, measured against by ``benchmarks/quality/backdrop_carving.py``). The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
     sample wherever a known surface lands in the target, whatever their depths (known
     geometry wins: a source facing the target has its plane in front of the object); other
     placements measured in docs/explanation/renderer.md.
@@ -448,7 +461,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         textured = np.zeros_like(unknown)
         bg = None
         if backdrop:
-            bg = backdrop_pixels(v.image, unknown)
+            bg = backdrop_pixels(v.image, unknown, core=backdrop_core)
             textured = unknown & ~bg if complete else textured
             unknown = bg
         elif unknown.any() and unknown.mean() < min_fraction:
@@ -496,5 +509,7 @@ def apply_fallback(sources: Scene, mode="auto") -> Scene:
     if mode == "always":
         return fallback_depth(sources)
     out = fallback_depth(sources, backdrop=True, complete=True)
-    masks = {n: i["backdrop"] for n, i in out.meta.get("fallback", {}).items() if "backdrop" in i}
+    # the windows' centres (the view's fallback mask: its pixels of unknown depth)
+    masks = {v.name: backdrop_pixels(v.image, v.fallback, core=True)
+             for v in out.views if "backdrop" in out.meta.get("fallback", {}).get(v.name, {})}
     return carve_silhouettes(out, masks)
