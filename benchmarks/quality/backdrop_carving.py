@@ -56,7 +56,6 @@ def rules(sigmas=()):
     from vibr.geometry.proxy import (
         BACKDROP_SIGMA_Z_REL,
         FALLBACK_FLAT_STD,
-        backdrop_pixels,
         carve_silhouettes,
         fallback_depth,
     )
@@ -64,8 +63,8 @@ def rules(sigmas=()):
     def auto_with(rel=BACKDROP_SIGMA_Z_REL, core=False):
         def rule(s):
             out = fallback_depth(s, backdrop=True, complete=True, backdrop_sigma_rel=rel, backdrop_core=core)
-            return carve_silhouettes(out, {v.name: backdrop_pixels(v.image, v.fallback, core=True) for v in out.views
-                                           if "backdrop" in out.meta.get("fallback", {}).get(v.name, {})})
+            return carve_silhouettes(out, {n: i["backdrop_core"] for n, i in out.meta.get("fallback", {}).items()
+                                           if "backdrop_core" in i})
         return rule
 
     out = {"before": lambda s: fallback_depth(s, min_fraction=0.5, flat_std=FALLBACK_FLAT_STD, complete=True),

@@ -20,7 +20,7 @@ from ..scene import Scene, View
 from .depth import DEFAULT_SIGMA_Z_REL
 
 __all__ = ["planar_proxy", "plane_depth", "PROXY_SIGMA_Z_REL", "PROXY_SPREAD_REL", "PROXY_Z_CORR", "sphere_proxy", "fallback_depth", "apply_fallback", "flat_pixels", "complete_depth", "FALLBACK_MODES",
-           "FALLBACK_FLAT_STD", "FALLBACK_FACTOR", "backdrop_pixels", "carve_silhouettes",
+           "FALLBACK_FLAT_STD", "FALLBACK_FACTOR", "backdrop_pixels", "backdrop_windows", "carve_silhouettes",
            "FALLBACK_SIGMA_Z_REL", "FALLBACK_PERCENTILE", "BACKDROP_SIGMA_Z_REL"]
 
 #: Default planar-proxy uncertainty: ``sigma_z = max(PROXY_SIGMA_Z_REL · D,
@@ -248,7 +248,7 @@ def backdrop_pixels(image, unknown, *, core: bool = False) -> np.ndarray:
     halo around it in every target. ``core``: the centres only (what
     :func:`carve_silhouettes` carves against: a window's rim beside a silhouette may hold a
     sliver of the object as another view sees it)."""
-    from scipy.ndimage import binary_dilation, label
+    from scipy.ndimage import label
 
     unknown = np.asarray(unknown, bool)
     cand = unknown & flat_pixels(image)
@@ -257,10 +257,18 @@ def backdrop_pixels(image, unknown, *, core: bool = False) -> np.ndarray:
         return cand
     edge = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
     centres = np.isin(lab, edge[edge > 0])
-    if core or not centres.any():
+    return centres if core else backdrop_windows(centres, unknown)
+
+
+def backdrop_windows(centres, unknown) -> np.ndarray:
+    """The unknown pixels of the flat windows centred at ``centres`` (:func:`backdrop_pixels`
+    with ``core=True``): the backdrop up to each silhouette."""
+    from scipy.ndimage import binary_dilation
+
+    if not centres.any():
         return centres
     size = 2 * FLAT_RADIUS + 1
-    return unknown & binary_dilation(centres, np.ones((size, size), bool))
+    return np.asarray(unknown, bool) & binary_dilation(centres, np.ones((size, size), bool))
 
 
 #: Depths at which :func:`carve_silhouettes` tests a sample: its depth and ``±sigma_z``
@@ -442,7 +450,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,
     "fraction": f_k}}`` for the views that have such pixels (``f_k`` their fraction; with
     ``complete``, ``"completed"``: the fraction completed rather than given the plane; with
-    ``backdrop``, ``"backdrop"``: the view's backdrop mask).
+    ``backdrop``, ``"backdrop"``: the view's backdrop mask, and ``"backdrop_core"``: its flat
+    windows' centres, what :func:`carve_silhouettes` tests against).
     """
 
     dsr = DEFAULT_SIGMA_Z_REL if default_sigma_rel is None else float(default_sigma_rel)
@@ -461,7 +470,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         textured = np.zeros_like(unknown)
         bg = None
         if backdrop:
-            bg = backdrop_pixels(v.image, unknown, core=backdrop_core)
+            core = backdrop_pixels(v.image, unknown, core=True)
+            bg = core if backdrop_core else backdrop_windows(core, unknown)
             textured = unknown & ~bg if complete else textured
             unknown = bg
         elif unknown.any() and unknown.mean() < min_fraction:
@@ -491,6 +501,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
             info[v.name]["completed"] = float(textured.mean())
         if bg is not None:
             info[v.name]["backdrop"] = bg
+            info[v.name]["backdrop_core"] = core
     return sources.replace(views=views, meta=dict(sources.meta, fallback=info))
 
 
@@ -509,7 +520,5 @@ def apply_fallback(sources: Scene, mode="auto") -> Scene:
     if mode == "always":
         return fallback_depth(sources)
     out = fallback_depth(sources, backdrop=True, complete=True)
-    # the windows' centres (the view's fallback mask: its pixels of unknown depth)
-    masks = {v.name: backdrop_pixels(v.image, v.fallback, core=True)
-             for v in out.views if "backdrop" in out.meta.get("fallback", {}).get(v.name, {})}
+    masks = {n: i["backdrop_core"] for n, i in out.meta.get("fallback", {}).items() if "backdrop_core" in i}
     return carve_silhouettes(out, masks)
