@@ -441,10 +441,11 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     (:data:`BACKDROP_SIGMA_Z_REL`), and ``min_fraction`` / ``flat_std`` are not read; its
     other unknown pixels are left, or completed with ``complete``. ``backdrop_core``: the
     backdrop's flat windows' centres only (``backdrop_pixels(..., core=True)``, the former
-    rule, measured against by ``benchmarks/quality/backdrop_carving.py``). The geometry stage (:func:`vibr.geometry.compute_samples`) hides a fallback
-    sample wherever a known surface lands in the target, whatever their depths (known
-    geometry wins: a source facing the target has its plane in front of the object); other
-    placements measured in docs/explanation/renderer.md.
+    rule, measured against by ``benchmarks/quality/backdrop_carving.py``). The geometry
+    stage (:func:`vibr.geometry.compute_samples`) hides a fallback sample wherever a known
+    surface lands in the target, whatever their depths (known geometry wins: a source facing
+    the target has its plane in front of the object); other placements measured in
+    docs/explanation/renderer.md.
 
     Returns the scene with each such view's ``fallback`` mask (:class:`vibr.scene.View`) set
     to the pixels given the plane, and ``meta["fallback"] = {name: {"depth": D_k,
