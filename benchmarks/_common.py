@@ -207,7 +207,7 @@ def seen_count(scene, ref: int, views, tol: float = 0.02) -> np.ndarray:
 
 # -- the defaults sweep's cases (quality/sweep_defaults.py and the studies that share them) --
 #: the case kinds built by ``vibr.synthetic``: the only scenes a setting is ever chosen on
-PROCEDURAL_KINDS = ("synthetic", "sparse", "nogeo")
+PROCEDURAL_KINDS = ("synthetic", "sparse", "nogeo", "ring")
 
 
 def scene_split(kind: str) -> str:
@@ -255,8 +255,10 @@ def sweep_sources(cache, case):
     from vibr.geometry.selection import select_views
     from vibr.pipeline import prepare
     from vibr.stereo.cache import scene_with_depth
-    from vibr.synthetic import make_scene
+    from vibr.synthetic import make_scene, ring_scene
 
+    if case["kind"] == "ring":  # the matcher-like depth of ring_scene, the fallback where unknown
+        return prepare(ring_scene(case["ring"]), case["target"], n_views=4)
     if case["kind"] == "synthetic":
         sc = make_scene(case["layout"], width=128, height=128)
         return sc.split(len(sc) // 2)

@@ -19,26 +19,32 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
 * no geometry (:func:`nogeo_cases`): the middle of 7 synthetic views of
   256×192 (arc, free, hand-held layouts, seeds 0 and 1) from the 6 others, their depth
   estimated from them as ``vibr eval`` does for a scene without depth maps (the fallback
-  proxy where it is unknown).
+  proxy where it is unknown);
+* rings (:func:`ring_cases`): views 4 and 11 of ``vibr.synthetic.ring_scene`` (a textureless
+  object on black, a textured one on grey, 160×120) from their 4 best views.
 
 Estimated depth is computed from the sources only (the target never takes part) and cached
 on disk (``vibr.stereo.cache``, default ~/.cache/vibr): a second run is rendering only.
 
-Settings per case: ULR, BVS, ``gradient`` with TV "uniform" over gamma × lam =
-{0, 0.1, 0.25, 0.5, 1} × {0.1, 0.3}, with TV "samples" (spatially varying) at
-gamma ∈ {0.1, 0.25, 0.5}, lam 0.1 and at gamma 0.1, lam 0.3; with ULR's view prior
-(``view_k=4``) at lam 0.3: gamma 0.1 and 0.25, gamma 0.1 with ``grad_weighting="W"``, gamma
-0.1 with TV "samples"; with the preconditioned solver (``precond=True``) at (gamma, lam) =
-(0, 0.3), (0.1, 0.1), (0.1, 0.3), (0.25, 0.3) and with the view prior at gamma × lam =
-{0.1, 0.2, 0.3} × {0.3, 0.6, 1}, the same nine with the gradient term's consistency weights
-(``grad_consistency=24``, with the library's ``grad_coverage``) and (0.2, 0.6) with the
-scales 12 and 48 (every other setting: ``grad_consistency=0``, which leaves ``grad_coverage``
-no weight to scale); with the consistency weights, ``lam_density=3`` (lam against the data's
-sum) and ``hole_fill="push-pull"`` at gamma × lam = {0.2, 0.3, 0.45} × {0.6, 0.8, 1, 1.4} (D; every other
-setting: ``lam_density=0``, ``hole_fill="solve"``); and ``gamma="auto", lam="auto"`` (``vibr.render.autotune``:
-leave-one-source-out on the sources, never the target image), whose tuning time is measured
-against the median full-size render time of the target over the case's gradient settings
-(same process, same minutes: the machine's load hits both alike).
+Settings per *choose* case: ULR, BVS and the library's family, ``gradient`` with the
+preconditioned solver (``precond=True``), ULR's view prior (``view_k=4``), the gradient term's
+consistency weights (``grad_consistency=24``, with the library's ``grad_coverage``), lam against
+the data's sum (``lam_density=3``) and the holes filled by push-pull (``hole_fill="push-pull"``),
+labelled "P V4 C D", at gamma × lam = {0.3, 0.45, 0.6, 0.8} × {0.8, 1, 1.4, 2, 2.8}; and
+``gamma="auto", lam="auto"`` (``vibr.render.autotune``: leave-one-source-out on the sources,
+never the target image), whose tuning time is measured against the median full-size render
+time of the target over the case's gradient settings (same process, same minutes: the
+machine's load hits both alike).
+
+``--all-settings`` adds the former families, whose questions docs/explanation/renderer.md
+answers: TV "uniform" without the view prior over gamma × lam = {0, 0.1, 0.25, 0.5, 1} × {0.1,
+0.3}; TV "samples" (spatially varying) at gamma ∈ {0.1, 0.25, 0.5}, lam 0.1 and at gamma 0.1,
+lam 0.3; the view prior at lam 0.3: gamma 0.1 and 0.25, gamma 0.1 with ``grad_weighting="W"``,
+gamma 0.1 with TV "samples"; the preconditioned solver at (gamma, lam) = (0, 0.3), (0.1, 0.1),
+(0.1, 0.3), (0.25, 0.3) and with the view prior at gamma × lam = {0.1, 0.2, 0.3} × {0.3, 0.6,
+1}, the same nine with the consistency weights and (0.2, 0.6) with the scales 12 and 48
+(without C: ``grad_consistency=0``, which leaves ``grad_coverage`` no weight to scale; without
+D: ``lam_density=0``, ``hole_fill="solve"``).
 
 Each case renders every setting from one geometry stage, on the grid ``vibr render`` would
 choose (:func:`vibr.render.shared_geometry`: a supersampled or coarser grid, gamma / s² for
@@ -47,7 +53,7 @@ coarser sources).
 Metrics: PSNR over all pixels and over the covered pixels (those every setting of the case
 reconstructed), 2-pixel border excluded. The held-out split is by scene and fixed before any
 number is seen (``_common.scene_split``): every scene ``vibr.synthetic`` generates (the synthetic,
-few-view and no-geometry families) is "choose", every photographed scene (cotton, backgammon,
+few-view, no-geometry and ring families) is "choose", every photographed scene (cotton, backgammon,
 fountain, temple) is "report". The choose cases render every setting; the default is the setting
 with the best mean all-pixel PSNR over them. Only then are the report cases rendered, with the
 chosen setting, ULR, BVS and the auto weights, so no photograph takes part in the choice.
@@ -104,18 +110,28 @@ BASE = {"tv_weighting": "uniform", "view_k": 0, "precond": False, "grad_weightin
 #: the settings labelled D: lam against the data's sum (``lam_density``, the reference density in
 #: views) and the holes filled by push-pull of the solved image, over gamma × lam
 LAM_DENSITY = 3.0
-D_GAMMAS = (0.2, 0.3, 0.45)
-D_LAMS = (0.6, 0.8, 1.0, 1.4)
+D_GAMMAS = (0.3, 0.45, 0.6, 0.8)
+D_LAMS = (0.8, 1.0, 1.4, 2.0, 2.8)
 #: the gradient term's consistency scale of the settings labelled C (grey levels / px), and the
 #: other scales tried at the former default's (gamma, lam)
 CONSISTENCY = 24.0
 CONSISTENCY_OTHERS = (12.0, 48.0)
 NOGEO_LAYOUTS = ("arc", "free", "handheld")
+#: the targets of the ring family (:func:`ring_cases`)
+RING_TARGETS = (4, 11)
 
 
 def settings():
-    """(label, method, params) of the sweep, in table order."""
+    """(label, method, params) of every setting the sweep knows, in table order."""
     return [(lab, m, {**BASE, **kw} if m == "gradient" else kw) for lab, m, kw in _settings()]
+
+
+def sweep_labels(all_settings=False):
+    """The labels a *choose* case renders: ULR, BVS and the library's family (D) over
+    :data:`D_GAMMAS` × :data:`D_LAMS`; ``all_settings`` adds the former families (no view prior,
+    TVs, plain FISTA, no consistency weights), whose questions the explanation pages answer."""
+    return [lab for lab, m, kw in settings()
+            if all_settings or m != "gradient" or kw["lam_density"] == LAM_DENSITY]
 
 
 def _settings():
@@ -161,6 +177,15 @@ def nogeo_cases():
     return [dict(kind="nogeo", layout=lo, seed=sd, name=f"no geometry {lo} seed {sd}", family="no geometry",
                  split=scene_split("nogeo"))
             for lo in NOGEO_LAYOUTS for sd in (0, 1)]
+
+
+def ring_cases():
+    """The sweep's object-on-a-backdrop family: views 4 and 11 of each :func:`vibr.synthetic.ring_scene`
+    (a textureless object on black, a textured one on grey) from their 4 best views, the depth a
+    matcher would find (unknown on the backdrop and the flat faces), the fallback where it is
+    unknown (procedural: *choose*)."""
+    return [dict(kind="ring", ring=k, target=t, name=f"ring {k} {t}", family="ring", split=scene_split("ring"))
+            for k in ("textureless", "textured") for t in RING_TARGETS]
 
 
 def run_case(cache, case):
@@ -216,9 +241,14 @@ def run_case(cache, case):
 # ---------------------------------------------------------------------------------------------
 def choose(reps):
     """The gradient setting with the best mean all-pixel PSNR over the "choose" cases."""
-    labels = [lab for lab, m, _ in settings() if m == "gradient"]
     ch = [r for r in reps if r["split"] == "choose"]
+    labels = gradient_labels(ch)
     return max(labels, key=lambda lab: np.mean([r["results"][lab]["all"] for r in ch]))
+
+
+def gradient_labels(reps):
+    """The gradient settings every report in ``reps`` rendered, in table order."""
+    return [lab for lab, m, _ in settings() if m == "gradient" and all(lab in r["results"] for r in reps)]
 
 
 def library_label():
@@ -231,11 +261,11 @@ def library_label():
     raise SystemExit("sweep_defaults.py: no setting of the sweep equals the library's defaults")
 
 
-def grid_edges(chosen):
+def grid_edges(chosen, labels):
     """The parameters ("gamma", "lam") whose value in ``chosen`` is the smallest or the largest
-    its grid tried (the settings equal to it but for that parameter): there the sweep has not
-    located the optimum."""
-    params = {lab: kw for lab, m, kw in settings() if m == "gradient"}
+    its grid tried (the settings of ``labels`` equal to it but for that parameter): there the
+    sweep has not located the optimum."""
+    params = {lab: kw for lab, m, kw in settings() if lab in labels}
     c = params[chosen]
     edges = []
     for p in ("gamma", "lam"):
@@ -257,7 +287,7 @@ def table(reps, chosen):
     lib = library_label()
 
     params = {lab: kw for lab, _, kw in settings()}
-    labs = [lab for lab, m, _ in settings() if m == "gradient"]
+    labs = gradient_labels([r for r in reps if r["split"] == "choose"])
     L = [BEGIN, "", "### Defaults chosen on procedural scenes, reported on photographs, generated by "
          "`benchmarks/quality/sweep_defaults.py`", "",
          f"Chosen on the *choose* half (best mean all-pixel PSNR): **{chosen}** "
@@ -307,7 +337,7 @@ def table(reps, chosen):
             orc = np.mean([max(r["results"][lab]["all"] for lab in labs) for r in sub])
             line += f", auto {mean('auto'):.2f}, oracle {orc:.2f}"
         L.append(line + ".")
-    edges = grid_edges(chosen)
+    edges = grid_edges(chosen, labs)
     if edges and chosen != lib:
         L += ["", f"The choice lies on the edge of the grid ({'; '.join(edges)}): the optimum is not located, "
               f"so the library's default ({lib}) stays until a wider grid is swept."]
@@ -347,7 +377,7 @@ def _read_done(path, case):
     if not path.is_file():
         return None
     rep = json.loads(path.read_text())
-    want = case.get("labels") or [lab for lab, _, _ in settings()]
+    want = case["labels"]
     return rep if all(lab in rep["results"] for lab in want) and rep["split"] == case["split"] else None
 
 
@@ -362,12 +392,14 @@ def main(argv=None):
     ap.add_argument("--resume", action="store_true",
                     help="keep the cases already reported in --out with the same settings")
     ap.add_argument("--report-only", action="store_true", help="rebuild the table from the JSON in --out")
+    ap.add_argument("--all-settings", action="store_true",
+                    help="the former families too (no view prior, TVs, plain FISTA, no consistency weights)")
     a = ap.parse_args(argv)
     from vibr.executor import run_tasks
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases()
+    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases() + ring_cases()
              if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     fname = lambda c: out / (c["name"].replace(" ", "_") + ".json")  # noqa: E731
     choose_cases = [c for c in cases if c["split"] == "choose"]
@@ -387,7 +419,7 @@ def main(argv=None):
             by = {r["name"]: r for r in new}
             return [done.get(c["name"]) or by[c["name"]] for c in cs]
 
-        reps = run(choose_cases, "sweep: choose")
+        reps = run([{**c, "labels": sweep_labels(a.all_settings)} for c in choose_cases], "sweep: choose")
         chosen = choose(reps)
         print(f"# chosen on {len(reps)} procedural cases: {chosen}", file=sys.stderr)
         if report_cases:
