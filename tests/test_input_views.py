@@ -38,7 +38,7 @@ def test_a_render_at_a_sources_camera_gives_its_photograph_back(holed):
         assert psnr(old.image, ref.image, border=2) < 42.0
 
 
-def test_completed_depth_is_a_mean_of_its_neighbourhood_with_its_spread():
+def test_completed_depth_is_a_mean_of_its_neighbourhood_with_the_maps_sigma():
     z = np.full((16, 16), 2.0)
     z[:, 8:] = 4.0
     z[6:10, 6:10] = np.nan  # a hole across the depth edge
@@ -47,5 +47,8 @@ def test_completed_depth_is_a_mean_of_its_neighbourhood_with_its_spread():
     known = np.isfinite(z)
     assert np.array_equal(zc[known], z[known].astype(np.float32)) and np.all(s[known] == np.float32(0.01))
     assert np.all((zc[~known] >= 2.0 - 1e-5) & (zc[~known] <= 4.0 + 1e-5))
-    assert np.allclose(zc[12:14, 1:3], 2.0) and np.allclose(s[12:14, 1:3], 0.01, atol=1e-6)  # no spread there
-    assert s[7:9, 7:9].min() > 0.3  # both sides of the edge: an uncertain depth
+    assert np.allclose(zc[12:14, 1:3], 2.0)
+    assert np.all(s[~known] == np.float32(0.01))  # the map's own, beside the edge as well
+    z2, s2 = complete_depth(z, 0.01, spread=True)  # the former rule
+    assert np.array_equal(z2, zc) and np.allclose(s2[12:14, 1:3], 0.01, atol=1e-6)
+    assert s2[7:9, 7:9].min() > 0.3  # both sides of the edge: the neighbourhood's spread

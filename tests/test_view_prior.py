@@ -431,12 +431,14 @@ def test_backdrop_takes_its_flat_windows_up_to_the_silhouette():
     assert core.sum() < bg.sum() and not (core & ~bg).any()
 
 
-@pytest.mark.parametrize("kind, min_psnr", [("textureless", 26.5), ("textured", 33.5)])
+@pytest.mark.parametrize("kind, min_psnr", [("textureless", 26.5), ("textured", 34.8)])
 def test_ring_view_from_4_all_pixels(kind, min_psnr):
     """The ring's view 4 from its 4 best views over all pixels (given depth, ``fallback="auto"``,
     120×90): with the backdrop only the flat windows' centres, the rim beside each silhouette
-    took the object's completed depth, a halo in every target: 25.11 / 31.71 dB
-    (benchmarks/quality/backdrop_carving.py measures the rings at 160×120)."""
+    took the object's completed depth, a halo in every target: 25.11 / 31.71 dB; with the
+    completed pixels' sigma_z widened by their neighbourhood's spread, a halo along the
+    sphere's edge on the textured ring: 34.62 dB (benchmarks/quality/backdrop_carving.py
+    measures the rings at 160×120)."""
     from vibr.geometry import apply_fallback
     from vibr.metrics import psnr
     from vibr.pipeline import prepare

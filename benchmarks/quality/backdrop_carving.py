@@ -7,7 +7,9 @@ connected to the image border), completes the view's other unknown pixels from i
 depth, and drops every sample whose point lands, at every depth within its ±sigma_z, on
 another view's backdrop (:func:`vibr.geometry.proxy.carve_silhouettes`). The backdrop is
 the whole of its flat windows; "centres" is the same rule with the backdrop its windows'
-centres only (the rim within a window's radius of each silhouette completed instead).
+centres only (the rim within a window's radius of each silhouette completed instead);
+"spread" is the same rule with the completed pixels' sigma_z widened by the spread of their
+neighbourhood's depths (``complete_depth(..., spread=True)``).
 "before" is the former rule: the plane at every unknown pixel of the views at least half
 unknown, and at the flat unknown pixels of the others, the textured ones completed.
 
@@ -21,6 +23,9 @@ unknown where the photograph is flat or the ray misses the object); the real sce
 reported without tuning:
 
 * rings: views 4 and 11 from their 4 best views (given depth);
+* ``--nogeo``: the sweep's no-geometry scenes (``sweep_defaults.nogeo_cases``: arc, free,
+  hand-held, seeds 0 and 1, the middle of 7 views from the 6 others, estimated depth),
+  procedural as well, without a backdrop;
 * ``--real``: Middlebury templeSR0004, 0008 and 0012 from their 4 best views (estimated
   depth); fountain-P11 at scale 0.25, views 0002, 0005, 0008 from the 10 others (estimated
   depth): a scene without a backdrop, where nothing may get worse.
@@ -31,7 +36,7 @@ backdrop pixels of the reference (rings: the rays that miss the object; photogra
 every channel at most 10 grey levels), and ULR's all-pixel PSNR. Targets on the temple:
 backdrop error <= 2 grey levels, all-pixel PSNR >= 23 dB.
 
-    python3 benchmarks/quality/backdrop_carving.py [--real] [--out DIR]   # DIR: PNGs target | before | after | ULR
+    python3 benchmarks/quality/backdrop_carving.py [--nogeo] [--real] [--out DIR]   # DIR: PNGs target | before | after | ULR
     python3 benchmarks/quality/backdrop_carving.py --backdrop-sigma 0.25,0.05,0.01,0   # the sweep on the rings
 """
 
@@ -60,30 +65,37 @@ def rules(sigmas=()):
         fallback_depth,
     )
 
-    def auto_with(rel=BACKDROP_SIGMA_Z_REL, core=False):
+    def auto_with(rel=BACKDROP_SIGMA_Z_REL, core=False, spread=False):
         def rule(s):
-            out = fallback_depth(s, backdrop=True, complete=True, backdrop_sigma_rel=rel, backdrop_core=core)
+            out = fallback_depth(s, backdrop=True, complete=True, backdrop_sigma_rel=rel, backdrop_core=core,
+                                 complete_spread=spread)
             return carve_silhouettes(out, {n: i["backdrop_core"] for n, i in out.meta.get("fallback", {}).items()
                                            if "backdrop_core" in i})
         return rule
 
     out = {"before": lambda s: fallback_depth(s, min_fraction=0.5, flat_std=FALLBACK_FLAT_STD, complete=True),
-           "centres": auto_with(core=True), "after": lambda s: apply_fallback(s, "auto")}
+           "centres": auto_with(core=True), "spread": auto_with(spread=True),
+           "after": lambda s: apply_fallback(s, "auto")}
     out.update({f"after σ={x:g}": auto_with(x) for x in sigmas})
     return out
 
 
-def cases(real: bool):
+def cases(real: bool, nogeo: bool = False):
     """(name, raw sources, target view, backdrop mask of the target)."""
     from vibr.io import load_scene
     from vibr.pipeline import prepare
-    from vibr.synthetic import RING_KINDS, ring_scene
+    from vibr.stereo.cache import scene_with_depth
+    from vibr.synthetic import RING_KINDS, make_scene, ring_scene
 
     for kind in RING_KINDS:
         sc = ring_scene(kind)
         for t in (4, 11):
             raw, tv = prepare(sc, t, n_views=4, fallback=False)
             yield f"ring {kind} {t}", raw, tv, ~np.isfinite(sc.meta["truth_depth"][tv.name])
+    for layout, seed in [(lo, sd) for lo in ("arc", "free", "handheld") for sd in (0, 1)] if nogeo else []:
+        src, tv = make_scene(layout, n_views=7, width=256, height=192, seed=seed).split(3)
+        src = src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views])
+        yield f"no geometry {layout} seed {seed}", scene_with_depth(src, depth="estimated", fallback="never"), tv, None
     if not real:
         return
     temple = load_scene(data_dir() / "middlebury_templeSparseRing")
@@ -118,6 +130,7 @@ def measure(raw, tv, backdrop, sigmas=()):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--real", action="store_true", help="also the temple and fountain views (estimated depth)")
+    ap.add_argument("--nogeo", action="store_true", help="also the procedural scenes without depth (estimated)")
     ap.add_argument("--out", help="folder for the PNGs target | before | after | ULR (after)")
     ap.add_argument("--backdrop-sigma", default="", metavar="X,...",
                     help="also the rule with the backdrop plane's sigma_z X times its depth (rows 'after σ=X')")
@@ -125,7 +138,7 @@ def main(argv=None):
     sigmas = [float(x) for x in args.backdrop_sigma.split(",") if x.strip()]
     print("| case | rule | PSNR all | PSNR covered | backdrop error (grey levels) | ULR all |")
     print("|---|---|---|---|---|---|")
-    for name, raw, tv, backdrop in cases(args.real):
+    for name, raw, tv, backdrop in cases(args.real, args.nogeo):
         res = measure(raw, tv, backdrop, sigmas)
         for rule, (pa, pc, err, pu, *_) in res.items():
             print(f"| {name} | {rule} | {pa:.2f} | {pc:.2f} | {err:.2f} | {pu:.2f} |", flush=True)

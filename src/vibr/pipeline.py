@@ -23,7 +23,7 @@ chosen geometry:
     are mostly unknown (a backdrop: it wins on the temple ring) and, in the others, where
     the photograph is flat (a plain wall or sky, which stereo cannot match); the textured
     patches of the object that stereo missed take a depth completed from their view's, with
-    a sigma_z as large as that depth varies around them (:func:`vibr.geometry.proxy.complete_depth`);
+    the view's own sigma_z there (:func:`vibr.geometry.proxy.complete_depth`);
     docs/explanation/renderer.md "Fallback proxy".
 ``planar``
     a fronto-parallel plane in the target camera (:func:`vibr.geometry.planar_proxy`), the

@@ -373,17 +373,19 @@ def _push_pull(vals: np.ndarray, weight: np.ndarray) -> np.ndarray:
     return cs[0]
 
 
-def complete_depth(depth: np.ndarray, sigma_z=None) -> tuple[np.ndarray, np.ndarray]:
+def complete_depth(depth: np.ndarray, sigma_z=None, *, spread: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Depth and sigma_z for every pixel of a depth map, its unknown (NaN) pixels completed
     from the known ones around them.
 
-    The inverse depth ``w = 1/z`` and its square are filled by push–pull
-    (:func:`_push_pull`): an unknown pixel takes a weighted mean ``E[w]`` of the known
-    depths around it, drawn from a neighbourhood as wide as the hole (coarser pyramid
-    levels inside large holes). Its uncertainty says how much that neighbourhood's depths
-    disagree: the spread ``√(E[w²] − E[w]²)``, carried to depth by ``dz = z² dw``, added in
-    quadrature to the pixel's own ``sigma_z`` (what stereo gives an unknown pixel: its
-    view's largest), so a hole beside a depth edge is far less certain than one in a wall.
+    The inverse depth ``w = 1/z`` is filled by push–pull (:func:`_push_pull`): an unknown
+    pixel takes a weighted mean ``E[w]`` of the known depths around it, drawn from a
+    neighbourhood as wide as the hole (coarser pyramid levels inside large holes). Its
+    sigma_z is the map's own there (what stereo gives an unknown pixel: its view's largest).
+    With ``spread``, the former rule, the spread of the neighbourhood's depths
+    ``√(E[w²] − E[w]²)``, carried to depth by ``dz = z² dw``, is added in quadrature: beside
+    a depth edge it collapsed the completed samples' weights wherever the target has
+    texture, where they are the only samples, and TV and the gradient term drew a halo
+    there (docs/explanation/renderer.md, "Fallback proxy").
 
     Parameters
     ----------
@@ -391,23 +393,34 @@ def complete_depth(depth: np.ndarray, sigma_z=None) -> tuple[np.ndarray, np.ndar
         Orthogonal depth, NaN unknown; at least one pixel known.
     sigma_z : (H, W) array or float, optional
         The map's own uncertainty (default 0).
+    spread : bool
+        Add the neighbourhood's spread to the completed pixels' sigma_z.
 
     Returns
     -------
     z, sigma : (H, W) float32
         Known pixels keep their depth and ``sigma_z``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> z = np.array([[2.0, np.nan, 4.0]])
+    >>> zc, s = complete_depth(z, 0.1)
+    >>> bool(2.0 < zc[0, 1] < 4.0), float(s[0, 1])
+    (True, 0.10000000149011612)
     """
     z = np.asarray(depth, np.float64)
     known = np.isfinite(z) & (z > 0)
     if not known.any():
         raise VibrInputError("complete_depth needs at least one known depth")
     w = np.where(known, 1.0 / np.where(known, z, 1.0), 0.0)
-    m = _push_pull(np.stack([w, w * w], axis=-1), known.astype(np.float64))
+    m = _push_pull(np.stack([w, w * w] if spread else [w], axis=-1), known.astype(np.float64))
     zf = 1.0 / np.maximum(m[..., 0], 1e-300)
-    spread = zf * zf * np.sqrt(np.maximum(m[..., 1] - m[..., 0] ** 2, 0.0))
-    own = np.broadcast_to(np.asarray(0.0 if sigma_z is None else sigma_z, np.float64), z.shape)
-    sig = np.where(known, own, np.sqrt(spread ** 2 + np.nan_to_num(own) ** 2))
-    return np.where(known, z, zf).astype(np.float32), sig.astype(np.float32)
+    own = np.nan_to_num(np.broadcast_to(np.asarray(0.0 if sigma_z is None else sigma_z, np.float64), z.shape))
+    if spread:
+        dev = zf * zf * np.sqrt(np.maximum(m[..., 1] - m[..., 0] ** 2, 0.0))
+        own = np.where(known, own, np.sqrt(dev ** 2 + own ** 2))
+    return np.where(known, z, zf).astype(np.float32), own.astype(np.float32)
 
 
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
@@ -415,7 +428,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
                    min_fraction: float = 0.0, flat_std: float | None = None,
                    complete: bool = False, backdrop: bool = False,
-                   backdrop_sigma_rel: float = BACKDROP_SIGMA_Z_REL, backdrop_core: bool = False) -> Scene:
+                   backdrop_sigma_rel: float = BACKDROP_SIGMA_Z_REL, backdrop_core: bool = False,
+                   complete_spread: bool = False) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -435,8 +449,9 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     largest ``D_k``. In views with less than ``min_fraction`` of their pixels unknown, only
     the unknown pixels :func:`flat_pixels` finds flat at ``flat_std`` get the plane (none
     when ``flat_std`` is None); the others stay unknown, or with ``complete`` take the depth
-    :func:`complete_depth` gives them from the view's known depth and its large sigma_z
-    (also marked as fallback). With ``backdrop``, in every view, only the view's backdrop
+    :func:`complete_depth` gives them from the view's known depth and its own sigma_z there
+    (also marked as fallback; ``complete_spread``: plus the neighbourhood's spread, the
+    former rule). With ``backdrop``, in every view, only the view's backdrop
     (:func:`backdrop_pixels`) gets the plane, with ``sigma_z = backdrop_sigma_rel · D_k``
     (:data:`BACKDROP_SIGMA_Z_REL`), and ``min_fraction`` / ``flat_std`` are not read; its
     other unknown pixels are left, or completed with ``complete``. ``backdrop_core``: the
@@ -494,7 +509,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         if bg is not None:  # the backdrop's photograph is flat: a depth error moves it onto the same colour
             s[unknown] = float(backdrop_sigma_rel) * D
         if textured.any():  # a surface stereo missed: its neighbourhood's depth, and how much that varies
-            zc, sc = complete_depth(np.where(known, z, np.nan), s)
+            zc, sc = complete_depth(np.where(known, z, np.nan), s, spread=complete_spread)
             z, s = np.where(textured, zc, z), np.where(textured, sc, s)
         views.append(v.replace(depth=z, sigma_z=s, fallback=unknown | textured))
         info[v.name] = {"depth": D, "fraction": float((unknown | textured).mean())}
