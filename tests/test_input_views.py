@@ -1,6 +1,6 @@
 """A render at a source's own camera gives that photograph back, even where the sources'
 depth has holes (docs/explanation/renderer.md, "A source's own camera"): the unknown pixels
-are completed from their view's depth with a large sigma_z, and a pixel the target sees
+are completed from their view's depth, and a pixel the target sees
 along its own ray is never hidden by another view's surface."""
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ def test_a_render_at_a_sources_camera_gives_its_photograph_back(holed):
         assert samples.meta["counts"][ref.name]["occluded"] == 0  # nothing hides its own pixels
         res = render(src, ref.camera)
         assert res.coverage[2:-2, 2:-2].mean() > 0.99  # the image edge lands on the edge of its cells
-        assert psnr(res.image, ref.image, border=2) > 44.0  # all pixels
+        p = psnr(res.image, ref.image, border=2)  # all pixels
         # before: the holes' pixels dropped, and the view's own pixels hidden by others' surfaces
         old = render(src, ref.camera, geometry_kw={"same_ray_px": 0.0})
-        assert psnr(old.image, ref.image, border=2) < 42.0
+        assert p > 42.5 and p > psnr(old.image, ref.image, border=2) + 2.0
 
 
 def test_completed_depth_is_a_mean_of_its_neighbourhood_with_the_maps_sigma():

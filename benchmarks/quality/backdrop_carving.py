@@ -67,8 +67,8 @@ def rules(sigmas=()):
 
     def auto_with(rel=BACKDROP_SIGMA_Z_REL, core=False, spread=False):
         def rule(s):
-            out = fallback_depth(s, backdrop=True, complete=True, backdrop_sigma_rel=rel, backdrop_core=core,
-                                 complete_spread=spread)
+            out = fallback_depth(s, backdrop=True, complete="spread" if spread else True, backdrop_sigma_rel=rel,
+                                 backdrop_core=core)
             return carve_silhouettes(out, {n: i["backdrop_core"] for n, i in out.meta.get("fallback", {}).items()
                                            if "backdrop_core" in i})
         return rule

@@ -5,8 +5,7 @@ Stereo leaves source pixels without depth. Before, ``fallback="auto"`` gave only
 ones (and the views mostly unknown) the fallback plane and dropped the textured ones, and
 every fallback pixel was hidden wherever a known surface landed: a render at a source's own
 camera lost what that photograph shows there. After, the textured ones are completed from
-their view's known depth with a sigma_z that says how much it varies there
-(:func:`vibr.geometry.proxy.complete_depth`), and a pixel the target sees along its own
+their view's known depth (:func:`vibr.geometry.proxy.complete_depth`), and a pixel the target sees along its own
 ray (:func:`vibr.geometry.sampling.same_ray`) is placed with the known geometry and never
 hidden.
 
@@ -44,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
-from _common import data_dir  # noqa: E402
+from _common import ROOT, data_dir  # noqa: E402
 
 
 def variants():
@@ -141,8 +140,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache-dir", default=None, help="depth cache folder (default: vibr's)")
     ap.add_argument("--size", type=int, default=192, help="synthetic image width")
     ap.add_argument("--skip-fountain", action="store_true")
-    ap.add_argument("--frames-dir", default="input_views_frames",
-                    help="where the fly-through's frames go (before/, after/; default ./input_views_frames)")
+    ap.add_argument("--frames-dir", default=str(ROOT / "out" / "input_views"),
+                    help="where the fly-through's frames go (before/, after/; default out/input_views, git-ignored)")
     args = ap.parse_args(argv)
     cases = [] if args.skip_fountain else list(fountain_cases(args.cache_dir))
     cases += list(synthetic_cases(args.size))

@@ -117,6 +117,9 @@ D_LAMS = (0.8, 1.0, 1.4, 2.0, 2.8)
 CONSISTENCY = 24.0
 CONSISTENCY_OTHERS = (12.0, 48.0)
 NOGEO_LAYOUTS = ("arc", "free", "handheld")
+#: the library's default before the last change of defaults: a report case renders it too, so
+#: the page shows what the change did to the photographs (column "previous")
+PREVIOUS = "γ0.3 λ0.8 P V4 C D"
 #: the targets of the ring family (:func:`ring_cases`)
 RING_TARGETS = (4, 11)
 
@@ -276,8 +279,9 @@ def grid_edges(chosen, labels):
 
 
 def report_labels(chosen):
-    """What a *report* case renders: the chosen setting beside ULR, BVS and the library's default."""
-    return list(dict.fromkeys(["ULR", "BVS", chosen, library_label()]))
+    """What a *report* case renders: the chosen setting beside ULR, BVS, the library's default
+    and the previous one (:data:`PREVIOUS`)."""
+    return list(dict.fromkeys(["ULR", "BVS", chosen, library_label(), PREVIOUS]))
 
 
 def table(reps, chosen):
@@ -308,9 +312,10 @@ def table(reps, chosen):
          "(rendered after the choice with the chosen setting, ULR, BVS and the library's default only). "
          f"*library*: the library's default setting ({lib}). "
          "Estimated depth: from the sources only, cached (`vibr.stereo.cache`).", "",
-         "| case | split | ULR | BVS | chosen | library | auto (γ, λ) | oracle (setting) | chosen − BVS | "
+         f"*previous*: the library's default before the last change of defaults ({PREVIOUS}).", "",
+         "| case | split | ULR | BVS | chosen | library | previous | auto (γ, λ) | oracle (setting) | chosen − BVS | "
          "chosen − ULR | tune / render |",
-         "|---|---|---|---|---|---|---|---|---|---|---|"]
+         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     f = lambda d: f"{d['all']:.2f} / {d['covered']:.2f}"  # noqa: E731
     for r in reps:
         R = r["results"]
@@ -321,8 +326,9 @@ def table(reps, chosen):
             o = f"{R[orc]['all']:.2f} ({orc})"
         au = f"{f(R['auto'])} ({a['gamma']:g}, {a['lam']:g})" if a else "—"
         ratio = f"{a['ratio']:.2f}" if a else "—"
+        prev = f(R[PREVIOUS]) if PREVIOUS in R else "—"
         L.append(f"| {r['name']} | {r['split']} | {f(R['ULR'])} | {f(R['BVS'])} | {f(R[chosen])} | "
-                 f"{f(R[lib])} | {au} | {o} | "
+                 f"{f(R[lib])} | {prev} | {au} | {o} | "
                  f"{R[chosen]['all'] - R['BVS']['all']:+.2f} | {R[chosen]['all'] - R['ULR']['all']:+.2f} | "
                  f"{ratio} |")
     L.append("")
@@ -333,6 +339,8 @@ def table(reps, chosen):
         mean = lambda k: np.mean([r["results"][k]["all"] for r in sub])  # noqa: E731
         line = (f"* mean over {split} ({len(sub)} cases), all pixels: ULR {mean('ULR'):.2f}, BVS {mean('BVS'):.2f}, "
                 f"chosen {mean(chosen):.2f}, library {mean(lib):.2f}")
+        if all(PREVIOUS in r["results"] for r in sub):
+            line += f", previous {mean(PREVIOUS):.2f}"
         if split == "choose":
             orc = np.mean([max(r["results"][lab]["all"] for lab in labs) for r in sub])
             line += f", auto {mean('auto'):.2f}, oracle {orc:.2f}"
@@ -343,6 +351,8 @@ def table(reps, chosen):
               f"so the library's default ({lib}) stays until a wider grid is swept."]
     L += ["", "The targets (all pixels, on the *report* half):", "",
           f"* chosen: {_targets(reps, chosen)}", f"* library: {_targets(reps, lib)}"]
+    if all(PREVIOUS in r["results"] for r in reps if r["split"] == "report"):
+        L.append(f"* previous: {_targets(reps, PREVIOUS)}")
     ratios = [r["auto"]["ratio"] for r in reps if r["auto"]]
     over = sum(x > 1.0 for x in ratios)
     L.append(f"* auto: tuning time / full-size render on the *choose* half: median {np.median(ratios):.2f}, "

@@ -427,9 +427,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
                    sigma_rel: float = FALLBACK_SIGMA_Z_REL, default_sigma_rel: float | None = None,
                    percentile: float = FALLBACK_PERCENTILE, common: bool = False,
                    min_fraction: float = 0.0, flat_std: float | None = None,
-                   complete: bool = False, backdrop: bool = False,
-                   backdrop_sigma_rel: float = BACKDROP_SIGMA_Z_REL, backdrop_core: bool = False,
-                   complete_spread: bool = False) -> Scene:
+                   complete: bool | str = False, backdrop: bool = False,
+                   backdrop_sigma_rel: float = BACKDROP_SIGMA_Z_REL, backdrop_core: bool = False) -> Scene:
     """Give the source pixels of unknown depth (NaN) a fallback proxy: a plane of their view.
 
     Stereo leaves untextured regions (a black backdrop, the sky, a plain object face)
@@ -450,7 +449,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     the unknown pixels :func:`flat_pixels` finds flat at ``flat_std`` get the plane (none
     when ``flat_std`` is None); the others stay unknown, or with ``complete`` take the depth
     :func:`complete_depth` gives them from the view's known depth and its own sigma_z there
-    (also marked as fallback; ``complete_spread``: plus the neighbourhood's spread, the
+    (also marked as fallback; ``complete="spread"``: plus the neighbourhood's spread, the
     former rule). With ``backdrop``, in every view, only the view's backdrop
     (:func:`backdrop_pixels`) gets the plane, with ``sigma_z = backdrop_sigma_rel · D_k``
     (:data:`BACKDROP_SIGMA_Z_REL`), and ``min_fraction`` / ``flat_std`` are not read; its
@@ -509,7 +508,7 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         if bg is not None:  # the backdrop's photograph is flat: a depth error moves it onto the same colour
             s[unknown] = float(backdrop_sigma_rel) * D
         if textured.any():  # a surface stereo missed: its neighbourhood's depth, and how much that varies
-            zc, sc = complete_depth(np.where(known, z, np.nan), s, spread=complete_spread)
+            zc, sc = complete_depth(np.where(known, z, np.nan), s, spread=complete == "spread")
             z, s = np.where(textured, zc, z), np.where(textured, sc, s)
         views.append(v.replace(depth=z, sigma_z=s, fallback=unknown | textured))
         info[v.name] = {"depth": D, "fraction": float((unknown | textured).mean())}
