@@ -250,6 +250,22 @@ def sparse_cases():
             for lo in SPARSE_LAYOUTS for n in (2, 4) for sd in (0, 1)]
 
 
+#: the no-geometry family (:func:`nogeo_scene`): its layouts and seeds
+NOGEO_LAYOUTS = ("arc", "free", "handheld")
+NOGEO_SEEDS = (0, 1)
+
+
+def nogeo_scene(layout: str, seed: int):
+    """(sources without depth, target View, the sources' exact depth by name) of a no-geometry
+    case: the middle of 7 synthetic views of 256×192 and the 6 others, whose depth a user
+    would have to estimate."""
+    from vibr.synthetic import make_scene
+
+    src, tv = make_scene(layout, n_views=7, width=256, height=192, seed=seed).split(3)
+    truth = {v.name: v.depth for v in src.views}
+    return src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views]), tv, truth
+
+
 def sweep_sources(cache, case):
     """(sources with depth, target View) of a sweep case; estimated depth through the depth cache."""
     from vibr.geometry.selection import select_views
@@ -268,9 +284,7 @@ def sweep_sources(cache, case):
             sc = sc.replace(views=[v.replace(depth=None, sigma_z=None) for v in sc.views])
         return prepare(sc, 3, n_views=case["n"])
     if case["kind"] == "nogeo":
-        sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=case["seed"])
-        src, tv = sc.split(3)
-        src = src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views])
+        src, tv, _ = nogeo_scene(case["layout"], case["seed"])
         return scene_with_depth(src, depth="estimated"), tv
     if case["kind"] in ("cotton", "backgammon"):
         sc = cache.get(f"hci2016_{case['kind']}", 1.0)

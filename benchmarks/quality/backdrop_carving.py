@@ -23,7 +23,7 @@ unknown where the photograph is flat or the ray misses the object); the real sce
 reported without tuning:
 
 * rings: views 4 and 11 from their 4 best views (given depth);
-* ``--nogeo``: the sweep's no-geometry scenes (``sweep_defaults.nogeo_cases``: arc, free,
+* ``--nogeo``: the sweep's no-geometry scenes (``_common.nogeo_scene``: arc, free,
   hand-held, seeds 0 and 1, the middle of 7 views from the 6 others, estimated depth),
   procedural as well, without a backdrop;
 * ``--real``: Middlebury templeSR0004, 0008 and 0012 from their 4 best views (estimated
@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
-from _common import data_dir  # noqa: E402
+from _common import NOGEO_LAYOUTS, NOGEO_SEEDS, data_dir, nogeo_scene  # noqa: E402
 
 BLACK = 10  # grey levels: a photograph's pixel is black when every channel is at most this
 
@@ -85,16 +85,15 @@ def cases(real: bool, nogeo: bool = False):
     from vibr.io import load_scene
     from vibr.pipeline import prepare
     from vibr.stereo.cache import scene_with_depth
-    from vibr.synthetic import RING_KINDS, make_scene, ring_scene
+    from vibr.synthetic import RING_KINDS, ring_scene
 
     for kind in RING_KINDS:
         sc = ring_scene(kind)
         for t in (4, 11):
             raw, tv = prepare(sc, t, n_views=4, fallback=False)
             yield f"ring {kind} {t}", raw, tv, ~np.isfinite(sc.meta["truth_depth"][tv.name])
-    for layout, seed in [(lo, sd) for lo in ("arc", "free", "handheld") for sd in (0, 1)] if nogeo else []:
-        src, tv = make_scene(layout, n_views=7, width=256, height=192, seed=seed).split(3)
-        src = src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views])
+    for layout, seed in [(lo, sd) for lo in NOGEO_LAYOUTS for sd in NOGEO_SEEDS] if nogeo else []:
+        src, tv, _ = nogeo_scene(layout, seed)
         yield f"no geometry {layout} seed {seed}", scene_with_depth(src, depth="estimated", fallback="never"), tv, None
     if not real:
         return

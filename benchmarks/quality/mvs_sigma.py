@@ -8,7 +8,7 @@ sweep's heuristic (cost curvature and the agreeing partners' spread) is multipli
 library's scale) and multiplied by each factor ``f`` of ``--factors``.
 
 Protocol, fixed before any measurement: the factor is chosen on the procedural scenes only,
-the sweep's no-geometry cases (``sweep_defaults.nogeo_cases``: arc, free and hand-held
+the sweep's no-geometry cases (``_common.nogeo_scene``: arc, free and hand-held
 layouts, seeds 0 and 1, the middle of 7 views of 256×192 rendered from the 6 others with the
 depth estimated from them, the fallback where it is unknown): the best mean all-pixel PSNR of
 the default ``gradient`` render. ``--real`` reports fountain-P11 views 0002, 0005, 0008 at
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
-from _common import data_dir  # noqa: E402
+from _common import NOGEO_LAYOUTS, NOGEO_SEEDS, data_dir, nogeo_scene  # noqa: E402
 
 BORDER = 2
 
@@ -42,13 +42,10 @@ BORDER = 2
 def procedural():
     """(name, sources with estimated depth and no fallback, target, exact depth of the sources)."""
     from vibr.stereo.cache import scene_with_depth
-    from vibr.synthetic import make_scene
 
-    for layout in ("arc", "free", "handheld"):
-        for seed in (0, 1):
-            src, tv = make_scene(layout, n_views=7, width=256, height=192, seed=seed).split(3)
-            truth = {v.name: v.depth for v in src.views}
-            src = src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views])
+    for layout in NOGEO_LAYOUTS:
+        for seed in NOGEO_SEEDS:
+            src, tv, truth = nogeo_scene(layout, seed)
             yield (f"no geometry {layout} seed {seed}", scene_with_depth(src, depth="estimated", fallback="never"),
                    tv, truth)
 

@@ -79,6 +79,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
 from _common import (  # noqa: E402  (the cases other studies share)
+    NOGEO_LAYOUTS,
+    NOGEO_SEEDS,
     RESULTS,
     ROOT,
     SWEEP_BORDER,
@@ -116,7 +118,6 @@ D_LAMS = (0.8, 1.0, 1.4, 2.0, 2.8)
 #: other scales tried at the former default's (gamma, lam)
 CONSISTENCY = 24.0
 CONSISTENCY_OTHERS = (12.0, 48.0)
-NOGEO_LAYOUTS = ("arc", "free", "handheld")
 #: the library's default before the last change of defaults: a report case renders it too, so
 #: the page shows what the change did to the photographs (column "previous")
 PREVIOUS = "γ0.3 λ0.8 P V4 C D"
@@ -179,7 +180,7 @@ def nogeo_cases():
     *choose* (procedural)."""
     return [dict(kind="nogeo", layout=lo, seed=sd, name=f"no geometry {lo} seed {sd}", family="no geometry",
                  split=scene_split("nogeo"))
-            for lo in NOGEO_LAYOUTS for sd in (0, 1)]
+            for lo in NOGEO_LAYOUTS for sd in NOGEO_SEEDS]
 
 
 def ring_cases():
