@@ -207,7 +207,7 @@ def seen_count(scene, ref: int, views, tol: float = 0.02) -> np.ndarray:
 
 # -- the defaults sweep's cases (quality/sweep_defaults.py and the studies that share them) --
 #: the case kinds built by ``vibr.synthetic``: the only scenes a setting is ever chosen on
-PROCEDURAL_KINDS = ("synthetic", "sparse", "nogeo", "ring")
+PROCEDURAL_KINDS = ("synthetic", "sparse", "nogeo", "ring", "own camera")
 
 
 def scene_split(kind: str) -> str:
@@ -266,6 +266,16 @@ def nogeo_scene(layout: str, seed: int):
     return src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views]), tv, truth
 
 
+def holed_scene(seed: int, size: int = 192):
+    """7 free-layout synthetic views of ``size`` × ``5·size/6`` whose exact depth has a fifth of
+    its pixels unknown, in blobs (:func:`vibr.synthetic.degrade_depth`): what stereo leaves."""
+    from vibr.synthetic import degrade_depth, make_scene
+
+    sc = make_scene("free", n_views=7, width=size, height=size * 5 // 6, seed=seed)
+    return sc.replace(views=[v.replace(depth=degrade_depth(v.depth, holes=0.2, hole_size=6, seed=i))
+                             for i, v in enumerate(sc.views)])
+
+
 def sweep_sources(cache, case):
     """(sources with depth, target View) of a sweep case; estimated depth through the depth cache."""
     from vibr.geometry.selection import select_views
@@ -273,6 +283,12 @@ def sweep_sources(cache, case):
     from vibr.stereo.cache import scene_with_depth
     from vibr.synthetic import make_scene, ring_scene
 
+    if case["kind"] == "own camera":  # a source's own camera, every view a source
+        from vibr.geometry import apply_fallback
+
+        holed = holed_scene(case["seed"])
+        t = holed.views[case["target"]]  # renamed: a target View named as a source holds it out
+        return apply_fallback(holed, "auto"), t.replace(name=f"{t.name} at its camera")
     if case["kind"] == "ring":  # the matcher-like depth of ring_scene, the fallback where unknown
         return prepare(ring_scene(case["ring"]), case["target"], n_views=4)
     if case["kind"] == "synthetic":

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
-from _common import ROOT, data_dir  # noqa: E402
+from _common import ROOT, data_dir, holed_scene  # noqa: E402
 
 
 def variants():
@@ -108,14 +108,10 @@ def flythrough_rows(cache_dir, out_dir):
 
 
 def synthetic_cases(size: int, seeds=(0, 1)):
-    from vibr.synthetic import degrade_depth, make_scene
-
     for seed in seeds:
-        sc = make_scene("free", n_views=7, width=size, height=size * 5 // 6, seed=seed)
-        holed = sc.replace(views=[v.replace(depth=degrade_depth(v.depth, holes=0.2, hole_size=6, seed=i))
-                                  for i, v in enumerate(sc.views)])
+        holed = holed_scene(seed, size)
         for t in (0, 3):
-            yield f"synthetic seed {seed} view {t} at its camera", holed, sc.views[t].camera, sc.views[t]
+            yield f"synthetic seed {seed} view {t} at its camera", holed, holed.views[t].camera, holed.views[t]
         src, tv = holed.split(3)
         yield f"synthetic seed {seed} view 3 held out", src, tv, tv
 

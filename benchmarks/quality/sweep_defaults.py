@@ -21,7 +21,10 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
   estimated from them as ``vibr eval`` does for a scene without depth maps (the fallback
   proxy where it is unknown);
 * rings (:func:`ring_cases`): views 4 and 11 of ``vibr.synthetic.ring_scene`` (a textureless
-  object on black, a textured one on grey, 160×120) from their 4 best views.
+  object on black, a textured one on grey, 160×120) from their 4 best views;
+* own camera (:func:`own_camera_cases`): views 0 and 3 of 7 free-layout synthetic views
+  (192×160, seeds 0 and 1, exact depth with a fifth unknown in blobs) rendered at their own
+  cameras from all 7: a frame at a photograph gives that photograph back.
 
 Estimated depth is computed from the sources only (the target never takes part) and cached
 on disk (``vibr.stereo.cache``, default ~/.cache/vibr): a second run is rendering only.
@@ -53,7 +56,7 @@ coarser sources).
 Metrics: PSNR over all pixels and over the covered pixels (those every setting of the case
 reconstructed), 2-pixel border excluded. The held-out split is by scene and fixed before any
 number is seen (``_common.scene_split``): every scene ``vibr.synthetic`` generates (the synthetic,
-few-view, no-geometry and ring families) is "choose", every photographed scene (cotton, backgammon,
+few-view, no-geometry, ring and own-camera families) is "choose", every photographed scene (cotton, backgammon,
 fountain, temple) is "report". The choose cases render every setting; the default is the setting
 with the best mean all-pixel PSNR over them. Only then are the report cases rendered, with the
 chosen setting, ULR, BVS and the auto weights, so no photograph takes part in the choice.
@@ -181,6 +184,17 @@ def nogeo_cases():
     return [dict(kind="nogeo", layout=lo, seed=sd, name=f"no geometry {lo} seed {sd}", family="no geometry",
                  split=scene_split("nogeo"))
             for lo in NOGEO_LAYOUTS for sd in NOGEO_SEEDS]
+
+
+def own_camera_cases():
+    """The sweep's own-camera family: a render at a source's own camera should give its
+    photograph back (a fly-through starts and ends at photographs). Views 0 and 3 of
+    ``_common.holed_scene`` (seeds 0 and 1: 7 free-layout views of 192×160, exact depth with a
+    fifth of it unknown in blobs) from all 7 views, the fallback where the depth is unknown
+    (procedural: *choose*)."""
+    return [dict(kind="own camera", seed=sd, target=t, name=f"own camera seed {sd} view {t}", family="own camera",
+                 split=scene_split("own camera"))
+            for sd in (0, 1) for t in (0, 3)]
 
 
 def ring_cases():
@@ -410,7 +424,7 @@ def main(argv=None):
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases() + ring_cases()
+    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases() + ring_cases() + own_camera_cases()
              if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     fname = lambda c: out / (c["name"].replace(" ", "_") + ".json")  # noqa: E731
     choose_cases = [c for c in cases if c["split"] == "choose"]
