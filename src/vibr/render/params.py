@@ -75,7 +75,7 @@ class RenderParams:
         "gradient-term weight, vibr's units (forward differences; the paper's through preset paper)", "", 0.45,
         lo=0.0, auto=True, flag="--gamma", metavar="G|auto")
     lam: Union[float, Auto] = _param(
-        "TV weight, where the colour term's density is lam_density views", "intensity scale", 1.4, lo=0.0,
+        "TV weight, where the colour term's density is lam_density views", "intensity scale", 1.0, lo=0.0,
         auto=True, flag="--lam", metavar="L|auto")
     sigma_s: float = _param("sensor noise (std. dev.)", "intensity scale", 1.0, lo=0.0, lo_open=True,
                             flag="--sigma-s")
@@ -318,7 +318,7 @@ def range_text(f) -> str:
 
 def default_text(f, overrides: dict | None = None) -> str:
     """A field's default as text, and the methods that override it (``overrides``: method
-    name → its overrides), e.g. "1.4 (savsr: 0.3, bvs: 0.3)"."""
+    name → its overrides), e.g. "1 (savsr: 0.3, bvs: 0.3)"."""
     d = f.metadata["default"]
     out = f.metadata["none"] if d is None else _g(d)
     over = [f"{name}: {'none' if o[f.name] is None else _g(o[f.name])}"
