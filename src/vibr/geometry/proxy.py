@@ -416,11 +416,12 @@ def complete_depth(depth: np.ndarray, sigma_z=None, *, spread: bool = False) -> 
     w = np.where(known, 1.0 / np.where(known, z, 1.0), 0.0)
     m = _push_pull(np.stack([w, w * w] if spread else [w], axis=-1), known.astype(np.float64))
     zf = 1.0 / np.maximum(m[..., 0], 1e-300)
-    own = np.nan_to_num(np.broadcast_to(np.asarray(0.0 if sigma_z is None else sigma_z, np.float64), z.shape))
+    own = np.broadcast_to(np.asarray(0.0 if sigma_z is None else sigma_z, np.float64), z.shape)
+    filled = np.nan_to_num(own)
     if spread:
         dev = zf * zf * np.sqrt(np.maximum(m[..., 1] - m[..., 0] ** 2, 0.0))
-        own = np.where(known, own, np.sqrt(dev ** 2 + own ** 2))
-    return np.where(known, z, zf).astype(np.float32), own.astype(np.float32)
+        filled = np.sqrt(dev ** 2 + filled ** 2)
+    return np.where(known, z, zf).astype(np.float32), np.where(known, own, filled).astype(np.float32)
 
 
 def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
