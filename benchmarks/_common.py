@@ -255,13 +255,16 @@ NOGEO_LAYOUTS = ("arc", "free", "handheld")
 NOGEO_SEEDS = (0, 1)
 
 
-def nogeo_scene(layout: str, seed: int):
+def nogeo_scene(layout: str, seed: int, capture: dict | None = None):
     """(sources without depth, target View, the sources' exact depth by name) of a no-geometry
     case: the middle of 7 synthetic views of 256×192 and the 6 others, whose depth a user
-    would have to estimate."""
+    would have to estimate; ``capture``: the sources' images as
+    :func:`vibr.synthetic.photograph` records them with these arguments (the target keeps the
+    ray-cast image)."""
     from vibr.synthetic import make_scene
 
     src, tv = make_scene(layout, n_views=7, width=256, height=192, seed=seed).split(3)
+    src = _captured(src, capture, seed)
     truth = {v.name: v.depth for v in src.views}
     return src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views]), tv, truth
 
@@ -276,31 +279,54 @@ def holed_scene(seed: int, size: int = 192):
                              for i, v in enumerate(sc.views)])
 
 
-def sweep_sources(cache, case):
-    """(sources with depth, target View) of a sweep case; estimated depth through the depth cache."""
+#: How the sweep's procedural scenes are photographed (:func:`vibr.synthetic.photograph`): a
+#: ray-cast image has no blur, noise or exposure difference, and photographs have all three.
+#: Fixed before any sweep read them.
+CAPTURE = dict(noise=2.0, blur=0.5, exposure=0.05)
+
+
+def _captured(scene, capture: dict | None, seed: int = 0):
+    """``scene`` photographed with ``capture`` (None: as ray-cast)."""
+    from vibr.synthetic import photograph
+
+    return scene if capture is None else photograph(scene, seed=seed, **capture)
+
+
+def sweep_sources(cache, case, capture: dict | None = None):
+    """(sources with depth, target View) of a sweep case; estimated depth through the depth
+    cache. ``capture``: a procedural scene's sources as :func:`vibr.synthetic.photograph`
+    records them with these arguments (e.g. :data:`CAPTURE`; None: as ray-cast); its target
+    keeps the ray-cast image, what the render should show (an exposure or noise of its own
+    would only add to every method's error), except at a source's own camera, where the
+    render should give back the photograph."""
     from vibr.geometry.selection import select_views
     from vibr.pipeline import prepare
     from vibr.stereo.cache import scene_with_depth
     from vibr.synthetic import make_scene, ring_scene
 
+    seed = case.get("seed", 0)
     if case["kind"] == "own camera":  # a source's own camera, every view a source
         from vibr.geometry import apply_fallback
 
-        holed = holed_scene(case["seed"])
+        holed = _captured(holed_scene(seed), capture, seed)
         t = holed.views[case["target"]]  # renamed: a target View named as a source holds it out
         return apply_fallback(holed, "auto"), t.replace(name=f"{t.name} at its camera")
     if case["kind"] == "ring":  # the matcher-like depth of ring_scene, the fallback where unknown
-        return prepare(ring_scene(case["ring"]), case["target"], n_views=4)
+        sc = ring_scene(case["ring"])
+        src, tv = prepare(_captured(sc, capture), case["target"], n_views=4)  # the backdrop found in the photographs
+        return src, tv.replace(image=sc[tv.name].image)
     if case["kind"] == "synthetic":
         sc = make_scene(case["layout"], width=128, height=128)
-        return sc.split(len(sc) // 2)
+        src, tv = sc.split(len(sc) // 2)
+        return _captured(src, capture), tv
     if case["kind"] == "sparse":
-        sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=case["seed"])
+        sc = make_scene(case["layout"], n_views=7, width=256, height=192, seed=seed)
         if case["layout"] == "pan":  # a pan has no depth: the sphere round the shared centre
             sc = sc.replace(views=[v.replace(depth=None, sigma_z=None) for v in sc.views])
-        return prepare(sc, 3, n_views=case["n"])
+        src, tv = prepare(_captured(sc, capture, seed), 3, n_views=case["n"])
+        return src, tv.replace(image=sc[tv.name].image)
     if case["kind"] == "nogeo":
-        src, tv, _ = nogeo_scene(case["layout"], case["seed"])
+        src, tv, _ = nogeo_scene(case["layout"], seed, capture)
         return scene_with_depth(src, depth="estimated"), tv
     if case["kind"] in ("cotton", "backgammon"):
         sc = cache.get(f"hci2016_{case['kind']}", 1.0)

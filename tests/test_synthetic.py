@@ -309,3 +309,32 @@ def test_degrade_quantise():
     np.testing.assert_allclose(k, np.round(k), atol=1e-3)  # 1/z on a grid of step q
     assert np.abs(1 / out - 1 / d).max() <= q / 2 + 1e-5
     assert len(np.unique(out)) < 0.1 * out.size
+
+
+def test_photograph_noise_gain_blur_and_8_bits():
+    """photograph: 8-bit images; with only noise the residual has the asked std; with only
+    exposure each view is its ray-cast image times one gain within the bound; a blur lowers
+    the image's high frequencies; cameras and depth are kept; the same seed, the same images."""
+    from vibr.synthetic import photograph
+
+    sc = make_scene("free", n_views=3, width=96, height=72, seed=0)
+    noisy = photograph(sc, noise=3.0, blur=0.0, exposure=0.0, seed=5)
+    for a, b in zip(sc.views, noisy.views):
+        assert np.array_equal(np.round(b.image * 255), b.image * 255)
+        inner = (a.image > 0.05) & (a.image < 0.95)  # unclipped
+        assert abs(np.std((b.image - a.image)[inner]) * 255 - 3.0) < 0.15
+        assert b.camera is a.camera and np.array_equal(b.depth, a.depth, equal_nan=True)
+    gains = []
+    for a, b in zip(sc.views, photograph(sc, noise=0.0, blur=0.0, exposure=0.1).views):
+        m = (a.image > 0.1) & (a.image < 0.85)
+        g = float(np.median(b.image[m] / a.image[m]))
+        assert 0.9 - 0.01 <= g <= 1.1 + 0.01 and np.abs(b.image[m] - g * a.image[m]).max() <= 1 / 255
+        gains.append(g)
+    assert np.ptp(gains) > 0.005  # each view its own gain
+    lap = lambda im: np.abs(np.diff(im, 2, axis=1)).mean()  # noqa: E731
+    blurred = photograph(sc, noise=0.0, blur=1.0, exposure=0.0)
+    assert all(lap(b.image) < 0.7 * lap(a.image) for a, b in zip(sc.views, blurred.views))
+    again = photograph(sc, noise=3.0, blur=0.0, exposure=0.0, seed=5)
+    assert all(np.array_equal(a.image, b.image) for a, b in zip(noisy.views, again.views))
+    with pytest.raises(ValueError):
+        photograph(sc, noise=-1.0)

@@ -13,7 +13,7 @@ gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term,
 Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/explanation/method.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
-* ``gamma = 0.45`` gradient-term weight for ``gradient`` and ``lam = 1`` TV weight (grey
+* ``gamma = 0.3`` gradient-term weight for ``gradient`` and ``lam = 0.8`` TV weight (grey
   levels of 255: a 1-grey-level step costs 1 per pixel of edge where 3 views weigh a pixel,
   ``lam_density`` below), with the uniform TV
   (eq. energy_final; vibr's units: forward differences, docs/explanation/renderer.md "One image
@@ -22,7 +22,8 @@ Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/
   the TV weight against the data's sum (``lam_density = 3``), the holes filled by push–pull
   and the preconditioned solver (``precond = True``): chosen together by
   ``benchmarks/quality/sweep_defaults.py``, the best mean all-pixel PSNR over the
-  *choose* half of a sweep (the scenes ``vibr.synthetic`` generates), reported on the other
+  *choose* half of a sweep (the scenes ``vibr.synthetic`` generates, their sources
+  photographed by :func:`vibr.synthetic.photograph`), reported on the other
   half (the photographs: cotton, backgammon, fountain, temple; docs/results/defaults.md); gamma forced to 0 for savsr and bvs,
   which keep their published form (``view_k = 0``, ``precond = False``, ``lam_density = 0``)
   unless given.

@@ -72,10 +72,10 @@ class RenderParams:
     method: str = "gradient"
     alpha: float = _param("colour-term weight (eq. energy_final)", "", 1.0, lo=0.0, flag="--alpha")
     gamma: Union[float, Auto] = _param(
-        "gradient-term weight, vibr's units (forward differences; the paper's through preset paper)", "", 0.45,
+        "gradient-term weight, vibr's units (forward differences; the paper's through preset paper)", "", 0.3,
         lo=0.0, auto=True, flag="--gamma", metavar="G|auto")
     lam: Union[float, Auto] = _param(
-        "TV weight, where the colour term's density is lam_density views", "intensity scale", 1.0, lo=0.0,
+        "TV weight, where the colour term's density is lam_density views", "intensity scale", 0.8, lo=0.0,
         auto=True, flag="--lam", metavar="L|auto")
     sigma_s: float = _param("sensor noise (std. dev.)", "intensity scale", 1.0, lo=0.0, lo_open=True,
                             flag="--sigma-s")
