@@ -23,7 +23,8 @@ the open3d-cpu 0.20 wheel, without a warning: the reason the peer uses ``VoxelBl
 ``--tune`` chooses the peer's voxel (0.5, 1 or 2 pixel footprints), truncation (2, 4 or 8
 voxels) and blend (ULR with 4 views or the best view) as vibr's defaults are chosen: on
 procedural scenes only (vibr.synthetic's arc, free and handheld layouts at 160×120, seed 0, the
-middle view from the others, depth estimated from the sources as in the cases; about a minute
+middle view from the others, the sources photographed as the sweep's, ``_common.CAPTURE``,
+depth estimated from them as in the cases; about a minute
 with the depth cached), by the best mean PSNR over all pixels (a hole counts black, so that no
 setting wins by covering less), then renders the cases with the settings chosen; the page gives
 the whole grid. Without it the peer keeps the recipe above.
@@ -313,17 +314,18 @@ TUNE_SIZE = (160, 120)
 
 def tune_scenes():
     """(name, sources with estimated depth (NaN where stereo left none), target view) of each
-    :data:`TUNE_LAYOUTS` scene, seed 0, at :data:`TUNE_SIZE`; the depth through the depth cache."""
-    from _common import scene_split
+    :data:`TUNE_LAYOUTS` scene, seed 0, at :data:`TUNE_SIZE`, its sources photographed as the
+    sweep's (``_common.CAPTURE``); the depth through the depth cache."""
+    from _common import CAPTURE, scene_split
     from vibr.stereo.cache import estimated_depth
-    from vibr.synthetic import make_scene
+    from vibr.synthetic import make_scene, photograph
 
     assert scene_split("synthetic") == "choose"  # the peer is tuned on no scene it is reported on
     out = []
     for lo in TUNE_LAYOUTS:
         sc = make_scene(lo, width=TUNE_SIZE[0], height=TUNE_SIZE[1], seed=0)
         src, tv = sc.split(len(sc) // 2)
-        out.append((f"synthetic {lo}", estimated_depth(src), tv))
+        out.append((f"synthetic {lo}", estimated_depth(photograph(src, **CAPTURE)), tv))
     return out
 
 
@@ -449,8 +451,8 @@ def tuning_section(tuning) -> list[str]:
     return ["## The peer's settings, chosen on procedural scenes", "",
             f"`--tune` tries every voxel size (in pixel footprints at the sources' median depth), truncation (in "
             f"voxels) and blend below on procedural scenes only ({', '.join(tuning['scenes'])}: vibr.synthetic, "
-            f"{w}×{h}, seed 0, the middle view from the others, depth estimated from the sources as in the cases "
-            "below), as vibr's defaults are chosen, and keeps the best mean PSNR over all pixels (a hole counts "
+            f"{w}×{h}, seed 0, the middle view from the others, the sources photographed as the defaults' sweep's, "
+            "depth estimated from them as in the cases below), as vibr's defaults are chosen, and keeps the best mean PSNR over all pixels (a hole counts "
             f"black, so that no setting wins by covering less): voxel {c['voxel_scale']:g}, truncation "
             f"{c['trunc_voxels']:g} voxels, {'ULR with 4 views' if c['k'] > 1 else 'the best view'}. None of the "
             "cases below takes part.", "",

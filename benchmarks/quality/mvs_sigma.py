@@ -10,7 +10,8 @@ library's scale) and multiplied by each factor ``f`` of ``--factors``.
 Protocol, fixed before any measurement: the factor is chosen on the procedural scenes only,
 the sweep's no-geometry cases (``_common.nogeo_scene``: arc, free and hand-held
 layouts, seeds 0 and 1, the middle of 7 views of 256×192 rendered from the 6 others with the
-depth estimated from them, the fallback where it is unknown): the best mean all-pixel PSNR of
+depth estimated from them, the fallback where it is unknown; the sources photographed as the
+sweep's, ``_common.CAPTURE``): the best mean all-pixel PSNR of
 the default ``gradient`` render. ``--real`` reports fountain-P11 views 0002, 0005, 0008 at
 scale 0.25 (from the 10 others) and templeSR0004 (from its 4 best views), never used to
 choose. ``--lightfield`` measures the light-field estimator's sigma_z the same way, apart (it
@@ -34,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
-from _common import NOGEO_LAYOUTS, NOGEO_SEEDS, data_dir, nogeo_scene  # noqa: E402
+from _common import CAPTURE, NOGEO_LAYOUTS, NOGEO_SEEDS, data_dir, nogeo_scene  # noqa: E402
 
 BORDER = 2
 
@@ -45,7 +46,7 @@ def procedural():
 
     for layout in NOGEO_LAYOUTS:
         for seed in NOGEO_SEEDS:
-            src, tv, truth = nogeo_scene(layout, seed)
+            src, tv, truth = nogeo_scene(layout, seed, CAPTURE)
             yield (f"no geometry {layout} seed {seed}", scene_with_depth(src, depth="estimated", fallback="never"),
                    tv, truth)
 
