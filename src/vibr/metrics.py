@@ -77,6 +77,12 @@ def psnr(img, ref, mask=None, border: int = 0, data_range: float = 1.0) -> float
     mask : (H, W) bool, optional
     border : int
         Pixels excluded on each side (the paper's evaluation uses 2).
+
+    Examples
+    --------
+    >>> ref = np.zeros((4, 4, 3))
+    >>> round(psnr(ref + 0.1, ref), 6)
+    20.0
     """
     e = mse(img, ref, mask, border)
     if e == 0.0:

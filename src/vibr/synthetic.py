@@ -827,6 +827,12 @@ def make_scene(layout: str = "grid", n_views: int | None = None, width: int = 12
     Views are named ``view_000``, ``view_001``, ...; ``meta`` holds ``format="synthetic"``,
     the layout, seed and baseline; the grid layout sets ``scene.grid`` and
     ``meta["grid_pos"]`` (name → (row, col)).
+
+    Examples
+    --------
+    >>> sc = make_scene("grid", n_views=9, width=48, height=48)
+    >>> len(sc), sc.views[0].name, sc.views[0].image.shape, sc.views[0].depth.shape
+    (9, 'view_000', (48, 48, 3), (48, 48))
     """
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise VibrInputError(f"seed must be an integer >= 0 (numpy's rule), got {seed!r}")

@@ -782,6 +782,13 @@ def interpolate(scene, views=None, *, order: str | None = None, n_frames: int | 
         splines (:func:`smooth_keys`): the hand's sway between the frames of a hand-held
         video, which the splines would otherwise follow. 0 (the default): the path passes
         through the cameras.
+
+    Examples
+    --------
+    >>> from vibr.synthetic import make_scene
+    >>> path = interpolate(make_scene("arc", width=32, height=32), n_frames=10)
+    >>> len(path.cameras), path.cameras[0].shape
+    (10, (32, 32))
     """
     from scipy.interpolate import CubicSpline
     from scipy.spatial.transform import Rotation, RotationSpline
