@@ -12,7 +12,7 @@ import pytest
 import vibr
 
 #: functions whose docstring must keep an Examples section
-MUST_HAVE = ("vibr.render.api.render", "vibr.synthetic.make_scene", "vibr.synthetic.photograph",
+MUST_HAVE = ("vibr.camera.Camera", "vibr.render.api.render", "vibr.synthetic.make_scene", "vibr.synthetic.photograph",
              "vibr.metrics.psnr", "vibr.paths.camera_path.interpolate")
 
 

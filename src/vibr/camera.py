@@ -65,6 +65,18 @@ class Camera:
 
     The projection is ``x̃ = K (R X + t)``, ``(x, y) = (x̃₁/x̃₃, x̃₂/x̃₃)`` (Nieto et al.
     2016, §5.2).
+
+    Examples
+    --------
+    A 64×48 camera at the origin looking down +z, its principal point at the image centre:
+
+    >>> K = np.array([[100.0, 0, 31.5], [0, 100.0, 23.5], [0, 0, 1]])
+    >>> cam = Camera(K, np.eye(3), np.zeros(3), 64, 48)
+    >>> xy, z = cam.project([[0.1, -0.2, 2.0]])
+    >>> xy.tolist(), z.tolist()
+    ([[36.5, 13.5]], [2.0])
+    >>> np.round(cam.backproject(xy, z), 12).tolist()
+    [[0.1, -0.2, 2.0]]
     """
 
     K: np.ndarray
