@@ -254,7 +254,7 @@ def run_case(cache, case):
            for k, im in imgs.items()}
     rep = {**case, "size": [int(tv.camera.width), int(tv.camera.height)], "n_sources": len(src),
             "covered_fraction": float(cover.mean()), "results": res, "depth_seconds": round(t_depth, 2),
-            "auto": auto,
+            "auto": auto, "capture": CAPTURE,
             "default_at_run": {k: DEFAULTS[k] for k in ("gamma", "lam", "tv_weighting")},
             "seconds": round(time.perf_counter() - t0, 1), "commit": git_commit()}
     if case.get("file"):  # each case as it completes: a partial run keeps what it measured
@@ -407,12 +407,14 @@ def _targets(reps, k):
 
 
 def _read_done(path, case):
-    """The report of ``case`` in ``path`` if it exists and rendered the settings ``case`` asks."""
+    """The report of ``case`` in ``path`` if it exists and rendered the settings ``case`` asks
+    from sources photographed as :data:`_common.CAPTURE` says."""
     if not path.is_file():
         return None
     rep = json.loads(path.read_text())
     want = case["labels"]
-    return rep if all(lab in rep["results"] for lab in want) and rep["split"] == case["split"] else None
+    same = rep["split"] == case["split"] and rep.get("capture") == CAPTURE
+    return rep if same and all(lab in rep["results"] for lab in want) else None
 
 
 def main(argv=None):
