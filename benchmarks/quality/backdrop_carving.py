@@ -36,7 +36,10 @@ backdrop pixels of the reference (rings: the rays that miss the object; photogra
 every channel at most 10 grey levels), and ULR's all-pixel PSNR. Targets on the temple:
 backdrop error <= 2 grey levels, all-pixel PSNR >= 23 dB.
 
-    python3 benchmarks/quality/backdrop_carving.py [--nogeo] [--real] [--out DIR]   # DIR: PNGs target | before | after | ULR
+``--photographed``: the procedural sources as the defaults' sweep photographs them
+(``_common.CAPTURE``: blur, exposure, sensor noise, 8 bits), the targets ray-cast.
+
+    python3 benchmarks/quality/backdrop_carving.py [--nogeo] [--real] [--photographed] [--out DIR]   # DIR: PNGs target | before | after | ULR
     python3 benchmarks/quality/backdrop_carving.py --backdrop-sigma 0.25,0.05,0.01,0   # the sweep on the rings
 """
 
@@ -49,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: the shared _common
-from _common import NOGEO_LAYOUTS, NOGEO_SEEDS, data_dir, nogeo_scene  # noqa: E402
+from _common import CAPTURE, NOGEO_LAYOUTS, NOGEO_SEEDS, data_dir, nogeo_scene  # noqa: E402
 
 BLACK = 10  # grey levels: a photograph's pixel is black when every channel is at most this
 
@@ -80,20 +83,23 @@ def rules(sigmas=()):
     return out
 
 
-def cases(real: bool, nogeo: bool = False):
-    """(name, raw sources, target view, backdrop mask of the target)."""
+def cases(real: bool, nogeo: bool = False, capture: dict | None = None):
+    """(name, raw sources, target view, backdrop mask of the target); ``capture``: the
+    procedural sources photographed so (:func:`vibr.synthetic.photograph`), the targets kept."""
     from vibr.io import load_scene
     from vibr.pipeline import prepare
     from vibr.stereo.cache import scene_with_depth
-    from vibr.synthetic import RING_KINDS, ring_scene
+    from vibr.synthetic import RING_KINDS, photograph, ring_scene
 
     for kind in RING_KINDS:
         sc = ring_scene(kind)
+        shot = sc if capture is None else photograph(sc, **capture)
         for t in (4, 11):
-            raw, tv = prepare(sc, t, n_views=4, fallback=False)
+            raw, tv = prepare(shot, t, n_views=4, fallback=False)
+            tv = tv.replace(image=sc[tv.name].image)
             yield f"ring {kind} {t}", raw, tv, ~np.isfinite(sc.meta["truth_depth"][tv.name])
     for layout, seed in [(lo, sd) for lo in NOGEO_LAYOUTS for sd in NOGEO_SEEDS] if nogeo else []:
-        src, tv, _ = nogeo_scene(layout, seed)
+        src, tv, _ = nogeo_scene(layout, seed, capture)
         yield f"no geometry {layout} seed {seed}", scene_with_depth(src, depth="estimated", fallback="never"), tv, None
     if not real:
         return
@@ -130,6 +136,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--real", action="store_true", help="also the temple and fountain views (estimated depth)")
     ap.add_argument("--nogeo", action="store_true", help="also the procedural scenes without depth (estimated)")
+    ap.add_argument("--photographed", action="store_true",
+                    help="the procedural sources photographed as the defaults' sweep's (_common.CAPTURE)")
     ap.add_argument("--out", help="folder for the PNGs target | before | after | ULR (after)")
     ap.add_argument("--backdrop-sigma", default="", metavar="X,...",
                     help="also the rule with the backdrop plane's sigma_z X times its depth (rows 'after σ=X')")
@@ -137,7 +145,7 @@ def main(argv=None):
     sigmas = [float(x) for x in args.backdrop_sigma.split(",") if x.strip()]
     print("| case | rule | PSNR all | PSNR covered | backdrop error (grey levels) | ULR all |")
     print("|---|---|---|---|---|---|")
-    for name, raw, tv, backdrop in cases(args.real, args.nogeo):
+    for name, raw, tv, backdrop in cases(args.real, args.nogeo, CAPTURE if args.photographed else None):
         res = measure(raw, tv, backdrop, sigmas)
         for rule, (pa, pc, err, pu, *_) in res.items():
             print(f"| {name} | {rule} | {pa:.2f} | {pc:.2f} | {err:.2f} | {pu:.2f} |", flush=True)
