@@ -96,8 +96,8 @@ def warp_to_next(cam_t, cam_n, depth_t: np.ndarray, depth_n: np.ndarray):
 
 #: Gaussian (px) both frames are low-passed by before the measure's difference (module docstring)
 MEASURE_BLUR = 1.0
-#: (label, spline order of the warp's sampling, low-pass in px) of the two measures
-MEASURES = (("measure", 3, MEASURE_BLUR), ("former", 1, 0.0))
+#: the two measures by label: (spline order of the warp's sampling, low-pass in px)
+MEASURES = {"measure": (3, MEASURE_BLUR), "former": (1, 0.0)}
 
 
 def sample(img: np.ndarray, xy: np.ndarray, order: int) -> np.ndarray:
@@ -106,12 +106,13 @@ def sample(img: np.ndarray, xy: np.ndarray, order: int) -> np.ndarray:
     return map_coordinates(img, [xy[..., 1], xy[..., 0]], order=order, mode="nearest")
 
 
-def frame_difference(g0: np.ndarray, g1: np.ndarray, xy: np.ndarray, measure: str = "measure") -> np.ndarray:
-    """|frame t+1 − frame t warped| (H×W grey levels) for the grey frames ``g0``, ``g1`` under
-    one of :data:`MEASURES`."""
+def frame_difference(g0: np.ndarray, g1: np.ndarray, xy: np.ndarray, order: int = 3,
+                     blur: float = MEASURE_BLUR) -> np.ndarray:
+    """|frame t+1 − frame t warped| (H×W grey levels) for the grey frames ``g0``, ``g1``: both
+    low-passed by a Gaussian of ``blur`` px, frame t sampled at ``xy`` by splines of ``order``
+    (:data:`MEASURES`)."""
     from scipy.ndimage import gaussian_filter
 
-    _, order, blur = next(m for m in MEASURES if m[0] == measure)
     if blur:
         g0, g1 = gaussian_filter(g0, blur), gaussian_filter(g1, blur)
     return np.abs(g1 - sample(g0, xy, order))
@@ -183,7 +184,7 @@ def class_tables(cams, frames, depth, sources, measure: str = "measure") -> None
         n = max(int(keep.sum()), 1)
         row = [t, int(cls[CLASSES[3]].sum())]
         for m in METHODS:
-            diff = frame_difference(grey(frames[m][t]), grey(frames[m][t + 1]), xy, measure)
+            diff = frame_difference(grey(frames[m][t]), grey(frames[m][t + 1]), xy, *MEASURES[measure])
             for c, msk in cls.items():
                 mean[m][c].append(float(diff[msk].mean()) if msk.any() else np.nan)
                 contrib[m][c].append(float(diff[msk].sum()) / n)
@@ -232,8 +233,7 @@ def procedural_table(frames: int) -> None:
         for label, order, lp in candidates:
             cells = []
             for g, qs in zip(grey_frames, q):
-                gs = [gaussian_filter(x, lp) for x in g] if lp else g
-                flk = np.mean([np.abs(gs[t + 1] - sample(gs[t], xy, order))[keep].mean()
+                flk = np.mean([frame_difference(g[t], g[t + 1], xy, order, lp)[keep].mean()
                                for t, (xy, keep) in enumerate(warps)])
                 cells.append(f"{flk:.3f} ({qs:.1f})")
             print(f"| {layout} seed {seed} | {label} | " + " | ".join(cells) + " |")
@@ -292,12 +292,11 @@ def main(argv=None) -> int:
         region = fallback_region(sources, X, keep)
         for m in METHODS:
             g0, g1 = grey(frames[m][t]), grey(frames[m][t + 1])
-            for key, measure in (("", "measure"), ("former_", "former")):
-                d = frame_difference(g0, g1, xy, measure)
+            diffs = {name: frame_difference(g0, g1, xy, *how) for name, how in MEASURES.items()}
+            for key, d in (("", diffs["measure"]), ("former_", diffs["former"])):
                 per[m][key + "all"].append(float(d[keep].mean()) if keep.any() else float("nan"))
                 per[m][key + "region"].append(float(d[region].mean()) if region.any() else float("nan"))
-                if not key:
-                    diff = d
+            diff = diffs["measure"]
             per[m]["n_region"].append(int(region.sum()))
             if t == mid:
                 strips[m] = (frames[m][t], frames[m][t + 1], np.where(keep, diff, 0.0), region)
@@ -326,7 +325,7 @@ def main(argv=None) -> int:
     (work / "results.json").write_text(json.dumps(out, indent=1))
     print(f"\nJSON in {work / 'results.json'}")
     if args.classes:
-        for measure, _, _ in MEASURES:
+        for measure in MEASURES:
             class_tables(cams, frames, depth, sources, measure)
     if args.procedural:
         procedural_table(len(cams))
