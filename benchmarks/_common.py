@@ -207,7 +207,7 @@ def seen_count(scene, ref: int, views, tol: float = 0.02) -> np.ndarray:
 
 # -- the defaults sweep's cases (quality/sweep_defaults.py and the studies that share them) --
 #: the case kinds built by ``vibr.synthetic``: the only scenes a setting is ever chosen on
-PROCEDURAL_KINDS = ("synthetic", "sparse", "nogeo", "ring", "own camera")
+PROCEDURAL_KINDS = ("synthetic", "sparse", "nogeo", "far", "ring", "own camera")
 
 
 def scene_split(kind: str) -> str:
@@ -255,15 +255,21 @@ NOGEO_LAYOUTS = ("arc", "free", "handheld")
 NOGEO_SEEDS = (0, 1)
 
 
-def nogeo_scene(layout: str, seed: int, capture: dict | None = None):
+#: the far-background family: the depth of its façade (``vibr.synthetic.default_world``'s ``far``)
+FAR_DEPTH = 30.0
+
+
+def nogeo_scene(layout: str, seed: int, capture: dict | None = None, far: float | None = None):
     """(sources without depth, target View, the sources' exact depth by name) of a no-geometry
     case: the middle of 7 synthetic views of 256×192 and the 6 others, whose depth a user
     would have to estimate; ``capture``: the sources' images as
     :func:`vibr.synthetic.photograph` records them with these arguments (the target keeps the
-    ray-cast image)."""
-    from vibr.synthetic import make_scene
+    ray-cast image); ``far``: the world with a far façade past the back wall's corner at that
+    depth (:func:`vibr.synthetic.default_world`)."""
+    from vibr.synthetic import default_world, make_scene
 
-    src, tv = make_scene(layout, n_views=7, width=256, height=192, seed=seed).split(3)
+    world = None if far is None else default_world(seed, far=far)
+    src, tv = make_scene(layout, n_views=7, width=256, height=192, seed=seed, world=world).split(3)
     src = _captured(src, capture, seed)
     truth = {v.name: v.depth for v in src.views}
     return src.replace(views=[v.replace(depth=None, sigma_z=None) for v in src.views]), tv, truth
@@ -325,8 +331,8 @@ def sweep_sources(cache, case, capture: dict | None = None):
             sc = sc.replace(views=[v.replace(depth=None, sigma_z=None) for v in sc.views])
         src, tv = prepare(_captured(sc, capture, seed), 3, n_views=case["n"])
         return src, tv.replace(image=sc[tv.name].image)
-    if case["kind"] == "nogeo":
-        src, tv, _ = nogeo_scene(case["layout"], seed, capture)
+    if case["kind"] in ("nogeo", "far"):
+        src, tv, _ = nogeo_scene(case["layout"], seed, capture, FAR_DEPTH if case["kind"] == "far" else None)
         return scene_with_depth(src, depth="estimated"), tv
     if case["kind"] in ("cotton", "backgammon"):
         sc = cache.get(f"hci2016_{case['kind']}", 1.0)

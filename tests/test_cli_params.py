@@ -50,7 +50,7 @@ def test_the_flags_are_built_from_the_fields():
         assert f.metadata["description"].replace("%", "%%") in h, f.name
         if f.metadata["units"]:
             assert f.metadata["units"] in h, f.name
-    assert "default 0.8" in opts["--lam"].help and "bvs: 0.3" in opts["--lam"].help
+    assert "default 0.6" in opts["--lam"].help and "bvs: 0.3" in opts["--lam"].help
 
 
 def test_eval_parses_a_preset_and_the_same_options():

@@ -11,6 +11,7 @@ from vibr.metrics import psnr
 from vibr.synthetic import (
     DEFAULT_BBOX,
     DEFAULT_SIGMA_Z,
+    FAR_GAP_X,
     SCENE_CENTRE,
     World,
     arc_cameras,
@@ -101,6 +102,25 @@ def test_handheld_layout_bounded_baselines_and_overlap():
     for c in cams:
         xy, z = c.project(np.array([SCENE_CENTRE]))
         assert z[0] > 0 and 0 < xy[0, 0] < 63 and 0 < xy[0, 1] < 47
+
+
+def test_far_background_is_seen_past_the_corner_only():
+    """default_world(far=...): left of the back wall's edge the rays stop on the wall (z = 6),
+    right of it they reach the façade at z = far; the standard world is unchanged elsewhere."""
+    far = 30.0
+    w, w0 = default_world(0, far=far), default_world(0)
+    # rays from the origin through the back wall's plane at heights between ceiling and floor
+    xs = np.array([-2.0, 0.5, FAR_GAP_X + 0.3, 3.0])
+    target = np.stack([xs, np.full(4, -3.5), np.full(4, 6.0)], -1)  # above the card and the sphere
+    t, obj, _ = w.raycast(np.zeros((4, 3)), target)
+    z = t * target[:, 2]  # the direction's z is 6: the hit's depth
+    assert np.allclose(z[:2], 6.0) and np.allclose(z[2:], far)
+    assert all(w.names[o] == "far façade" for o in obj[2:])
+    t0, _, _ = w0.raycast(np.zeros((4, 3)), target)
+    assert np.allclose(t0 * 6.0, 6.0)  # the standard world's wall is whole
+    assert w.bbox[2][1] == far and w0.bbox[2][1] == DEFAULT_BBOX[2][1]
+    with pytest.raises(VibrInputError, match="behind the back wall"):
+        default_world(0, far=5.0)
 
 
 def test_unknown_layout():

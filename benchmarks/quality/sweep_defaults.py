@@ -20,6 +20,9 @@ Cases (each one task of ``vibr.executor.run_tasks``, ``--workers N``):
   256×192 (arc, free, hand-held layouts, seeds 0 and 1) from the 6 others, their depth
   estimated from them as ``vibr eval`` does for a scene without depth maps (the fallback
   proxy where it is unknown);
+* far background (:func:`far_cases`): the same in the world with a far façade seen past the
+  back wall's corner (``vibr.synthetic.default_world(far=30)``), which stereo mostly leaves
+  without depth, as it does fountain's buildings (free and hand-held layouts, seeds 0 and 1);
 * rings (:func:`ring_cases`): views 4 and 11 of ``vibr.synthetic.ring_scene`` (a textureless
   object on black, a textured one on grey, 160×120) from their 4 best views;
 * own camera (:func:`own_camera_cases`): views 0 and 3 of 7 free-layout synthetic views
@@ -40,7 +43,7 @@ Settings per *choose* case: ULR, BVS and the library's family, ``gradient`` with
 preconditioned solver (``precond=True``), ULR's view prior (``view_k=4``), the gradient term's
 consistency weights (``grad_consistency=24``, with the library's ``grad_coverage``), lam against
 the data's sum (``lam_density=3``) and the holes filled by push-pull (``hole_fill="push-pull"``),
-labelled "P V4 C D", at gamma × lam = {0.2, 0.3, 0.45, 0.6, 0.8} × {0.6, 0.8, 1, 1.4, 2, 2.8}; and
+labelled "P V4 C D", at gamma × lam = {0.2, 0.3, 0.45, 0.6, 0.8} × {0.4, 0.6, 0.8, 1, 1.4, 2, 2.8}; and
 ``gamma="auto", lam="auto"`` (``vibr.render.autotune``: leave-one-source-out on the sources,
 never the target image), whose tuning time is measured against the median full-size render
 time of the target over the case's gradient settings (same process, same minutes: the
@@ -63,7 +66,7 @@ coarser sources).
 Metrics: PSNR over all pixels and over the covered pixels (those every setting of the case
 reconstructed), 2-pixel border excluded. The held-out split is by scene and fixed before any
 number is seen (``_common.scene_split``): every scene ``vibr.synthetic`` generates (the synthetic,
-few-view, no-geometry, ring and own-camera families) is "choose", every photographed scene (cotton, backgammon,
+few-view, no-geometry, far-background, ring and own-camera families) is "choose", every photographed scene (cotton, backgammon,
 fountain, temple) is "report". The choose cases render every setting; the default is the setting
 with the best mean all-pixel PSNR over them. Only then are the report cases rendered, with the
 chosen setting, ULR, BVS and the auto weights, so no photograph takes part in the choice.
@@ -124,14 +127,16 @@ BASE = {"tv_weighting": "uniform", "view_k": 0, "precond": False, "grad_weightin
 #: views) and the holes filled by push-pull of the solved image, over gamma × lam
 LAM_DENSITY = 3.0
 D_GAMMAS = (0.2, 0.3, 0.45, 0.6, 0.8)
-D_LAMS = (0.6, 0.8, 1.0, 1.4, 2.0, 2.8)
+D_LAMS = (0.4, 0.6, 0.8, 1.0, 1.4, 2.0, 2.8)
 #: the gradient term's consistency scale of the settings labelled C (grey levels / px), and the
 #: other scales tried at the former default's (gamma, lam)
 CONSISTENCY = 24.0
 CONSISTENCY_OTHERS = (12.0, 48.0)
 #: the library's default before the last change of defaults: a report case renders it too, so
 #: the page shows what the change did to the photographs (column "previous")
-PREVIOUS = "γ0.45 λ1 P V4 C D"
+PREVIOUS = "γ0.3 λ0.8 P V4 C D"
+#: the layouts of the far-background family (:func:`far_cases`)
+FAR_LAYOUTS = ("free", "handheld")
 #: the targets of the ring family (:func:`ring_cases`)
 RING_TARGETS = (4, 11)
 
@@ -192,6 +197,15 @@ def nogeo_cases():
     return [dict(kind="nogeo", layout=lo, seed=sd, name=f"no geometry {lo} seed {sd}", family="no geometry",
                  split=scene_split("nogeo"))
             for lo in NOGEO_LAYOUTS for sd in NOGEO_SEEDS]
+
+
+def far_cases():
+    """The sweep's far-background family: as :func:`nogeo_cases`, in the world with a far façade
+    past the back wall's corner (``_common.FAR_DEPTH``), which stereo mostly leaves without
+    depth, free and hand-held layouts, seeds 0 and 1 (procedural: *choose*)."""
+    return [dict(kind="far", layout=lo, seed=sd, name=f"far background {lo} seed {sd}", family="far background",
+                 split=scene_split("far"))
+            for lo in FAR_LAYOUTS for sd in (0, 1)]
 
 
 def own_camera_cases():
@@ -435,7 +449,8 @@ def main(argv=None):
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases() + ring_cases() + own_camera_cases()
+    cases = [c for c in sweep_cases() + sparse_cases() + nogeo_cases() + far_cases() + ring_cases()
+             + own_camera_cases()
              if not a.only or any(c["name"].startswith(p) for p in a.only.split(","))]
     fname = lambda c: out / (c["name"].replace(" ", "_") + ".json")  # noqa: E731
     choose_cases = [c for c in cases if c["split"] == "choose"]

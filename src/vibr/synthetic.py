@@ -16,7 +16,9 @@ bounding box :data:`DEFAULT_BBOX` = x ∈ [-5, 5], y ∈ [-4, 1.5], z ∈ [-1, 6
   brick);
 * a box standing on the floor, rotated about the vertical axis;
 * a sphere resting on the floor;
-* a tilted card (a small textured rectangle) floating in front, for a thin occluder.
+* a tilted card (a small textured rectangle) floating in front, for a thin occluder;
+* with ``far`` (``default_world(seed, far=30)``), the back wall stops short of the right and a
+  façade far behind shows past its corner: a far background that stereo mostly misses.
 
 Images are band-limited so that a source pixel is well modelled as a bilinear sample of
 another view (the renderer's assumption, docs/explanation/method.md §4): textures are pre-smoothed (Gaussian,
@@ -60,10 +62,14 @@ __all__ = [
     "DEFAULT_BBOX",
     "DEFAULT_SIGMA_Z",
     "SCENE_CENTRE",
+    "FAR_GAP_X",
 ]
 
 #: Bounding box of :func:`default_world`: ((xmin, xmax), (ymin, ymax), (zmin, zmax)).
 DEFAULT_BBOX = ((-5.0, 5.0), (-4.0, 1.5), (-1.0, 6.0))
+#: Right edge of the back wall in :func:`default_world` with a far background (world x): the
+#: gap to its right shows the far façade.
+FAR_GAP_X = 1.2
 #: Point the arc and free layouts look at (world coordinates).
 SCENE_CENTRE = (0.0, 0.3, 3.6)
 #: Depth uncertainty (scene units) given to the exact depth maps of :func:`make_scene`
@@ -581,12 +587,26 @@ class World:
                 f"{len(self._spheres)} spheres, {len(self._tex_pyr)} textures)")
 
 
-def default_world(seed: int = 0) -> World:
+def default_world(seed: int = 0, far: float | None = None) -> World:
     """The standard synthetic world (see the module docstring and :data:`DEFAULT_BBOX`).
 
     ``seed`` jitters the box and sphere positions (a few centimetres to decimetres) and
     permutes the textures; seed 0 is the reference scene. Object ids: 0 back wall, 1 floor,
     2 box, 3 sphere, 4 card.
+
+    ``far``: a far background, as a street seen past a wall's corner. The back wall then
+    stops at x = :data:`FAR_GAP_X`, and through the gap right of it the views see a
+    textured façade at z = ``far`` (object 5, wide and tall enough to fill the gap from
+    every layout's cameras). From one view to the next the façade slides behind the wall's
+    corner by more than the strip each view shows of it, and its parallax is small: what
+    stereo leaves without depth on a real scene's far buildings. The bounding box
+    (``bbox``) then reaches z = ``far``.
+
+    Examples
+    --------
+    >>> w = default_world(far=30.0)
+    >>> w.names[5], w.bbox[2]
+    ('far façade', (-1.0, 30.0))
     """
     rng = np.random.default_rng(seed)
     photos = ["astronaut", "coffee", "chelsea", "rocket"]
@@ -600,7 +620,10 @@ def default_world(seed: int = 0) -> World:
     floor_y = y1
     # back wall z = 6, one 4.5-unit tile (a 512-texel tile: texel ~ 9 mm), offset so that
     # the middle of the photograph (not a mirror fold) faces the cameras
-    w.add_rect([x0, y0, z1], [x1 - x0, 0, 0], [0, floor_y - y0, 0], photos[0], tile=4.5,
+    if far is not None and not far > z1:
+        raise VibrInputError(f"far must lie behind the back wall (z > {z1:g}), got {far!r}")
+    right = x1 if far is None else FAR_GAP_X
+    w.add_rect([x0, y0, z1], [right - x0, 0, 0], [0, floor_y - y0, 0], photos[0], tile=4.5,
                offset=(-0.8, -0.4), name="back wall")
     # floor y = 1.5 (below the cameras: world up is -y)
     w.add_rect([x0, floor_y, z0], [x1 - x0, 0, 0], [0, 0, z1 - z0], grounds[0], tile=2.5, name="floor")
@@ -617,6 +640,12 @@ def default_world(seed: int = 0) -> World:
     v = np.array([0.0, 0.9, 0.0])
     w.add_rect(np.array([-0.3 + jit(0.2), -1.3, 2.6]) - 0.5 * u, u, v, photos[2], tile=1.2, name="card")
     w.bbox = DEFAULT_BBOX
+    if far is not None:
+        # the photograph no other object shows, a tile about 120 px wide at 256 px: structure a
+        # matcher could use, as a far building's windows
+        w.add_rect([-far, -far, far], [2.5 * far, 0, 0], [0, 1.5 * far, 0], photos[3], tile=far / 2.0,
+                   name="far façade")
+        w.bbox = (DEFAULT_BBOX[0], DEFAULT_BBOX[1], (DEFAULT_BBOX[2][0], float(far)))
     return w
 
 

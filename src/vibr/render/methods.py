@@ -13,7 +13,7 @@ gradient   Nieto et al. 2016 (this paper, the default): bvs + the gradient term,
 Parameter defaults (paper names; intensities on the scale ``scale`` = 255, docs/explanation/method.md §9):
 
 * ``alpha = 1.0`` colour-term weight (eq. energy_final; the paper's light-field setting).
-* ``gamma = 0.3`` gradient-term weight for ``gradient`` and ``lam = 0.8`` TV weight (grey
+* ``gamma = 0.3`` gradient-term weight for ``gradient`` and ``lam = 0.6`` TV weight (grey
   levels of 255: a 1-grey-level step costs 1 per pixel of edge where 3 views weigh a pixel,
   ``lam_density`` below), with the uniform TV
   (eq. energy_final; vibr's units: forward differences, docs/explanation/renderer.md "One image

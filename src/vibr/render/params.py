@@ -75,7 +75,7 @@ class RenderParams:
         "gradient-term weight, vibr's units (forward differences; the paper's through preset paper)", "", 0.3,
         lo=0.0, auto=True, flag="--gamma", metavar="G|auto")
     lam: Union[float, Auto] = _param(
-        "TV weight, where the colour term's density is lam_density views", "intensity scale", 0.8, lo=0.0,
+        "TV weight, where the colour term's density is lam_density views", "intensity scale", 0.6, lo=0.0,
         auto=True, flag="--lam", metavar="L|auto")
     sigma_s: float = _param("sensor noise (std. dev.)", "intensity scale", 1.0, lo=0.0, lo_open=True,
                             flag="--sigma-s")
