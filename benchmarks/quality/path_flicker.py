@@ -285,8 +285,8 @@ def turned_last(scene, world, deg: float):
 
 def far_table(frames: int, work: Path, size=(192, 144)) -> dict:
     """``--far``: the fountain's failure where it can be measured against a truth. For each of
-    :data:`FAR_SCENES` (the standard world with a far façade seen past the back wall's corner,
-    which stereo mostly leaves without depth), the 7 views photographed as the defaults' sweep
+    :data:`FAR_SCENES` (the standard world, mostly with a far façade seen past the back wall's
+    corner, which stereo mostly leaves without depth), the 7 views photographed as the defaults' sweep
     photographs its sources (``_common.CAPTURE``), depth estimated from them, a
     ``frames``-frame path through them rendered by each method; the warp between frames is the
     ray-cast truth's depth. Prints, per scene and method, the flicker overall, in the region
