@@ -319,6 +319,29 @@ def test_fallback_min_fraction_and_auto_completion():
         assert np.all(v.depth[unknown] == np.float32(always.meta["fallback"][v.name]["depth"]))
 
 
+def test_auto_fallback_gives_a_view_without_any_depth_the_plane():
+    """A view stereo found no depth in at all (its partners see none of it) has nothing to
+    complete its textured pixels from: ``fallback="auto"`` gives them the plane, with the
+    plane's sigma_z, rather than failing the whole scene."""
+    from vibr.geometry import apply_fallback
+    from vibr.geometry.proxy import FALLBACK_FACTOR, FALLBACK_PERCENTILE, FALLBACK_SIGMA_Z_REL
+
+    rng = np.random.default_rng(2)
+    sc = make_scene("grid", 4, 20, 20)
+    v0 = sc.views[0]
+    img = rng.uniform(0.2, 0.8, v0.image.shape).astype(np.float32)  # textured: no backdrop
+    sc = sc.replace(views=[v0.replace(image=img, depth=np.full(v0.depth.shape, np.nan, np.float32))]
+                    + list(sc.views[1:]))
+    out = apply_fallback(sc, "auto")
+    v = out.views[0]
+    D = out.meta["fallback"][v.name]["depth"]
+    assert v.fallback.all() and np.all(v.depth == np.float32(D))
+    np.testing.assert_allclose(v.sigma_z, FALLBACK_SIGMA_Z_REL * D, rtol=1e-6)
+    # the largest of the other views' planes (each just behind its farthest known depth)
+    assert D == pytest.approx(max(FALLBACK_FACTOR * np.percentile(u.depth, FALLBACK_PERCENTILE)
+                                  for u in sc.views[1:]))
+
+
 def test_auto_fallback_takes_the_flat_unknown_pixels_of_any_view():
     """In a view mostly known, the unknown pixels whose photograph is flat (a plain wall
     stereo cannot match) get the plane, and the textured ones do not (stereo failures on a

@@ -445,7 +445,8 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
     depth, win there). Known pixels keep their depth and their sigma_z (the view's own
     map, or ``default_sigma_rel`` · median known depth, the geometry stage's default, made
     explicit because the median would otherwise include the plane). A view with no known
-    depth gets the largest ``D_k`` of the others; ``common=True`` gives every view that
+    depth gets the largest ``D_k`` of the others, at its textured pixels too (there is no
+    known depth to complete them from); ``common=True`` gives every view that
     largest ``D_k``. In views with less than ``min_fraction`` of their pixels unknown, only
     the unknown pixels :func:`flat_pixels` finds flat at ``flat_std`` get the plane (none
     when ``flat_std`` is None); the others stay unknown, or with ``complete`` take the depth
@@ -508,7 +509,10 @@ def fallback_depth(sources: Scene, factor: float = FALLBACK_FACTOR,
         s[unknown] = sigma_rel * D
         if bg is not None:  # the backdrop's photograph is flat: a depth error moves it onto the same colour
             s[unknown] = float(backdrop_sigma_rel) * D
-        if textured.any():  # a surface stereo missed: its neighbourhood's depth, and how much that varies
+        if textured.any() and not known.any():  # nothing to complete from: the plane, as "always" gives it
+            z = np.where(textured, np.float32(D), z)
+            s[textured] = sigma_rel * D
+        elif textured.any():  # a surface stereo missed: its neighbourhood's depth, and how much that varies
             zc, sc = complete_depth(np.where(known, z, np.nan), s, spread=complete == "spread")
             z, s = np.where(textured, zc, z), np.where(textured, sc, s)
         views.append(v.replace(depth=z, sigma_z=s, fallback=unknown | textured))
