@@ -449,8 +449,8 @@ def test_support_weights_closed_form_and_colour_guide():
     np.testing.assert_allclose(I, luma, atol=1e-6)
     offs = window_offsets(2, 1)
     sc, ss = 0.05, 2.0
-    w_grey = kern.support_weights(I, offs, sc, ss, np.ascontiguousarray(I[..., None]))[0]
-    w_col = kern.support_weights(I, offs, sc, ss, np.ascontiguousarray(img))[0]
+    w_grey = kern.support_weights(I, offs, sc, ss, np.ascontiguousarray(I[..., None], np.float32))[0]
+    w_col = kern.support_weights(I, offs, sc, ss, np.ascontiguousarray(img, np.float32))[0]
     i, j = 4, 5  # last red column: the window's right part is green
     k_across = [k for k, (dy, dx) in enumerate(offs) if dx > 0]
     r2 = (offs ** 2).sum(1)
@@ -569,7 +569,7 @@ def test_patchmatch_memo_skips_evaluations_without_changing_the_result():
         n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, NOMASK, A, b, 1, 0.002 ** 2, w, gx,
                                         gy, cost, 3, 2 * abs(res.winv[1] - res.winv[0]), 1.0,
                                         np.linalg.inv(ref.K), res.winv.min(), res.winv.max(), 0,
-                                        0.1, 0, memo)
+                                        0.1, 0, memo, 4)
         out[memo] = (w, gx, gy, cost, n_eval)
     for a, b_ in zip(out[False][:4], out[True][:4]):
         np.testing.assert_array_equal(a, b_)
@@ -587,7 +587,7 @@ def test_plane_cost_is_minimal_at_the_true_slanted_plane():
     ref, cams, views, res, n, d = _slanted_setup(8)
     I = to_grey(views[0][0]).astype(np.float64)
     offs = window_offsets(3, 2)
-    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(I[..., None]))
+    wts, wI, sdI = kern.support_weights(I, offs, 0.05, 3.0, np.ascontiguousarray(I[..., None], np.float32))
     np.testing.assert_allclose(wts.sum(-1), 1.0, atol=1e-5)
     srcs = np.stack([to_grey(v[0]) for v in views[1:]]).astype(np.float32)
     sizes = np.array([[80, 96], [80, 96]], np.int64)

@@ -16,6 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+_DTYPES = {"xy": np.float64, "colour": np.float32, "grad": np.float32, "jac": np.float32,
+           "inv_det": np.float32, "dtau_dz": np.float32, "sigma_z": np.float32, "view": np.int32,
+           "src_xy": np.int32, "X": np.float32}
+
 
 @dataclass(eq=False)
 class Samples:
@@ -67,6 +71,14 @@ class Samples:
     X: np.ndarray
     target_shape: tuple[int, int]
     meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        # the dtypes above, contiguous: a float64 or strided field would compile every kernel
+        # that reads it once more (no copy when the field already conforms)
+        for name, dtype in _DTYPES.items():
+            a = getattr(self, name)
+            if a is not None:
+                setattr(self, name, np.ascontiguousarray(a, dtype))
 
     def __len__(self) -> int:
         return int(self.xy.shape[0])

@@ -293,8 +293,9 @@ def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz
     H, W = splat.shape
     acc = np.zeros((H, W, 3 + (C if with_views else 0) + (1 if with_pos else 0)), np.float64)
     _sigma_splat(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts,
-                 np.ascontiguousarray(weight), np.ascontiguousarray(colour), np.ascontiguousarray(u, np.float32),
-                 view, offs, np.ascontiguousarray(sigma_z), np.ascontiguousarray(dtau_dz), acc)
+                 np.ascontiguousarray(weight, np.float64), np.ascontiguousarray(colour),
+                 np.ascontiguousarray(u, np.float32), view, offs, np.ascontiguousarray(sigma_z, np.float32),
+                 np.ascontiguousarray(dtau_dz), acc)
     out = {k: np.empty((H, W)) for k in ("s2", "n_eff")}
     out["pos_var"] = np.empty((H, W)) if with_pos else np.zeros((H, W))
     bias2 = np.empty((H, W)) if with_views else np.zeros((1, 1))

@@ -188,12 +188,11 @@ def shared_error_beta(samples: Samples, splat, g, sigma_z, sigma_s: float, z_cor
     weights of samples whose errors ``a_m δ`` share one depth error δ with correlation ρ.
     One pass over the samples."""
     H, W = samples.target_shape
-    sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z)
+    sz_map, sz_scalar = _sigma_z_arg(samples, sigma_z)
     out = np.zeros((2, H, W), np.float64)
     _shared_error_kernel(splat.x0, splat.y0, splat.fx, splat.fy, splat.bx0, splat.coef, splat.order, splat.starts,
-                         np.asarray(samples.inv_det), np.inf if inv_det_cap is None else float(inv_det_cap),
-                         sz if sz.ndim == 1 else np.zeros(0),
-                         float(sz) if sz.ndim == 0 else 0.0, np.asarray(samples.dtau_dz), np.ascontiguousarray(g),
+                         samples.inv_det, np.inf if inv_det_cap is None else float(inv_det_cap), sz_map, sz_scalar,
+                         samples.dtau_dz, np.ascontiguousarray(g, np.float32),
                          float(sigma_s) ** 2, float(z_corr), _opt(samples.meta.get("sample_weight")), _opt(factor), out)
     return (z_corr * out[0] / (1.0 + z_corr * out[1])).astype(np.float32)
 
@@ -296,7 +295,7 @@ def _weight_gradient_kernel(u, scale, grad_max, clamp, out):
 def _weight_gradient(u, scale, grad_max):
     """``∇u`` of the weights: the luminance gradient (:func:`luminance_gradient`) on the
     ``scale``, its magnitude clamped at ``grad_max``; (H, W, 2) float32."""
-    u = np.asarray(u, np.float32)
+    u = np.ascontiguousarray(u, np.float32)  # one layout: a strided view would compile the kernel again
     out = np.empty(u.shape[:2] + (2,), np.float32)
     _weight_gradient_kernel(u, np.float32(scale), np.float32(0.0 if grad_max is None else grad_max),
                             grad_max is not None, out)
@@ -419,6 +418,15 @@ def _weighted_kernel(x0, y0, fx, fy, bx0, coef, order, starts, inv_det, sz, sz_s
     return _sum_in_order(cpart)
 
 
+def _sigma_z_arg(samples: Samples, sigma_z):
+    """The kernels' depth uncertainty: (N,) float32 map or an empty one, and the scalar
+    (``sigma_z`` None: the samples' own). One dtype, so that each kernel compiles once."""
+    sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z)
+    if sz.ndim == 0:
+        return np.zeros(0, np.float32), float(sz)
+    return np.ascontiguousarray(sz, np.float32), 0.0
+
+
 def _opt(a, dtype=np.float32):
     """An optional per-sample array for the kernels: the array, or an empty one."""
     return np.zeros(0, dtype) if a is None else np.ascontiguousarray(a, dtype)
@@ -448,7 +456,7 @@ def coverage_blend(samples: Samples, splat, sigma_s: float = 1.0, gradient: bool
         A0, rhs0 = np.zeros((1, H, W), np.float32), np.zeros((0, H, W), np.float32)
     wsum, bw = np.zeros((1, H, W), np.float32), np.zeros((3, H, W), np.float32)
     c0 = _coverage_kernel(splat.bx0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts, _opt(sw), _opt(blend_factor), gv,
-                          np.asarray(samples.inv_det), float(sigma_s) ** 2, np.asarray(samples.colour), A0.shape[0],
+                          samples.inv_det, float(sigma_s) ** 2, samples.colour, A0.shape[0],
                           A0, rhs0, wsum, bw)
     return A0, rhs0, float(c0), wsum, bw
 
@@ -554,11 +562,9 @@ def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=No
     ``z_corr`` > 0 one more pass over the samples (:func:`shared_error_beta`)."""
     H, W = samples.target_shape
     n = len(samples)
-    sz = np.asarray(samples.sigma_z if sigma_z is None else sigma_z)
-    use_g = u is not None and bool(np.nanmax(sz, initial=0.0) > 0) if sz.size else False
+    sz_map, sz_scalar = _sigma_z_arg(samples, sigma_z)
+    use_g = u is not None and max(float(np.nanmax(sz_map, initial=0.0)), sz_scalar) > 0
     g = _weight_gradient(u, scale, grad_max) if use_g else np.zeros((1, 1, 2), np.float32)
-    sz_map = sz if sz.ndim == 1 else np.zeros(0)
-    sz_scalar = float(sz) if sz.ndim == 0 else 0.0
     A = np.zeros((9, H, W), np.float32)
     b = np.zeros((3, H, W), np.float32)
     w_out = np.empty(n if keep_weights else 0, np.float32)
@@ -566,7 +572,7 @@ def weighted_normal(samples: Samples, splat, u, sigma_s: float = 1.0, sigma_z=No
     beta = (shared_error_beta(samples, splat, g, sigma_z, sigma_s, z_corr, factor) if z_corr > 0
             else np.zeros((0, 0), np.float32))
     c = _weighted_kernel(splat.x0, splat.y0, splat.fx, splat.fy, splat.bx0, splat.coef, splat.order, splat.starts,
-                         np.asarray(samples.inv_det), sz_map, sz_scalar, np.asarray(samples.dtau_dz), g, use_g,
+                         samples.inv_det, sz_map, sz_scalar, samples.dtau_dz, g, use_g,
                          float(sigma_s) ** 2, z_corr, beta, np.float32(wscale), _opt(samples.meta.get("sample_weight")),
                          _opt(factor), np.asarray(samples.colour), A, b, w_out)
     return A, b, float(c), (w_out if keep_weights else None)

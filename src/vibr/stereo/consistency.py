@@ -47,10 +47,10 @@ def check_consistency(depth: np.ndarray, camera: Camera, nb_depths: list[np.ndar
     for v, d in enumerate(nb_depths):
         D[v, : d.shape[0], : d.shape[1]] = d
         sizes[v] = d.shape
-    Ks = np.stack([c.K for c in nb_cameras])
-    Rs = np.stack([c.R for c in nb_cameras])
-    ts = np.stack([c.t for c in nb_cameras])
+    # writable C-ordered float64 copies: a transposed or read-only rotation would compile the kernel again
+    f8 = lambda a: np.array(a, np.float64, order="C")  # noqa: E731
+    Ks, Rs, ts = (f8(np.stack([getattr(c, a) for c in nb_cameras])) for a in ("K", "R", "t"))
     n, reproj, spread = kern.consistency(
-        np.asarray(depth, np.float64), np.linalg.inv(camera.K), camera.R, camera.t, D, sizes,
+        f8(depth), f8(np.linalg.inv(camera.K)), f8(camera.R), f8(camera.t), D, sizes,
         Ks, Rs, ts, float(rel_tol), float(px_tol))
     return ConsistencyResult(n, reproj, spread, n >= int(min_agree))

@@ -331,8 +331,8 @@ def refine_planes(ref_image: np.ndarray, ref_camera: Camera, src_images: list[np
         cost = np.where(fronto, c0, cost)
     n_eval = kern.patchmatch_refine(wts, wI, sdI, offs, srcs, sizes, valid, A, b, n_best, eps2, w, gx, gy,
                            cost, int(o.n_iter), 2.0 * step, float(o.dn), np.linalg.inv(ref_camera.K),
-                           wmin, wmax, int(o.seed), lam1, r_first=0 if o.joint_perturbation else 1,
-                           r_last=4 if o.normal_perturbation else 2)
+                           wmin, wmax, int(o.seed), lam1, 0 if o.joint_perturbation else 1, True,
+                           4 if o.normal_perturbation else 2)  # every argument given: one compiled signature
     z = 1.0 / w
     sigma_w = init.sigma_z.astype(np.float64) / np.asarray(init.depth, np.float64) ** 2
     sigma_z = (z * z * sigma_w).astype(np.float32)
