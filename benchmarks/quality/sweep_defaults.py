@@ -64,7 +64,8 @@ choose (:func:`vibr.render.shared_geometry`: a supersampled or coarser grid, gam
 coarser sources).
 
 Metrics: PSNR over all pixels and over the covered pixels (those every setting of the case
-reconstructed), 2-pixel border excluded. The held-out split is by scene and fixed before any
+reconstructed), 2-pixel border excluded, and on the covered pixels :func:`vibr.metrics.sharpness`
+(the render's high-frequency energy over the photograph's), tabled for the report half. The held-out split is by scene and fixed before any
 number is seen (``_common.scene_split``): every scene ``vibr.synthetic`` generates (the synthetic,
 few-view, no-geometry, far-background, ring and own-camera families) is "choose", every photographed scene (cotton, backgammon,
 fountain, temple) is "report". The choose cases render every setting; the default is the setting
@@ -233,7 +234,7 @@ def ring_cases():
 
 def run_case(cache, case):
     """Render one case with every setting and the auto weights; return its measurements."""
-    from vibr.metrics import psnr
+    from vibr.metrics import psnr, sharpness
     from vibr.render import shared_geometry
     from vibr.render.autotune import tune
     from vibr.render.methods import DEFAULTS
@@ -267,7 +268,8 @@ def run_case(cache, case):
                 "ratio": t_tune / float(np.median(secs))}
     cover = np.logical_and.reduce(covs)
     ref = tv.image
-    res = {k: {"all": float(psnr(im, ref, border=BORDER)), "covered": float(psnr(im, ref, mask=cover, border=BORDER))}
+    res = {k: {"all": float(psnr(im, ref, border=BORDER)), "covered": float(psnr(im, ref, mask=cover, border=BORDER)),
+               "sharpness": float(sharpness(np.clip(im, 0, 1), ref, cover, BORDER))}
            for k, im in imgs.items()}
     rep = {**case, "size": [int(tv.camera.width), int(tv.camera.height)], "n_sources": len(src),
             "covered_fraction": float(cover.mean()), "results": res, "depth_seconds": round(t_depth, 2),
@@ -427,6 +429,7 @@ def table(reps, chosen):
     L.append(f"* auto: tuning time / full-size render on the *choose* half: median {np.median(ratios):.2f}, "
              f"over the budget of 1× on {over} of {len(ratios)} cases: "
              + ("within budget." if over == 0 else "over budget, so not a default."))
+    L += sharpness_table(reps, lib)
     ch = [r for r in reps if r["split"] == "choose"]
     L += ["", "Every setting on the *choose* cases, all-pixel PSNR (dB):", "",
           "| case | " + " | ".join(labs) + " |", "|---|" + "---|" * len(labs)]
@@ -434,6 +437,25 @@ def table(reps, chosen):
         L.append(f"| {r['name']} | " + " | ".join(f"{r['results'][lab]['all']:.2f}" for lab in labs) + " |")
     L += ["", END]
     return "\n".join(L)
+
+
+def sharpness_table(reps, lib):
+    """How sharp the renders of the *report* half are against their photographs
+    (:func:`vibr.metrics.sharpness` on the pixels every method covers), as page lines; none
+    when the reports predate the measure."""
+    rep = [r for r in reps if r["split"] == "report"]
+    cols = ("ULR", "BVS", lib)
+    if not rep or not all("sharpness" in r["results"][k] for r in rep for k in cols):
+        return []
+    L = ["", "Sharpness on the *report* half: the render's high-frequency energy (squared Laplacian) over the "
+         "photograph's on the covered pixels (`vibr.metrics.sharpness`): 1 as sharp as the photograph, below 1 "
+         "blurred, above 1 noisier.", "",
+         "| case | ULR | BVS | library |", "|---|---|---|---|"]
+    for r in rep:
+        L.append(f"| {r['name']} | " + " | ".join(f"{r['results'][k]['sharpness']:.2f}" for k in cols) + " |")
+    med = {k: np.median([r["results"][k]["sharpness"] for r in rep]) for k in cols}
+    L += ["", "* median: " + ", ".join(f"{k if k != lib else 'library'} {v:.2f}" for k, v in med.items()) + "."]
+    return L
 
 
 def _targets(reps, k):
