@@ -42,6 +42,16 @@ Laplacian energy over the photograph's: 1 as sharp, below 1 blurred).
     PYTHONPATH=$PWD/src python3 benchmarks/quality/mesh_peer.py [--tune] [--cases fountain,cotton,backgammon,temple] \\
         [--figures DIR] [--write-docs]
 
+``--decompose`` asks where the peer's lead comes from, per case, on the pixels every row covers:
+the peer's blend (the texturing above) over the mesh's depth at the target or over vibr's own
+target z-buffer (:func:`vibr.geometry.target_depth`, the nearest warped source surface per
+pixel), with the sources' visibility tested against the mesh, against vibr's source depth maps
+(the same 4-voxel margin), or not at all, beside vibr's ``ulr`` (each source's samples
+forward-warped by its own depth and splatted) and ``gradient``. It prints the table and writes
+``out/mesh_peer/decompose.json``; the page is not written.
+
+    PYTHONPATH=$PWD/src python3 benchmarks/quality/mesh_peer.py --tune --decompose [--cases ...]
+
 JSON in ``out/mesh_peer/results.json``; ``--write-docs`` writes ``docs/results/peer.md``. Exits 1
 when the self-check fails or a case fails to run (then the page is left as it was), not when
 vibr loses.
@@ -421,6 +431,43 @@ def run_case(cache, case, opts: PeerOptions, figures: Path | None) -> dict:
     return rep
 
 
+#: the rows of ``--decompose``: (label, target depth, sources' depth for the visibility test)
+DECOMPOSE_ROWS = (("peer: mesh at the target, visibility by the mesh", "mesh", "mesh"),
+                  ("mesh at the target, visibility by vibr's source depth", "mesh", "vibr"),
+                  ("mesh at the target, no visibility test", "mesh", None),
+                  ("vibr's z-buffer, visibility by vibr's source depth", "zbuffer", "vibr"),
+                  ("vibr's z-buffer, no visibility test", "zbuffer", None))
+
+
+def decompose(cache, case, opts: PeerOptions) -> dict:
+    """PSNR on the pixels every row of :data:`DECOMPOSE_ROWS` and vibr's ``ulr`` and
+    ``gradient`` cover (module docstring, ``--decompose``)."""
+    from vibr.geometry import compute_samples, target_depth
+    from vibr.metrics import psnr
+    from vibr.render import render
+
+    src, raw, tv = case_sources(cache, case)
+    voxel = opts.voxel_scale * voxel_size(raw)
+    scene, ntri = mesh_scene(fuse(raw, voxel, opts), opts)
+    if not ntri:
+        raise RuntimeError("the TSDF fused no surface")
+    depth = {"mesh": raycast_depth(scene, tv.camera),
+             "zbuffer": target_depth(compute_samples(src, tv.camera, return_zbuffer=True))}
+    at_sources = {"mesh": [raycast_depth(scene, v.camera) for v in raw.views], "vibr": [v.depth for v in src.views],
+                  None: [np.zeros(v.camera.shape, np.float32) for v in src.views]}
+    rows = {}
+    for label, target, vis in DECOMPOSE_ROWS:
+        o = opts if vis is not None else replace(opts, ztol_voxels=np.inf)
+        img, cov = texture(src, at_sources[vis], tv.camera, depth[target], voxel, o)
+        rows[label] = (np.clip(img, 0, 1), cov)
+    for m in ("ulr", "gradient"):
+        r = render(src, tv, m)
+        rows[f"vibr {m}"] = (np.clip(r.image, 0, 1), np.asarray(r.coverage, bool))
+    common = np.logical_and.reduce([c for _, c in rows.values()])
+    return dict(name=case["name"], common_pct=100 * float(common.mean()),
+                psnr_common={k: float(psnr(im, tv.image, common, BORDER)) for k, (im, _) in rows.items()})
+
+
 def save_strip(path: Path, photo, renders):
     """Photo | each method (in :data:`METHODS` order) side by side, then the same at 2× on a
     quarter of the image (left of centre, above it)."""
@@ -551,7 +598,12 @@ def main(argv=None) -> int:
                     help="choose the peer's voxel, truncation and blend on procedural scenes first, then use them")
     ap.add_argument("--figures", type=Path, help="save photo | renders strips (PNG) in this folder")
     ap.add_argument("--write-docs", action="store_true", help=f"write {PAGE.relative_to(ROOT)}")
+    ap.add_argument("--decompose", action="store_true",
+                    help="where the peer's lead comes from: its blend over either depth at the target, "
+                         "with each visibility test, beside vibr's ulr and gradient (prints; the page is not written)")
     a = ap.parse_args(argv)
+    if a.decompose and a.write_docs:
+        ap.error("--decompose writes no page: run it without --write-docs")
     try:
         import open3d
     except ImportError:
@@ -570,6 +622,8 @@ def main(argv=None) -> int:
         opts = replace(opts, **tuning["chosen"])
         print(f"tuned: {json.dumps(tuning['chosen'])}", flush=True)
     cache = SceneCache(data_dir(a.data))
+    if a.decompose:
+        return run_decompose(cache, a.cases.split(","), opts, a)
     reps = []
     for case in cases(a.cases.split(",")):
         try:
@@ -594,6 +648,18 @@ def main(argv=None) -> int:
         return 1
     if a.write_docs:
         PAGE.write_text(page(report))
+    return 0
+
+
+def run_decompose(cache, which, opts: PeerOptions, a) -> int:
+    reps = []
+    for case in cases([w for w in which if w != "temple"]):  # temple's common pixels are its object's rim only
+        reps.append(decompose(cache, case, opts))
+        print(f"{case['name']} (common {reps[-1]['common_pct']:.1f} %)", flush=True)
+        for k, v in reps[-1]["psnr_common"].items():
+            print(f"  {k:<55} {v:6.2f} dB", flush=True)
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "decompose.json").write_text(json.dumps(dict(options=asdict(opts), cases=reps, commit=git_commit()), indent=1))
     return 0
 
 
