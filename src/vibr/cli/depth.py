@@ -78,6 +78,9 @@ def register(sub) -> None:
                    help="refinement iterations at the coarse level before the full-size ones "
                    "(default that of estimate_depth, 1; light fields: the first of --refine-iter)")
     p.add_argument("--no-consistency", action="store_true", help="skip the cross-view consistency check")
+    p.add_argument("--consensus-tol", type=float, default=None, metavar="FRACTION",
+                   help="light fields: each pixel's depth becomes the mean of the views' depths that agree "
+                   "within this fraction, 0 for none (default that of LightFieldOptions, 0.35)")
     # the views' sweeps (MVS) on local processes or a Dask cluster (docs/explanation/scale-out.md)
     add_executor_args(p, default="here: the sweeps' kernels already use every core of this machine")
     p.add_argument("--fill-segments", action="store_true",
@@ -91,11 +94,15 @@ def register(sub) -> None:
 def _refuse_mvs_options(args, scene) -> None:
     """The plane sweep's options (n_neighbours, step_px, max_planes, consistency,
     fill_segments: read by vibr.stereo.api's MVS path only) given for a light-field estimate
-    (vibr.stereo.api.depth_method): refused, not ignored."""
+    (vibr.stereo.api.depth_method), and the light field's consensus_tol given for MVS:
+    refused, not ignored."""
     from ..errors import VibrInputError
     from ..stereo.api import depth_method
 
     if depth_method(scene, args.method) != "lightfield":
+        if args.consensus_tol is not None:
+            raise VibrInputError("--consensus-tol applies to a light field's estimate only, and this scene's depth "
+                                 "is estimated by the plane sweep (MVS)", args.scene)
         return
     given = [f for f, v in (("--neighbours", args.neighbours), ("--step-px", args.step_px),
                             ("--max-planes", args.max_planes), ("--no-consistency", args.no_consistency),
@@ -136,7 +143,8 @@ def _depth_options(args) -> dict:
     return {k: v for k, v in (("n_neighbours", args.neighbours), ("step_px", args.step_px),
                               ("max_planes", args.max_planes), ("refine_iter", args.refine_iter),
                               ("median_radius", args.median_radius), ("sweep_scale", args.sweep_scale),
-                              ("coarse_iter", args.coarse_iter)) if v is not None}
+                              ("coarse_iter", args.coarse_iter), ("consensus_tol", args.consensus_tol))
+            if v is not None}
 
 
 def _output_folder(args):

@@ -369,13 +369,15 @@ def consistency(depth_r, Kr_inv, Rr, tr, depths, sizes, Ks, Rs, ts, rel_tol, px_
 
     Returns ``(n_agree (H,W) int32, reproj (H,W) float64 mean round-trip error of the
     agreeing views (NaN if none), spread (H,W) float64 std of the reference-frame depths
-    of the agreeing round-trip points together with z)``.
+    of the agreeing round-trip points together with z, mean (H,W) float64 their mean (z
+    where none agrees, NaN where z is unknown))``.
     """
     H, W = depth_r.shape
     nv = depths.shape[0]
     n_agree = np.zeros((H, W), np.int32)
     reproj = np.full((H, W), np.nan)
     spread = np.full((H, W), np.nan)
+    mean = np.full((H, W), np.nan)
     for i in prange(H):
         for j in range(W):
             z = depth_r[i, j]
@@ -440,12 +442,13 @@ def consistency(depth_r, Kr_inv, Rr, tr, depths, sizes, Ks, Rs, ts, rel_tol, px_
                 s1 += c2
                 s2 += c2 * c2
             n_agree[i, j] = cnt
+            mean[i, j] = s1 / (cnt + 1)
             if cnt > 0:
                 reproj[i, j] = err_sum / cnt
                 m = s1 / (cnt + 1)
                 var = s2 / (cnt + 1) - m * m
                 spread[i, j] = np.sqrt(var) if var > 0 else 0.0
-    return n_agree, reproj, spread
+    return n_agree, reproj, spread, mean
 
 
 # --------------------------------------------------------------------------- TV-L1

@@ -38,7 +38,7 @@ from ..geometry.resample import resize_mask
 from ..progress import progress
 from ..scene import Scene
 from .checks import check_depth_params
-from .consistency import check_consistency
+from .consistency import check_consistency, consensus_depth
 from .lightfield import LightFieldOptions, lightfield_depth
 from .partners import (
     _ray_parallax,
@@ -66,8 +66,9 @@ REFINE_ITER = 2
 #: served. 2: the light-field sweep's plane step from the parallax (docs/explanation/depth.md). 3: the
 #: light field's coarse level (sweep and first refinement iteration at half size). 4: the
 #: light field's full-size refinement with a random search of the depth alone. 5: the MVS
-#: sigma_z times :data:`MVS_SIGMA_SCALE`.
-ESTIMATOR_VERSION = 5
+#: sigma_z times :data:`MVS_SIGMA_SCALE`. 6: the light-field views' consensus
+#: (``LightFieldOptions.consensus_tol``).
+ESTIMATOR_VERSION = 6
 
 
 #: At most this many light-field views are estimated side by side (threads,
@@ -512,6 +513,15 @@ def _estimate_lightfield(scene, targets, inputs, cams, imgs, opt: DepthOptions):
     for i, (z, s, st) in zip(targets, results):
         depths[i], sigmas[i] = z, s
         stats[scene.views[i].name] = dict(st, role="target")
+    tol = float(opt.lightfield.get("consensus_tol", LightFieldOptions.consensus_tol))
+    if tol > 0 and len(targets) > 1:
+        t0 = time.perf_counter()
+        fused, agree = consensus_depth([depths[i] for i in targets], [cams[i] for i in targets], rel_tol=tol)
+        for i, z, a in zip(targets, fused, agree):
+            depths[i] = z
+            stats[scene.views[i].name].update(consensus_agree=a)
+        logger.info("light-field consensus of %d views (tolerance %g): %.1f s", len(targets), tol,
+                    time.perf_counter() - t0)
     return depths, sigmas, stats
 
 

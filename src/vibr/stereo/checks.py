@@ -34,6 +34,7 @@ def check_depth_params(**kw) -> None:
         "rel_tol": lambda v: check_real("rel_tol", v, lo=0.0, lo_open=True),
         "px_tol": lambda v: check_real("px_tol", v, lo=0.0, lo_open=True),
         "mem_bytes": lambda v: check_real("mem_bytes", v, lo=0.0, lo_open=True),
+        "consensus_tol": lambda v: check_real("consensus_tol", v, lo=0.0),
         "coverage_gain": lambda v: check_real("coverage_gain", v, lo=0.0) if v is not None else None,
     }
     for k, v in kw.items():

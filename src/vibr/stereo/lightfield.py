@@ -55,6 +55,10 @@ REFINE_MODES = ("st", "sweep", "sweep+tv")
 #: iteration; :func:`lightfield_depth`'s ``pm_coarse_scale``): measured in docs/explanation/depth.md
 #: ("Coarse to fine").
 COARSE_SCALE = 0.5
+#: The light-field views' consensus tolerance (relative depth; ``LightFieldOptions.consensus_tol``),
+#: chosen on procedural light fields by ``benchmarks/quality/lightfield_consensus.py``
+#: (docs/explanation/depth.md, "The views' consensus").
+CONSENSUS_TOL = 0.35
 
 
 def disparity_model(ref: Camera, right: Camera) -> tuple[float, float]:
@@ -180,6 +184,14 @@ class LightFieldOptions:
     median_radius : int
         Half-size of the planes' joint weighted median
         (:func:`vibr.stereo.planesweep.median_planes`; 0, the default: none, renders lose).
+    consensus_tol : float
+        Once every requested view has its depth, :func:`vibr.stereo.estimate_depth` replaces
+        each pixel's depth by the mean of its own and of its 8 nearest estimated views' depths
+        that agree with it within this fraction (:func:`vibr.stereo.consensus_depth`; 0:
+        none; default :data:`CONSENSUS_TOL`). Each view's estimate errs on its own, and a
+        render places each source's samples by that source's depth: the consensus registers
+        them with each other (docs/explanation/depth.md, "The views' consensus"). A single
+        view estimated alone keeps its own depth.
     """
 
     depth_range: tuple[float, float] | None = None
@@ -205,6 +217,7 @@ class LightFieldOptions:
     pm_coarse_scale: float = COARSE_SCALE
     pm_coarse_iter: int = 1
     median_radius: int = 0
+    consensus_tol: float = CONSENSUS_TOL
 
     def __post_init__(self):
         if self.refine not in REFINE_MODES:
