@@ -440,8 +440,11 @@ def fountain_section(reports, large, args):
 
 
 #: The floor of vibr's (0.1, 1, 0.002) row on fountain at scale 0.25 (PSNR dB per view): a run
-#: below it exits 1 (:func:`floor_failures`).
-FOUNTAIN_FLOOR = {"0002": 29.09, "0005": 30.20, "0008": 27.82}
+#: below it exits 1 (:func:`floor_failures`). View 8's was re-set, 0.41 dB below its run as
+#: before, when the fallback proxy began completing textured unknown pixels: the building right
+#: of the wall, which no source sees as the target does, joined the reconstructed pixels this
+#: protocol scores (88.8 % → 89.9 %), and ULR fell on them as much as this row.
+FOUNTAIN_FLOOR = {"0002": 29.09, "0005": 30.20, "0008": 25.96}
 
 
 def _lead(rep):
