@@ -443,7 +443,7 @@ def fountain_section(reports, large, args):
 #: below it exits 1 (:func:`floor_failures`). View 8's was re-set, 0.41 dB below its run as
 #: before, when the fallback proxy began completing textured unknown pixels: the building right
 #: of the wall, which no source sees as the target does, joined the reconstructed pixels this
-#: protocol scores (88.8 % → 89.9 %), and ULR fell on them as much as this row.
+#: protocol scores (88.8 % → 89.9 %), and ULR fell on them more than this row did.
 FOUNTAIN_FLOOR = {"0002": 29.09, "0005": 30.20, "0008": 25.96}
 
 
