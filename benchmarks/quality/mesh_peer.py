@@ -623,7 +623,7 @@ def main(argv=None) -> int:
         print(f"tuned: {json.dumps(tuning['chosen'])}", flush=True)
     cache = SceneCache(data_dir(a.data))
     if a.decompose:
-        return run_decompose(cache, a.cases.split(","), opts, a)
+        return run_decompose(cache, a.cases.split(","), opts)
     reps = []
     for case in cases(a.cases.split(",")):
         try:
@@ -651,7 +651,7 @@ def main(argv=None) -> int:
     return 0
 
 
-def run_decompose(cache, which, opts: PeerOptions, a) -> int:
+def run_decompose(cache, which, opts: PeerOptions) -> int:
     reps = []
     for case in cases([w for w in which if w != "temple"]):  # temple's common pixels are its object's rim only
         reps.append(decompose(cache, case, opts))

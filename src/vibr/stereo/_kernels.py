@@ -442,10 +442,10 @@ def consistency(depth_r, Kr_inv, Rr, tr, depths, sizes, Ks, Rs, ts, rel_tol, px_
                 s1 += c2
                 s2 += c2 * c2
             n_agree[i, j] = cnt
-            mean[i, j] = s1 / (cnt + 1)
+            m = s1 / (cnt + 1)
+            mean[i, j] = m
             if cnt > 0:
                 reproj[i, j] = err_sum / cnt
-                m = s1 / (cnt + 1)
                 var = s2 / (cnt + 1) - m * m
                 spread[i, j] = np.sqrt(var) if var > 0 else 0.0
     return n_agree, reproj, spread, mean

@@ -64,8 +64,8 @@ def consensus_depth(depths: list[np.ndarray], cameras: list[Camera], *, rel_tol:
                     n_neighbours: int = 8) -> tuple[list[np.ndarray], list[float]]:
     """The views' consensus on their depth: each pixel's depth replaced by the mean of its
     own and of the depths of its ``n_neighbours`` nearest views (by camera centre) that see
-    the same point within ``rel_tol`` (:func:`check_consistency` without the round-trip
-    bound: the mean is in the reference frame, so a neighbour's pixel grid does not bias it).
+    the same point within ``rel_tol`` (:func:`check_consistency`'s depth test, without its
+    round-trip bound).
 
     Every view is compared with the others' own estimates, never with a consensus already
     taken, so the result does not depend on the order of the views. Returns the depth maps
