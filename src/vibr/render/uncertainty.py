@@ -23,12 +23,15 @@ samples has the variance ``s²/n_eff`` on top (the standard error), so the sprea
 distribution. The spread is taken around ``B u + b_k`` and the render's mix of offsets
 ``mix(p) = Σ W B b_k / Σ W B`` adds ``v_views = ‖mix − β̂‖²/3 + σ_β²(1 + π/(2V))`` (``β̂``,
 ``σ_β``: median and 1.4826·MAD of the V views' offsets, :func:`view_offset_prior`); where
-one view dominates the sources agree but the render carries its offset. Pixels near a
+one view dominates the sources agree but the render carries its offset. An exposure is a
+gain, so the offsets, measured at the samples' mean intensity, are taken proportional to the
+pixel's: ``v_gain(p) = v_views(p) · ‖u(p)‖² / mean_covered ‖u‖²`` (black stays black in every
+exposure; the ``gain`` term, the default; ``views`` keeps them additive). Pixels near a
 push–pull filled region border a disocclusion, where the depth is least reliable: the sum
 is multiplied by ``1 + HOLE_RANGE/d``, ``d`` the distance in pixels to the nearest filled
 pixel (:func:`hole_distance`). The rendered view's standard deviation is
 
-    σ(p) = min(σ_hole, sqrt((1/diag(H)_p + s²(p)·(1 + 1/n_eff(p)) + v_views(p)) · (1 + HOLE_RANGE/d(p))))
+    σ(p) = min(σ_hole, sqrt((1/diag(H)_p + s²(p)·(1 + 1/n_eff(p)) + v_gain(p)) · (1 + HOLE_RANGE/d(p))))
                                                      where the samples cover p,
     σ(p) = σ_hole                                   where push–pull filled it,
 
@@ -56,7 +59,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["HOLE_SIGMA_FRACTION", "hole_sigma", "hessian_diagonal", "model_variance",
            "sample_spread", "sample_statistics", "view_offsets", "view_offset_prior",
-           "hole_distance", "HOLE_RANGE", "TERMS",
+           "hole_distance", "HOLE_RANGE", "TERMS", "KNOWN_TERMS", "view_gains",
            "variational_sigma", "ulr_sigma", "sample_spread_sigma",
            "view_count_sigma"]
 
@@ -174,10 +177,11 @@ def view_offsets(splat, colour, u, view, n_views=None, stride=None):
 
 
 @njit(parallel=True, cache=True)
-def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, view, offs, sigma_z, dtau_dz, out):
+def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, view, offs, relative, sigma_z, dtau_dz, out):
     """One pass over the samples, splats into the interleaved ``out`` (H, W, K):
     ``out[..., 0] = Σ_m w_m B_m· ‖colour_m − (B u)(m) − b_k(m)‖² / C`` (the residual, less its
-    view's offset ``b_k = offs[view_m]`` when ``offs`` has rows, else none),
+    view's offset ``b_k = offs[view_m]`` when ``offs`` has rows, else none; ``relative``: the
+    offsets are gains, ``b_k(m) = offs[view_m] · (B u)(m)``),
     ``out[..., 1] = Σ_m w_m² B_m·`` (for the effective number of samples),
     ``out[..., 2] = Σ_m w_m B_m·`` (the weight sum), then with offsets
     ``out[..., 3:3+C] = Σ_m w_m B_m· b_k(m)`` (the render's mix of view offsets) and, when
@@ -211,7 +215,7 @@ def _sigma_splat(x0, y0, fx, fy, coef, order, starts, w, colour, u, view, offs, 
                     bu = b0 * uc[y, x] + b1 * uc[y, x + 1] + b2 * uc[y + 1, x] + b3 * uc[y + 1, x + 1]
                     d = np.float64(colour[i, c]) - bu
                     if with_views:
-                        d -= offs[k, c]
+                        d -= offs[k, c] * bu if relative else offs[k, c]
                     e += d * d
                 v0 = e * wi / C
                 v1 = wi * wi
@@ -269,7 +273,7 @@ def _finish_stats(acc, wsum, own_wsum, centre, with_views, with_pos, s2, neff, b
 
 
 def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz=None, view=None, offsets=None,
-                      centre=None):
+                      centre=None, relative: bool = False):
     """Per-pixel statistics of the samples around the rendered image ``u`` (planar (C, H, W),
     units of ``colour``), from one pass (:func:`_sigma_splat`); ``wsum = Σ_m w_m B_mp``
     (None: accumulated in the same pass).
@@ -280,7 +284,8 @@ def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz
     ``pos_var`` the weighted mean of the samples' position variance ``sigma_z² ‖∂tau/∂z‖²``
     (target pixels²; 0 without ``sigma_z``); with offsets also ``bias2``
     ``‖mix − centre‖² / C``, ``mix = Σ w B b_k / Σ w B`` the W-weighted mean of the offsets
-    of the views the render blends at p (``centre`` (C,), default 0)."""
+    of the views the render blends at p (``centre`` (C,), default 0); ``relative``: the
+    offsets are gains less one (:func:`view_gains`), a sample's offset ``offsets[k]·(B u)(m)``."""
     with_pos = sigma_z is not None
     with_views = view is not None and offsets is not None
     if not with_pos:
@@ -294,7 +299,8 @@ def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz
     acc = np.zeros((H, W, 3 + (C if with_views else 0) + (1 if with_pos else 0)), np.float64)
     _sigma_splat(splat.bx0, splat.by0, splat.fx, splat.fy, splat.coef, splat.order, splat.starts,
                  np.ascontiguousarray(weight, np.float64), np.ascontiguousarray(colour),
-                 np.ascontiguousarray(u, np.float32), view, offs, np.ascontiguousarray(sigma_z, np.float32),
+                 np.ascontiguousarray(u, np.float32), view, offs, bool(relative),
+                 np.ascontiguousarray(sigma_z, np.float32),
                  np.ascontiguousarray(dtau_dz), acc)
     out = {k: np.empty((H, W)) for k in ("s2", "n_eff")}
     out["pos_var"] = np.empty((H, W)) if with_pos else np.zeros((H, W))
@@ -316,8 +322,12 @@ def _finish(var, coverage, scale):
     return sig.astype(np.float32)
 
 
-#: The terms of σ² (docs/explanation/renderer.md "Uncertainty": chosen by measurement).
-TERMS = ("model", "spread", "views", "hole")
+#: The terms of σ² by default (docs/explanation/renderer.md "Uncertainty": chosen on
+#: procedural scenes by benchmarks/quality/uncertainty_table.py).
+TERMS = ("model", "spread", "gain", "hole")
+#: every term a caller may name: ``views`` is ``gain`` with additive offsets, the same at
+#: every intensity (one of the two at a time)
+KNOWN_TERMS = ("model", "spread", "views", "gain", "hole")
 
 
 #: Range (pixels) of the variance inflation next to push–pull filled pixels:
@@ -362,50 +372,70 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     grad_density : float, optional
         The density the gradient term was divided by (``RenderResult.params["density"]``,
         rho); None: ``density``.
-    terms : sequence of {"model", "spread", "views", "hole"} or a "+"-joined string
+    terms : sequence of {"model", "spread", "gain", "views", "hole"} or a "+"-joined string
         The variances added: the model's ``1/diag(H)``, the disagreement of the sources
-        ``s²·(1 + 1/n_eff)`` and the view offsets (``views``: the spread is then taken with
-        each view's offset removed, and the offsets' bias and variance are added; needs
-        ``view``); ``hole`` multiplies their sum by ``1 + HOLE_RANGE / d`` near push–pull
-        filled pixels (module docstring); default all four.
+        ``s²·(1 + 1/n_eff)`` and the view offsets (``gain``: the spread is then taken with
+        each view's offset removed, and the offsets' bias and variance are added, scaled by
+        the pixel's intensity over the mean; ``views``: the same, unscaled; one of the two;
+        needs ``view``); ``hole`` multiplies their sum by ``1 + HOLE_RANGE / d`` near
+        push–pull filled pixels (module docstring); default :data:`TERMS`.
     view : (N,) int array, optional
-        The source view of each sample (``Samples.view``), for the ``views`` term (without
-        it the term is left out).
+        The source view of each sample (``Samples.view``), for the offset terms (without it
+        they are left out).
     """
     if terms is True:
         terms = TERMS
     if isinstance(terms, str):
         terms = tuple(terms.split("+"))
-    bad = set(terms) - set(TERMS)
-    if bad or not terms:
-        raise ValueError(f"uncertainty terms must be among {TERMS}, got {terms!r}")
+    bad = set(terms) - set(KNOWN_TERMS)
+    if bad or not terms or {"views", "gain"} <= set(terms):
+        raise ValueError(f"uncertainty terms must be among {KNOWN_TERMS}, views and gain not both, got {terms!r}")
     var = np.zeros(np.shape(coverage))
     s2_scale = float(scale) ** 2
     if "model" in terms:
         rg = float(density if grad_density is None else grad_density)
         var = var + model_variance(model.A, model.Ag if model.use_grad else None, model.alpha * float(density),
                                    model.gamma * rg if model.use_grad else 0.0)
-    with_views = "views" in terms and view is not None and len(view) > 0
+    with_views = ("views" in terms or "gain" in terms) and view is not None and len(view) > 0
     if "spread" in terms or with_views:
         up = np.asarray(u)
         if not (up.ndim == 3 and up.shape[0] == np.shape(colour)[1]):
             up = up.transpose(2, 0, 1)  # (H, W, C) → planar
         offs = centre = None
+        gain = "gain" in terms
         if with_views:
             offs, counts = view_offsets(splat, colour, up, view)
+            if gain:
+                offs = view_gains(offs, colour, view, len(counts))
             centre, v_off = view_offset_prior(offs, counts)
         st = sample_statistics(splat, weight, colour, up, view=view if with_views else None, offsets=offs,
-                               centre=centre)
+                               centre=centre, relative=gain)
         if "spread" in terms:
             neff = st["n_eff"]
             inv_n = np.where(neff > 0, 1.0 / np.where(neff > 0, neff, 1.0), 0.0)
             var = var + st["s2"] * (1.0 + inv_n) * s2_scale
         if with_views:
-            var = var + (st["bias2"] + v_off) * s2_scale
+            v_views = st["bias2"] + v_off
+            if gain:  # a gain's offset at p: the gain times the pixel's intensity
+                v_views = v_views * (up.astype(np.float64) ** 2).mean(0)
+            var = var + v_views * s2_scale
     if "hole" in terms:
         with np.errstate(divide="ignore", invalid="ignore"):  # holes: σ_hole below
             var = var * (1.0 + HOLE_RANGE / hole_distance(coverage))
     return _finish(var, coverage, scale)
+
+
+def view_gains(offsets, colour, view, n_views, stride=None):
+    """The views' offsets (:func:`view_offsets`, same ``stride``) as gains less one:
+    ``g_k = b_k / mean_m∈k (B u)(m)``, the mean prediction being the view's mean colour less its
+    offset (the same samples); 0 for a view without samples or light."""
+    view = np.asarray(view)
+    stride = max(1, len(view) // OFFSET_SAMPLES) if stride is None else max(1, int(stride))
+    v, col = view[::stride], np.asarray(colour, np.float64)[::stride]
+    n = np.bincount(v, minlength=n_views).astype(np.float64)
+    mean = np.stack([np.bincount(v, col[:, c], n_views) for c in range(col.shape[1])], 1) / np.maximum(n, 1.0)[:, None]
+    pred = mean - np.asarray(offsets, np.float64)
+    return np.where(pred > 1e-6, np.asarray(offsets, np.float64) / np.maximum(pred, 1e-6), 0.0)
 
 
 def view_offset_prior(offsets, counts):
