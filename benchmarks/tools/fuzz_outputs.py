@@ -234,14 +234,22 @@ def make_base(work: Path) -> Path:
     (base / "user" / "notes.txt").write_text("the user's notes\n")
     (base / "user" / "fr").mkdir()
     (base / "user" / "fr" / "holiday.jpg").write_bytes(os.urandom(300))
-    warm_up(base, work / "warm")
+    global _warmed
+    if not _warmed:
+        warm_up(base, work / "warm")
+        _warmed = True
     return base
+
+
+#: imports and compiled kernels last as long as the process: a second fuzz() (the tests
+#: run two) has nothing left to warm, and the warm-up was half of its time
+_warmed = False
 
 
 def warm_up(base: Path, folder: Path) -> None:
     """Every command once as this user, in ``folder``: vibr's modules are imported and its
     kernels compiled before a case runs as nobody, who cannot read them where root keeps
-    its Python (a lazy import failed there)."""
+    its Python (a lazy import failed there). Once per process (:func:`make_base`)."""
     shutil.copytree(base, folder, symlinks=True)
     here = os.getcwd()
     os.chdir(folder)
@@ -714,6 +722,10 @@ def fuzz(cases: int, seed: int = 0, families=None, only=None, keep=None, progres
     (work / "cases").mkdir()
     (work / "cases").chmod(0o755)
     results, skipped = [], None
+    # each case's gc.collect() then walks only what was made since: in a test session's heap a
+    # full walk cost more than many a case
+    gc.collect()
+    gc.freeze()
     try:
         base = make_base(work)
         with small_disk(work) if "full-disk" in families and os.geteuid() == 0 else \
@@ -735,6 +747,7 @@ def fuzz(cases: int, seed: int = 0, families=None, only=None, keep=None, progres
                 if progress:
                     progress(r)
     finally:
+        gc.unfreeze()
         if old_cache is None:
             os.environ.pop("VIBR_CACHE_DIR", None)
         else:
