@@ -11,7 +11,8 @@ standard error; a run whose choice differs from the library's exits 1 and says s
 *Report*: HCI 2016 *cotton* (512×512), centre view ``input_Cam040`` from the 8 neighbours of
 its 3×3 block at strides 1, 2, 4, with ground-truth, estimated and planar-proxy geometry
 (as benchmarks/quality/paper_tables.py); Strecha *fountain-P11* views 0002, 0005, 0008 at image
-scale 0.25 from the 10 other views, depth estimated from those only.
+scale 0.25 from the 10 other views, depth estimated from those only; Middlebury *templeSR*
+view 0004 from its 4 best views (an object on a black backdrop), depth estimated from them.
 
 Per case the view is rendered with the ``gradient`` method at the library's defaults (what a
 user gets; ``--paper-settings``: cotton alpha, gamma, lam = 1, 1, 0.1 and fountain the
@@ -58,6 +59,7 @@ from _common import (  # noqa: E402
     NOGEO_SEEDS,
     RESULTS,
     ROOT,
+    SceneCache,
     cotton_neighbours,
     data_dir,
     replace_block,
@@ -85,7 +87,7 @@ PAPER_SETTINGS = [False]  # --paper-settings: the two dicts above instead of the
 
 def all_cases():
     out = [f"cotton_s{s}_{d}" for s in (1, 2, 4) for d in ("gt", "estimated", "planar")]
-    return PROCEDURAL + out + [f"fountain_{v}" for v in ("0002", "0005", "0008")]
+    return PROCEDURAL + out + [f"fountain_{v}" for v in ("0002", "0005", "0008")] + ["temple_0004"]
 
 
 def split(case: str) -> str:
@@ -125,6 +127,8 @@ def prepared(case, data, scenes, cache=None):
     m = re.fullmatch(r"cotton_s(\d)_(gt|estimated|planar)", case)
     if case.startswith("proc_"):
         out = procedural(case)
+    elif case == "temple_0004":  # a black backdrop, from its 4 best views (the defaults' sweep's case)
+        out = sweep_sources(SceneCache(data), dict(kind="temple"))
     elif m:
         if "cotton" not in scenes:
             scenes["cotton"] = load_scene(data / "hci2016_cotton")
