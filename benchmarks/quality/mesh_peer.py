@@ -47,7 +47,9 @@ the peer's blend (the texturing above) over the mesh's depth at the target or ov
 target z-buffer (:func:`vibr.geometry.target_depth`, the nearest warped source surface per
 pixel), with the sources' visibility tested against the mesh, against vibr's source depth maps
 (the same 4-voxel margin), or not at all, beside vibr's ``ulr`` (each source's samples
-forward-warped by its own depth and splatted) and ``gradient``. It prints the table and writes
+forward-warped by its own depth and splatted) and ``gradient``, and those two again with the
+sources' measured depth replaced by the mesh's (the peer's fused geometry under vibr's
+renderer; the fallback proxy kept where stereo left no depth). It prints the table and writes
 ``out/mesh_peer/decompose.json``; the page is not written.
 
     PYTHONPATH=$PWD/src python3 benchmarks/quality/mesh_peer.py --tune --decompose [--cases ...]
@@ -439,6 +441,17 @@ DECOMPOSE_ROWS = (("peer: mesh at the target, visibility by the mesh", "mesh", "
                   ("vibr's z-buffer, no visibility test", "zbuffer", None))
 
 
+def mesh_at_measured(src, mesh_depth):
+    """``src`` with each view's measured depth (not its fallback proxy) replaced by the mesh's
+    where the mesh has a surface: vibr over the peer's fused geometry."""
+    views = []
+    for v, m in zip(src.views, mesh_depth):
+        keep = ~np.isfinite(m) if v.fallback is None else ~np.isfinite(m) | v.fallback
+        # replace() forgets the proxy mask of a new depth map unless it is passed on
+        views.append(v.replace(depth=np.where(keep, v.depth, m).astype(np.float32), fallback=v.fallback))
+    return src.replace(views=views)
+
+
 def decompose(cache, case, opts: PeerOptions) -> dict:
     """PSNR on the pixels every row of :data:`DECOMPOSE_ROWS` and vibr's ``ulr`` and
     ``gradient`` cover (module docstring, ``--decompose``)."""
@@ -460,9 +473,11 @@ def decompose(cache, case, opts: PeerOptions) -> dict:
         o = opts if vis is not None else replace(opts, ztol_voxels=np.inf)
         img, cov = texture(src, at_sources[vis], tv.camera, depth[target], voxel, o)
         rows[label] = (np.clip(img, 0, 1), cov)
+    fused = mesh_at_measured(src, at_sources["mesh"])
     for m in ("ulr", "gradient"):
-        r = render(src, tv, m)
-        rows[f"vibr {m}"] = (np.clip(r.image, 0, 1), np.asarray(r.coverage, bool))
+        for label, s in ((f"vibr {m}", src), (f"vibr {m}, the mesh's depth at its measured pixels", fused)):
+            r = render(s, tv, m)
+            rows[label] = (np.clip(r.image, 0, 1), np.asarray(r.coverage, bool))
     common = np.logical_and.reduce([c for _, c in rows.values()])
     return dict(name=case["name"], common_pct=100 * float(common.mean()),
                 psnr_common={k: float(psnr(im, tv.image, common, BORDER)) for k, (im, _) in rows.items()})
