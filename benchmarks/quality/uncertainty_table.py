@@ -157,7 +157,8 @@ def run_case(case, data, scenes, log, cache=None):
     src, tv = prepared(case, data, scenes, cache)
     m = re.fullmatch(r"cotton_s\d_(\w+)", case)
     depth = m.group(1) if m else "estimated"
-    params = {} if not PAPER_SETTINGS[0] or split(case) == "choose" else FOUNTAIN_PARAMS if case.startswith("fountain") else COTTON_PARAMS
+    paper = {"cotton": COTTON_PARAMS, "fountain": FOUNTAIN_PARAMS}.get(case.split("_")[0], {})
+    params = paper if PAPER_SETTINGS[0] else {}
     t_depth = time.perf_counter() - t0
     S = compute_samples(src, tv.camera)
     ref = tv.image

@@ -24,9 +24,11 @@ distribution. The spread is taken around ``B u + b_k`` and the render's mix of o
 ``mix(p) = Σ W B b_k / Σ W B`` adds ``v_views = ‖mix − β̂‖²/3 + σ_β²(1 + π/(2V))`` (``β̂``,
 ``σ_β``: median and 1.4826·MAD of the V views' offsets, :func:`view_offset_prior`); where
 one view dominates the sources agree but the render carries its offset. An exposure is a
-gain, so the offsets, measured at the samples' mean intensity, are taken proportional to the
-pixel's: ``v_gain(p) = v_views(p) · ‖u(p)‖² / mean_covered ‖u‖²`` (black stays black in every
-exposure; the ``gain`` term, the default; ``views`` keeps them additive). Pixels near a
+gain and moves black by nothing, so by default (the ``gain`` term; ``views`` keeps the
+offsets additive) each view's offset is a gain ``g_k = b_k / mean_m∈k (B u)(m)``
+(:func:`view_gains`), a sample's offset ``g_k (B u)(m)``, and the same bias and variance of
+the gains are scaled by the pixel's intensity:
+``v_gain(p) = (‖mix_g − ĝ‖²/3 + σ_g²(1 + π/(2V))) · ‖u(p)‖²/3``. Pixels near a
 push–pull filled region border a disocclusion, where the depth is least reliable: the sum
 is multiplied by ``1 + HOLE_RANGE/d``, ``d`` the distance in pixels to the nearest filled
 pixel (:func:`hole_distance`). The rendered view's standard deviation is
@@ -375,8 +377,9 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     terms : sequence of {"model", "spread", "gain", "views", "hole"} or a "+"-joined string
         The variances added: the model's ``1/diag(H)``, the disagreement of the sources
         ``s²·(1 + 1/n_eff)`` and the view offsets (``gain``: the spread is then taken with
-        each view's offset removed, and the offsets' bias and variance are added, scaled by
-        the pixel's intensity over the mean; ``views``: the same, unscaled; one of the two;
+        each view's offset removed, and the offsets' bias and variance are added, the
+        offsets being gains, proportional to the pixel's intensity; ``views``: the same with
+        additive offsets; one of the two;
         needs ``view``); ``hole`` multiplies their sum by ``1 + HOLE_RANGE / d`` near
         push–pull filled pixels (module docstring); default :data:`TERMS`.
     view : (N,) int array, optional
