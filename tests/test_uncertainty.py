@@ -106,7 +106,8 @@ def test_render_fills_uncertainty_only_when_asked(grid_split80):
         assert s.shape == tg.shape and s.dtype == np.float32
         assert np.all(np.isfinite(s)) and np.all(s > 0 if method != "ulr" else s >= 0)
         assert np.all(s <= hole_sigma() + 1e-3)
-        assert np.all(s[~r.coverage] == pytest.approx(hole_sigma()))
+        if method == "ulr":  # ULR keeps the uniform rule; the default's fill term reads the neighbours
+            assert np.all(s[~r.coverage] == pytest.approx(hole_sigma()))
     # the image does not depend on the flag (to the rounding of parallel sums)
     r1 = render(src, tg, "bvs", max_iter=15, uncertainty=True)
     assert np.allclose(r0.image, r1.image, atol=1e-5)
@@ -150,7 +151,9 @@ def test_sigma_high_where_few_views_and_in_holes(grid_split80):
     hole = np.zeros_like(r.coverage)
     hole[33:40, 33:40] = True
     assert not r.coverage[hole].any()
-    assert np.all(s[hole] == pytest.approx(hole_sigma()))
+    # filled from textured neighbours: measured 16-24 grey levels, above the pixels every view sees
+    assert np.all(s[hole] <= hole_sigma() + 1e-3) and np.median(s[hole]) > 2 * np.median(s[few]), (
+        np.median(s[hole]), np.median(s[few]))
 
 
 def test_sigma_ranks_the_errors_of_a_planar_proxy(grid_split80):
@@ -397,3 +400,45 @@ def test_an_exposure_gain_leaves_black_pixels_certain(grid_split80):
     none, gain, views = med["model+spread+hole"], med["model+spread+gain+hole"], med["model+spread+views+hole"]
     assert gain[0] < 1.2 * none[0] and views[0] > 4 * none[0], med
     assert gain[1] > 0.9 * none[1], med
+
+
+def test_fill_variance_follows_what_the_hole_is_filled_from():
+    """A push–pull filled pixel is known as well as the pixels it is filled from agree: amid a
+    uniform backdrop, their own variance; between black and white, more than σ_hole (so the
+    cap holds); covered pixels keep their variance."""
+    from vibr.render.uncertainty import fill_variance, hole_sigma
+
+    H, W = 32, 48
+    cov = np.ones((H, W), bool)
+    cov[12:20, 20:28] = False
+    var = np.full((H, W), 4.0)
+    flat = np.full((H, W, 3), 0.2)
+    fv = fill_variance(flat, var, cov)
+    assert np.allclose(fv[cov], 4.0) and np.allclose(fv[~cov], 4.0, rtol=1e-4)
+    edge = np.zeros((H, W, 3))
+    edge[:, W // 2:] = 1.0
+    fe = fill_variance(edge.transpose(2, 0, 1), var, cov)  # planar input reads the same
+    assert fe[16, 23] > hole_sigma() ** 2 and fe[16, 23] > 100 * fv[16, 23]
+
+
+def test_default_sigma_of_a_hole_on_a_black_backdrop_is_small():
+    """Through render(): the default terms give a hole amid black a small σ, where the former
+    rule (no ``fill``) gives every filled pixel σ_hole."""
+    from vibr.render.uncertainty import hole_sigma
+    from vibr.synthetic import make_scene
+
+    sc = make_scene("grid", width=64, height=64, seed=1)
+    src, tg = sc.split(4)
+    src = src.replace(views=[v.replace(image=np.zeros_like(v.image)) for v in src.views])
+    from vibr.geometry import compute_samples
+    from vibr.render import render_samples
+
+    S = compute_samples(src, tg.camera)
+    x, y = S.xy[:, 0], S.xy[:, 1]
+    S = S.select(~((x > 24) & (x < 40) & (y > 24) & (y < 40)))  # a hole no sample reaches
+    r = render_samples(S, "gradient", max_iter=20, uncertainty=True)
+    r0 = render_samples(S, "gradient", max_iter=20, uncertainty="model+spread+gain+hole")
+    hole = ~np.asarray(r.coverage, bool)
+    assert hole.sum() > 50
+    assert np.allclose(r0.uncertainty[hole], hole_sigma())
+    assert np.median(r.uncertainty[hole]) < 3.0  # measured 1.57 grey levels

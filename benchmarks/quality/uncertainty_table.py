@@ -73,7 +73,7 @@ PAGE = RESULTS / "paper-tables.md"
 SPEARMAN_FLOOR = 0.4
 
 VARIANTS = ("model", "spread", "model+spread", "model+spread+hole", "model+spread+views", "model+spread+gain+hole",
-            "spread+views+hole", "model+spread+views+hole")
+            "spread+views+hole", "model+spread+views+hole", "model+spread+gain+hole+fill")
 CHOSEN = "+".join(TERMS)  # the library's sum, which the choose half keeps or replaces
 #: the procedural families of the choose half (the defaults' sweep's, photographed with
 #: _common.CAPTURE): no geometry, a far background stereo misses, an object on a backdrop

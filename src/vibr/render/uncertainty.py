@@ -35,11 +35,15 @@ pixel (:func:`hole_distance`). The rendered view's standard deviation is
 
     σ(p) = min(σ_hole, sqrt((1/diag(H)_p + s²(p)·(1 + 1/n_eff(p)) + v_gain(p)) · (1 + HOLE_RANGE/d(p))))
                                                      where the samples cover p,
-    σ(p) = σ_hole                                   where push–pull filled it,
+    σ(p) = min(σ_hole, sqrt(v_fill(p)))             where push–pull filled it,
 
 with ``σ_hole = s / √12`` the standard deviation of an intensity known only to lie in
-``[0, s]`` (uniform): a filled pixel is known no better than that, and no pixel is known
-worse. For ULR the same rule applies to the ULR-weighted variance of the blended views.
+``[0, s]`` (uniform): no pixel is known worse. ``v_fill`` (the ``fill`` term,
+:func:`fill_variance`) is what push–pull fills the pixel from: the spread of those pixels
+around their weighted mean plus their own variance, both push–pulled like the colour; a hole
+amid a uniform backdrop is known as well as the backdrop, one across a depth edge as little as
+its two sides differ (without ``fill``: ``σ_hole``). For ULR the uniform rule applies to the
+ULR-weighted variance of the blended views.
 
 Two baselines for comparison (:func:`sample_spread_sigma`, :func:`view_count_sigma`): the
 spread of the source samples alone, and one over the number of views seeing a pixel.
@@ -61,7 +65,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["HOLE_SIGMA_FRACTION", "hole_sigma", "hessian_diagonal", "model_variance",
            "sample_spread", "sample_statistics", "view_offsets", "view_offset_prior",
-           "hole_distance", "HOLE_RANGE", "TERMS", "KNOWN_TERMS", "view_gains",
+           "hole_distance", "HOLE_RANGE", "TERMS", "KNOWN_TERMS", "view_gains", "fill_variance",
            "variational_sigma", "ulr_sigma", "sample_spread_sigma",
            "view_count_sigma"]
 
@@ -316,20 +320,22 @@ def sample_statistics(splat, weight, colour, u, wsum=None, sigma_z=None, dtau_dz
     return out
 
 
-def _finish(var, coverage, scale):
-    """σ = min(σ_hole, sqrt(var)) on covered pixels, σ_hole elsewhere; float32."""
+def _finish(var, coverage, scale, hole_var=None):
+    """σ = min(σ_hole, sqrt(var)) on covered pixels, σ_hole elsewhere (``hole_var`` given:
+    min(σ_hole, sqrt(hole_var)) there); float32."""
     sh = hole_sigma(scale)
     sig = np.sqrt(np.minimum(np.nan_to_num(var, nan=np.inf), sh * sh))
-    sig[~np.asarray(coverage, bool)] = sh
+    holes = ~np.asarray(coverage, bool)
+    sig[holes] = sh if hole_var is None else np.sqrt(np.minimum(np.nan_to_num(hole_var[holes], nan=np.inf), sh * sh))
     return sig.astype(np.float32)
 
 
 #: The terms of σ² by default (docs/explanation/renderer.md "Uncertainty": chosen on
 #: procedural scenes by benchmarks/quality/uncertainty_table.py).
-TERMS = ("model", "spread", "gain", "hole")
+TERMS = ("model", "spread", "gain", "hole", "fill")
 #: every term a caller may name: ``views`` is ``gain`` with additive offsets, the same at
 #: every intensity (one of the two at a time)
-KNOWN_TERMS = ("model", "spread", "views", "gain", "hole")
+KNOWN_TERMS = ("model", "spread", "views", "gain", "hole", "fill")
 
 
 #: Range (pixels) of the variance inflation next to push–pull filled pixels:
@@ -366,7 +372,8 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     u : (3, H, W) planar (or (H, W, 3)) array in [0, 1]
         The rendered image.
     coverage : (H, W) bool
-        Pixels reached by the samples; the rest get ``σ_hole`` (:func:`hole_sigma`).
+        Pixels reached by the samples; the rest get ``σ_hole`` (:func:`hole_sigma`), or
+        with ``fill`` their fill's (:func:`fill_variance`) up to it.
     density : float
         The density the colour term was divided by (``RenderResult.params["colour_density"]``,
         rho_c): the model's variance is that of the unnormalised energy (the paper's),
@@ -381,7 +388,9 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
         offsets being gains, proportional to the pixel's intensity; ``views``: the same with
         additive offsets; one of the two;
         needs ``view``); ``hole`` multiplies their sum by ``1 + HOLE_RANGE / d`` near
-        push–pull filled pixels (module docstring); default :data:`TERMS`.
+        push–pull filled pixels (module docstring); ``fill``: a filled pixel's σ from the
+        pixels it is filled from (:func:`fill_variance`) instead of ``σ_hole``; default
+        :data:`TERMS`.
     view : (N,) int array, optional
         The source view of each sample (``Samples.view``), for the offset terms (without it
         they are left out).
@@ -425,7 +434,28 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     if "hole" in terms:
         with np.errstate(divide="ignore", invalid="ignore"):  # holes: σ_hole below
             var = var * (1.0 + HOLE_RANGE / hole_distance(coverage))
-    return _finish(var, coverage, scale)
+    hole_var = fill_variance(u, var, coverage, scale) if "fill" in terms else None
+    return _finish(var, coverage, scale, hole_var)
+
+
+def fill_variance(u, var, coverage, scale: float = 255.0) -> np.ndarray:
+    """Variance (H, W) float64, grey levels², of a push–pull filled pixel: the pixels it is
+    filled from vary around their weighted mean (push–pull of ``u²`` less the square of the
+    push–pull of ``u``, mean over channels), and carry their own variance ``var`` (its
+    push–pull). A hole amid a uniform backdrop is known as well as the backdrop; one
+    between two surfaces as little as they differ. Covered pixels: their own ``var``."""
+    from .pushpull import push_pull
+
+    up = np.asarray(u, np.float64)
+    if up.ndim == 3 and up.shape[0] in (1, 3) and up.shape[-1] not in (1, 3):
+        up = up.transpose(1, 2, 0)  # planar → (H, W, C)
+    w = np.asarray(coverage, np.float32)
+    stack = np.concatenate([up, up * up, np.nan_to_num(np.asarray(var, np.float64), posinf=0.0)[..., None]
+                            / float(scale) ** 2], axis=-1) * w[..., None]
+    f = push_pull(stack, w).astype(np.float64)
+    C = up.shape[-1]
+    spread = np.maximum(f[..., C:2 * C] - f[..., :C] ** 2, 0.0).mean(-1)
+    return np.where(np.asarray(coverage, bool), var, (spread + f[..., 2 * C]) * float(scale) ** 2)
 
 
 def view_gains(offsets, colour, view, n_views, stride=None):
