@@ -447,9 +447,9 @@ def fill_variance(u, var, coverage, scale: float = 255.0) -> np.ndarray:
     from .pushpull import push_pull
 
     up = np.asarray(u, np.float64)
-    if up.ndim == 3 and up.shape[0] in (1, 3) and up.shape[-1] not in (1, 3):
-        up = up.transpose(1, 2, 0)  # planar → (H, W, C)
     w = np.asarray(coverage, np.float32)
+    if up.shape[:2] != w.shape:
+        up = up.transpose(1, 2, 0)  # planar → (H, W, C)
     stack = np.concatenate([up, up * up, np.nan_to_num(np.asarray(var, np.float64), posinf=0.0)[..., None]
                             / float(scale) ** 2], axis=-1) * w[..., None]
     f = push_pull(stack, w).astype(np.float64)
