@@ -42,8 +42,8 @@ with ``σ_hole = s / √12`` the standard deviation of an intensity known only t
 :func:`fill_variance`) is what push–pull fills the pixel from: the spread of those pixels
 around their weighted mean plus their own variance, both push–pulled like the colour; a hole
 amid a uniform backdrop is known as well as the backdrop, one across a depth edge as little as
-its two sides differ (without ``fill``: ``σ_hole``). For ULR the uniform rule applies to the
-ULR-weighted variance of the blended views.
+its two sides differ (without ``fill``: ``σ_hole``). ULR's σ is the ULR-weighted variance of
+the blended views, and ``σ_hole`` where push–pull filled it (:func:`ulr_sigma`).
 
 Two baselines for comparison (:func:`sample_spread_sigma`, :func:`view_count_sigma`): the
 spread of the source samples alone, and one over the number of views seeing a pixel.
