@@ -412,12 +412,12 @@ def test_fill_variance_follows_what_the_hole_is_filled_from():
     cov = np.ones((H, W), bool)
     cov[12:20, 20:28] = False
     var = np.full((H, W), 4.0)
-    flat = np.full((H, W, 3), 0.2)
+    flat = np.full((3, H, W), 0.2)
     fv = fill_variance(flat, var, cov)
     assert np.allclose(fv[cov], 4.0) and np.allclose(fv[~cov], 4.0, rtol=1e-4)
     edge = np.zeros((H, W, 3))
     edge[:, W // 2:] = 1.0
-    fe = fill_variance(edge.transpose(2, 0, 1), var, cov)  # planar input reads the same
+    fe = fill_variance(edge.transpose(2, 0, 1), var, cov)
     assert fe[16, 23] > hole_sigma() ** 2 and fe[16, 23] > 100 * fv[16, 23]
 
 

@@ -409,10 +409,10 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
         var = var + model_variance(model.A, model.Ag if model.use_grad else None, model.alpha * float(density),
                                    model.gamma * rg if model.use_grad else 0.0)
     with_views = ("views" in terms or "gain" in terms) and view is not None and len(view) > 0
+    up = np.asarray(u)
+    if not (up.ndim == 3 and up.shape[0] == np.shape(colour)[1]):
+        up = up.transpose(2, 0, 1)  # (H, W, C) → planar
     if "spread" in terms or with_views:
-        up = np.asarray(u)
-        if not (up.ndim == 3 and up.shape[0] == np.shape(colour)[1]):
-            up = up.transpose(2, 0, 1)  # (H, W, C) → planar
         offs = centre = None
         gain = "gain" in terms
         if with_views:
@@ -434,22 +434,21 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     if "hole" in terms:
         with np.errstate(divide="ignore", invalid="ignore"):  # holes: σ_hole below
             var = var * (1.0 + HOLE_RANGE / hole_distance(coverage))
-    hole_var = fill_variance(u, var, coverage, scale) if "fill" in terms else None
+    hole_var = fill_variance(up, var, coverage, scale) if "fill" in terms else None
     return _finish(var, coverage, scale, hole_var)
 
 
 def fill_variance(u, var, coverage, scale: float = 255.0) -> np.ndarray:
-    """Variance (H, W) float64, grey levels², of a push–pull filled pixel: the pixels it is
+    """Variance (H, W) float64, grey levels², of a push–pull filled pixel (``u`` planar
+    (C, H, W) in [0, 1], ``var`` (H, W) grey levels²): the pixels it is
     filled from vary around their weighted mean (push–pull of ``u²`` less the square of the
     push–pull of ``u``, mean over channels), and carry their own variance ``var`` (its
     push–pull). A hole amid a uniform backdrop is known as well as the backdrop; one
     between two surfaces as little as they differ. Covered pixels: their own ``var``."""
     from .pushpull import push_pull
 
-    up = np.asarray(u, np.float64)
+    up = np.asarray(u, np.float64).transpose(1, 2, 0)  # push_pull reads (H, W, C)
     w = np.asarray(coverage, np.float32)
-    if up.shape[:2] != w.shape:
-        up = up.transpose(1, 2, 0)  # planar → (H, W, C)
     stack = np.concatenate([up, up * up, np.nan_to_num(np.asarray(var, np.float64), posinf=0.0)[..., None]
                             / float(scale) ** 2], axis=-1) * w[..., None]
     f = push_pull(stack, w).astype(np.float64)
