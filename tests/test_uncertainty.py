@@ -366,13 +366,11 @@ def test_sigma_follows_a_source_exposure_change(grid_split80):
     x, y = S.xy[:, 0], S.xy[:, 1]
     S = S.select(~((x > 20) & (x < 50) & (y > 20) & (y < 50) & (S.view != 0)))
     S.colour[:] = np.clip(S.colour * np.where(S.view == 0, 1.4, 1.0)[:, None], 0, 1)
-    err = np.sqrt(np.mean((np.clip(S.colour, 0, 1) - S.colour / np.where(S.view == 0, 1.4, 1.0)[:, None]) ** 2))
     rho, sig = {}, {}
     for terms in ("model+spread+hole", True):
         r = render_samples(S, "gradient", max_iter=30, uncertainty=terms)
         rho[terms] = uncertainty_metrics(r.uncertainty, r.image, tg.image, border=2)["spearman"]
         sig[terms] = float(np.median(r.uncertainty[25:45, 25:45]))
-    assert err > 0  # the gain moved the view's samples
     assert rho[True] > rho["model+spread+hole"], rho
     assert sig[True] > 3 * sig["model+spread+hole"], sig
 
@@ -424,15 +422,13 @@ def test_fill_variance_follows_what_the_hole_is_filled_from():
 def test_default_sigma_of_a_hole_on_a_black_backdrop_is_small():
     """Through render(): the default terms give a hole amid black a small σ, where the former
     rule (no ``fill``) gives every filled pixel σ_hole."""
+    from vibr.geometry import compute_samples
+    from vibr.render import render_samples
     from vibr.render.uncertainty import hole_sigma
     from vibr.synthetic import make_scene
 
-    sc = make_scene("grid", width=64, height=64, seed=1)
-    src, tg = sc.split(4)
+    src, tg = make_scene("grid", width=64, height=64, seed=1).split(4)
     src = src.replace(views=[v.replace(image=np.zeros_like(v.image)) for v in src.views])
-    from vibr.geometry import compute_samples
-    from vibr.render import render_samples
-
     S = compute_samples(src, tg.camera)
     x, y = S.xy[:, 0], S.xy[:, 1]
     S = S.select(~((x > 24) & (x < 40) & (y > 24) & (y < 40)))  # a hole no sample reaches
