@@ -455,6 +455,22 @@ def run_study(run_case, summary, doc, argv=None) -> None:
     print(f"\n{len(reps)} cases in {time.perf_counter() - t0:.0f} s")
 
 
+# -- the choice of a default -------------------------------------------------------------------
+def paired_gain(challenger, default) -> tuple[float, float]:
+    """(mean, standard error) of ``challenger − default``, two scores per case paired by case
+    (higher better: dB; pass AUSE negated)."""
+    d = np.asarray(challenger, float) - np.asarray(default, float)
+    return float(d.mean()), float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("inf")
+
+
+def replaces_default(challenger, default) -> bool:
+    """The studies' tie rule: a challenger with a better mean replaces the default only when its
+    gain, paired by case, exceeds the gain's standard error (:func:`paired_gain`); settings near
+    the optimum differ by far less than the cases do, and a default should not follow that."""
+    gain, se = paired_gain(challenger, default)
+    return gain > se
+
+
 # -- tables and generated pages --------------------------------------------------------------
 def md_table(header, rows) -> str:
     """A markdown table: ``header`` cells, then one line per row."""

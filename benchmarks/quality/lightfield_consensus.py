@@ -42,6 +42,8 @@ from _common import (  # noqa: E402
     data_dir,
     machine_description,
     md_table,
+    paired_gain,
+    replaces_default,
 )
 
 CANDIDATES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.35, 0.6)
@@ -95,9 +97,10 @@ def main(argv=None) -> int:
     gain = {t: np.array([rows[(s, b, t)]["gradient"] - rows[(s, b, 0.0)]["gradient"] for s, b in CHOOSE])
             for t in CANDIDATES}
     best = max(CANDIDATES, key=lambda t: gain[t].mean())
-    se = gain[best].std(ddof=1) / np.sqrt(len(CHOOSE))
-    chosen = best if gain[best].mean() > se else 0.0
-    print(f"chosen: {chosen} (best {best}, gain {gain[best].mean():+.3f} ± {se:.3f})", flush=True)
+    score = {t: [rows[(s, b, t)]["gradient"] for s, b in CHOOSE] for t in (best, 0.0)}
+    chosen = best if best != 0.0 and replaces_default(score[best], score[0.0]) else 0.0
+    print(f"chosen: {chosen} (best {best}, gain {gain[best].mean():+.3f} ± {paired_gain(score[best], score[0.0])[1]:.3f})",
+          flush=True)
     cache = SceneCache(data_dir(a.data))
     rep = {}
     for scene, stride in REPORT:

@@ -105,7 +105,9 @@ from _common import (  # noqa: E402  (the cases other studies share)
     SceneCache,
     data_dir,
     git_commit,
+    paired_gain,
     replace_block,
+    replaces_default,
     scene_split,
     sparse_cases,
     sweep_cases,
@@ -287,15 +289,13 @@ def run_case(cache, case):
 def choose(reps):
     """The gradient setting the "choose" cases make the default: the best mean all-pixel PSNR
     over them (:func:`best_mean`), unless that leads the library's default by no more than the
-    noise of the cases (:func:`paired_gain`: the mean gain, paired by case, at most its
+    noise of the cases (``_common.replaces_default``: the mean gain, paired by case, at most its
     standard error); then the default stays, so that it does not follow differences the cases
     do not support."""
     ch = [r for r in reps if r["split"] == "choose"]
     best, lib = best_mean(ch), library_label()
-    if best != lib and lib in gradient_labels(ch):
-        gain, se = paired_gain(ch, best, lib)
-        if gain <= se:
-            return lib
+    if best != lib and lib in gradient_labels(ch) and not replaces_default(*_scores(ch, best, lib)):
+        return lib
     return best
 
 
@@ -304,11 +304,9 @@ def best_mean(reps):
     return max(gradient_labels(reps), key=lambda lab: np.mean([r["results"][lab]["all"] for r in reps]))
 
 
-def paired_gain(reps, a, b):
-    """(mean, standard error) over ``reps`` of setting ``a``'s all-pixel PSNR minus ``b``'s, case
-    by case (dB)."""
-    d = np.array([r["results"][a]["all"] - r["results"][b]["all"] for r in reps])
-    return float(d.mean()), float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("inf")
+def _scores(reps, a, b):
+    """Settings ``a``'s and ``b``'s all-pixel PSNR over ``reps``, case by case (dB)."""
+    return ([r["results"][a]["all"] for r in reps], [r["results"][b]["all"] for r in reps])
 
 
 def gradient_labels(reps):
@@ -412,7 +410,7 @@ def table(reps, chosen):
     ch = [r for r in reps if r["split"] == "choose"]
     best = best_mean(ch)
     if best != lib and lib in labs:
-        gain, se = paired_gain(ch, best, lib)
+        gain, se = paired_gain(*_scores(ch, best, lib))
         L += ["", f"The best mean is {best}'s: {gain:+.3f} dB over the library's default ({lib}), standard error "
               f"{se:.3f} over the *choose* cases, paired by case: "
               + ("within the cases' noise, so the default stays." if chosen == lib else "beyond it: the new default.")]

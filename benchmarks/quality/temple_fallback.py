@@ -8,8 +8,7 @@ covered (2-px border), and writes the figure reference | without | with.
 
 Each table row gives the views' unknown-depth fractions (min–max over the sources); "with"
 is the plane at every unknown pixel (``"always"``); ``benchmarks/quality/backdrop_carving.py``
-measures ``fallback="auto"`` (each view's backdrop, silhouette carving). ``benchmarks/quality/fallback_rule.py`` compares
-the rules, the flat pixels of ``"auto"`` included.
+measures ``fallback="auto"`` (each view's backdrop, silhouette carving) against the former rules.
 """
 
 from __future__ import annotations

@@ -62,7 +62,9 @@ from _common import (  # noqa: E402
     SceneCache,
     cotton_neighbours,
     data_dir,
+    paired_gain,
     replace_block,
+    replaces_default,
     sweep_sources,
 )
 from vibr.render.uncertainty import TERMS  # noqa: E402
@@ -235,7 +237,7 @@ def variant_table(reports):
 def choose(reports):
     """(the σ sum the *choose* reports give the library, summary rows): the variant of the
     lowest mean AUSE replaces the library's :data:`CHOSEN` only when its paired AUSE gain over
-    it exceeds the gain's standard error (the defaults' sweep's tie rule)."""
+    it exceeds the gain's standard error (``_common.replaces_default``)."""
     reps = [r for r in reports if split(r["case"]) == "choose"]
     if not reps:
         return CHOSEN, []
@@ -243,12 +245,13 @@ def choose(reports):
     rho = {v: np.array([r["rows"][f"vibr[{v}]"]["spearman"] for r in reps]) for v in VARIANTS}
     rows = []
     for v in VARIANTS:
+        gain, se = paired_gain(-a[v], -a[CHOSEN])  # an AUSE gain: lower is better
         d = a[CHOSEN] - a[v]
-        se = float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else float("inf")
-        rows.append(dict(variant=v, ause=float(a[v].mean()), spearman=float(np.nanmean(rho[v])), gain=float(d.mean()),
+        rows.append(dict(variant=v, ause=float(a[v].mean()), spearman=float(np.nanmean(rho[v])), gain=gain,
                          se=se, better=int((d > 0).sum()), worse=int((d < 0).sum())))
     best = min(rows, key=lambda r: r["ause"])
-    return (best["variant"] if best["variant"] != CHOSEN and best["gain"] > best["se"] else CHOSEN), rows
+    keep = best["variant"] == CHOSEN or not replaces_default(-a[best["variant"]], -a[CHOSEN])
+    return (CHOSEN if keep else best["variant"]), rows
 
 
 def choose_table(reports):
