@@ -49,8 +49,11 @@ pixel), with the sources' visibility tested against the mesh, against vibr's sou
 (the same 4-voxel margin), or not at all, beside vibr's ``ulr`` (each source's samples
 forward-warped by its own depth and splatted) and ``gradient``, and those two again with the
 sources' measured depth replaced by the mesh's (the peer's fused geometry under vibr's
-renderer; the fallback proxy kept where stereo left no depth). It prints the table and writes
-``out/mesh_peer/decompose.json``; the page is not written.
+renderer; the fallback proxy kept where stereo left no depth). Each row's squared error on those
+pixels is also split by spatial frequency (:func:`error_bands`: the parts add up to the MSE), which
+says at which scale a lead lies: the views' exposures and the blend at the coarse end, registration
+and sharpness at the fine end. It prints the tables and writes ``out/mesh_peer/decompose.json``;
+the page is not written.
 
     PYTHONPATH=$PWD/src python3 benchmarks/quality/mesh_peer.py --tune --decompose [--cases ...]
 
@@ -479,8 +482,27 @@ def decompose(cache, case, opts: PeerOptions) -> dict:
             r = render(s, tv, m)
             rows[label] = (np.clip(r.image, 0, 1), np.asarray(r.coverage, bool))
     common = np.logical_and.reduce([c for _, c in rows.values()])
+    inner = np.zeros_like(common)
+    inner[BORDER:-BORDER, BORDER:-BORDER] = True
     return dict(name=case["name"], common_pct=100 * float(common.mean()),
-                psnr_common={k: float(psnr(im, tv.image, common, BORDER)) for k, (im, _) in rows.items()})
+                psnr_common={k: float(psnr(im, tv.image, common, BORDER)) for k, (im, _) in rows.items()},
+                bands={k: error_bands(im, tv.image, common & inner) for k, (im, _) in rows.items()})
+
+
+#: the spatial-frequency bands of ``--decompose``'s error split, cycles per pixel (0.5: Nyquist
+#: along an axis; the diagonal reaches 0.71)
+BANDS = (0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75)
+
+
+def error_bands(img, ref, mask) -> list[float]:
+    """The mean squared error of ``img`` against ``ref`` over ``mask`` (per channel, averaged), split
+    by the radial spatial frequency of the masked error (:data:`BANDS`): by Parseval the parts
+    add up to the MSE, so a lead is located in scale (a wavelength of 1 / f pixels)."""
+    H, W = mask.shape
+    E = (np.asarray(img, np.float64) - ref) * mask[..., None]
+    power = sum(np.abs(np.fft.fft2(E[..., c])) ** 2 for c in range(E.shape[2])) / (E.shape[2] * H * W * mask.sum())
+    f = np.hypot(np.fft.fftfreq(H)[:, None], np.fft.fftfreq(W)[None, :])
+    return [float(power[(f >= a) & (f < b)].sum()) for a, b in zip(BANDS[:-1], BANDS[1:])]
 
 
 def save_strip(path: Path, photo, renders):
@@ -673,6 +695,10 @@ def run_decompose(cache, which, opts: PeerOptions) -> int:
         print(f"{case['name']} (common {reps[-1]['common_pct']:.1f} %)", flush=True)
         for k, v in reps[-1]["psnr_common"].items():
             print(f"  {k:<55} {v:6.2f} dB", flush=True)
+        print("  MSE (×1e-5) by spatial frequency, cycles per pixel: "
+              + "  ".join(f"{a:g}–{b:g}" for a, b in zip(BANDS[:-1], BANDS[1:])), flush=True)
+        for k, v in reps[-1]["bands"].items():
+            print(f"  {k:<55} " + " ".join(f"{1e5 * x:6.2f}" for x in v), flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "decompose.json").write_text(json.dumps(dict(options=asdict(opts), cases=reps, commit=git_commit()), indent=1))
     return 0
