@@ -463,7 +463,7 @@ def view_gains(offsets, colour, view, n_views, stride=None):
     offset (the same samples); 0 for a view without samples or light."""
     view = np.asarray(view)
     stride = max(1, len(view) // OFFSET_SAMPLES) if stride is None else max(1, int(stride))
-    v, col = view[::stride], np.asarray(colour, np.float64)[::stride]
+    v, col = view[::stride], np.asarray(colour)[::stride].astype(np.float64)  # stride first: N can be millions
     n = np.bincount(v, minlength=n_views).astype(np.float64)
     mean = np.stack([np.bincount(v, col[:, c], n_views) for c in range(col.shape[1])], 1) / np.maximum(n, 1.0)[:, None]
     pred = mean - np.asarray(offsets, np.float64)
