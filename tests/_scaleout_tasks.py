@@ -135,12 +135,18 @@ def lost_workers_scenario(folder):
     in a process of its own: a LocalCluster wants a fresh event loop)."""
     import json
 
+    import dask
+    import distributed  # noqa: F401  (its config defaults, before one of them is set)
+
     from vibr.errors import VibrInputError
     from vibr.executor import run_tasks
 
     tasks = ["a", "b", "victim"]
     try:
-        run_tasks(write_or_always_die, tasks, setup=str, setup_args=(folder,), executor="local:1", retries=0)
+        # the scheduler gives up at the first death (its default waits for four, each a worker
+        # restart: seconds apiece on a loaded machine) and vibr's line is the same either way
+        with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+            run_tasks(write_or_always_die, tasks, setup=str, setup_args=(folder,), executor="local:1", retries=0)
         msg = None
     except VibrInputError as exc:
         msg = str(exc)
