@@ -580,8 +580,10 @@ def _workers_lost(desc: str, exc: BaseException, done: int, n: int) -> VibrInput
     written by the task itself, atomically: a rerun finds the finished ones and resumes)."""
     why = ("its tasks were cancelled (workers lost)" if isinstance(exc, CancelledError)
            else "its workers were killed")
-    return VibrInputError(f"the Dask cluster stopped the {desc} after {done} of {n} tasks: {why}; run the same "
-                          "command again to resume (finished tasks are kept)")
+    # a task's result lives on its worker until the client fetches it: tasks that finished on a
+    # worker that then died are on disk but never reported, so the count is of reports
+    return VibrInputError(f"the Dask cluster stopped the {desc} with {done} of {n} tasks reported back: {why}; run "
+                          "the same command again to resume (the tasks that finished are kept and skipped)")
 
 
 def _run_dask(fn, tasks, setup, setup_args, kind, arg, desc, retries):
