@@ -381,7 +381,7 @@ def variational_sigma(model, splat, weight, colour, u, coverage, *, scale: float
     grad_density : float, optional
         The density the gradient term was divided by (``RenderResult.params["density"]``,
         rho); None: ``density``.
-    terms : sequence of {"model", "spread", "gain", "views", "hole"} or a "+"-joined string
+    terms : sequence of {"model", "spread", "gain", "views", "hole", "fill"} or a "+"-joined string
         The variances added: the model's ``1/diag(H)``, the disagreement of the sources
         ``s²·(1 + 1/n_eff)`` and the view offsets (``gain``: the spread is then taken with
         each view's offset removed, and the offsets' bias and variance are added, the
